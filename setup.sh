@@ -55,7 +55,7 @@ apt_install
 make_venv
 case "${1:-}" in
   "") say "ready: $VENV/bin/mpmfx --help" ;;
-  demo) shift; exec "$VENV/bin/mpmfx" run pipeline/jelly_splash.toml "$@" ;;
+  demo) shift; exec "$VENV/bin/mpmfx" run pipeline/shots/jelly_splash.toml "$@" ;;
   test) shift; exec "$VENV/bin/python" -m pytest "$@" ;;
   *) die "unknown command '$1': use 'demo', 'test' or nothing" ;;
 esac

@@ -1,1 +1,14 @@
-"""mpmfx."""
+"""mpmfx: meshes to simulated, surfaced and rendered MPM snow, sand, mud, water and jelly.
+
+    import mpmfx
+    mpmfx.load_shot("pipeline/shots/jelly_splash.toml").run(until="surface")
+
+Importing mpmfx is cheap: warp, pxr, pyopenvdb and pyvista load only when a stage needs them.
+"""
+__version__ = "0.1.0"
+
+
+def load_shot(path, **kwargs):
+    """Load and validate a shot file -> `mpmfx.stages.runner.ShotRun` (see its docstring)."""
+    from mpmfx.stages.runner import load_shot as _load
+    return _load(path, **kwargs)

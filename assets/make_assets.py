@@ -1,0 +1,74 @@
+"""Builds the meshes in assets/ (made for this project with trimesh + manifold3d; CC0).
+
+Run: .venv/bin/python assets/make_assets.py   (deterministic; sizes in metres)
+"""
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from trimesh.creation import box, capsule, cylinder, icosphere
+
+HERE = Path(__file__).parent
+
+
+def union(*meshes):
+    return trimesh.boolean.union(list(meshes), engine="manifold")
+
+
+def at(mesh, x, y, z):
+    mesh = mesh.copy()
+    mesh.apply_translation([x, y, z])
+    return mesh
+
+
+def jelly_bear():
+    """A gummy bear, 0.32 m tall, standing on y = 0; every limb >= 0.06 m across."""
+    body = icosphere(3, 0.09)
+    body.apply_scale([1.0, 1.2, 0.85])
+    parts = [at(body, 0, 0.14, 0), at(icosphere(3, 0.075), 0, 0.27, 0),
+             at(icosphere(3, 0.032), -0.055, 0.335, 0), at(icosphere(3, 0.032), 0.055, 0.335, 0),
+             at(icosphere(3, 0.03), 0, 0.255, 0.065)]
+    for s in (-1, 1):
+        arm = capsule(height=0.07, radius=0.032)
+        arm.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2.6 * s, [0, 0, 1]))
+        parts.append(at(arm, 0.095 * s, 0.17, 0))
+        parts.append(at(capsule(height=0.05, radius=0.036), 0.05 * s, 0.05, 0))
+    m = union(*parts)
+    m.apply_translation([0, -m.bounds[0][1], 0])
+    return m
+
+
+def snowball():
+    return icosphere(4, 0.15)
+
+
+def sand_column():
+    c = cylinder(radius=0.12, height=0.4, sections=48)
+    c.apply_translation([0, 0.2, 0])
+    return c
+
+
+def slab(x, y, z):
+    b = box(extents=[x, y, z])
+    b.apply_translation([0, y / 2, 0])
+    return b
+
+
+def thin_fin():
+    """A ball with a 1 cm fin: fails the five-cell check at any usual grid (for `mpmfx check`)."""
+    fin = box(extents=[0.3, 0.2, 0.01])
+    return union(icosphere(4, 0.1), at(fin, 0.15, 0, 0))
+
+
+def main():
+    meshes = {"jelly_bear.obj": jelly_bear(), "snowball.obj": snowball(), "sand_column.obj": sand_column(),
+              "water_pool.obj": slab(0.7, 0.06, 0.7), "water_dam.obj": slab(0.35, 0.5, 0.9),
+              "snow_block.obj": slab(0.5, 0.2, 0.5), "thin_fin.obj": thin_fin()}
+    for name, m in meshes.items():
+        assert m.is_watertight, name
+        m.export(HERE / name)
+        print(f"{name}: {len(m.faces)} faces, {m.volume * 1e3:.2f} L")
+
+
+if __name__ == "__main__":
+    main()

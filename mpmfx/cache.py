@@ -1,0 +1,150 @@
+"""The one place that builds stage keys and paths, writes files atomically and keeps manifests.
+
+Layout (DESIGN.md, "The cache")::
+
+    <root>/<shot>/<stage>/<stage>-<key12>/
+        manifest.json      written last: schema version, key inputs, frames, timings, QA
+        frames/NNNN.*      one file per frame, written to a temp name and renamed
+        checkpoints/       full solver state every K frames (exact resume)
+
+A stage key is the sha256 of canonical JSON of {stage, stage format version, the stage's own
+parameters, upstream keys, input file hashes}. A frame file exists only when it is complete
+(temp name + os.replace), so a killed run leaves complete frames or none; the manifest is written
+only when a run finishes, so an entry without one is "partial" and resumes.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+MANIFEST_SCHEMA = 1
+
+
+def canonical_json(obj: Any) -> str:
+    return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
+
+
+def file_hash(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def stage_key(stage: str, version: int, params: dict, upstream: dict[str, str], inputs: dict[str, str]) -> str:
+    """sha256 over what determines a stage's output. `inputs`: name -> file hash."""
+    payload = {"stage": stage, "version": version, "params": params, "upstream": upstream, "inputs": inputs}
+    return hashlib.sha256(canonical_json(payload).encode()).hexdigest()
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """Yield a temp path beside `path`; on success rename it over `path`, on failure delete it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, path)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def write_json(path: str | Path, data: Any) -> None:
+    with atomic_path(path) as tmp:
+        tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=str))
+
+
+@dataclass
+class Entry:
+    """One stage's cache entry: a folder named by its key."""
+
+    root: Path
+    stage: str
+    key: str
+    key_inputs: dict
+
+    @property
+    def manifest_path(self) -> Path:
+        return self.root / "manifest.json"
+
+    @property
+    def frames_dir(self) -> Path:
+        return self.root / "frames"
+
+    def frame_path(self, frame: int, ext: str) -> Path:
+        return self.frames_dir / f"{frame:04d}.{ext}"
+
+    def manifest(self) -> dict | None:
+        try:
+            return json.loads(self.manifest_path.read_text())
+        except (FileNotFoundError, json.JSONDecodeError):
+            return None
+
+    def done_frames(self, ext: str) -> list[int]:
+        """Frames whose file is complete (temp files never match: they start with '.')."""
+        if not self.frames_dir.is_dir():
+            return []
+        return sorted(int(p.stem) for p in self.frames_dir.glob(f"[0-9]*.{ext}"))
+
+    def complete(self, frames: list[int] | None = None) -> bool:
+        """True when a manifest exists and covers `frames` (all of its own frames if None)."""
+        man = self.manifest()
+        if man is None or man.get("schema") != MANIFEST_SCHEMA:
+            return False
+        return frames is None or set(frames) <= set(man.get("frames", []))
+
+    def write_manifest(self, *, frames: list[int], timings: dict, qa: dict | None = None, extra: dict | None = None):
+        write_json(self.manifest_path, {
+            "schema": MANIFEST_SCHEMA, "stage": self.stage, "key": self.key, "key_inputs": self.key_inputs,
+            "frames": sorted(frames), "timings": timings, "qa": qa or {}, "written": time.time(), **(extra or {}),
+        })
+
+    def invalidate(self) -> None:
+        """Drop the manifest so the entry counts as partial (its complete frames stay)."""
+        self.manifest_path.unlink(missing_ok=True)
+
+    def remove(self) -> None:
+        shutil.rmtree(self.root, ignore_errors=True)
+
+
+class Cache:
+    """Stage entries of one shot under `<root>/<shot>/`."""
+
+    def __init__(self, root: str | Path, shot: str):
+        self.root = Path(root)
+        self.shot_dir = self.root / shot
+
+    def entry(self, stage: str, version: int, params: dict, upstream: dict[str, str],
+              inputs: dict[str, str]) -> Entry:
+        key = stage_key(stage, version, params, upstream, inputs)
+        key_inputs = {"version": version, "params": params, "upstream": upstream, "inputs": inputs}
+        return Entry(self.shot_dir / stage / f"{stage}-{key[:12]}", stage, key, key_inputs)
+
+    def entries(self, stage: str) -> list[Path]:
+        d = self.shot_dir / stage
+        return sorted(d.glob(f"{stage}-*")) if d.is_dir() else []
+
+    def clean(self, stage: str | None = None) -> list[Path]:
+        targets = [self.shot_dir / stage] if stage else [self.shot_dir]
+        removed = [t for t in targets if t.exists()]
+        for t in removed:
+            shutil.rmtree(t)
+        return removed
+
+
+def default_root() -> Path:
+    """`$MPMFX_CACHE`, else `./cache` in the working directory."""
+    return Path(os.environ.get("MPMFX_CACHE", "cache"))

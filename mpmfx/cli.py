@@ -1,0 +1,138 @@
+"""`mpmfx` command line. Parses, then calls the stage runner; imports nothing heavy at start-up.
+
+Exit codes: 0 success, 1 a stage failed (or a check failed), 2 bad input (config, file, arguments).
+"""
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+
+STAGES = ("voxelise", "simulate", "surface", "export", "render")
+
+
+def _frames(text: str) -> list[int]:
+    try:
+        a, _, b = text.partition(":")
+        lo, hi = int(a), int(b or a)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"--frames {text!r}: expected A:B (inclusive), e.g. --frames 10:20")
+    if hi < lo:
+        raise argparse.ArgumentTypeError(f"--frames {text!r}: B must not be below A")
+    return list(range(lo, hi + 1))
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="mpmfx", description="Meshes to simulated, surfaced and rendered MPM "
+                                "snow, sand, mud, water and jelly.")
+    sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
+
+    def shot_cmd(name, help_):
+        s = sub.add_parser(name, help=help_, description=help_)
+        s.add_argument("shot", help="shot file, e.g. pipeline/shots/jelly_splash.toml")
+        s.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                       help="override any shot field, e.g. --set solver.cfl=0.3 --set objects.0.material=Water")
+        s.add_argument("--cache", default=None, help="cache root (default $MPMFX_CACHE or ./cache)")
+        return s
+
+    r = shot_cmd("run", "run the pipeline (cached stages are skipped)")
+    r.add_argument("--until", choices=STAGES, default="render", help="last stage to run")
+    r.add_argument("--force", choices=STAGES, action="append", default=[], help="re-run this stage from scratch")
+    r.add_argument("--frames", type=_frames, default=None, metavar="A:B", help="only these frames (inclusive)")
+    r.add_argument("--device", choices=("cpu", "cuda"), default=None, help="Warp device (default: cuda if present)")
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    e = shot_cmd("export", "run export alone from the cached upstream stages")
+    e.add_argument("--frames", type=_frames, default=None, metavar="A:B")
+    s = shot_cmd("status", "each stage: cached, partial, stale or missing, and why")
+    s.add_argument("--qa", action="store_true", help="per-frame observables of the simulation")
+    c = shot_cmd("clean", "delete cached results")
+    c.add_argument("--stage", choices=STAGES, default=None, help="only this stage (default: the whole shot)")
+
+    k = sub.add_parser("check", help="five-cell thickness check of an asset (exit 0 pass/warn, 1 fail, 2 bad input)")
+    k.add_argument("asset", help="mesh file (obj, ply, stl, glb, gltf, usd)")
+    k.add_argument("--grid-n", type=int, default=64, help="grid cells per axis of the domain")
+    k.add_argument("--domain", default=None, metavar="OX,OY,OZ,SIZE",
+                   help="domain min corner and edge (m); default: the mesh's bounding cube + 10 %%")
+    k.add_argument("--json", action="store_true", help="JSON for pipelines")
+
+    b = sub.add_parser("bench", help="speed and accuracy benchmarks (run them on the GPU)")
+    b.add_argument("what", choices=("accuracy", "surface", "solver"), help="which benchmark")
+    b.add_argument("--quick", action="store_true", help="small CPU-sized sweep")
+    b.add_argument("--device", choices=("cpu", "cuda"), default=None)
+    b.add_argument("--out", default="renders/bench", help="folder for CSV/JSON/PNG")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        return _dispatch(args)
+    except KeyboardInterrupt:
+        print("interrupted: complete frames are cached; run again to resume", file=sys.stderr)
+        return 130
+    except Exception as exc:  # noqa: BLE001 - every error becomes a message and an exit code
+        from mpmfx.config import ShotError
+        from mpmfx.stages.base import StageError
+        if isinstance(exc, ShotError):
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        if isinstance(exc, StageError):
+            print(f"error: {exc}", file=sys.stderr)
+            return 1
+        raise
+
+
+def _dispatch(args) -> int:
+    if args.cmd == "check":
+        from mpmfx.geometry.check import run_check
+        origin = size = None
+        if args.domain:
+            try:
+                *o, s = (float(x) for x in args.domain.split(","))
+                assert len(o) == 3
+            except (ValueError, AssertionError):
+                print(f"error: --domain {args.domain!r}: expected OX,OY,OZ,SIZE in metres", file=sys.stderr)
+                return 2
+            origin, size = tuple(o), s
+        return run_check(args.asset, grid_n=args.grid_n, origin=origin, size=size, as_json=args.json)
+    if args.cmd == "bench":
+        from mpmfx.bench import main as bench_main
+        return bench_main(args.what, quick=args.quick, device=args.device, out=args.out)
+
+    from mpmfx.stages.runner import load_shot
+    run = load_shot(args.shot, overrides=args.overrides, cache_root=args.cache,
+                    device=getattr(args, "device", None), quiet=getattr(args, "quiet", False))
+    if args.cmd == "run":
+        results = run.run(until=args.until, force=args.force, frames=args.frames)
+        _print_table(["stage", "result", "wall s", "frames"],
+                     [[r.stage, r.state, f"{r.seconds:.1f}", str(r.frames)] for r in results])
+        return 0
+    if args.cmd == "export":
+        results = run.run(until="export", frames=args.frames)
+        missing = [r.stage for r in results[:-1] if r.state != "cached"]
+        if missing:
+            print(f"note: export needed upstream stages first and ran them: {', '.join(missing)}", file=sys.stderr)
+        print(f"USD: {results[-1].entry / 'shot.usda'}")
+        return 0
+    if args.cmd == "status":
+        rows = [[s.stage, s.state, s.why, os.path.relpath(s.entry)] for s in run.status()]
+        _print_table(["stage", "state", "why", "entry"], rows)
+        if args.qa:
+            from mpmfx.stages.qa import print_qa
+            return print_qa(run)
+        return 0
+    if args.cmd == "clean":
+        removed = run.cache.clean(args.stage)
+        print("removed: " + (", ".join(str(p) for p in removed) if removed else "nothing cached"))
+        return 0
+    raise AssertionError(args.cmd)
+
+
+def _print_table(header: list[str], rows: list[list[str]]) -> None:
+    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
+    for r in [header, ["-" * w for w in widths], *rows]:
+        print("  ".join(str(c).ljust(w) for c, w in zip(r, widths)).rstrip())
+
+
+if __name__ == "__main__":
+    sys.exit(main())

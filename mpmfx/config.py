@@ -1,0 +1,298 @@
+"""The shot schema: one typed, validated model for a shot's TOML file.
+
+World units everywhere in this file: metres, seconds, degrees. The solver's normalised domain
+(guide section 2) begins only when particles enter the solver; `mpmfx.stages.simulate` maps.
+Material moduli are the exception: they are the guide's preset units (section 8), which are
+defined in the normalised domain, so a preset looks the same in a 1 m box and a 10 m box.
+
+Errors name the file, the key and the fix: `ShotError("shot.toml: [solver].cfl: ...")`.
+"""
+from __future__ import annotations
+
+import difflib
+import enum
+import tomllib
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+Vec3 = tuple[float, float, float]
+STAGES = ("voxelise", "simulate", "surface", "export", "render")
+
+
+class ShotError(ValueError):
+    """A shot file that cannot run; the message names file, key and fix."""
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ShotInfo(_Section):
+    name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$", description="Shot name; names the cache and renders/<name>/.")
+    frame_start: int = Field(1, ge=0, description="First frame number (frame_start is the initial state, t = 0).")
+    frame_end: int = Field(48, ge=0, description="Last frame number, inclusive.")
+    fps: float = Field(24.0, gt=0, le=1000, description="Frames per second; one frame is 1/fps seconds.")
+
+
+class Domain(_Section):
+    origin: Vec3 = Field((-1.0, 0.0, -1.0), description="World position (m) of the domain's min corner.")
+    size: float = Field(2.0, gt=0, description="Edge of the cubic domain (m).")
+    grid_n: int = Field(64, ge=8, le=1024, description="Grid cells per axis; dx = size / grid_n (m).")
+
+
+class SceneObject(_Section):
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="Object name (a USD prim name).")
+    mesh: Path = Field(description="Mesh file (obj, ply, stl, glb, gltf, usd, usda, usdc), relative to the shot file.")
+    prim_path: str | None = Field(None, description="USD files only: the prim whose meshes are taken.")
+    material: str = Field("Elastic", description="Preset name from the guide's section 8 (Soft, Mushy, Goopy, Wet, "
+                          "Slush, Elastic, Granular, CohesiveGranular, Water, Tracer).")
+    overrides: dict[str, float | bool] = Field(default_factory=dict,
+                                               description="Material fields to change, e.g. {youngs_modulus = 3000}.")
+    translate: Vec3 = Field((0.0, 0.0, 0.0), description="Translation (m), applied after rotate and scale.")
+    rotate: Vec3 = Field((0.0, 0.0, 0.0), description="XYZ Euler rotation (degrees).")
+    scale: float = Field(1.0, gt=0, description="Uniform scale of the mesh file's units to metres.")
+    velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Initial linear velocity (m/s).")
+    angular_velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Initial angular velocity about the centroid (rad/s).")
+
+
+class Thickness(str, enum.Enum):
+    ERROR = "error"
+    WARN = "warn"
+    IGNORE = "ignore"
+
+
+class Voxelise(_Section):
+    ppc: int = Field(8, ge=1, le=64, description="Particles per grid cell.")
+    seed: int = Field(0, ge=0, description="Jitter seed; the same seed re-voxelises identically.")
+    thickness: Thickness = Field(Thickness.WARN, description="What a failed five-cell thickness check does.")
+
+
+WallName = Literal["sticky", "slip", "separate"]
+
+
+class ColliderShape(str, enum.Enum):
+    PLANE = "plane"
+    BOX = "box"
+    SPHERE = "sphere"
+    MESH = "mesh"
+
+
+class Keyframe(_Section):
+    time: float = Field(ge=0, description="Seconds from frame_start.")
+    translate: Vec3 = Field((0.0, 0.0, 0.0), description="Position (m) of the collider's origin.")
+    rotate: Vec3 = Field((0.0, 0.0, 0.0), description="XYZ Euler rotation (degrees).")
+
+
+class ColliderCfg(_Section):
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
+    shape: ColliderShape
+    friction: float = Field(0.3, ge=0, description="Coulomb friction coefficient.")
+    normal: Vec3 = Field((0.0, 1.0, 0.0), description="plane: outward normal.")
+    half_extents: Vec3 = Field((0.1, 0.1, 0.1), description="box: half extents (m).")
+    radius: float = Field(0.1, gt=0, description="sphere: radius (m).")
+    mesh: Path | None = Field(None, description="mesh: file, relative to the shot file.")
+    scale: float = Field(1.0, gt=0, description="mesh: uniform scale.")
+    keyframes: list[Keyframe] = Field(default_factory=lambda: [Keyframe(time=0.0)],
+                                      description="Rigid transform keys, interpolated per substep.")
+
+
+class Solver(_Section):
+    cfl: float = Field(0.4, gt=0, le=1.0, description="CFL number: dt = cfl * dx / (c_max + |v|_max).")
+    gravity: Vec3 = Field((0.0, -9.81, 0.0), description="Gravity (m/s^2, world); the solver sees it / domain.size.")
+    damping: float = Field(0.0, ge=0, description="Velocity decay rate (1/s): v *= 1 - damping*dt (trap 5).")
+    drag: float = Field(0.0, ge=0, description="PIC blend as a rate (1/s), never a per-substep fraction.")
+    time_scale: float = Field(1.0, gt=0, description="Playback speed: simulated seconds per shot second (trap 1).")
+    walls: WallName | list[WallName] = Field("separate", description="Domain walls: one type, or six for "
+                                             "-x,+x,-y,+y,-z,+z.")
+    wall_friction: float = Field(0.3, ge=0, description="Coulomb friction at the walls.")
+    dt_max: float = Field(1e-2, gt=0, description="Largest substep (s).")
+    dt_min: float = Field(1e-7, gt=0, description="Substep floor (s): below it the run stops with advice.")
+    deterministic: bool = Field(True, description="Fixed-point P2G: bit-identical replays (guide 10.1).")
+    multi_field: bool = Field(False, description="One velocity field per object so bodies don't fuse.")
+    checkpoint_every: int = Field(5, ge=1, description="Frames between full-state checkpoints (resume points).")
+
+    @field_validator("walls")
+    @classmethod
+    def _six_walls(cls, v):
+        if isinstance(v, list) and len(v) != 6:
+            raise ValueError("give one wall type or exactly six (-x,+x,-y,+y,-z,+z)")
+        return v
+
+
+class SurfaceGroup(str, enum.Enum):
+    ALL = "all"
+    MATERIAL = "material"
+    OBJECT = "object"
+
+
+class Surface(_Section):
+    radius_scale: float = Field(1.0, gt=0, description="Multiplier on the particle radius (half the spacing).")
+    voxel_size: float | None = Field(None, gt=0, description="Level-set voxel (m); default half the particle radius.")
+    smooth_iters: int = Field(2, ge=0, le=50, description="Level-set smoothing passes.")
+    dilate: float = Field(0.0, description="Offset (m): + dilates, - erodes.")
+    min_feature_particles: int = Field(8, ge=0, description="Blobs of fewer particles are removed (specks).")
+    group: SurfaceGroup = Field(SurfaceGroup.MATERIAL, description="One surface per material, per object, or one.")
+
+
+class Export(_Section):
+    usd: bool = Field(True, description="Write the USD stage.")
+    vdb: bool = Field(True, description="Write per-frame .vdb level sets.")
+    points: bool = Field(True, description="Include particles as UsdGeomPoints.")
+
+
+class Render(_Section):
+    width: int = Field(960, ge=16, le=8192)
+    height: int = Field(540, ge=16, le=8192)
+    mode: Literal["surface", "particles"] = Field("surface", description="particles: the guide's debug look (9.4).")
+    camera_position: Vec3 | None = Field(None, description="Camera position (m); default a 3/4 view of the domain.")
+    camera_look_at: Vec3 | None = Field(None, description="Camera target (m); default the domain centre.")
+    movie: bool = Field(True, description="Also write an mp4 of the frames.")
+
+
+class Shot(_Section):
+    shot: ShotInfo
+    domain: Domain = Domain()
+    objects: list[SceneObject] = Field(min_length=1)
+    colliders: list[ColliderCfg] = Field(default_factory=list)
+    voxelise: Voxelise = Voxelise()
+    solver: Solver = Solver()
+    surface: Surface = Surface()
+    export: Export = Export()
+    render: Render = Render()
+    # Not part of the schema's TOML: where the file lives (relative paths resolve from here).
+    base_dir: Path = Field(Path("."), exclude=True)
+
+    @property
+    def frames(self) -> range:
+        return range(self.shot.frame_start, self.shot.frame_end + 1)
+
+    def resolve(self, p: Path) -> Path:
+        return p if p.is_absolute() else (self.base_dir / p).resolve()
+
+
+# ---------------------------------------------------------------------------------------------
+# Loading, overrides and error messages
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """`solver.cfl=0.3` -> (["solver", "cfl"], 0.3). Values are TOML (strings may be bare)."""
+    if "=" not in text:
+        raise ShotError(f"--set {text!r}: expected key=value, e.g. --set solver.cfl=0.3")
+    key, raw = text.split("=", 1)
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw  # bare string, e.g. --set objects.0.material=Water
+    return key.strip().split("."), value
+
+
+def apply_override(data: dict, path: list[str], value: Any, *, source: str) -> None:
+    node: Any = data
+    for i, part in enumerate(path[:-1]):
+        if isinstance(node, list):
+            if not part.isdigit() or int(part) >= len(node):
+                raise ShotError(f"{source}: --set {'.'.join(path)}: '{part}' is not an index of "
+                                f"[{'.'.join(path[:i])}] (0..{len(node) - 1})")
+            node = node[int(part)]
+        else:
+            node = node.setdefault(part, {})
+    last = path[-1]
+    if isinstance(node, list):
+        if not last.isdigit() or int(last) >= len(node):
+            raise ShotError(f"{source}: --set {'.'.join(path)}: bad list index '{last}'")
+        node[int(last)] = value
+    else:
+        node[last] = value
+
+
+def _loc(loc: tuple) -> str:
+    out = ""
+    for part in loc:
+        out += f"[{part}]" if isinstance(part, int) else (f".{part}" if out else str(part))
+    return out
+
+
+def _model_at(loc: tuple) -> type[BaseModel] | None:
+    model: Any = Shot
+    for part in loc[:-1]:
+        if isinstance(part, int):
+            continue
+        field = model.model_fields.get(part) if model else None
+        if field is None:
+            return None
+        ann = field.annotation
+        args = getattr(ann, "__args__", ())
+        model = next((a for a in (ann, *args) if isinstance(a, type) and issubclass(a, BaseModel)), None)
+    return model
+
+
+def _format_error(err: dict, source: str) -> str:
+    loc = tuple(err["loc"])
+    key = _loc(loc)
+    if err["type"] == "extra_forbidden":
+        model = _model_at(loc)
+        known = list(model.model_fields) if model else []
+        close = difflib.get_close_matches(str(loc[-1]), known, n=1)
+        hint = f"did you mean '{close[0]}'?" if close else f"known keys: {', '.join(known)}"
+        return f"{source}: unknown key '{key}': {hint}"
+    if err["type"] == "missing":
+        return f"{source}: missing key '{key}': add it (see pipeline/shots/*.toml for examples)"
+    model = _model_at(loc)
+    field = model.model_fields.get(str(loc[-1])) if model else None
+    doc = f" ({field.description})" if field is not None and field.description else ""
+    return f"{source}: '{key}' = {err.get('input')!r}: {err['msg']}{doc}"
+
+
+def load_shot_config(path: str | Path, overrides: list[str] = ()) -> Shot:
+    """Read, override and validate a shot file. Raises ShotError naming file, key and fix."""
+    path = Path(path)
+    if not path.is_file():
+        raise ShotError(f"{path}: shot file not found (run from the project root, e.g. "
+                        f"mpmfx run pipeline/shots/jelly_splash.toml)")
+    try:
+        data = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise ShotError(f"{path}: not valid TOML: {exc}") from None
+    for text in overrides:
+        key, value = parse_override(text)
+        apply_override(data, key, value, source=str(path))
+    try:
+        shot = Shot.model_validate({**data, "base_dir": path.resolve().parent})
+    except ValidationError as exc:
+        raise ShotError("\n".join(_format_error(e, str(path)) for e in exc.errors())) from None
+    _check_semantics(shot, str(path))
+    return shot
+
+
+def _check_semantics(shot: Shot, source: str) -> None:
+    """Checks that need more than one field: frame order, file existence, time step bounds."""
+    problems = []
+    if shot.shot.frame_end <= shot.shot.frame_start:
+        problems.append(f"{source}: shot.frame_end ({shot.shot.frame_end}) must be after shot.frame_start "
+                        f"({shot.shot.frame_start})")
+    if shot.solver.dt_min >= shot.solver.dt_max:
+        problems.append(f"{source}: solver.dt_min ({shot.solver.dt_min}) must be below solver.dt_max "
+                        f"({shot.solver.dt_max})")
+    if shot.solver.dt_max * shot.shot.fps * 0.999 > 1.0 / shot.solver.time_scale:
+        problems.append(f"{source}: solver.dt_max ({shot.solver.dt_max} s) is longer than one frame "
+                        f"(1/{shot.shot.fps} s): lower solver.dt_max")
+    names = [o.name for o in shot.objects] + [c.name for c in shot.colliders]
+    for dup in sorted({n for n in names if names.count(n) > 1}):
+        problems.append(f"{source}: name '{dup}' is used twice in objects/colliders: names must be unique")
+    for i, obj in enumerate(shot.objects):
+        if not shot.resolve(obj.mesh).is_file():
+            problems.append(f"{source}: objects[{i}].mesh: file not found: {shot.resolve(obj.mesh)} "
+                            f"(paths are relative to the shot file)")
+    for i, col in enumerate(shot.colliders):
+        if col.shape is ColliderShape.MESH:
+            if col.mesh is None:
+                problems.append(f"{source}: colliders[{i}].mesh: a shape = \"mesh\" collider needs mesh = \"file\"")
+            elif not shot.resolve(col.mesh).is_file():
+                problems.append(f"{source}: colliders[{i}].mesh: file not found: {shot.resolve(col.mesh)}")
+        times = [k.time for k in col.keyframes]
+        if times != sorted(times) or len(set(times)) != len(times):
+            problems.append(f"{source}: colliders[{i}].keyframes: times must be strictly increasing")
+    if problems:
+        raise ShotError("\n".join(problems))

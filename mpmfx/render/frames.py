@@ -1,0 +1,96 @@
+"""Offscreen PyVista renders of surfaces (the look) and particles (the guide's debug look, 9.4)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+# Colour per material family, keyed by preset name (unknown names fall back to grey).
+COLOURS = {"Soft": "#f4f7fb", "Mushy": "#eef2f7", "Goopy": "#e3e9f0", "Wet": "#d5e2ec", "Slush": "#c9dbe8",
+           "Elastic": "#e8577a", "Granular": "#d8b47c", "CohesiveGranular": "#c79f6a", "Water": "#3d8fd6",
+           "Tracer": "#ffd23f"}
+PALETTE = ["#e8577a", "#3d8fd6", "#d8b47c", "#7ac74f", "#f4f7fb", "#b07cc6"]
+
+
+def _pv():
+    try:
+        import pyvista as pv
+    except ImportError as exc:  # pragma: no cover - installed by setup.sh
+        raise ImportError("rendering needs pyvista: run `bash setup.sh` (or pip install pyvista)") from exc
+    pv.OFF_SCREEN = True
+    return pv
+
+
+def colour_for(name: str, index: int) -> str:
+    return COLOURS.get(name, PALETTE[index % len(PALETTE)])
+
+
+class FrameRenderer:
+    """One plotter reused for every frame of a shot (creating a render window is the slow part)."""
+
+    def __init__(self, *, size: tuple[int, int], camera: tuple, domain: tuple, title: str = ""):
+        pv = self.pv = _pv()
+        self.plotter = pv.Plotter(off_screen=True, window_size=size, lighting="three lights")
+        self.plotter.set_background("#20242c", top="#5d6d82")
+        origin, L = np.asarray(domain[0], float), float(domain[1])
+        floor = pv.Plane(center=origin + [L / 2, 0, L / 2], direction=(0, 1, 0), i_size=L * 1.6, j_size=L * 1.6)
+        self.plotter.add_mesh(floor, color="#8a8f98", ambient=0.25, diffuse=0.7, specular=0.0, name="floor")
+        box = pv.Box(bounds=(origin[0], origin[0] + L, origin[1], origin[1] + L, origin[2], origin[2] + L))
+        self.plotter.add_mesh(box, style="wireframe", color="#9aa5b5", opacity=0.25, name="domain")
+        self.plotter.camera_position = [camera[0], camera[1], (0, 1, 0)]
+        self.plotter.camera.view_angle = 35.0
+        self.title = title
+        self._names: list[str] = []
+
+    def _clear(self):
+        for n in self._names:
+            self.plotter.remove_actor(n, render=False)
+        self._names = []
+
+    def surfaces(self, meshes: dict[str, tuple[np.ndarray, np.ndarray, str]], path: Path, *, label: str = ""):
+        """meshes: name -> (vertices (m,3) m, faces (k,3) int, colour). Writes a PNG to `path`."""
+        self._clear()
+        for name, (v, f, colour) in meshes.items():
+            if len(f) == 0:
+                continue
+            faces = np.hstack([np.full((len(f), 1), 3), f]).astype(np.int64).ravel()
+            mesh = self.pv.PolyData(np.asarray(v, np.float64), faces).compute_normals(auto_orient_normals=False)
+            water = colour == COLOURS["Water"]
+            self.plotter.add_mesh(mesh, color=colour, smooth_shading=True, specular=0.6 if water else 0.2,
+                                  specular_power=40, opacity=0.85 if water else 1.0, name=name)
+            self._names.append(name)
+        return self._shoot(path, label)
+
+    def particles(self, points: dict[str, tuple[np.ndarray, str]], radius: float, path: Path, *, label: str = ""):
+        """The debug look: big soft blobs, one colour per group (guide 9.4, rule 1)."""
+        self._clear()
+        for name, (x, colour) in points.items():
+            if len(x) == 0:
+                continue
+            self.plotter.add_points(np.asarray(x, np.float64), color=colour, point_size=max(2.0, radius),
+                                    render_points_as_spheres=True, name=name)
+            self._names.append(name)
+        return self._shoot(path, label)
+
+    def _shoot(self, path: Path, label: str) -> Path:
+        self.plotter.add_text(f"{self.title}  {label}", font_size=9, color="white", name="label")
+        self._names.append("label")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.stem}.tmp.png")
+        self.plotter.screenshot(str(tmp))
+        tmp.replace(path)
+        return path
+
+    def close(self):
+        self.plotter.close()
+
+
+def write_movie(frames: list[Path], path: Path, *, fps: float) -> Path:
+    """H.264 mp4 of the PNGs (imageio-ffmpeg ships its own ffmpeg binary), written atomically."""
+    import imageio.v2 as imageio
+    tmp = path.with_name(f".{path.stem}.tmp.mp4")
+    with imageio.get_writer(tmp, fps=fps, codec="libx264", quality=8, macro_block_size=8) as w:
+        for f in frames:
+            w.append_data(imageio.imread(f))
+    tmp.replace(path)
+    return path

@@ -1,0 +1,52 @@
+"""What every stage module provides, and the context a stage runs in."""
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field
+from typing import Callable, Protocol
+
+from mpmfx.cache import Entry
+from mpmfx.config import Shot
+
+
+class StageError(RuntimeError):
+    """A stage could not produce its output; the message says what to change. Exit code 1."""
+
+
+@dataclass
+class Context:
+    """Everything one stage run may read. `frames` are the frames asked for (all for the shot)."""
+
+    shot: Shot
+    entry: Entry
+    upstream: dict[str, Entry]
+    frames: list[int]
+    device: str | None = None
+    quiet: bool = False
+    notes: list[str] = field(default_factory=list)
+
+    def progress(self, iterable, *, total: int | None = None, desc: str = ""):
+        """A progress bar over frames on stderr (silent when quiet or not a terminal in tests)."""
+        if self.quiet:
+            return iterable
+        from tqdm import tqdm
+        return tqdm(iterable, total=total, desc=f"{desc or self.entry.stage:>9}", unit="frame",
+                    file=sys.stderr, leave=False, dynamic_ncols=True)
+
+    def warn(self, message: str) -> None:
+        self.notes.append(message)
+        print(f"[{self.entry.stage}] warning: {message}", file=sys.stderr)
+
+
+class Stage(Protocol):
+    NAME: str
+    VERSION: int
+    PER_FRAME: bool          # output is one file per frame (else one result for the shot)
+    FRAME_EXT: str
+
+    def params(self, shot: Shot) -> dict: ...               # the stage's own parameters (key inputs)
+    def inputs(self, shot: Shot) -> dict[str, str]: ...     # input files: name -> sha256
+    def run(self, ctx: Context) -> dict: ...                # writes into ctx.entry; returns manifest extras
+
+
+ProgressFn = Callable[[int], None]

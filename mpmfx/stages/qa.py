@@ -1,0 +1,48 @@
+"""`mpmfx status SHOT --qa`: the simulation's per-frame observables, with suspicious frames flagged."""
+from __future__ import annotations
+
+import math
+
+MASS_TOL = 1e-4          # relative change of total mass that counts as "mass changed"
+ENERGY_JUMP = 1.5        # kinetic energy growing by more than this factor in one frame, with no collider
+
+
+def flags(qa: dict[int, dict]) -> dict[int, list[str]]:
+    """Frame -> reasons it looks wrong (mass changed, energy jumped, particles lost, rejected substeps)."""
+    out: dict[int, list[str]] = {}
+    frames = sorted(qa)
+    m0 = qa[frames[0]].get("mass") if frames else None
+    prev = None
+    for f in frames:
+        q, why = qa[f], []
+        if m0 and q.get("mass") is not None and abs(q["mass"] - m0) > MASS_TOL * abs(m0):
+            why.append(f"mass changed {100 * (q['mass'] - m0) / m0:+.3f} %")
+        ke = q.get("kinetic_energy")
+        if prev is not None and ke is not None and prev > 1e-12 and ke > ENERGY_JUMP * prev:
+            why.append(f"kinetic energy x{ke / prev:.1f}")
+        if q.get("particles_lost"):
+            why.append(f"{q['particles_lost']} particles lost")
+        if q.get("rejected_substeps"):
+            why.append(f"{q['rejected_substeps']} substeps rejected")
+        if why:
+            out[f] = why
+        prev = ke
+    return out
+
+
+def print_qa(run) -> int:
+    entry = run.entries()["simulate"]
+    man = entry.manifest()
+    if not man or not man.get("qa"):
+        print("no simulation QA yet: run the shot first")
+        return 1
+    qa = {int(k): v for k, v in man["qa"].items()}
+    bad = flags(qa)
+    cols = ["mass", "kinetic_energy", "j_min", "j_max", "max_speed", "substeps", "rejected_substeps", "cfl_used"]
+    print("frame  " + "  ".join(f"{c[:12]:>12}" for c in cols) + "  flags")
+    for f in sorted(qa):
+        vals = [qa[f].get(c) for c in cols]
+        cells = [f"{v:12.4g}" if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                 else f"{str(v):>12}" for v in vals]
+        print(f"{f:5d}  " + "  ".join(cells) + "  " + "; ".join(bad.get(f, [])))
+    return 0

@@ -1,0 +1,70 @@
+"""Stage 5: PNG frames and an mp4 of the surfaces (or the particle debug look).
+
+Output in the cache entry: `frames/NNNN.png` and `<shot>.mp4`; both are then published to
+`renders/<shot>/`, the folder artists look in.
+"""
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+from mpmfx.config import Shot
+from mpmfx.stages.base import Context
+
+NAME, VERSION, PER_FRAME, FRAME_EXT = "render", 1, True, "png"
+
+
+def params(shot: Shot) -> dict:
+    from mpmfx.render.camera import default_camera
+    return {"render": shot.render.model_dump(mode="json"), "camera": default_camera(shot),
+            "domain": shot.domain.model_dump(mode="json"), "materials": [o.material for o in shot.objects]}
+
+
+def inputs(shot: Shot) -> dict[str, str]:
+    return {}
+
+
+def run(ctx: Context) -> dict:
+    from mpmfx.render.camera import default_camera
+    from mpmfx.render.frames import FrameRenderer, colour_for, write_movie
+    from mpmfx.stages import simulate
+    from mpmfx.stages.surface import group_names, load_frame_groups, particle_spacing
+
+    shot, entry = ctx.shot, ctx.entry
+    r = shot.render
+    todo = [f for f in ctx.frames if not entry.frame_path(f, FRAME_EXT).exists()]
+    renderer = FrameRenderer(size=(r.width, r.height), camera=default_camera(shot),
+                             domain=(shot.domain.origin, shot.domain.size), title=shot.shot.name)
+    material_of = {g: o.material for g, o in zip(group_names(shot), shot.objects)}
+    try:
+        for f in ctx.progress(todo, total=len(todo), desc="render"):
+            label = f"frame {f}  t={(f - shot.shot.frame_start) / shot.shot.fps:.2f}s"
+            if r.mode == "particles":
+                p = simulate.load_frame(ctx.upstream["simulate"], f)
+                pts = {o.name: (p["x"][p["body"] == i], colour_for(o.material, i)) for i, o in enumerate(shot.objects)}
+                px = r.height * particle_spacing(shot) / shot.domain.size * 1.5
+                renderer.particles(pts, px, entry.frame_path(f, FRAME_EXT), label=label)
+            else:
+                groups = load_frame_groups(ctx.upstream["surface"], f)
+                meshes = {g: (d["vertices"], d["faces"], colour_for(material_of.get(g, g), i))
+                          for i, (g, d) in enumerate(groups.items())}
+                renderer.surfaces(meshes, entry.frame_path(f, FRAME_EXT), label=label)
+    finally:
+        renderer.close()
+    pngs = [entry.frame_path(f, FRAME_EXT) for f in entry.done_frames(FRAME_EXT)]
+    movie = None
+    if r.movie and len(pngs) > 1:
+        movie = write_movie(pngs, entry.root / f"{shot.shot.name}.mp4", fps=shot.shot.fps)
+    out = publish(shot, pngs, movie)
+    return {"published": str(out)}
+
+
+def publish(shot: Shot, pngs: list[Path], movie: Path | None) -> Path:
+    """Copy the frames and movie to renders/<shot>/ (next to the working directory's cache)."""
+    out = Path("renders") / shot.shot.name
+    out.mkdir(parents=True, exist_ok=True)
+    for p in pngs:
+        shutil.copyfile(p, out / p.name)
+    if movie is not None:
+        shutil.copyfile(movie, out / movie.name)
+    return out

@@ -1,0 +1,147 @@
+"""Runs the stages of one shot in order, each a cache hit or a (resumed) run.
+
+`ShotRun` is the Python API behind `mpmfx run/status/clean`:
+    mpmfx.load_shot("pipeline/shots/jelly_splash.toml").run(until="surface")
+"""
+from __future__ import annotations
+
+import importlib
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from mpmfx.cache import Cache, Entry, default_root
+from mpmfx.config import STAGES, Shot, ShotError, load_shot_config
+from mpmfx.stages.base import Context, Stage
+
+
+def stage_module(name: str) -> Stage:
+    return importlib.import_module(f"mpmfx.stages.{name}")  # type: ignore[return-value]
+
+
+@dataclass
+class StageResult:
+    stage: str
+    state: str          # "cached" | "ran" | "resumed"
+    seconds: float
+    frames: int
+    entry: Path
+
+
+@dataclass
+class StageStatus:
+    stage: str
+    state: str          # "cached" | "stale" | "partial" | "missing"
+    why: str
+    entry: Path
+
+
+class ShotRun:
+    """One shot file bound to a cache root. Nothing runs until `run()`."""
+
+    def __init__(self, shot: Shot, *, cache_root: str | Path | None = None, device: str | None = None,
+                 quiet: bool = False):
+        self.shot = shot
+        self.cache = Cache(cache_root or default_root(), shot.shot.name)
+        self.device = device
+        self.quiet = quiet
+
+    # -- keys ------------------------------------------------------------------------------
+    def entries(self) -> dict[str, Entry]:
+        """Each stage's entry; keys chain, so a change upstream changes every key after it."""
+        out: dict[str, Entry] = {}
+        upstream: dict[str, str] = {}
+        for name in STAGES:
+            mod = stage_module(name)
+            entry = self.cache.entry(name, mod.VERSION, mod.params(self.shot), dict(upstream), mod.inputs(self.shot))
+            out[name] = entry
+            upstream = {name: entry.key}
+        return out
+
+    def _wanted(self, name: str, frames: list[int] | None) -> list[int] | None:
+        mod = stage_module(name)
+        if not mod.PER_FRAME:
+            return None
+        all_frames = list(self.shot.frames)
+        if name == "simulate" and frames:
+            # the simulation is sequential: frames up to the last one asked for
+            return [f for f in all_frames if f <= max(frames)]
+        return frames or all_frames
+
+    # -- status ----------------------------------------------------------------------------
+    def status(self) -> list[StageStatus]:
+        out = []
+        for name, entry in self.entries().items():
+            if entry.complete(self._wanted(name, None)):
+                out.append(StageStatus(name, "cached", "all frames present", entry.root))
+            elif entry.root.exists():
+                n = len(entry.done_frames(stage_module(name).FRAME_EXT))
+                out.append(StageStatus(name, "partial", f"{n} frames done; a run resumes", entry.root))
+            elif others := [p for p in self.cache.entries(name) if p != entry.root]:
+                newest = max(others, key=lambda p: p.stat().st_mtime)
+                out.append(StageStatus(name, "stale", _why_stale(entry, newest), entry.root))
+            else:
+                out.append(StageStatus(name, "missing", "never run", entry.root))
+        return out
+
+    # -- run -------------------------------------------------------------------------------
+    def run(self, *, until: str = "render", force: tuple[str, ...] | list[str] = (),
+            frames: list[int] | None = None) -> list[StageResult]:
+        """Run stages up to `until` (inclusive). `force`: stages re-run from scratch."""
+        for name in (until, *force):
+            if name not in STAGES:
+                raise ShotError(f"unknown stage '{name}': one of {', '.join(STAGES)}")
+        if frames:
+            bad = sorted(set(frames) - set(self.shot.frames))
+            if bad:
+                raise ShotError(f"--frames: {bad[0]} is outside the shot's frames "
+                                f"{self.shot.shot.frame_start}..{self.shot.shot.frame_end}")
+        entries = self.entries()
+        results = []
+        for name in STAGES[: STAGES.index(until) + 1]:
+            entry, mod = entries[name], stage_module(name)
+            wanted = self._wanted(name, frames)
+            if name in force:
+                entry.remove()
+            if entry.complete(wanted):
+                n = len(wanted) if wanted is not None else 1
+                results.append(StageResult(name, "cached", 0.0, n, entry.root))
+                continue
+            state = "resumed" if entry.root.exists() else "ran"
+            up = {s: entries[s] for s in STAGES[: STAGES.index(name)]}
+            ctx = Context(self.shot, entry, up, wanted if wanted is not None else [], self.device, self.quiet)
+            t0 = time.perf_counter()
+            entry.root.mkdir(parents=True, exist_ok=True)
+            extra = mod.run(ctx) or {}
+            seconds = time.perf_counter() - t0
+            done = entry.done_frames(mod.FRAME_EXT) if mod.PER_FRAME else []
+            old = entry.manifest() or {}
+            timings = {**old.get("timings", {}), "last_run_s": round(seconds, 3)}
+            entry.write_manifest(frames=done, timings=timings, qa=extra.pop("qa", None),
+                                 extra={**extra, "notes": ctx.notes})
+            results.append(StageResult(name, state, seconds, len(wanted) if wanted is not None else 1, entry.root))
+        return results
+
+
+def _why_stale(entry: Entry, other: Path) -> str:
+    """Name the key inputs that differ from the newest other entry of the same stage."""
+    import json
+    try:
+        old = json.loads((other / "manifest.json").read_text())["key_inputs"]
+    except (OSError, KeyError, ValueError):
+        return "parameters or inputs changed"
+    new = entry.key_inputs
+    changed = []
+    for group in ("version", "params", "upstream", "inputs"):
+        a, b = old.get(group), new.get(group)
+        if isinstance(a, dict) and isinstance(b, dict):
+            changed += [f"{group}.{k}" for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+        elif a != b:
+            changed.append(group)
+    return "changed: " + ", ".join(changed[:6]) if changed else "parameters or inputs changed"
+
+
+def load_shot(path: str | Path, *, overrides: list[str] = (), cache_root: str | Path | None = None,
+              device: str | None = None, quiet: bool = False) -> ShotRun:
+    """Load and validate a shot file; returns a ShotRun (see module docstring)."""
+    return ShotRun(load_shot_config(path, list(overrides)), cache_root=cache_root, device=device, quiet=quiet)

@@ -1,0 +1,56 @@
+"""Shared fixtures: a tiny shot that runs end to end on a 2-core CPU in seconds."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+TINY = """
+[shot]
+name = "tiny"
+frame_start = 1
+frame_end = {frame_end}
+fps = 24
+
+[domain]
+origin = [0.0, 0.0, 0.0]
+size = 1.0
+grid_n = 24
+
+[[objects]]
+name = "cube"
+mesh = "cube.obj"
+material = "{material}"
+translate = [0.5, 0.45, 0.5]
+velocity = [0.0, -0.5, 0.0]
+
+[voxelise]
+ppc = 4
+
+[solver]
+cfl = 0.4
+damping = 1.0
+walls = "slip"
+checkpoint_every = 2
+
+[surface]
+smooth_iters = 1
+
+[render]
+width = 160
+height = 120
+movie = false
+"""
+
+
+def write_tiny_shot(folder: Path, *, material: str = "Elastic", frame_end: int = 6, extra: str = "") -> Path:
+    import trimesh
+    trimesh.creation.box(extents=[0.25, 0.25, 0.25]).export(folder / "cube.obj")
+    path = folder / "tiny.toml"
+    path.write_text(TINY.format(material=material, frame_end=frame_end) + extra)
+    return path
+
+
+@pytest.fixture
+def tiny_shot(tmp_path: Path) -> Path:
+    return write_tiny_shot(tmp_path)

@@ -1,0 +1,136 @@
+"""The cache contract of issue 2, on a tiny shot, end to end on the CPU."""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import mpmfx
+from tests.conftest import write_tiny_shot
+
+RAN = {"ran", "resumed"}
+
+
+def _states(results):
+    return {r.stage: r.state for r in results}
+
+
+def _bytes(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.glob("*.npz"))}
+
+
+@pytest.fixture(scope="module")
+def first_run(tmp_path_factory):
+    """One full run of the tiny shot; later tests build on its cache."""
+    folder = tmp_path_factory.mktemp("shot")
+    shot = write_tiny_shot(folder)
+    cache = folder / "cache"
+    cwd = os.getcwd()
+    os.chdir(folder)  # renders/<shot>/ is published relative to the working directory
+    try:
+        results = mpmfx.load_shot(shot, cache_root=cache, quiet=True).run()
+    finally:
+        os.chdir(cwd)
+    return shot, cache, results
+
+
+def test_full_run_produces_every_output(first_run):
+    shot, cache, results = first_run
+    assert [r.stage for r in results] == ["voxelise", "simulate", "surface", "export", "render"]
+    assert all(r.state == "ran" for r in results)
+    sim, surf, exp, ren = (results[i].entry for i in range(1, 5))
+    assert len(list((sim / "frames").glob("*.npz"))) == 6
+    assert len(list((surf / "frames").glob("*.npz"))) == 6
+    assert (exp / "shot.usda").is_file() and len(list((exp / "frames").glob("*.usdc"))) == 6
+    assert len(list(exp.rglob("*.vdb"))) == 6
+    assert len(list((ren / "frames").glob("*.png"))) == 6
+    assert len(list((shot.parent / "renders" / "tiny").glob("*.png"))) == 6
+
+
+def test_second_run_is_all_cache_hits(first_run):
+    shot, cache, _ = first_run
+    results = mpmfx.load_shot(shot, cache_root=cache, quiet=True).run()
+    assert set(_states(results).values()) == {"cached"}
+
+
+def test_surface_change_reruns_only_surface_and_after(first_run):
+    shot, cache, first = first_run
+    sim_before = _bytes(first[1].entry / "frames")
+    run = mpmfx.load_shot(shot, overrides=["surface.radius_scale=1.3"], cache_root=cache, quiet=True)
+    states = _states(run.run(until="surface"))
+    assert states == {"voxelise": "cached", "simulate": "cached", "surface": "ran"}
+    assert {s.stage: s.state for s in run.status()}["export"] in {"stale", "missing"}
+    assert _bytes(first[1].entry / "frames") == sim_before  # the simulation is untouched, byte for byte
+
+
+def test_material_change_reruns_simulate_and_after(first_run):
+    shot, cache, _ = first_run
+    run = mpmfx.load_shot(shot, overrides=["objects.0.overrides.youngs_modulus=3000"], cache_root=cache,
+                          quiet=True)
+    status = {s.stage: s for s in run.status()}
+    assert status["voxelise"].state == "cached"
+    assert status["simulate"].state == "stale" and "materials" in status["simulate"].why
+    states = _states(run.run(until="surface"))
+    assert states == {"voxelise": "cached", "simulate": "ran", "surface": "ran"}
+
+
+KILLER = """
+import sys, time
+import mpmfx.stages.simulate as sim
+_write = sim._write_frame
+def slow(*a, **k):
+    _write(*a, **k)
+    time.sleep(0.4)   # give the test time to kill us between frames
+sim._write_frame = slow
+from mpmfx.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_killed_simulation_resumes_to_identical_frames(tmp_path):
+    shot = write_tiny_shot(tmp_path, frame_end=12)
+    ref_cache, cache = tmp_path / "ref", tmp_path / "killed"
+    ref = mpmfx.load_shot(shot, cache_root=ref_cache, quiet=True).run(until="simulate")
+    cmd = [sys.executable, "-c", KILLER, "run", str(shot), "--until", "simulate", "--cache", str(cache), "-q"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    run = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
+    frames_dir = run.entries()["simulate"].frames_dir
+    deadline = time.time() + 300
+    while time.time() < deadline and len(list(frames_dir.glob("[0-9]*.npz"))) < 6:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done = len(list(frames_dir.glob("[0-9]*.npz")))
+    assert 6 <= done < 12, "the run must have been killed part-way"
+    assert not run.entries()["simulate"].complete()
+    states = _states(run.run(until="simulate"))
+    assert states["simulate"] == "resumed"
+    assert _bytes(frames_dir) == _bytes(ref[1].entry / "frames")
+
+
+def test_cli_status_and_clean(first_run, capsys):
+    from mpmfx.cli import main
+    shot, cache, _ = first_run
+    assert main(["status", str(shot), "--cache", str(cache)]) == 0
+    out = capsys.readouterr().out
+    assert "voxelise" in out and "cached" in out
+    assert main(["clean", str(shot), "--cache", str(cache), "--stage", "render"]) == 0
+    assert main(["status", str(shot), "--cache", str(cache)]) == 0
+    assert "render    missing" in capsys.readouterr().out.replace("  ", "  ")
+
+
+def test_cli_bad_config_exit_2(tmp_path, capsys):
+    from mpmfx.cli import main
+    shot = write_tiny_shot(tmp_path, extra="\n[solver]\n")  # duplicate table: invalid TOML
+    assert main(["run", str(shot), "--cache", str(tmp_path / "c")]) == 2
+    assert "not valid TOML" in capsys.readouterr().err
+    shot = write_tiny_shot(tmp_path)
+    assert main(["run", str(shot), "--set", "solver.cfll=0.3", "--cache", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert "solver.cfll" in err and "did you mean 'cfl'" in err
+    assert not (tmp_path / "c").exists()  # nothing cached from a bad config

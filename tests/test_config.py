@@ -1,0 +1,79 @@
+"""The shot schema: what an artist's typo produces."""
+from pathlib import Path
+
+import pytest
+
+from mpmfx.config import ShotError, load_shot_config
+from tests.conftest import write_tiny_shot
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_example_shots_validate():
+    shots = sorted((REPO / "pipeline" / "shots").glob("*.toml"))
+    assert shots, "pipeline/shots/ must hold example shots"
+    for path in shots:
+        shot = load_shot_config(path)
+        for obj in shot.objects:
+            assert shot.resolve(obj.mesh).is_file()
+
+
+def test_defaults_and_units(tiny_shot):
+    shot = load_shot_config(tiny_shot)
+    assert shot.domain.grid_n == 24 and shot.solver.gravity == (0.0, -9.81, 0.0)
+    assert list(shot.frames) == [1, 2, 3, 4, 5, 6]
+
+
+def test_unknown_key_names_file_key_and_suggestion(tmp_path):
+    path = write_tiny_shot(tmp_path, extra="\n[export]\nusdd = true\n")
+    with pytest.raises(ShotError) as err:
+        load_shot_config(path)
+    msg = str(err.value)
+    assert str(path) in msg and "export.usdd" in msg and "did you mean 'usd'" in msg
+
+
+def test_wrong_type_and_range(tiny_shot):
+    with pytest.raises(ShotError, match=r"solver.cfl.*less than or equal to 1.*CFL number"):
+        load_shot_config(tiny_shot, ["solver.cfl=3.0"])
+    with pytest.raises(ShotError, match=r"domain.grid_n"):
+        load_shot_config(tiny_shot, ["domain.grid_n=lots"])
+
+
+def test_missing_mesh_names_the_object(tmp_path):
+    path = write_tiny_shot(tmp_path)
+    (tmp_path / "cube.obj").unlink()
+    with pytest.raises(ShotError, match=r"objects\[0\].mesh: file not found: .*cube.obj"):
+        load_shot_config(path)
+
+
+def test_missing_shot_file():
+    with pytest.raises(ShotError, match="shot file not found"):
+        load_shot_config("nope/missing.toml")
+
+
+def test_bad_toml(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text("[shot\nname='x'")
+    with pytest.raises(ShotError, match="not valid TOML"):
+        load_shot_config(p)
+
+
+def test_set_overrides_any_field(tiny_shot):
+    shot = load_shot_config(tiny_shot, ["solver.cfl=0.25", "objects.0.material=Water", "surface.group=all",
+                                        "objects.0.overrides.youngs_modulus=3000"])
+    assert shot.solver.cfl == 0.25 and shot.objects[0].material == "Water"
+    assert shot.surface.group.value == "all" and shot.objects[0].overrides == {"youngs_modulus": 3000}
+    with pytest.raises(ShotError, match="not an index"):
+        load_shot_config(tiny_shot, ["objects.7.material=Water"])
+
+
+def test_impossible_time_step(tiny_shot):
+    with pytest.raises(ShotError, match="dt_max .* longer than one frame"):
+        load_shot_config(tiny_shot, ["solver.dt_max=0.5"])
+    with pytest.raises(ShotError, match="dt_min .* must be below"):
+        load_shot_config(tiny_shot, ["solver.dt_min=0.001", "solver.dt_max=0.0001"])
+
+
+def test_frame_range(tiny_shot):
+    with pytest.raises(ShotError, match="frame_end"):
+        load_shot_config(tiny_shot, ["shot.frame_end=0"])
