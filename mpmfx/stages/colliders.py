@@ -64,7 +64,7 @@ def build(shot: Shot) -> list:
     out = []
     for col in shot.colliders:
         t, tr, rot = keyframes(col)
-        common = dict(friction=col.friction, times=t * shot.solver.time_scale,
+        common = dict(friction=col.friction, times=t,  # shot clock, as the solver expects
                       translations=((tr - origin) / L).astype(np.float32), rotations=rot.astype(np.float32))
         if col.shape is ColliderShape.PLANE:
             out.append(Collider(kind=ColliderKind.PLANE, normal=tuple(col.normal), **common))
