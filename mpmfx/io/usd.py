@@ -64,14 +64,15 @@ class PointsSample:
     """Particles of one object at one frame.
 
     positions: (n, 3) float32, metres, world.   velocities: (n, 3) float32, metres/second.
-    widths: (n,) float32 particle diameters, metres (stored once if all equal).
+    widths: (n,) float32 particle diameters, metres; or one float for all particles (stored
+        once, constant interpolation). Use the same form on every frame of a shot.
     ids: (n,) int64 persistent particle ids.   primvars: name -> (n,) or (n, 3) array
     (e.g. material (n,) int32, body (n,) int32, Jp (n,) float32), vertex interpolation.
     """
 
     positions: np.ndarray
     velocities: np.ndarray | None = None
-    widths: np.ndarray | None = None
+    widths: np.ndarray | float | None = None
     ids: np.ndarray | None = None
     primvars: dict[str, np.ndarray] = field(default_factory=dict)
 
@@ -194,12 +195,16 @@ def _write_points(stage: Any, path: str, sample: PointsSample, time: float, wher
         vel = _array(sample.velocities, f"{where}.velocities", shape=(n, 3), dtype=np.float32)
         prim.CreateVelocitiesAttr().Set(Vt.Vec3fArray.FromNumpy(vel), time)
     if sample.widths is not None:
-        widths = _array(sample.widths, f"{where}.widths", shape=(n,), dtype=np.float32)
-        pad = float(widths.max()) / 2 if n else 0.0
-        # One value instead of n when all particles share a size (the common case).
-        uniform = n > 0 and bool((widths == widths[0]).all())
-        prim.CreateWidthsAttr().Set(Vt.FloatArray.FromNumpy(widths[:1] if uniform else widths), time)
-        prim.SetWidthsInterpolation(UsdGeom.Tokens.constant if uniform else UsdGeom.Tokens.vertex)
+        # Interpolation is metadata, one value for the whole shot (the topology layer keeps the
+        # first frame's): a scalar width means constant, an array means vertex, on every frame.
+        if np.ndim(sample.widths) == 0:
+            widths = _array(np.reshape(sample.widths, 1), f"{where}.widths", shape=(1,), dtype=np.float32)
+            prim.SetWidthsInterpolation(UsdGeom.Tokens.constant)
+        else:
+            widths = _array(sample.widths, f"{where}.widths", shape=(n,), dtype=np.float32)
+            prim.SetWidthsInterpolation(UsdGeom.Tokens.vertex)
+        pad = float(widths.max()) / 2 if len(widths) else 0.0
+        prim.CreateWidthsAttr().Set(Vt.FloatArray.FromNumpy(widths), time)
     if sample.ids is not None:
         ids = _array(sample.ids, f"{where}.ids", shape=(n,), dtype=np.int64)
         prim.CreateIdsAttr().Set(Vt.Int64Array.FromNumpy(ids), time)

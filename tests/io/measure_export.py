@@ -32,9 +32,12 @@ def _particles(n: int, seed: int) -> PointsSample:
 def big_frame(out: Path, n: int = 1_000_000) -> None:
     writer = UsdShotWriter(out / "big" / "shot.usda", fps=24, start_frame=1, end_frame=1)
     sample = _particles(n, 0)
-    best = min(_timed(lambda: writer.write_frame(1, points={"water": sample})) for _ in range(3))
-    size = writer.frame_path(1).stat().st_size
-    print(f"USD frame, {n:,} particles: {best:.3f} s, {size / n:.1f} bytes/particle ({size / 1e6:.1f} MB)")
+    for label, widths in (("per-particle widths", sample.widths), ("one shared width", 0.005)):
+        sample.widths = widths
+        best = min(_timed(lambda: writer.write_frame(1, points={"water": sample})) for _ in range(3))
+        size = writer.frame_path(1).stat().st_size
+        print(f"USD frame, {n:,} particles, {label}: {best:.3f} s, {size / n:.1f} bytes/particle "
+              f"({size / 1e6:.1f} MB)")
 
 
 def many_frames(out: Path, frames: int = 240) -> None:

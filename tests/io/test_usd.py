@@ -21,7 +21,7 @@ def _points(frame: int) -> PointsSample:
     return PointsSample(
         positions=rng.random((n, 3), dtype=np.float32),
         velocities=rng.standard_normal((n, 3)).astype(np.float32),
-        widths=np.full(n, 0.02, np.float32),
+        widths=rng.uniform(0.01, 0.03, n).astype(np.float32),
         ids=np.arange(n, dtype=np.int64) * 3,
         primvars={"material": (np.arange(n) % 2).astype(np.int32),
                   "Jp": rng.random(n, dtype=np.float32)},
@@ -91,14 +91,32 @@ def test_points_mesh_and_primvars_equal_at_every_time_code(shot):
         np.testing.assert_array_equal(np.array(points.GetVelocitiesAttr().Get(f)), want.velocities)
         np.testing.assert_array_equal(np.array(points.GetIdsAttr().Get(f)), want.ids)
         np.testing.assert_array_equal(np.array(material.Get(f)), want.primvars["material"])
-        # Same widths for all: stored once, constant interpolation, still the right diameter.
-        np.testing.assert_allclose(np.array(points.GetWidthsAttr().Get(f)), [0.02])
+        np.testing.assert_array_equal(np.array(points.GetWidthsAttr().Get(f)), want.widths)
         np.testing.assert_array_equal(np.array(mesh.GetPointsAttr().Get(f)), want_mesh.points)
         np.testing.assert_array_equal(np.array(mesh.GetFaceVertexIndicesAttr().Get(f)),
                                       want_mesh.face_vertex_indices.reshape(-1))
         extent = np.array(points.GetExtentAttr().Get(f))
-        assert (extent[0] <= want.positions.min(0)).all() and (extent[1] >= want.positions.max(0)).all()
-    assert points.GetWidthsInterpolation() == UsdGeom.Tokens.constant
+        # The extent bounds the spheres, not just their centres (renderers cull with it).
+        r = want.widths.max() / 2
+        assert (extent[0] <= want.positions.min(0) - r + 1e-6).all()
+        assert (extent[1] >= want.positions.max(0) + r - 1e-6).all()
+    assert points.GetWidthsInterpolation() == UsdGeom.Tokens.vertex
+
+
+def test_objects_that_come_and_go_have_no_points_when_absent(tmp_path):
+    writer = UsdShotWriter(tmp_path / "s.usda", fps=FPS, start_frame=1, end_frame=3)
+    one = np.zeros((1, 3), np.float32)
+    writer.write_frame(1, points={"a": PointsSample(one, widths=0.1)})
+    writer.write_frame(2, points={"a": PointsSample(one, widths=0.1), "b": PointsSample(one, widths=0.2)})
+    writer.write_frame(3, points={"b": PointsSample(one, widths=0.2)})
+    stage = Usd.Stage.Open(str(writer.finalize([1, 2, 3])))
+    a = UsdGeom.Points(stage.GetPrimAtPath("/World/a/particles"))
+    b = UsdGeom.Points(stage.GetPrimAtPath("/World/b/particles"))
+    assert [a.GetPointsAttr().Get(t) is None for t in (1, 2, 3)] == [False, False, True]
+    assert [b.GetPointsAttr().Get(t) is None for t in (1, 2, 3)] == [True, False, False]
+    # A scalar width is one shared diameter: constant interpolation.
+    assert b.GetWidthsInterpolation() == UsdGeom.Tokens.constant
+    assert list(b.GetWidthsAttr().Get(2)) == [pytest.approx(0.2)]
 
 
 def test_volume_fields_point_at_each_frames_vdb(shot):
@@ -200,3 +218,15 @@ def test_finalize_names_missing_frames(tmp_path):
     with pytest.raises(ValueError, match="0002.usdc"):
         writer.finalize([1, 2])
     assert not (tmp_path / "s.usda").exists()
+
+
+def test_importing_the_module_loads_no_pxr_and_a_missing_pxr_says_how_to_install(tmp_path, monkeypatch):
+    import subprocess
+    import sys
+    code = "import sys, mpmfx.io.usd, mpmfx.io.vdb; print('pxr' in sys.modules, 'pyopenvdb' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False", "False"]
+    monkeypatch.setitem(sys.modules, "pxr", None)
+    writer = UsdShotWriter(tmp_path / "s.usda", fps=FPS, start_frame=1, end_frame=1)
+    with pytest.raises(ImportError, match="pip install usd-core"):
+        writer.write_frame(1, points={"p": PointsSample(np.zeros((1, 3), np.float32))})

@@ -147,3 +147,10 @@ def test_bad_grids_are_rejected_with_the_field_named(tmp_path, change, message):
 def test_metadata_of_unsupported_type_is_rejected(tmp_path):
     with pytest.raises(ValueError, match="'params'.*str, int or float"):
         write_vdb(tmp_path / "x.vdb", _sphere_grids()[:1], metadata={"params": {"a": 1}})
+
+
+def test_missing_pyopenvdb_says_how_to_install(tmp_path, monkeypatch):
+    import sys
+    monkeypatch.setitem(sys.modules, "pyopenvdb", None)
+    with pytest.raises(ImportError, match="apt-get install python3-openvdb"):
+        write_vdb(tmp_path / "x.vdb", _sphere_grids()[:1], metadata={})
