@@ -213,7 +213,8 @@ def _write_points(stage: Any, path: str, sample: PointsSample, time: float, wher
         _check_name(name, f"{where} primvar")
         arr = np.asarray(values)
         if len(arr) != n:
-            raise ValueError(f"{where}.primvars[{name!r}]: length {len(arr)}, expected {n} (one per particle)")
+            raise ValueError(f"{where}.primvars[{name!r}]: length {len(arr)}, expected {n} "
+                             f"(one value per particle)")
         type_name, vt = _vt_array(arr, f"{where}.primvars[{name!r}]")
         api.CreatePrimvar(name, type_name, UsdGeom.Tokens.vertex).Set(vt, time)
     prim.CreateExtentAttr().Set(_extent(pts, pad), time)
@@ -389,7 +390,8 @@ class UsdShotWriter:
         from pxr import UsdGeom
         stage = self._new_stage()
         time = float(frame)
-        groups = {**dict.fromkeys(points or {}), **dict.fromkeys(meshes or {}), **dict.fromkeys(volumes or {})}
+        groups = {**dict.fromkeys(points or {}), **dict.fromkeys(meshes or {}),
+                  **dict.fromkeys(volumes or {})}
         for name in groups:
             _check_name(name, "object")
             UsdGeom.Xform.Define(stage, f"/World/{name}")
@@ -473,7 +475,9 @@ class UsdShotWriter:
             world.AddScaleOp().Set(Gf.Vec3f(1.0 / self.meters_per_unit))
         if camera is not None:
             _write_camera(stage, camera, self.meters_per_unit)
-        del stage  # add the sublayer without composing it: relative to an in-memory layer it would not resolve
+        # Add the sublayer without a stage composing it: relative to an in-memory layer it
+        # would not resolve (a spurious warning); beside the written root it does.
+        del stage
         layer.subLayerPaths.append(f"./{self.topology_path().name}")
         return layer
 

@@ -12,7 +12,7 @@ import contextlib
 import enum
 import math
 import os
-import tempfile
+import uuid
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -74,12 +74,11 @@ def import_pyopenvdb() -> Any:
 
 @contextlib.contextmanager
 def _atomic_target(path: Path) -> Iterator[Path]:
-    """Yield a temp path beside `path` with the same suffix (writers pick the format from it);
-    rename it over `path` on success, delete it on failure, so `path` is complete or untouched."""
+    """Yield a fresh temp path beside `path` with the same suffix; rename it over `path` on
+    success, delete it on failure, so `path` is complete or untouched. The writer creates the
+    temp file itself, so it gets the usual (umask) permissions."""
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent)
-    os.close(fd)
-    tmp_path = Path(tmp)
+    tmp_path = path.with_name(f".{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
     try:
         yield tmp_path
         os.replace(tmp_path, path)

@@ -150,7 +150,8 @@ def test_camera_looks_at_its_target(shot):
     want = np.array([0.0, -0.5, -5.0]) / np.linalg.norm([0.0, -0.5, -5.0])
     np.testing.assert_allclose(direction, want, atol=1e-6)
     # 50 mm lens on a 36 mm back: horizontal field of view 2 atan(18/50).
-    assert cam.GetFieldOfView(cam.FOVHorizontal) == pytest.approx(np.degrees(2 * np.arctan(18 / 50)), rel=1e-5)
+    fov = np.degrees(2 * np.arctan(18 / 50))
+    assert cam.GetFieldOfView(cam.FOVHorizontal) == pytest.approx(fov, rel=1e-5)
 
 
 def test_validators_find_no_errors(shot):
@@ -202,7 +203,8 @@ def test_failed_frame_write_keeps_the_old_frame_and_leaves_no_temp(shot, monkeyp
     ({"points": {"my-jelly": PointsSample(np.zeros((1, 3), np.float32))}}, "valid USD prim name.*my_jelly"),
     ({"points": {"camera": PointsSample(np.zeros((1, 3), np.float32))}}, "reserved"),
     ({"points": {"j": PointsSample(np.zeros((4, 2), np.float32))}}, r"positions: shape \(4, 2\)"),
-    ({"meshes": {"j": MeshSample(np.zeros((3, 3), np.float32), np.array([[0, 1, 3]]))}}, r"indices must lie in \[0, 3\)"),
+    ({"meshes": {"j": MeshSample(np.zeros((3, 3), np.float32), np.array([[0, 1, 3]]))}},
+     r"indices must lie in \[0, 3\)"),
     ({"volumes": {"j": {"surface": "vdb/x.nvdb"}}}, "not a .vdb"),
 ])
 def test_bad_frame_input_is_rejected_with_the_field_named(tmp_path, kwargs, message):
@@ -230,3 +232,13 @@ def test_importing_the_module_loads_no_pxr_and_a_missing_pxr_says_how_to_install
     writer = UsdShotWriter(tmp_path / "s.usda", fps=FPS, start_frame=1, end_frame=1)
     with pytest.raises(ImportError, match="pip install usd-core"):
         writer.write_frame(1, points={"p": PointsSample(np.zeros((1, 3), np.float32))})
+
+
+def test_written_files_get_ordinary_permissions(shot, tmp_path):
+    # A farm renderer running as another user must be able to read what export wrote.
+    root, writer = shot
+    reference = tmp_path / "plain.txt"
+    reference.write_text("x")
+    want = reference.stat().st_mode & 0o777
+    for path in (root, writer.topology_path(), writer.manifest_path(), writer.frame_path(FRAMES[0])):
+        assert path.stat().st_mode & 0o777 == want, path
