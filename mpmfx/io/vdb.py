@@ -1,0 +1,239 @@
+"""OpenVDB export: dense numpy blocks in world units -> sparse `.vdb` grids, written atomically.
+
+Index/world convention (OpenVDB's, cell-centred): voxel (i, j, k) holds the value sampled at
+world position (i, j, k) * voxel_size metres, so `values[0, 0, 0]` sits at `ijk0 * voxel_size`.
+A DCC that loads the file places it correctly with no extra transform.
+
+pyopenvdb (Debian's python3-openvdb 10) is imported only inside the functions that need it.
+"""
+from __future__ import annotations
+
+import contextlib
+import enum
+import math
+import os
+import uuid
+from collections.abc import Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+INSTALL_HINT = ("pyopenvdb is not importable: run `bash setup.sh` (it installs Debian's "
+                "python3-openvdb and links it into the venv), or as root "
+                "`apt-get install python3-openvdb`")
+
+
+class GridClass(str, enum.Enum):
+    """What a grid's values mean; mirrors OpenVDB's GridClass (STAGGERED is not used here)."""
+
+    LEVEL_SET = "level_set"    # signed distance in metres, negative inside
+    FOG_VOLUME = "fog_volume"  # density in [0, 1], 0 outside
+    UNKNOWN = "unknown"        # anything else, e.g. velocity
+
+
+@dataclass
+class VdbGrid:
+    """One grid to write.
+
+    name: grid name inside the file ("surface", "vel", "density"); USD fields refer to it.
+    values: (a, b, c) float32 scalars or (a, b, c, 3) float32 vectors, world units
+        (level set: metres; vel: metres/second).
+    ijk0: voxel index of values[0, 0, 0]; world position = index * voxel_size.
+    voxel_size: edge length of a voxel, metres.
+    grid_class: GridClass or its value string.
+    background: value of inactive voxels. For level sets the narrow-band half width in metres
+        (> 0): values with |phi| >= background are pruned to +-background.
+    """
+
+    name: str
+    values: np.ndarray
+    ijk0: tuple[int, int, int]
+    voxel_size: float
+    grid_class: GridClass | str = GridClass.LEVEL_SET
+    background: float = 0.0
+
+    def __post_init__(self) -> None:
+        try:
+            self.grid_class = GridClass(self.grid_class)
+        except ValueError:
+            allowed = ", ".join(c.value for c in GridClass)
+            raise ValueError(f"VdbGrid {self.name!r}: grid_class {self.grid_class!r} is not one of "
+                             f"{allowed}") from None
+
+
+def import_pyopenvdb() -> Any:
+    """Return the pyopenvdb module, or raise ImportError saying how to install it."""
+    try:
+        import pyopenvdb
+    except ImportError as exc:
+        raise ImportError(INSTALL_HINT) from exc
+    return pyopenvdb
+
+
+@contextlib.contextmanager
+def _atomic_target(path: Path) -> Iterator[Path]:
+    """Yield a fresh temp path beside `path` with the same suffix; rename it over `path` on
+    success, delete it on failure, so `path` is complete or untouched. The writer creates the
+    temp file itself, so it gets the usual (umask) permissions."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp_path = path.with_name(f".{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
+    try:
+        yield tmp_path
+        os.replace(tmp_path, path)
+    finally:
+        if tmp_path.exists():
+            tmp_path.unlink()
+
+
+def _check_grid(grid: VdbGrid, path: Path) -> np.ndarray:
+    """Validate one grid; return its values as C-contiguous float32."""
+    where = f"{path}: grid {grid.name!r}"
+    if not grid.name or not isinstance(grid.name, str):
+        raise ValueError(f"{path}: every grid needs a non-empty name")
+    values = np.ascontiguousarray(grid.values, dtype=np.float32)
+    is_vector = values.ndim == 4 and values.shape[3] == 3
+    if values.ndim != 3 and not is_vector:
+        raise ValueError(f"{where}: values shape {values.shape}; expected (a, b, c) scalars or "
+                         f"(a, b, c, 3) vectors")
+    if not np.isfinite(values).all():
+        raise ValueError(f"{where}: values contain NaN or inf; fix the upstream field (e.g. "
+                         f"clamp the level set) before export")
+    if len(grid.ijk0) != 3:
+        raise ValueError(f"{where}: ijk0 {grid.ijk0!r} must be three integers")
+    if not (math.isfinite(grid.voxel_size) and grid.voxel_size > 0):
+        raise ValueError(f"{where}: voxel_size {grid.voxel_size!r} must be a positive length in metres")
+    if grid.grid_class is GridClass.LEVEL_SET:
+        if is_vector:
+            raise ValueError(f"{where}: a level set must be scalar; use grid_class='unknown' for vectors")
+        if not grid.background > 0:
+            raise ValueError(f"{where}: a level set needs background = narrow-band half width in "
+                             f"metres (> 0), got {grid.background!r}; 3 * voxel_size is usual")
+    return values
+
+
+def _level_set_grid(vdb: Any, grid: VdbGrid, values: np.ndarray) -> Any:
+    """Narrow-band level set: only |phi| < band is active, the rest are +-band tiles."""
+    band = np.float32(grid.background)
+    # Everything outside the band is written as +band (inactive, equal to the background);
+    # signedFloodFill then flips the inactive voxels and tiles inside the surface to -band.
+    banded = np.where(np.abs(values) < band, values, band).astype(np.float32, copy=False)
+    out = vdb.FloatGrid(float(band))
+    out.gridClass = vdb.GridClass.LEVEL_SET
+    out.copyFromArray(banded, ijk=tuple(int(i) for i in grid.ijk0), tolerance=0)
+    out.signedFloodFill()
+    out.prune()
+    return out
+
+
+def _build_grid(vdb: Any, grid: VdbGrid, values: np.ndarray) -> Any:
+    ijk = tuple(int(i) for i in grid.ijk0)
+    if grid.grid_class is GridClass.LEVEL_SET:
+        out = _level_set_grid(vdb, grid, values)
+    elif values.ndim == 4:
+        out = vdb.Vec3SGrid((float(grid.background),) * 3)
+        # Velocities are displacements per time: rotate/scale with the transform, no translation.
+        out.vectorType = vdb.VectorType.CONTRAVARIANT_RELATIVE
+        out.copyFromArray(values, ijk=ijk, tolerance=(0.0, 0.0, 0.0))
+        out.prune((0.0, 0.0, 0.0))
+    else:
+        out = vdb.FloatGrid(float(grid.background))
+        out.copyFromArray(values, ijk=ijk, tolerance=0)
+        out.prune()
+    if grid.grid_class is GridClass.FOG_VOLUME:
+        out.gridClass = vdb.GridClass.FOG_VOLUME
+    out.name = grid.name
+    out.transform = vdb.createLinearTransform(float(grid.voxel_size))
+    return out
+
+
+def _check_metadata(metadata: dict[str, Any], path: Path) -> dict[str, Any]:
+    clean: dict[str, Any] = {}
+    for key, value in metadata.items():
+        if not isinstance(key, str) or not key:
+            raise ValueError(f"{path}: metadata key {key!r} must be a non-empty string")
+        if isinstance(value, (bool, np.bool_)):
+            clean[key] = bool(value)
+        elif isinstance(value, (int, np.integer)):
+            clean[key] = int(value)
+        elif isinstance(value, (float, np.floating)):
+            clean[key] = float(value)
+        elif isinstance(value, str):
+            clean[key] = value
+        else:
+            raise ValueError(f"{path}: metadata {key!r} has type {type(value).__name__}; "
+                             f"use str, int or float (e.g. json.dumps it)")
+    return clean
+
+
+def write_vdb(path: str | Path, grids: Sequence[VdbGrid], *, metadata: dict[str, str | int | float]) -> Path:
+    """Write `grids` and file-level `metadata` to `path` (.vdb) so that the file is complete or absent.
+
+    Level sets get class LEVEL_SET and background = band (metres); fog volumes class FOG_VOLUME;
+    vector grids vectorType "contravariant relative" (velocity). Voxels equal to the background
+    are stored inactive, so a field that is mostly empty costs little.
+    Returns the path written.
+    """
+    path = Path(path)
+    if path.suffix != ".vdb":
+        raise ValueError(f"{path}: OpenVDB files must end in .vdb")
+    if not grids:
+        raise ValueError(f"{path}: no grids to write")
+    names = [g.name for g in grids]
+    if len(set(names)) != len(names):
+        raise ValueError(f"{path}: grid names {names} repeat; each grid needs its own name")
+    checked = [(g, _check_grid(g, path)) for g in grids]
+    file_metadata = _check_metadata(metadata, path)
+    vdb = import_pyopenvdb()
+    vdb_grids = [_build_grid(vdb, g, values) for g, values in checked]
+    with _atomic_target(path) as tmp:
+        vdb.write(str(tmp), grids=vdb_grids, metadata=file_metadata)
+    return path
+
+
+# pyopenvdb reports classes by their OpenVDB names.
+_CLASS_FROM_VDB = {"level set": GridClass.LEVEL_SET, "fog volume": GridClass.FOG_VOLUME,
+                   "unknown": GridClass.UNKNOWN}
+
+
+def _grid_info(vdb: Any, grid: Any, *, with_values: bool) -> dict[str, Any]:
+    vector = isinstance(grid, vdb.Vec3SGrid)
+    info: dict[str, Any] = {
+        "class": _CLASS_FROM_VDB.get(str(grid.gridClass), str(grid.gridClass)),
+        "value_type": grid.valueTypeName,
+        "voxel_size": tuple(float(v) for v in grid.transform.voxelSize()),
+        "active_voxel_count": int(grid.activeVoxelCount()),
+        "background": grid.background,
+        "vector_type": str(grid.vectorType) if vector else None,
+        "metadata": dict(grid.metadata),
+    }
+    if with_values:
+        lo, hi = grid.evalActiveVoxelBoundingBox()
+        shape = tuple(max(int(h) - int(l) + 1, 0) for l, h in zip(lo, hi))
+        dense = np.zeros(shape + ((3,) if vector else ()), dtype=np.float32)
+        if dense.size:
+            grid.copyToArray(dense, ijk=tuple(int(v) for v in lo))
+        info["ijk0"] = tuple(int(v) for v in lo)
+        info["values"] = dense
+    return info
+
+
+def read_vdb(path: str | Path, *, with_values: bool = False) -> dict[str, Any]:
+    """Summarise a .vdb file (for tests and tools).
+
+    Returns {"metadata": file metadata dict, "grids": {name: info}} where info has "class"
+    (GridClass), "value_type", "voxel_size" (dx, dy, dz) metres, "active_voxel_count",
+    "background", "vector_type" (vector grids, else None) and the grid's "metadata". With
+    with_values=True each info also has "ijk0" and "values": the dense block over the active
+    bounding box (inactive voxels hold the background, level-set interiors -background).
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such .vdb file")
+    vdb = import_pyopenvdb()
+    grids, metadata = vdb.readAll(str(path))
+    return {
+        "metadata": dict(metadata),
+        "grids": {g.name: _grid_info(vdb, g, with_values=with_values) for g in grids},
+    }
