@@ -56,15 +56,15 @@ def _points(shot: Shot, p: dict, spacing: float) -> dict:
         primvars = {"material": p["material"][sel], "body": p["body"][sel]}
         if "Jp" in p:
             primvars["Jp"] = p["Jp"][sel]
-        out[f"{obj.name}_points"] = PointsSample(
-            positions=p["x"][sel], velocities=p["v"][sel], widths=np.full(int(sel.sum()), spacing, np.float32),
+        out[obj.name] = PointsSample(
+            positions=p["x"][sel], velocities=p["v"][sel], widths=float(spacing),
             ids=p["id"][sel].astype(np.int64), primvars=primvars)
     return out
 
 
 def _meshes(groups: dict) -> dict:
     from mpmfx.io.usd import MeshSample
-    return {f"{g}_surface": MeshSample(points=d["vertices"], face_vertex_indices=d["faces"], normals=d["normals"],
+    return {g: MeshSample(points=d["vertices"], face_vertex_indices=d["faces"], normals=d["normals"],
                                        velocities=d["velocities"]) for g, d in groups.items()}
 
 
@@ -81,7 +81,7 @@ def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
         rel = f"vdb/{g}/{frame:04d}.vdb"
         write_vdb(entry.root / rel, grids, metadata={"shot": shot.shot.name, "frame": frame, "units": "m",
                                                      "group": g})
-        volumes[f"{g}_volume"] = {grid.name: rel for grid in grids}
+        volumes[g] = {grid.name: rel for grid in grids}
     return volumes
 
 
