@@ -1,0 +1,118 @@
+"""Solver knobs (guide §9.1): what the solver owns, as opposed to the material table."""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+__all__ = ["WallType", "OutOfDomain", "SolverConfig"]
+
+
+class WallType(enum.Enum):
+    """Boundary condition on one face of the domain box."""
+
+    STICKY = "sticky"  # grid velocity set to zero: material glues to the wall
+    SLIP = "slip"  # normal velocity zeroed both ways; tangential kept (minus friction)
+    SEPARATE = "separate"  # normal velocity zeroed only when moving into the wall
+
+
+class OutOfDomain(enum.Enum):
+    """What happens to a particle that reaches the last grid cell of the domain."""
+
+    CLAMP = "clamp"  # position clamped into the domain; the particle stays
+    REMOVE = "remove"  # particle deactivated (alive = 0), counted in particles_lost
+
+
+@dataclass(frozen=True)
+class SolverConfig:
+    """Solver parameters. Everything is in domain units (box [0,1]^3) and seconds.
+
+    Attributes:
+        grid_n: cells per axis; dx = 1 / grid_n. Sets feature size, interaction range and
+            the time-step ceiling (guide §9.1): changing it changes the material.
+        cfl: CFL number; dt = cfl * dx / (c_max + |v|_max) (validation.md §5: 0.3-0.5).
+        gravity: (3,) domain/s^2. A balance knob (mound vs pancake), not a speed knob
+            (guide §9.2 trap 1).
+        damping: 1/s velocity decay rate, applied per substep as v *= 1 - damping * dt
+            (trap 5), so its effect per second does not depend on dt.
+        drag: 1/s rate at which the affine velocity C is blended toward PIC,
+            C *= 1 - drag * dt. A rate, never a per-substep fraction (guide §6 trap):
+            it damps sub-cell rotation and noise, not bulk motion.
+        time_scale: simulated seconds per shot second (playback speed, trap 1).
+            `Solver.advance(t0, t1)` simulates (t1 - t0) * time_scale seconds.
+            Collider keyframes stay on the shot clock.
+        walls: 6 WallTypes for the faces -x, +x, -y, +y, -z, +z.
+        wall_friction: Coulomb coefficient mu at the walls: tangential speed drops by
+            mu * |removed normal speed|, an impulse ratio independent of dt (trap 2).
+        boundary_cells: thickness of the wall layer, in cells (>= 2 keeps the 3-cell
+            stencil inside the grid).
+        dt_max, dt_min: bounds on the substep, seconds. A substep that has to go below
+            dt_min raises SimulationError.
+        max_substeps_per_frame: SimulationError past this many substeps in one advance().
+        deterministic: P2G in fixed-point integer atomics so a replay is bit-identical
+            (guide §10.1); see `mpmfx.mpm.p2g` for range and resolution.
+        multi_field: one velocity field per body (not implemented: NotImplementedError).
+        out_of_domain: OutOfDomain (or its string value).
+    """
+
+    grid_n: int = 64
+    cfl: float = 0.4
+    gravity: tuple[float, float, float] = (0.0, -4.9, 0.0)
+    damping: float = 0.0
+    drag: float = 0.0
+    time_scale: float = 1.0
+    walls: tuple[WallType, ...] = (WallType.SEPARATE,) * 6
+    wall_friction: float = 0.0
+    boundary_cells: int = 3
+    dt_max: float = 1e-2
+    dt_min: float = 1e-7
+    max_substeps_per_frame: int = 20000
+    deterministic: bool = False
+    multi_field: bool = False
+    out_of_domain: OutOfDomain | str = OutOfDomain.CLAMP
+
+    def __post_init__(self) -> None:
+        set_ = lambda k, v: object.__setattr__(self, k, v)  # noqa: E731 (frozen dataclass)
+        try:
+            set_("out_of_domain", OutOfDomain(self.out_of_domain))
+        except ValueError:
+            raise ValueError(
+                f"SolverConfig.out_of_domain = {self.out_of_domain!r}; use "
+                f"{' or '.join(repr(o.value) for o in OutOfDomain)}"
+            ) from None
+        walls = tuple(self.walls)
+        if len(walls) != 6:
+            raise ValueError(
+                f"SolverConfig.walls has {len(walls)} entries; give 6 (-x, +x, -y, +y, -z, +z)"
+            )
+        try:
+            set_("walls", tuple(WallType(w) for w in walls))
+        except ValueError as err:
+            raise ValueError(
+                f"SolverConfig.walls: {err}; use {', '.join(w.value for w in WallType)}"
+            ) from None
+        gravity = tuple(float(g) for g in self.gravity)
+        if len(gravity) != 3 or not all(math.isfinite(g) for g in gravity):
+            raise ValueError(f"SolverConfig.gravity = {self.gravity!r}; give 3 finite numbers")
+        set_("gravity", gravity)
+        checks = [
+            ("grid_n", 8 <= self.grid_n <= 4096, "must be in [8, 4096]"),
+            ("cfl", 0 < self.cfl <= 2.0, "must be in (0, 2]; 0.3-0.5 is usual"),
+            ("damping", self.damping >= 0, "must be >= 0 (a rate, 1/s)"),
+            ("drag", self.drag >= 0, "must be >= 0 (a rate, 1/s)"),
+            ("time_scale", self.time_scale > 0, "must be > 0"),
+            ("wall_friction", self.wall_friction >= 0, "must be >= 0"),
+            ("boundary_cells", 2 <= self.boundary_cells < self.grid_n // 2,
+             "must be >= 2 and < grid_n / 2"),
+            ("dt_min", 0 < self.dt_min <= self.dt_max, "needs 0 < dt_min <= dt_max"),
+            ("max_substeps_per_frame", self.max_substeps_per_frame >= 1, "must be >= 1"),
+        ]
+        for name, ok, what in checks:
+            if not ok:
+                raise ValueError(f"SolverConfig.{name} = {getattr(self, name)!r} {what}")
+
+    @property
+    def dx(self) -> float:
+        """Cell width, domain units."""
+        return 1.0 / self.grid_n

@@ -1,0 +1,188 @@
+"""Device-side material rows and the constitutive functions (guide §4.2, §7, §8.1).
+
+Pure `wp.func`s: the B-spline weights shared by both transfers, the stress of each mode
+(as the Kirchhoff stress tau = P F^T that MLS-MPM fuses into the affine term) and the
+return maps (plasticity as a projection of the trial elastic F). They compile into the
+kernels that call them; this module has no kernels of its own.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from .materials import Material, Mode
+
+MODE_SNOW = wp.constant(int(Mode.SNOW))
+MODE_SAND = wp.constant(int(Mode.SAND))
+MODE_WATER = wp.constant(int(Mode.WATER))
+MODE_TRACER = wp.constant(int(Mode.TRACER))
+
+
+@wp.struct
+class MaterialParams:
+    """One material row on the device (see materials.Material for units)."""
+
+    mode: int
+    mu0: float
+    lambda0: float
+    hardening: float
+    theta_c: float
+    theta_s: float
+    jp_min: float
+    jp_max: float
+    plastic: int  # 0: the snow clamp can never fire (Elastic), skip its SVD
+    dp_alpha: float
+    cohesion: float
+    volume_correction: int
+    bulk_modulus: float
+    eos_gamma: float
+    clamp_pressure: int
+
+
+def pack_material(m: Material) -> MaterialParams:
+    """Host Material -> device MaterialParams."""
+    p = MaterialParams()
+    p.mode = int(m.mode)
+    p.mu0 = m.mu0
+    p.lambda0 = m.lambda0
+    p.hardening = m.hardening
+    p.theta_c = m.theta_c
+    p.theta_s = m.theta_s
+    p.jp_min = m.jp_min
+    p.jp_max = m.jp_max
+    p.plastic = int(m.plastic)
+    p.dp_alpha = m.dp_alpha
+    p.cohesion = m.cohesion
+    p.volume_correction = int(m.volume_correction)
+    p.bulk_modulus = m.bulk_modulus
+    p.eos_gamma = m.eos_gamma
+    p.clamp_pressure = int(m.clamp_pressure)
+    return p
+
+
+@wp.func
+def pack_f_jp(F: wp.mat33, jp: float) -> wp.mat44:
+    """(F, Jp) -> mat44, because a wp.func returns one value here."""
+    return wp.mat44(
+        F[0, 0], F[0, 1], F[0, 2], 0.0,
+        F[1, 0], F[1, 1], F[1, 2], 0.0,
+        F[2, 0], F[2, 1], F[2, 2], 0.0,
+        0.0, 0.0, 0.0, jp,
+    )
+
+
+@wp.func
+def unpack_f(m: wp.mat44) -> wp.mat33:
+    return wp.mat33(m[0, 0], m[0, 1], m[0, 2], m[1, 0], m[1, 1], m[1, 2], m[2, 0], m[2, 1], m[2, 2])
+
+
+@wp.func
+def bspline_weights(fx: wp.vec3) -> wp.mat33:
+    """Quadratic B-spline weights (guide §4.2). fx: offset from the base node, cells,
+    in [0.5, 1.5) per axis. Row k holds the weight of node base + k along each axis;
+    each column sums to 1 (partition of unity)."""
+    a = wp.vec3(1.5) - fx
+    b = fx - wp.vec3(1.0)
+    c = fx - wp.vec3(0.5)
+    w0 = 0.5 * wp.cw_mul(a, a)
+    w1 = wp.vec3(0.75) - wp.cw_mul(b, b)
+    w2 = 0.5 * wp.cw_mul(c, c)
+    return wp.mat33(w0[0], w0[1], w0[2], w1[0], w1[1], w1[2], w2[0], w2[1], w2[2])
+
+
+@wp.func
+def hardening_factor(mat: MaterialParams, jp: float) -> float:
+    """exp(xi (1 - Jp)): how much stiffer (Jp < 1) or softer a packed snow particle is."""
+    return wp.exp(mat.hardening * (1.0 - jp))
+
+
+@wp.func
+def fixed_corotated_tau(F: wp.mat33, mu: float, la: float) -> wp.mat33:
+    """Kirchhoff stress tau = P F^T of fixed-corotated elasticity (guide §7.1):
+    2 mu (F - R) F^T + lambda (J - 1) J I, with R the rotation of F."""
+    U, sig, V = wp.svd3(F)
+    R = U * wp.transpose(V)
+    J = sig[0] * sig[1] * sig[2]
+    return 2.0 * mu * (F - R) * wp.transpose(F) + wp.identity(n=3, dtype=float) * (la * (J - 1.0) * J)
+
+
+@wp.func
+def hencky_tau(F: wp.mat33, mu: float, la: float) -> wp.mat33:
+    """Kirchhoff stress of St. Venant-Kirchhoff on Hencky strain (Klar et al. 2016):
+    tau = U (2 mu ln S + lambda tr(ln S) I) U^T."""
+    U, sig, V = wp.svd3(F)
+    eps = wp.vec3(
+        wp.log(wp.max(wp.abs(sig[0]), 1.0e-4)),
+        wp.log(wp.max(wp.abs(sig[1]), 1.0e-4)),
+        wp.log(wp.max(wp.abs(sig[2]), 1.0e-4)),
+    )
+    tr = eps[0] + eps[1] + eps[2]
+    d = 2.0 * mu * eps + wp.vec3(la * tr)
+    return U * wp.diag(d) * wp.transpose(U)
+
+
+@wp.func
+def tait_pressure(mat: MaterialParams, J: float) -> float:
+    """Tait equation of state p = K (J^-gamma - 1) (guide §8.1); p >= 0 when clamped."""
+    p = mat.bulk_modulus * (wp.pow(wp.max(J, 1.0e-4), -mat.eos_gamma) - 1.0)
+    if mat.clamp_pressure != 0:
+        p = wp.max(p, 0.0)
+    return p
+
+
+@wp.func
+def solid_tau(mat: MaterialParams, F: wp.mat33, jp: float) -> wp.mat33:
+    """Kirchhoff stress of a snow (hardened fixed-corotated) or sand particle."""
+    if mat.mode == MODE_SAND:
+        return hencky_tau(F, mat.mu0, mat.lambda0)
+    h = hardening_factor(mat, jp)
+    return fixed_corotated_tau(F, mat.mu0 * h, mat.lambda0 * h)
+
+
+@wp.func
+def snow_return_map(mat: MaterialParams, F: wp.mat33, jp: float) -> wp.mat44:
+    """Stomakhin clamp (guide §7.2): singular values of the trial elastic F into
+    [1 - theta_c, 1 + theta_s]; the clamped-away volume goes into Jp, clamped to
+    [jp_min, jp_max]. Returns mat44 packing (new F in the 3x3 block, new Jp at [3,3])."""
+    Fe = F
+    jp_new = jp
+    if mat.plastic != 0:
+        U, sig, V = wp.svd3(F)
+        lo = 1.0 - mat.theta_c
+        hi = 1.0 + mat.theta_s
+        sc = wp.vec3(wp.clamp(sig[0], lo, hi), wp.clamp(sig[1], lo, hi), wp.clamp(sig[2], lo, hi))
+        jp_new = jp * (sig[0] * sig[1] * sig[2]) / (sc[0] * sc[1] * sc[2])
+        jp_new = wp.clamp(jp_new, mat.jp_min, mat.jp_max)
+        Fe = U * wp.diag(sc) * wp.transpose(V)
+    return pack_f_jp(Fe, jp_new)
+
+
+@wp.func
+def sand_return_map(mat: MaterialParams, F: wp.mat33, vc: float) -> wp.mat44:
+    """Drucker-Prager projection in Hencky strain (Klar et al. 2016) with cohesion and
+    volume correction. vc: log-volume expansion discarded at the apex so far (>= 0; kept
+    in the particle's Jp slot). Returns (new F, new vc) packed like snow_return_map."""
+    U, sig, V = wp.svd3(F)
+    eps = wp.vec3(
+        wp.log(wp.max(wp.abs(sig[0]), 1.0e-4)),
+        wp.log(wp.max(wp.abs(sig[1]), 1.0e-4)),
+        wp.log(wp.max(wp.abs(sig[2]), 1.0e-4)),
+    )
+    tr = eps[0] + eps[1] + eps[2] + vc
+    eps_hat = eps - wp.vec3(tr / 3.0)
+    norm = wp.length(eps_hat) + 1.0e-20
+    # cohesion shifts the cone apex into tension (guide §7.2 figure)
+    trc = tr - mat.cohesion
+    vc_new = float(0.0)
+    eps_new = eps
+    if trc >= 0.0:
+        # beyond the apex: no strength at all; keep the cohesive part only
+        eps_new = wp.vec3(mat.cohesion / 3.0)
+        if mat.volume_correction != 0:
+            vc_new = trc
+    else:
+        dgamma = norm + (3.0 * mat.lambda0 + 2.0 * mat.mu0) / (2.0 * mat.mu0) * trc * mat.dp_alpha
+        if dgamma > 0.0:
+            eps_new = eps - (dgamma / norm) * eps_hat
+    s = wp.vec3(wp.exp(eps_new[0]), wp.exp(eps_new[1]), wp.exp(eps_new[2]))
+    return pack_f_jp(U * wp.diag(s) * wp.transpose(V), vc_new)

@@ -1,0 +1,112 @@
+"""Phase 3 — grid update: v = mv / m, gravity, damping, colliders, walls (guide §3).
+
+This is the only place two pieces of material influence each other, and where all
+contact happens. One thread per node; nodes sit at i * dx, i = 0..grid_n.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+from .colliders import ColliderParams, apply_collider
+
+WALL_STICKY = wp.constant(0)
+WALL_SLIP = wp.constant(1)
+WALL_SEPARATE = wp.constant(2)
+WALL_CODES = {"sticky": 0, "slip": 1, "separate": 2}
+
+# counts[] slots shared with G2P (see solver.py)
+COUNT_GRID_NONFINITE = wp.constant(3)
+
+
+@wp.struct
+class GridParams:
+    """Per-substep grid-update parameters.
+
+    dt: s; dx: domain units; gravity: domain/s^2; damping_factor: 1 - damping*dt (>= 0);
+    walls_lo / walls_hi: wall codes of the -x,-y,-z / +x,+y,+z faces; wall_friction: mu;
+    boundary_cells: wall layer thickness, cells; n_cells: grid_n; deterministic: 1 when
+    P2G accumulated in fixed point; q_mass / q_mom: fixed-point quanta (mass, momentum);
+    num_colliders: entries used in the collider array.
+    """
+
+    dt: float
+    dx: float
+    gravity: wp.vec3
+    damping_factor: float
+    walls_lo: wp.vec3i
+    walls_hi: wp.vec3i
+    wall_friction: float
+    boundary_cells: int
+    n_cells: int
+    deterministic: int
+    q_mass: float
+    q_mom: float
+    num_colliders: int
+
+
+@wp.func
+def apply_wall(v: wp.vec3, n_out: wp.vec3, wall: int, mu: float) -> wp.vec3:
+    """Wall boundary on one face. n_out: outward face normal. Coulomb friction removes
+    mu * |vn| of tangential speed, where vn is the normal speed stopped by the wall."""
+    if wall == WALL_STICKY:
+        return wp.vec3(0.0)
+    vn = wp.dot(v, n_out)  # > 0: moving into the wall
+    if wall == WALL_SEPARATE and vn <= 0.0:
+        return v
+    vt = v - vn * n_out
+    if vn > 0.0:
+        vt_len = wp.length(vt)
+        if vt_len > 0.0:
+            vt = vt * wp.max(0.0, 1.0 - mu * vn / vt_len)
+    return vt
+
+
+@wp.func
+def apply_walls(v: wp.vec3, node: wp.vec3i, gp: GridParams) -> wp.vec3:
+    out = v
+    for a in range(3):
+        n_out = wp.vec3(0.0)
+        if node[a] < gp.boundary_cells:
+            n_out[a] = -1.0
+            out = apply_wall(out, n_out, gp.walls_lo[a], gp.wall_friction)
+        if node[a] > gp.n_cells - gp.boundary_cells:
+            n_out[a] = 1.0
+            out = apply_wall(out, n_out, gp.walls_hi[a], gp.wall_friction)
+    return out
+
+
+@wp.kernel(enable_backward=False)
+def grid_update(
+    gp: GridParams,
+    grid_m: wp.array3d(dtype=float),
+    grid_mv: wp.array3d(dtype=wp.vec3),
+    grid_fixed: wp.array4d(dtype=wp.int64),
+    colliders: wp.array(dtype=ColliderParams),
+    sdf: wp.array(dtype=float),
+    grid_v: wp.array3d(dtype=wp.vec3),
+    counts: wp.array(dtype=wp.int32),
+):
+    i, j, k = wp.tid()
+    m = float(0.0)
+    mv = wp.vec3(0.0)
+    if gp.deterministic != 0:
+        m = float(grid_fixed[i, j, k, 0]) * gp.q_mass
+        mv = wp.vec3(
+            float(grid_fixed[i, j, k, 1]), float(grid_fixed[i, j, k, 2]), float(grid_fixed[i, j, k, 3])
+        ) * gp.q_mom
+    else:
+        m = grid_m[i, j, k]
+        mv = grid_mv[i, j, k]
+    v = wp.vec3(0.0)
+    if m > 0.0:
+        v = mv / m  # grid_mv held momentum until here
+        v = (v + gp.dt * gp.gravity) * gp.damping_factor
+        xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
+        for c in range(gp.num_colliders):
+            v = apply_collider(colliders[c], sdf, xn, v, 0.5 * gp.dx)
+        v = apply_walls(v, wp.vec3i(i, j, k), gp)
+        if not wp.isfinite(v):
+            wp.atomic_add(counts, COUNT_GRID_NONFINITE, 1)
+            v = wp.vec3(0.0)  # the substep is rejected anyway; keep G2P finite
+    grid_v[i, j, k] = v

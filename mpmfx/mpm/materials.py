@@ -1,0 +1,183 @@
+"""Material table: the constitutive constants of each material row (guide §7–8).
+
+A material is a row of constants plus a mode that picks the stress function and the
+yield surface. Units follow the solver's normalised domain (guide §2): lengths in domain
+units (the simulation box is [0,1]^3), time in seconds, density in mass per domain
+unit^3, so moduli are in mass / (domain unit * s^2). With density 1 the guide's §8
+numbers (E = 1500 for Soft) are used as is.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import math
+from dataclasses import dataclass
+
+__all__ = ["Mode", "Material", "PRESETS", "preset"]
+
+
+class Mode(enum.IntEnum):
+    """Constitutive branch of a material (the guide's `mode` column, §8)."""
+
+    SNOW = 0  # fixed-corotated elasticity + Stomakhin singular-value clamp (+ hardening)
+    SAND = 1  # Drucker-Prager on Hencky strain (Klar et al. 2016)
+    WATER = 2  # weakly compressible Tait fluid: pressure only, tracks J not F
+    TRACER = 3  # massless marker advected with the grid velocity; exerts nothing
+
+
+@dataclass(frozen=True)
+class Material:
+    """One row of the material table.
+
+    Attributes:
+        mode: constitutive branch, see :class:`Mode`.
+        youngs_modulus: E, mass/(domain*s^2) (snow, sand). Stiffness of elastic rebound;
+            raising it costs time step (dt ~ 1/sqrt(E)) and buys ringing, not hardness
+            (guide §9.2 trap 3).
+        poisson_ratio: nu, dimensionless, in [0, 0.5).
+        density: rest density rho0, mass/domain^3. Particle mass = rest volume * density.
+        hardening: xi, dimensionless; moduli scale by exp(xi * (1 - Jp)) (snow). 0 = off.
+        theta_c: critical compression, dimensionless; singular values are clamped to
+            >= 1 - theta_c (snow). The Elastic preset uses 1e9 so the clamp never fires.
+        theta_s: critical stretch, dimensionless; singular values <= 1 + theta_s (snow).
+        jp_min: lower clamp of the plastic volume ratio Jp (snow), dimensionless.
+        jp_max: upper clamp of Jp (snow), dimensionless.
+        friction_angle: Drucker-Prager friction angle, degrees (sand); roughly the angle
+            of repose (validation.md §4 says how roughly).
+        cohesion: tensile strength of the sand cone, as a volumetric Hencky (log) strain
+            the grains sustain before they separate (dimensionless; 0 = dry sand). The
+            cone apex moves from tr(log strain) = 0 to tr = cohesion.
+        volume_correction: sand only; remember the volume expansion discarded at the
+            cone apex (stored in Jp as a log strain) so a re-compacted pile does not stay
+            fluffed (Tampubolon et al. 2017; guide §9.3).
+        bulk_modulus: Tait bulk modulus K, mass/(domain*s^2) (water):
+            p = K * (J^-gamma - 1).
+        eos_gamma: Tait exponent gamma, dimensionless (water).
+        volume_recovery: water grid volume recovery (guide §9.3). Not implemented yet:
+            the solver raises NotImplementedError when a material sets it.
+        clamp_pressure: water only; clamp the pressure to p >= 0 so water in tension
+            does not clump into strings (validation.md §5).
+    """
+
+    mode: Mode
+    youngs_modulus: float = 1500.0
+    poisson_ratio: float = 0.2
+    density: float = 1.0
+    hardening: float = 0.0
+    theta_c: float = 2.5e-2
+    theta_s: float = 7.5e-3
+    jp_min: float = 0.6
+    jp_max: float = 20.0
+    friction_angle: float = 38.0
+    cohesion: float = 0.0
+    volume_correction: bool = True
+    bulk_modulus: float = 100.0
+    eos_gamma: float = 7.0
+    volume_recovery: bool = False
+    clamp_pressure: bool = True
+
+    def __post_init__(self) -> None:
+        try:
+            object.__setattr__(self, "mode", Mode(self.mode))
+        except ValueError:
+            raise ValueError(
+                f"Material.mode: {self.mode!r} is not a mode; use one of "
+                f"{', '.join(m.name for m in Mode)}"
+            ) from None
+        checks = [
+            ("youngs_modulus", self.youngs_modulus > 0, "must be > 0"),
+            ("poisson_ratio", 0.0 <= self.poisson_ratio < 0.5, "must be in [0, 0.5)"),
+            ("density", self.density > 0, "must be > 0"),
+            ("hardening", self.hardening >= 0, "must be >= 0"),
+            ("theta_c", 0 < self.theta_c, "must be > 0"),
+            ("theta_s", 0 < self.theta_s, "must be > 0"),
+            ("jp_min", 0 < self.jp_min <= 1.0 <= self.jp_max, "needs 0 < jp_min <= 1 <= jp_max"),
+            ("friction_angle", 0 <= self.friction_angle < 90, "must be in [0, 90) degrees"),
+            ("cohesion", self.cohesion >= 0, "must be >= 0"),
+            ("bulk_modulus", self.bulk_modulus > 0, "must be > 0"),
+            ("eos_gamma", self.eos_gamma >= 1, "must be >= 1"),
+        ]
+        for name, ok, what in checks:
+            value = getattr(self, name)
+            if not (ok and math.isfinite(float(value))):
+                raise ValueError(f"Material.{name} = {value!r} {what}")
+
+    @property
+    def mu0(self) -> float:
+        """Lame shear modulus mu = E / (2 (1 + nu)), unhardened."""
+        return self.youngs_modulus / (2.0 * (1.0 + self.poisson_ratio))
+
+    @property
+    def lambda0(self) -> float:
+        """Lame first parameter lambda = E nu / ((1 + nu)(1 - 2 nu)), unhardened."""
+        nu = self.poisson_ratio
+        return self.youngs_modulus * nu / ((1.0 + nu) * (1.0 - 2.0 * nu))
+
+    @property
+    def dp_alpha(self) -> float:
+        """Drucker-Prager cone parameter alpha = sqrt(2/3) 2 sin(phi) / (3 - sin(phi))."""
+        s = math.sin(math.radians(self.friction_angle))
+        return math.sqrt(2.0 / 3.0) * 2.0 * s / (3.0 - s)
+
+    @property
+    def plastic(self) -> bool:
+        """False when the snow clamp can never fire (Elastic preset: thetas >= 1e8)."""
+        return not (self.theta_c >= 1e8 and self.theta_s >= 1e8)
+
+    def wave_speed(self, *, hardening_factor: float = 1.0, j_min: float = 1.0) -> float:
+        """Dilatational wave speed c, domain/s (validation.md §5), for the CFL time step.
+
+        hardening_factor: current exp(xi (1 - Jp)) of the stiffest particle (snow).
+        j_min: smallest current volume ratio J (water; Tait stiffens under compression).
+        """
+        if self.mode == Mode.TRACER:
+            return 0.0
+        if self.mode == Mode.WATER:
+            k_eff = self.bulk_modulus * self.eos_gamma * max(j_min, 1e-4) ** (-self.eos_gamma)
+            return math.sqrt(k_eff / self.density)
+        stiff = (self.lambda0 + 2.0 * self.mu0) * hardening_factor
+        return math.sqrt(stiff / self.density)
+
+
+_ELASTIC_YIELD = 1e9  # thetas this large mean "the clamp never fires" (guide §8)
+
+PRESETS: dict[str, Material] = {
+    # Guide §8 table, verbatim: name -> (mode, E, hardening, extras)
+    "Soft": Material(Mode.SNOW, youngs_modulus=1500.0, hardening=4.0),
+    "Mushy": Material(Mode.SNOW, youngs_modulus=600.0, hardening=2.0),
+    "Goopy": Material(Mode.SNOW, youngs_modulus=250.0, hardening=1.0),
+    "Wet": Material(Mode.SNOW, youngs_modulus=150.0, hardening=0.7),
+    "Slush": Material(Mode.SNOW, youngs_modulus=90.0, hardening=0.5),
+    "Elastic": Material(
+        Mode.SNOW, youngs_modulus=1200.0, hardening=0.0,
+        theta_c=_ELASTIC_YIELD, theta_s=_ELASTIC_YIELD,
+    ),
+    "Granular": Material(Mode.SAND, youngs_modulus=400.0, hardening=0.0, friction_angle=38.0),
+    "CohesiveGranular": Material(
+        Mode.SAND, youngs_modulus=400.0, hardening=0.0, friction_angle=38.0, cohesion=0.0006
+    ),
+    "Water": Material(Mode.WATER, bulk_modulus=100.0),
+    "Tracer": Material(Mode.TRACER),
+}
+
+
+def preset(name: str, **overrides) -> Material:
+    """Return the preset `name` (case-insensitive) with `overrides` applied.
+
+    Raises ValueError naming the unknown preset or field and listing the valid ones.
+    """
+    lookup = {k.lower(): k for k in PRESETS}
+    key = lookup.get(str(name).lower())
+    if key is None:
+        raise ValueError(
+            f"unknown material preset {name!r}; valid presets: {', '.join(PRESETS)}"
+        )
+    fields = [f.name for f in dataclasses.fields(Material)]
+    unknown = sorted(set(overrides) - set(fields))
+    if unknown:
+        raise ValueError(
+            f"unknown Material field(s) {', '.join(unknown)} in overrides for preset {key!r}; "
+            f"valid fields: {', '.join(fields)}"
+        )
+    return dataclasses.replace(PRESETS[key], **overrides)

@@ -1,0 +1,406 @@
+"""The MLS-MPM solver: model (materials, colliders, grid), state, and the adaptive stepper.
+
+`Solver.step` is the guide's four-phase loop (§3), one phase per file:
+
+    clear grid -> P2G -> grid update -> G2P
+
+`Solver.advance` owns the clock (guide §10: "a stepper that owns the wall-clock-to-substep
+accounting"): dt = cfl * dx / (c_max + |v|max) from the current hardened moduli, a substep
+that produces non-finite values or moves a particle more than a cell is rejected and redone
+at half dt, and the substeps land exactly on the requested time.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+import warp as wp
+
+from . import g2p as g2p_mod
+from .clear_grid import clear_grid
+from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
+from .config import OutOfDomain, SolverConfig
+from .constitutive import MaterialParams, pack_material
+from .g2p import G2PParams, make_g2p
+from .grid_update import WALL_CODES, GridParams, grid_update
+from .materials import Material, Mode
+from .p2g import FIXED_POINT_BITS, make_p2g
+from .state import ParticleBuffers, SceneFlags, State, StepperClock
+
+__all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
+
+CHECKPOINT_VERSION = 1
+_SYMPTOM = "Everything explodes / NaNs"  # the guide §9.3 row the errors point at
+
+
+class SimulationError(RuntimeError):
+    """The solver cannot continue without a knob change; the message says which."""
+
+
+@dataclass
+class Particles:
+    """Solver input (host, numpy).
+
+    x: (n, 3) float32 domain units, inside [0, 1]; v: (n, 3) float32 domain/s;
+    volume: (n,) float32 rest volume, domain^3 (mass = volume * material density);
+    material: (n,) int32 index into the solver's materials; body: (n,) int32 object id.
+    """
+
+    x: np.ndarray
+    v: np.ndarray
+    volume: np.ndarray
+    material: np.ndarray
+    body: np.ndarray
+
+
+@dataclass
+class StepReport:
+    """What one `advance` did. Times in s, speeds domain/s, mass in density*domain^3.
+
+    cfl_used: largest dt * (c_max + |v|max) / dx actually taken; momentum: (3,);
+    elastic_energy: None (not computed); j_min, j_max: range of J (det F for solids, J for
+    water) over the accepted substeps.
+    """
+
+    substeps: int
+    rejected_substeps: int
+    dt_min: float
+    dt_max: float
+    max_speed: float
+    cfl_used: float
+    particles_lost: int
+    mass: float
+    momentum: np.ndarray
+    kinetic_energy: float
+    elastic_energy: float | None
+    j_min: float
+    j_max: float
+    wall_time_s: float
+
+
+def _pow2_at_least(x: float) -> float:
+    return 2.0 ** math.ceil(math.log2(max(x, 1e-30)))
+
+
+class Solver:
+    """Explicit MLS-MPM on a dense grid in the domain [0, 1]^3.
+
+    materials: the material table; particles index into it. config: solver knobs.
+    colliders: kinematic Colliders. device: Warp device ("cpu", "cuda:0"; None = default).
+    """
+
+    def __init__(self, materials: Sequence[Material], config: SolverConfig, *,
+                 colliders: Sequence[Collider] = (), device: str | None = None):
+        self.materials = tuple(materials)
+        if not self.materials:
+            raise ValueError("Solver: materials is empty; give at least one Material")
+        for i, m in enumerate(self.materials):
+            if not isinstance(m, Material):
+                raise ValueError(f"Solver: materials[{i}] is {type(m).__name__}, not a Material")
+            if m.volume_recovery:
+                raise NotImplementedError(
+                    f"materials[{i}].volume_recovery=True: grid volume recovery is not implemented "
+                    "yet; set it False"
+                )
+        if config.multi_field:
+            raise NotImplementedError(
+                "SolverConfig.multi_field=True: multi-field contact (one velocity field per body) "
+                "is not implemented yet; set multi_field=False (bodies share one velocity field "
+                "and fuse on contact, guide §9.3)"
+            )
+        self.config = config
+        self.colliders = tuple(colliders)
+        self.device = wp.get_device(device)
+        self.flags = SceneFlags.of(self.materials)
+        # specialised kernels for this scene: both land in one Warp module per flags
+        self._p2g = make_p2g(self.flags)
+        self._g2p = make_g2p(self.flags)
+        self._allocate_grid()
+        with wp.ScopedDevice(self.device):
+            self._materials_dev = wp.array([pack_material(m) for m in self.materials], dtype=MaterialParams)
+            self._sdf = wp.array(concat_sdfs(self.colliders), dtype=float)
+            self._colliders_dev = wp.empty(max(1, len(self.colliders)), dtype=ColliderParams)
+            self._stats = wp.zeros(g2p_mod.N_STATS, dtype=float)
+            self._counts = wp.zeros(g2p_mod.COUNT_PER_MATERIAL + len(self.materials), dtype=wp.int32)
+            init = np.array([0.0, 0.0, 1e30, 1e30, -1e30], dtype=np.float32)
+            self._stats_init = wp.array(init, dtype=float)
+        self._q_mass = 1.0
+        self._q_mom = 1.0
+
+    # ------------------------------------------------------------------ setup
+    def _allocate_grid(self) -> None:
+        nn = self.config.grid_n + 1  # nodes at i * dx, i = 0..grid_n
+        det = self.config.deterministic
+        with wp.ScopedDevice(self.device):
+            shape = (nn, nn, nn) if not det else (1, 1, 1)
+            self._grid_m = wp.zeros(shape, dtype=float)
+            self._grid_mv = wp.zeros(shape, dtype=wp.vec3)
+            self._grid_fixed = wp.zeros((nn, nn, nn, 4) if det else (1, 1, 1, 4), dtype=wp.int64)
+            self._grid_v = wp.zeros((nn, nn, nn), dtype=wp.vec3)
+
+    def _check_particles(self, p: Particles) -> int:
+        x = np.asarray(p.x)
+        n = x.shape[0] if x.ndim == 2 else -1
+        shapes = {"x": (n, 3), "v": (n, 3), "volume": (n,), "material": (n,), "body": (n,)}
+        for name, shape in shapes.items():
+            arr = np.asarray(getattr(p, name))
+            if n < 1 or arr.shape != shape:
+                raise ValueError(f"Particles.{name}: shape {arr.shape}, expected {shape} with n >= 1")
+            if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
+                raise ValueError(f"Particles.{name}: contains NaN or inf; fix the particle source")
+        if x.min() < 0.0 or x.max() > 1.0:
+            raise ValueError(
+                "Particles.x: positions outside the domain [0, 1]^3 (min %.3g, max %.3g); map world "
+                "space into the domain before simulating" % (x.min(), x.max())
+            )
+        mat = np.asarray(p.material)
+        if mat.min() < 0 or mat.max() >= len(self.materials):
+            raise ValueError(
+                f"Particles.material: indices must be in [0, {len(self.materials) - 1}] "
+                f"(the solver has {len(self.materials)} materials), got {mat.min()}..{mat.max()}"
+            )
+        if np.any(np.asarray(p.volume) <= 0):
+            raise ValueError("Particles.volume: rest volumes must be > 0 (domain units^3)")
+        return n
+
+    def init_state(self, particles: Particles) -> State:
+        """Upload particles; F = I, C = 0, J = Jp = 1, alive = 1."""
+        n = self._check_particles(particles)
+        mat_idx = np.asarray(particles.material, dtype=np.int32)
+        density = np.array([m.density for m in self.materials], dtype=np.float64)
+        tracer = np.array([m.mode == Mode.TRACER for m in self.materials])
+        volume = np.asarray(particles.volume, dtype=np.float32)
+        mass = np.where(tracer[mat_idx], 0.0, volume * density[mat_idx]).astype(np.float32)
+        data = {
+            "x": np.asarray(particles.x, np.float32), "v": np.asarray(particles.v, np.float32),
+            "C": np.zeros((n, 3, 3), np.float32),
+            "F": np.tile(np.eye(3, dtype=np.float32), (n if self.flags.solid else 1, 1, 1)),
+            "J": np.ones(n if self.flags.water else 1, np.float32),
+            "Jp": np.where(np.array([m.mode == Mode.SAND for m in self.materials])[mat_idx], 0.0, 1.0),
+            "alive": np.ones(n, np.int32),
+            "mass": mass, "volume": volume, "material": mat_idx,
+            "body": np.asarray(particles.body, np.int32),
+        }
+        clock = StepperClock(max_speed=float(np.linalg.norm(data["v"], axis=1).max()))
+        return self._build_state(data, clock)
+
+    def _build_state(self, data: dict, clock: StepperClock) -> State:
+        n = int(data["x"].shape[0])
+        with wp.ScopedDevice(self.device):
+            cur = ParticleBuffers.allocate(n, self.flags, self.device)
+            nxt = ParticleBuffers.allocate(n, self.flags, self.device)
+            for name, arr in zip(ParticleBuffers.NAMES, cur.arrays()):
+                scalar = np.int32 if name == "alive" else np.float32
+                arr.assign(np.ascontiguousarray(data[name], dtype=scalar))
+            state = State(
+                n=n, cur=cur, nxt=nxt,
+                mass=wp.array(np.asarray(data["mass"], np.float32), dtype=float),
+                volume=wp.array(np.asarray(data["volume"], np.float32), dtype=float),
+                material=wp.array(np.asarray(data["material"], np.int32), dtype=wp.int32),
+                body=wp.array(np.asarray(data["body"], np.int32), dtype=wp.int32),
+                clock=clock,
+            )
+        m = np.asarray(data["mass"], np.float64)
+        m_ref = float(m[m > 0].mean()) if np.any(m > 0) else 1.0
+        # fixed-point quanta: powers of two (see p2g module docstring)
+        self._q_mass = _pow2_at_least(m_ref) * 2.0 ** -FIXED_POINT_BITS
+        self._q_mom = self._q_mass
+        return state
+
+    # ------------------------------------------------------------------ one substep
+    def step(self, state: State, dt: float, *, t: float = 0.0) -> None:
+        """ONE substep of dt seconds, committed unconditionally (no adaptivity; see
+        `advance`). t: shot time of the substep start, s (poses the colliders)."""
+        self._substep(state, dt, t, t + dt / self.config.time_scale)
+        state.swap()
+        state.clock.substeps += 1
+        state.clock.last_dt = dt
+
+    def _substep(self, state: State, dt: float, t0: float, t1: float) -> None:
+        """clear grid -> P2G -> grid update -> G2P, writing state.nxt (state.cur intact)."""
+        cfg, cur, nxt = self.config, state.cur, state.nxt
+        inv_dx = float(cfg.grid_n)
+        wp.copy(self._stats, self._stats_init)
+        self._counts.zero_()
+        # 1 · clear
+        clear_grid(self._grid_m, self._grid_mv, self._grid_fixed, deterministic=cfg.deterministic)
+        # 2 · P2G
+        wp.launch(self._p2g, dim=state.n, device=self.device, inputs=[
+            cur.x, cur.v, cur.C, cur.F, cur.J, cur.Jp, cur.alive, state.mass, state.volume,
+            state.material, self._materials_dev, inv_dx, float(dt), int(cfg.deterministic),
+            1.0 / self._q_mass, 1.0 / self._q_mom, self._grid_m, self._grid_mv, self._grid_fixed])
+        # 3 · grid update
+        if self.colliders:
+            self._colliders_dev.assign(pack_colliders(self.colliders, t0, t1, dt))
+        wp.launch(grid_update, dim=self._grid_v.shape, device=self.device, inputs=[
+            self._grid_params(dt), self._grid_m, self._grid_mv, self._grid_fixed,
+            self._colliders_dev, self._sdf, self._grid_v, self._counts])
+        # 4 · G2P
+        gp = G2PParams()
+        gp.dt, gp.inv_dx = float(dt), inv_dx
+        gp.affine_keep = max(0.0, 1.0 - cfg.drag * dt)  # a rate, not a per-substep fraction
+        gp.lo, gp.hi = 1.0 / cfg.grid_n, 1.0 - 1.0 / cfg.grid_n  # stencil stays on the grid
+        gp.remove = int(cfg.out_of_domain == OutOfDomain.REMOVE)
+        wp.launch(self._g2p, dim=state.n, device=self.device, inputs=[
+            gp, self._grid_v, self._materials_dev, state.material, *cur.arrays(), *nxt.arrays(),
+            self._stats, self._counts])
+
+    def _grid_params(self, dt: float) -> GridParams:
+        cfg = self.config
+        gp = GridParams()
+        gp.dt, gp.dx = float(dt), cfg.dx
+        gp.gravity = wp.vec3(*cfg.gravity)
+        gp.damping_factor = max(0.0, 1.0 - cfg.damping * dt)  # v *= 1 - damping*dt (trap 5)
+        codes = [WALL_CODES[w.value] for w in cfg.walls]
+        gp.walls_lo = wp.vec3i(codes[0], codes[2], codes[4])
+        gp.walls_hi = wp.vec3i(codes[1], codes[3], codes[5])
+        gp.wall_friction = cfg.wall_friction
+        gp.boundary_cells = cfg.boundary_cells
+        gp.n_cells = cfg.grid_n
+        gp.deterministic = int(cfg.deterministic)
+        gp.q_mass, gp.q_mom = self._q_mass, self._q_mom
+        gp.num_colliders = len(self.colliders)
+        return gp
+
+    # ------------------------------------------------------------------ stepper
+    def wave_speed(self, clock: StepperClock) -> float:
+        """c_max, domain/s, over the scene's materials at the current hardening / J."""
+        return max(m.wave_speed(hardening_factor=max(1.0, clock.max_hardening) if m.mode == Mode.SNOW else 1.0,
+                                j_min=clock.water_j_min) for m in self.materials)
+
+    def _cfl_dt(self, clock: StepperClock) -> float:
+        cfg = self.config
+        c = self.wave_speed(clock) + clock.max_speed
+        dt = cfg.dt_max if c <= 0 else min(cfg.dt_max, cfg.cfl * cfg.dx / c)
+        return dt * clock.dt_scale
+
+    def advance(self, state: State, t0: float, t1: float) -> StepReport:
+        """Advance from shot time t0 to t1 (s), i.e. (t1 - t0) * time_scale simulated
+        seconds, in adaptive substeps landing exactly on t1. Raises SimulationError when
+        a substep would need dt < dt_min or the frame needs > max_substeps_per_frame."""
+        cfg = self.config
+        if not t1 >= t0:
+            raise ValueError(f"Solver.advance: t1 = {t1} must be >= t0 = {t0}")
+        wall0 = time.perf_counter()
+        total = (t1 - t0) * cfg.time_scale
+        done, substeps, rejected = 0.0, 0, 0
+        dts, cfl_used, vmax, jmin, jmax, lost = [], 0.0, 0.0, math.inf, -math.inf, 0
+        while done < total:
+            remaining = total - done
+            dt_cfl = self._cfl_dt(state.clock)
+            if dt_cfl < cfg.dt_min:
+                self._raise_too_small(state, t0 + done / cfg.time_scale, dt_cfl)
+            if substeps >= cfg.max_substeps_per_frame:
+                raise SimulationError(
+                    f"t={t0 + done / cfg.time_scale:.4f}s: {substeps} substeps did not reach t1={t1:.4f}s "
+                    f"(dt ~ {dt_cfl:.3g}s, c_max {self.wave_speed(state.clock):.3g} domain/s). Raise "
+                    f"SolverConfig.max_substeps_per_frame, or lower youngs_modulus / bulk_modulus / grid_n")
+            last = remaining <= dt_cfl * (1.0 + 1e-6)
+            dt = remaining if last else (0.5 * remaining if remaining < 2.0 * dt_cfl else dt_cfl)
+            ts0 = t0 + done / cfg.time_scale
+            ts1 = t1 if last else t0 + (done + dt) / cfg.time_scale
+            self._substep(state, dt, ts0, ts1)
+            stats = self._stats.numpy()
+            counts = self._counts.numpy()
+            if counts[: g2p_mod.COUNT_LOST].sum() + counts[g2p_mod.COUNT_GRID_NONFINITE] > 0:
+                rejected += 1
+                state.clock.dt_scale *= 0.5  # redo at half dt (Ziran)
+                self._last_bad = counts
+                continue
+            state.swap()
+            done = total if last else done + dt
+            substeps += 1
+            clock = state.clock
+            clock.substeps += 1
+            clock.last_dt = dt
+            clock.dt_scale = min(1.0, clock.dt_scale * 1.25)
+            clock.max_speed = float(stats[g2p_mod.STAT_MAX_SPEED])
+            if self.flags.snow:
+                clock.max_hardening = max(1.0, float(stats[g2p_mod.STAT_MAX_HARDENING]))
+            if self.flags.water:
+                clock.water_j_min = min(1.0, float(stats[g2p_mod.STAT_WATER_J_MIN]))
+            dts.append(dt)
+            c = self.wave_speed(clock) + clock.max_speed
+            cfl_used = max(cfl_used, dt * c / cfg.dx)
+            vmax = max(vmax, clock.max_speed)
+            if stats[g2p_mod.STAT_J_MIN] <= stats[g2p_mod.STAT_J_MAX]:
+                jmin = min(jmin, float(stats[g2p_mod.STAT_J_MIN]))
+                jmax = max(jmax, float(stats[g2p_mod.STAT_J_MAX]))
+            lost += int(counts[g2p_mod.COUNT_LOST])
+        return self._report(state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0)
+
+    def _raise_too_small(self, state: State, t: float, dt: float) -> None:
+        bad = getattr(self, "_last_bad", None)
+        per_mat = [] if bad is None else bad[g2p_mod.COUNT_PER_MATERIAL:]
+        n_bad = 0 if bad is None else int(bad[g2p_mod.COUNT_NONFINITE] + bad[g2p_mod.COUNT_TOO_FAR])
+        names = [self._describe_material(i) for i, k in enumerate(per_mat) if k > 0] or [
+            self._describe_material(i) for i in range(len(self.materials))]
+        raise SimulationError(
+            f"t={t:.4f}s: the substep fell to dt={dt:.3g}s < dt_min={self.config.dt_min:g}s; "
+            f"{n_bad} particle(s) of {', '.join(names)} went non-finite or moved more than one cell "
+            f"per substep ('{_SYMPTOM}', guide §9.3). Lower youngs_modulus / bulk_modulus, "
+            f"raise damping, or lower SolverConfig.cfl; dt_min={self.config.dt_min:g} is the floor")
+
+    def _describe_material(self, i: int) -> str:
+        m = self.materials[i]
+        if m.mode == Mode.WATER:
+            return f"material {i} (WATER, bulk_modulus={m.bulk_modulus:g})"
+        return f"material {i} ({m.mode.name}, youngs_modulus={m.youngs_modulus:g})"
+
+    def _report(self, state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0) -> StepReport:
+        v = state.cur.v.numpy().astype(np.float64)
+        alive = state.cur.alive.numpy() > 0
+        m = state.mass.numpy().astype(np.float64) * alive
+        return StepReport(
+            substeps=substeps, rejected_substeps=rejected,
+            dt_min=min(dts) if dts else 0.0, dt_max=max(dts) if dts else 0.0,
+            max_speed=vmax, cfl_used=cfl_used, particles_lost=lost, mass=float(m.sum()),
+            momentum=(m[:, None] * v).sum(axis=0),
+            kinetic_energy=float(0.5 * (m * (v * v).sum(axis=1)).sum()), elastic_energy=None,
+            j_min=jmin if dts else 1.0, j_max=jmax if dts else 1.0,
+            wall_time_s=time.perf_counter() - wall0)
+
+    # ------------------------------------------------------------------ I/O
+    def state_to_numpy(self, state: State) -> dict[str, np.ndarray]:
+        """Host copy: x (n,3), v (n,3), C (n,3,3), F (n,3,3) if any solid, J (n,) (det F for
+        solids, J for water, 1 for tracers), Jp (n,), mass, volume (n,), material, body,
+        alive (n,) int32."""
+        cur = state.cur
+        out = {"x": cur.x.numpy(), "v": cur.v.numpy(), "C": cur.C.numpy(), "Jp": cur.Jp.numpy(),
+               "alive": cur.alive.numpy(), "mass": state.mass.numpy(), "volume": state.volume.numpy(),
+               "material": state.material.numpy(), "body": state.body.numpy()}
+        J = np.ones(state.n, np.float32)
+        if self.flags.solid:
+            out["F"] = cur.F.numpy()
+            J = np.linalg.det(out["F"]).astype(np.float32)
+        if self.flags.water:
+            Jw = cur.J.numpy()
+            water = np.array([m.mode == Mode.WATER for m in self.materials])[out["material"]]
+            J = np.where(water, Jw, J)
+        tracer = np.array([m.mode == Mode.TRACER for m in self.materials])[out["material"]]
+        out["J"] = np.where(tracer, 1.0, J).astype(np.float32)
+        return out
+
+    def checkpoint(self, state: State, t: float) -> dict[str, np.ndarray]:
+        """Full state + stepper clock, as numpy arrays; `restore` resumes bit-identically."""
+        data = {name: arr.numpy() for name, arr in zip(ParticleBuffers.NAMES, state.cur.arrays())}
+        data.update(mass=state.mass.numpy(), volume=state.volume.numpy(),
+                    material=state.material.numpy(), body=state.body.numpy())
+        data["clock"] = state.clock.to_array()
+        data["t"] = np.array([t], np.float64)
+        data["meta"] = np.array([CHECKPOINT_VERSION, self.config.grid_n, state.n], np.int64)
+        return data
+
+    def restore(self, data: dict[str, np.ndarray]) -> tuple[State, float]:
+        """State and shot time t from `checkpoint` output (ValueError if it does not fit)."""
+        meta = np.asarray(data.get("meta", [-1, -1, -1]))
+        if int(meta[0]) != CHECKPOINT_VERSION or int(meta[1]) != self.config.grid_n:
+            raise ValueError(
+                f"checkpoint: version/grid_n {meta[:2].tolist()} do not match this solver "
+                f"({CHECKPOINT_VERSION}, {self.config.grid_n}); re-simulate from the start")
+        state = self._build_state(data, StepperClock.from_array(data["clock"]))
+        return state, float(data["t"][0])

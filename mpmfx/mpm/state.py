@@ -1,0 +1,130 @@
+"""Per-step solver state (particles, double-buffered) and the per-scene kernel flags."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import warp as wp
+
+from .materials import Material, Mode
+
+__all__ = ["SceneFlags", "ParticleBuffers", "StepperClock", "State"]
+
+
+@dataclass(frozen=True)
+class SceneFlags:
+    """Which constitutive branches a scene compiles (guide: model only what the scene needs).
+
+    A water-only scene compiles no SVD and keeps no F; a snow-only scene keeps no J.
+    """
+
+    snow: bool
+    sand: bool
+    water: bool
+
+    @classmethod
+    def of(cls, materials) -> "SceneFlags":
+        modes = {m.mode for m in materials}
+        return cls(Mode.SNOW in modes, Mode.SAND in modes, Mode.WATER in modes)
+
+    @property
+    def solid(self) -> bool:
+        """Any material that carries a deformation gradient F."""
+        return self.snow or self.sand
+
+    @property
+    def key(self) -> str:
+        """Name of the Warp module holding this scene's specialised P2G and G2P."""
+        tag = "".join(c for c, on in (("s", self.snow), ("g", self.sand), ("w", self.water)) if on)
+        return f"mpmfx_mpm_scene_{tag or 'tracer'}"
+
+
+@dataclass
+class ParticleBuffers:
+    """The particle fields that change every substep, on the device.
+
+    x: (n,) vec3 domain units; v: (n,) vec3 domain/s; C: (n,) mat33 1/s (APIC affine
+    velocity); F: (n,) mat33 elastic deformation gradient, or (1,) when no material needs
+    it; J: (n,) float32 volume ratio of water particles, or (1,) without water;
+    Jp: (n,) float32 plastic volume ratio (snow) or log-volume correction (sand);
+    alive: (n,) int32, 0 once a particle left the domain in REMOVE mode.
+    """
+
+    x: wp.array
+    v: wp.array
+    C: wp.array
+    F: wp.array
+    J: wp.array
+    Jp: wp.array
+    alive: wp.array
+
+    NAMES = ("x", "v", "C", "F", "J", "Jp", "alive")
+
+    @classmethod
+    def allocate(cls, n: int, flags: SceneFlags, device) -> "ParticleBuffers":
+        def arr(dtype, count=n):
+            return wp.zeros(count, dtype=dtype, device=device)
+
+        return cls(
+            x=arr(wp.vec3), v=arr(wp.vec3), C=arr(wp.mat33),
+            F=arr(wp.mat33, n if flags.solid else 1),
+            J=arr(wp.float32, n if flags.water else 1),
+            Jp=arr(wp.float32), alive=arr(wp.int32),
+        )
+
+    def arrays(self):
+        return [getattr(self, k) for k in self.NAMES]
+
+
+@dataclass
+class StepperClock:
+    """What the adaptive stepper carries from one substep to the next.
+
+    Checkpointed with the state so a resumed run picks exactly the same dt sequence.
+    dt_scale: factor in (0, 1] on the CFL step, halved per rejected substep and regrown by
+    1.25x per accepted one; max_speed: |v|max of the last accepted substep, domain/s;
+    max_hardening: largest exp(xi (1 - Jp)) among snow particles; water_j_min: smallest
+    J among water particles; substeps: accepted substeps since init_state.
+    """
+
+    dt_scale: float = 1.0
+    max_speed: float = 0.0
+    max_hardening: float = 1.0
+    water_j_min: float = 1.0
+    last_dt: float = 0.0
+    substeps: int = 0
+
+    FIELDS = ("dt_scale", "max_speed", "max_hardening", "water_j_min", "last_dt", "substeps")
+
+    def to_array(self) -> np.ndarray:
+        return np.array([float(getattr(self, k)) for k in self.FIELDS], dtype=np.float64)
+
+    @classmethod
+    def from_array(cls, a: np.ndarray) -> "StepperClock":
+        vals = dict(zip(cls.FIELDS, (float(x) for x in a)))
+        vals["substeps"] = int(vals["substeps"])
+        return cls(**vals)
+
+
+@dataclass
+class State:
+    """Everything that evolves: particle buffers (current + scratch for the next
+    substep, swapped on acceptance so a rejected substep leaves `cur` untouched), the
+    constant per-particle arrays and the stepper clock.
+
+    mass: (n,) float32 (0 for tracers); volume: (n,) float32 rest volume, domain^3;
+    material: (n,) int32 row in the solver's material table; body: (n,) int32 object id.
+    """
+
+    n: int
+    cur: ParticleBuffers
+    nxt: ParticleBuffers
+    mass: wp.array
+    volume: wp.array
+    material: wp.array
+    body: wp.array
+    clock: StepperClock = field(default_factory=StepperClock)
+
+    def swap(self) -> None:
+        self.cur, self.nxt = self.nxt, self.cur
