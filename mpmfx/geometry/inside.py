@@ -13,8 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-# Rays run through lattice columns shifted by this tiny, irrational fraction of h so a
-# ray never passes exactly through a mesh edge or vertex that sits on the lattice.
+# Every lattice point is tested as if moved by this tiny, irrational fraction of h, so a
+# ray never passes exactly through a mesh edge or vertex, and a point on an axis-aligned
+# face is decided the same way in every column (not by floating-point noise).
 _RAY_SHIFT = np.array([1.2345678e-6, 2.3456789e-6, 3.4567891e-6])
 _CHUNK = 2_000_000  # work items per numpy chunk: bounds peak memory to ~100s of MB
 
@@ -88,7 +89,7 @@ def ray_winding(mesh, lattice: Lattice, *, axis: int, signed: bool) -> np.ndarra
     sign_all = -np.sign(normals[:, axis]) if signed else np.ones(len(tris))
     for tri_ids, iu, iv in _columns_per_triangle(t[:, :, u], t[:, :, v], shape[u], shape[v]):
         a_hit, ok = _project_hits(t[tri_ids], iu, iv, u, v, axis)
-        k = np.clip(np.ceil(a_hit[ok]), 0, shape[axis]).astype(np.int64)
+        k = np.clip(np.ceil(a_hit[ok] - _RAY_SHIFT[axis]), 0, shape[axis]).astype(np.int64)
         np.add.at(acc, (iu[ok], iv[ok], k), sign_all[tri_ids[ok]].astype(np.int32))
     w = np.cumsum(acc, axis=2)[:, :, : shape[axis]]
     return np.moveaxis(w, 2, axis)
