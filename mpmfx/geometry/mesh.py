@@ -1,0 +1,208 @@
+"""Mesh loading, placement and domain checks.
+
+All lengths are world units (metres). Formats: OBJ, PLY, STL, GLB/glTF through trimesh
+(scenes are flattened with their node transforms) and USD/USDA/USDC through ``pxr``
+(every ``UsdGeom.Mesh`` under a prim, world transform and ``metersPerUnit`` applied).
+trimesh, scipy and pxr are imported inside the functions that use them.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # pragma: no cover
+    import trimesh
+
+TRIMESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
+USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
+
+# A mesh whose smallest bounding-box side is below this fraction of its largest is flat:
+# it has no interior to fill with particles.
+_FLAT_RATIO = 1e-6
+
+
+class MeshError(ValueError):
+    """A mesh cannot be used as given; the message names the file and the fix."""
+
+
+def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Trimesh":
+    """Load a triangle mesh in world units (metres).
+
+    path: OBJ, PLY, STL, GLB/glTF or USD/USDA/USDC file.
+    prim_path: USD only; load the meshes under this prim (default: the whole stage).
+    Returns one ``trimesh.Trimesh`` (all parts concatenated, transforms applied,
+    n-gons triangulated). Raises ``MeshError`` for a missing, unreadable, empty or
+    degenerate (flat, zero-volume) mesh.
+    """
+    import trimesh
+
+    path = Path(path)
+    if not path.is_file():
+        raise MeshError(f"{path}: no such file; check the asset path (relative paths are "
+                        f"relative to {Path.cwd()})")
+    suffix = path.suffix.lower()
+    if suffix in USD_SUFFIXES:
+        vertices, faces = _load_usd(path, prim_path)
+    elif suffix in TRIMESH_SUFFIXES:
+        vertices, faces = _load_trimesh(path)
+    else:
+        raise MeshError(f"{path}: unsupported format '{suffix}'; export the asset as one of "
+                        f"{', '.join(TRIMESH_SUFFIXES + USD_SUFFIXES)}")
+    mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=True)
+    _validate(mesh, path)
+    return mesh
+
+
+def _load_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    try:
+        scene = trimesh.load_scene(str(path))
+        parts = [g for g in scene.dump(concatenate=False)
+                 if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+    except Exception as exc:  # trimesh raises many types for corrupt files
+        raise MeshError(f"{path}: cannot be read as a mesh ({type(exc).__name__}: {exc}); "
+                        "re-export it from your DCC") from exc
+    if not parts:
+        raise MeshError(f"{path}: contains no triangles (only points, lines or an empty "
+                        "scene); export the surface as a polygon mesh")
+    merged = trimesh.util.concatenate(parts)
+    return np.asarray(merged.vertices, float), np.asarray(merged.faces, np.int64)
+
+
+def _load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray]:
+    try:
+        from pxr import Usd, UsdGeom
+    except ImportError as exc:  # pragma: no cover - usd-core is a dependency
+        raise MeshError(f"{path}: reading USD needs pxr; pip install usd-core") from exc
+    stage = Usd.Stage.Open(str(path)) if _usd_readable(path) else None
+    if stage is None:
+        raise MeshError(f"{path}: cannot be opened as a USD stage; check that the file is "
+                        "valid USD (usdcat can tell)")
+    root = stage.GetPrimAtPath(prim_path) if prim_path else stage.GetPseudoRoot()
+    if not root or not root.IsValid():
+        raise MeshError(f"{path}: prim '{prim_path}' not found; pass an existing prim path "
+                        "(e.g. /root/model) or none to load the whole stage")
+    meters = UsdGeom.GetStageMetersPerUnit(stage)
+    time = Usd.TimeCode.EarliestTime()
+    cache = UsdGeom.XformCache(time)
+    all_v, all_f, offset = [], [], 0
+    for prim in Usd.PrimRange(root):
+        if not prim.IsA(UsdGeom.Mesh):
+            continue
+        geom = UsdGeom.Mesh(prim)
+        points = geom.GetPointsAttr().Get(time)
+        counts = geom.GetFaceVertexCountsAttr().Get(time)
+        indices = geom.GetFaceVertexIndicesAttr().Get(time)
+        if points is None or counts is None or indices is None or len(points) == 0:
+            continue
+        # USD matrices act on row vectors: p_world = p @ M.
+        m = np.array(cache.GetLocalToWorldTransform(prim), dtype=float).reshape(4, 4)
+        v = np.asarray(points, float) @ m[:3, :3] + m[3, :3]
+        tris = _fan_triangulate(np.asarray(counts, np.int64), np.asarray(indices, np.int64))
+        if geom.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
+            tris = tris[:, ::-1]
+        if np.linalg.det(m[:3, :3]) < 0:  # a mirroring transform flips the winding
+            tris = tris[:, ::-1]
+        all_v.append(v * meters)
+        all_f.append(tris + offset)
+        offset += len(v)
+    if not all_f or sum(len(f) for f in all_f) == 0:
+        where = f"under '{prim_path}'" if prim_path else "on the stage"
+        raise MeshError(f"{path}: no UsdGeom.Mesh with faces {where}; point prim_path at "
+                        "the mesh or export the asset with its geometry")
+    return np.concatenate(all_v), np.concatenate(all_f)
+
+
+def _usd_readable(path: Path) -> bool:
+    # Usd.Stage.Open raises (rather than returning None) on garbage; normalise to a bool.
+    from pxr import Sdf
+
+    try:
+        return Sdf.Layer.FindOrOpen(str(path)) is not None
+    except Exception:
+        return False
+
+
+def _fan_triangulate(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
+    """Fan-triangulate polygons. counts: (p,) vertices per face; indices: (sum counts,).
+
+    Returns (t, 3) int64 vertex indices; faces with fewer than 3 vertices are dropped.
+    """
+    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    n_tris = np.clip(counts - 2, 0, None)
+    face_start = np.repeat(starts, n_tris)
+    # k-th triangle of a face uses vertices (0, k+1, k+2) of that face.
+    k = np.arange(n_tris.sum()) - np.repeat(np.cumsum(n_tris) - n_tris, n_tris)
+    return np.stack([indices[face_start], indices[face_start + k + 1],
+                     indices[face_start + k + 2]], axis=1)
+
+
+def _validate(mesh: "trimesh.Trimesh", path: Path | str) -> None:
+    import trimesh
+
+    if len(mesh.faces) == 0:
+        raise MeshError(f"{path}: no non-degenerate triangles; export the surface as a "
+                        "polygon mesh")
+    extents = mesh.extents
+    if not np.all(np.isfinite(mesh.vertices)):
+        raise MeshError(f"{path}: vertices contain NaN or inf; clean up the asset in your DCC")
+    if extents.max() <= 0 or extents.min() <= _FLAT_RATIO * extents.max():
+        raise MeshError(f"{path}: the mesh is flat (bounding box {np.round(extents, 6)} m); "
+                        "a simulated solid needs volume: give it thickness (e.g. solidify)")
+    if mesh.is_watertight:
+        if mesh.volume < 0:  # inverted normals: fix so inside tests see an outward surface
+            trimesh.repair.fix_inversion(mesh)
+        if abs(mesh.volume) <= _FLAT_RATIO * np.prod(extents):
+            raise MeshError(f"{path}: the closed mesh has zero volume; a simulated solid "
+                            "needs an interior (check for collapsed or doubled faces)")
+
+
+def transform_mesh(mesh: "trimesh.Trimesh", *, translate=(0.0, 0.0, 0.0),
+                   rotate_deg=(0.0, 0.0, 0.0), scale=1.0) -> "trimesh.Trimesh":
+    """Return a scaled, then rotated, then translated copy of ``mesh``.
+
+    translate: (3,) metres. rotate_deg: (3,) XYZ Euler angles in degrees (about the fixed
+    world x, then y, then z axes). scale: scalar or (3,) factor, applied about the origin.
+    """
+    from scipy.spatial.transform import Rotation
+
+    s = np.broadcast_to(np.asarray(scale, float), (3,))
+    if not np.all(np.isfinite(s)) or np.any(s <= 0):
+        raise MeshError(f"scale={scale!r}: scale factors must be positive; use rotate_deg "
+                        "to flip an asset")
+    rot = Rotation.from_euler("xyz", np.asarray(rotate_deg, float), degrees=True).as_matrix()
+    out = mesh.copy()
+    out.vertices = (np.asarray(mesh.vertices, float) * s) @ rot.T + np.asarray(translate, float)
+    return out
+
+
+def check_in_domain(mesh: "trimesh.Trimesh", *, origin, size: float, name: str) -> None:
+    """Raise ``MeshError`` unless ``mesh`` lies inside the cube [origin, origin + size].
+
+    origin: (3,) metres, min corner of the domain. size: edge length in metres.
+    name: the asset's name for the message. The message says what to change.
+    """
+    lo, hi = np.asarray(mesh.bounds[0], float), np.asarray(mesh.bounds[1], float)
+    o = np.asarray(origin, float)
+    extent = hi - lo
+    if np.any(extent > size):
+        factor = size / extent.max()
+        raise MeshError(
+            f"{name}: mesh is {_fmt(extent)} m, larger than the domain (size {size:g} m); "
+            f"scale it by at most {factor:.3g} or set domain.size >= {extent.max():.4g}")
+    below = np.clip(o - lo, 0, None)
+    above = np.clip(hi - (o + size), 0, None)
+    if np.any(below > 0) or np.any(above > 0):
+        shift = below - above
+        raise MeshError(
+            f"{name}: mesh bounds {_fmt(lo)}..{_fmt(hi)} m extend outside the domain "
+            f"{_fmt(o)}..{_fmt(o + size)} m; translate it by {_fmt(shift)} m or move "
+            "domain.origin")
+
+
+def _fmt(v) -> str:
+    return "(" + ", ".join(f"{x:.4g}" for x in np.asarray(v, float)) + ")"
