@@ -60,16 +60,37 @@ def zhu_bridson_phi(
     gw_grid: wp.array3d(dtype=wp.vec3),
     radius_vox: float,
     far_vox: float,
+    projected: int,
     phi: wp.array3d(dtype=float),
 ):
-    """phi = |g - gbar| - r in voxel units; `far_vox` where no particle reaches."""
+    """phi = |g - gbar| - r in voxel units; `far_vox` where no particle reaches.
+
+    With `projected`, g - gbar is projected on the outward normal -grad(w)/|grad(w)|: on
+    irregular (random) samples gbar jitters sideways as much as along the normal, and
+    |g - gbar| turns that sideways jitter into an outward bias (the surface shrinks by
+    ~0.3 particle spacings); the projection keeps only the normal part. On a flat or
+    spherical boundary g - gbar is already normal, so the two agree there.
+    """
     i, j, k = wp.tid()
     w = w_grid[i, j, k]
-    if w > 0.0:
-        d = wp.vec3(float(i), float(j), float(k)) - gw_grid[i, j, k] / w
-        phi[i, j, k] = wp.length(d) - radius_vox
-    else:
+    if w <= 0.0:
         phi[i, j, k] = far_vox
+        return
+    d = wp.vec3(float(i), float(j), float(k)) - gw_grid[i, j, k] / w
+    dist = wp.length(d)
+    if projected != 0:
+        nx = w_grid.shape[0] - 1
+        ny = w_grid.shape[1] - 1
+        nz = w_grid.shape[2] - 1
+        grad = wp.vec3(
+            w_grid[wp.min(i + 1, nx), j, k] - w_grid[wp.max(i - 1, 0), j, k],
+            w_grid[i, wp.min(j + 1, ny), k] - w_grid[i, wp.max(j - 1, 0), k],
+            w_grid[i, j, wp.min(k + 1, nz)] - w_grid[i, j, wp.max(k - 1, 0)],
+        )
+        gl = wp.length(grad)
+        if gl > 0.0:
+            dist = -wp.dot(d, grad) / gl
+    phi[i, j, k] = dist - radius_vox
 
 
 @wp.kernel

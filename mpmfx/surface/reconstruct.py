@@ -26,6 +26,7 @@ log = logging.getLogger(__name__)
 
 MAX_GRID_NODES = 1 << 28  # ~268 M voxels (~1 GB per float channel): beyond this a dense grid is a mistake
 MAX_SWEEP_ROUNDS = 256
+PROJECTED = 1
 
 
 def surface_particles(
@@ -58,6 +59,9 @@ def surface_particles(
         if params.dilate != 0.0:
             wp.launch(K.add_float, phi.shape, inputs=[phi, -params.dilate / grid.voxel])
         phi = _smooth(wp, K, phi, params.smooth_iters)
+        if params.smooth_iters > 0:
+            # blurring closes thin outside tunnels, sealing pockets they joined to the outside
+            _fill_bubbles(wp, K, phi, inside_value=-grid.r_vox)
         timings["smooth"] = _lap(wp, t0)
         if params.min_feature_particles > 0:
             _remove_specks(wp, K, phi, g, params.min_feature_particles, far_value=grid.far_vox)
@@ -152,7 +156,7 @@ def _raw_field(wp, K, g, v: np.ndarray | None, params: SurfaceParams, grid: _Gri
     va = wp.array(v if with_v else np.zeros((1, 3), np.float32), dtype=wp.vec3)
     wp.launch(K.splat_zhu_bridson, g.shape[0], inputs=[g, va, int(with_v), grid.kernel_vox, w, gw, vw])
     phi = wp.empty(shape, dtype=float)
-    wp.launch(K.zhu_bridson_phi, shape, inputs=[w, gw, grid.r_vox, grid.far_vox, phi])
+    wp.launch(K.zhu_bridson_phi, shape, inputs=[w, gw, grid.r_vox, grid.far_vox, PROJECTED, phi])
     del gw
     vel = None
     if with_v:
