@@ -1,0 +1,128 @@
+"""Parameter and result types of the surfacer (numpy only; no Warp import here)."""
+
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+class Method(enum.Enum):
+    """How particles become an implicit field before the level set is extracted."""
+
+    SPHERES = "spheres"
+    """Union of spheres of radius r: exact for lone particles, blobby on bulk material."""
+    ZHU_BRIDSON = "zhu_bridson"
+    """phi = |x - xbar(x)| - r with xbar a kernel-weighted particle average (Zhu & Bridson 2005)."""
+
+
+@dataclass(frozen=True)
+class SurfaceParams:
+    """Settings of :func:`mpmfx.surface.surface_particles`. Lengths are world units (m).
+
+    particle_radius: radius r of one particle; the pipeline passes ~0.5-0.6 x particle spacing.
+    radius_scale: artist multiplier on r (grows / shrinks the surface; the kernel support stays).
+    voxel_size: level-set voxel edge; None -> 0.5 * particle_radius (independent of the sim dx).
+    smooth_iters: passes of a [1 2 1]/4 separable blur over the raw field (each ~1 voxel).
+    dilate: offset of the surface before smoothing, outward (+) or inward (-).
+    min_feature_particles: connected blobs holding fewer particles than this are removed.
+    method: see :class:`Method`.
+    band_voxels: narrow-band half width in voxels; the level set is clipped to +-band*voxel.
+    kernel_radius: Zhu-Bridson kernel support R in units of particle_radius. With the
+        (1 - s^2)^3 kernel the weighted centroid of a half-space ball sits 0.246 R deep, so
+        R = 4.06 r puts the zero level exactly on a flat material boundary (no shrinkage).
+    """
+
+    particle_radius: float
+    radius_scale: float = 1.0
+    voxel_size: float | None = None
+    smooth_iters: int = 2
+    dilate: float = 0.0
+    min_feature_particles: int = 0
+    method: Method = Method.ZHU_BRIDSON
+    band_voxels: int = 3
+    kernel_radius: float = 4.06
+
+    def __post_init__(self) -> None:
+        def bad(field: str, fix: str) -> ValueError:
+            return ValueError(f"SurfaceParams.{field}: {fix}")
+
+        if not (math.isfinite(self.particle_radius) and self.particle_radius > 0):
+            raise bad("particle_radius", f"got {self.particle_radius!r}; give a positive length in metres")
+        if not (math.isfinite(self.radius_scale) and self.radius_scale > 0):
+            raise bad("radius_scale", f"got {self.radius_scale!r}; give a positive multiplier (1.0 = as is)")
+        if self.voxel_size is not None and not (math.isfinite(self.voxel_size) and self.voxel_size > 0):
+            raise bad("voxel_size", f"got {self.voxel_size!r}; give a positive length or None")
+        if self.smooth_iters < 0:
+            raise bad("smooth_iters", f"got {self.smooth_iters}; give 0 or more passes")
+        if not math.isfinite(self.dilate):
+            raise bad("dilate", f"got {self.dilate!r}; give a finite length")
+        if self.min_feature_particles < 0:
+            raise bad("min_feature_particles", f"got {self.min_feature_particles}; give 0 (off) or more")
+        if not isinstance(self.method, Method):
+            raise bad("method", f"got {self.method!r}; use one of {[m.name for m in Method]}")
+        if self.band_voxels < 1:
+            raise bad("band_voxels", f"got {self.band_voxels}; give at least 1 voxel")
+        if not (math.isfinite(self.kernel_radius) and self.kernel_radius >= 1.0):
+            raise bad("kernel_radius", f"got {self.kernel_radius!r}; give >= 1 (x particle_radius), 4.06 by default")
+
+    @property
+    def resolved_voxel_size(self) -> float:
+        """Voxel edge in world units (m)."""
+        return float(self.voxel_size) if self.voxel_size is not None else 0.5 * self.particle_radius
+
+
+@dataclass
+class LevelSet:
+    """Narrow-band signed distance on a voxel grid aligned to multiples of voxel_size.
+
+    values: (a, b, c) float32, world units, negative inside, clipped to +-background.
+    ijk0: (3,) int64; values[i, j, k] sits at world ((ijk0 + (i, j, k)) * voxel_size), so the
+        index space equals an OpenVDB transform of uniform scale voxel_size.
+    """
+
+    values: np.ndarray
+    ijk0: np.ndarray
+    voxel_size: float
+    background: float
+
+    @property
+    def origin(self) -> np.ndarray:
+        """(3,) float64 world position of values[0, 0, 0]."""
+        return self.ijk0.astype(np.float64) * self.voxel_size
+
+
+@dataclass
+class SurfaceMesh:
+    """Triangle mesh of the zero level, outward-facing (counter-clockwise seen from outside).
+
+    vertices: (m, 3) float32 world; faces: (k, 3) int32; normals: (m, 3) float32 unit, outward;
+    velocities: (m, 3) float32 world/s (zeros when no velocities were given).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    velocities: np.ndarray
+
+    @classmethod
+    def empty(cls) -> SurfaceMesh:
+        z = np.zeros((0, 3), np.float32)
+        return cls(z, np.zeros((0, 3), np.int32), z.copy(), z.copy())
+
+
+@dataclass
+class SurfaceResult:
+    """Output of :func:`surface_particles`.
+
+    velocity: (a, b, c, 3) float32 world/s on the level-set grid (kernel-weighted particle
+        velocity, 0 where no particle reaches), or None when no velocities were given.
+    density: (a, b, c) float32 particles per m^3 (kernel estimate), or None (SPHERES method).
+    """
+
+    level_set: LevelSet
+    mesh: SurfaceMesh
+    velocity: np.ndarray | None
+    density: np.ndarray | None
