@@ -64,7 +64,7 @@ class Thickness(str, enum.Enum):
 
 
 class Voxelise(_Section):
-    ppc: int = Field(8, ge=1, le=64, description="Particles per grid cell.")
+    ppc: Literal[1, 8, 27, 64] = Field(8, description="Particles per grid cell: a k*k*k jittered lattice.")
     seed: int = Field(0, ge=0, description="Jitter seed; the same seed re-voxelises identically.")
     thickness: Thickness = Field(Thickness.WARN, description="What a failed five-cell thickness check does.")
 

@@ -25,7 +25,7 @@ translate = [0.5, 0.45, 0.5]
 velocity = [0.0, -0.5, 0.0]
 
 [voxelise]
-ppc = 4
+ppc = 8
 
 [solver]
 cfl = 0.4
