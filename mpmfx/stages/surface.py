@@ -43,8 +43,11 @@ def group_names(shot: Shot) -> list[str]:
 def surface_params(shot: Shot):
     from mpmfx.surface import SurfaceParams
     s = shot.surface
-    return SurfaceParams(particle_radius=0.6 * particle_spacing(shot), radius_scale=s.radius_scale,
-                         voxel_size=s.voxel_size, smooth_iters=s.smooth_iters, dilate=s.dilate,
+    h = particle_spacing(shot)
+    # Default voxel: half the particle spacing, fine enough for a smooth render and ~10x cheaper
+    # than the surfacer's own default (a quarter of the radius).
+    return SurfaceParams(particle_radius=0.6 * h, radius_scale=s.radius_scale,
+                         voxel_size=s.voxel_size or 0.5 * h, smooth_iters=s.smooth_iters, dilate=s.dilate,
                          min_feature_particles=s.min_feature_particles)
 
 
