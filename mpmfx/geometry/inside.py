@@ -91,7 +91,7 @@ def ray_winding(mesh, lattice: Lattice, *, axis: int, signed: bool) -> np.ndarra
         a_hit, ok = _project_hits(t[tri_ids], iu, iv, u, v, axis)
         k = np.clip(np.ceil(a_hit[ok] - _RAY_SHIFT[axis]), 0, shape[axis]).astype(np.int64)
         np.add.at(acc, (iu[ok], iv[ok], k), sign_all[tri_ids[ok]].astype(np.int32))
-    w = np.cumsum(acc, axis=2)[:, :, : shape[axis]]
+    w = np.cumsum(acc, axis=2, dtype=np.int32)[:, :, : shape[axis]]
     return np.moveaxis(w, 2, axis)
 
 

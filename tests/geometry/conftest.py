@@ -1,0 +1,39 @@
+"""Analytic test shapes of known thickness (metres), built with trimesh / manifold3d."""
+
+import pytest
+import trimesh
+
+
+def slab(t: float) -> trimesh.Trimesh:
+    """0.5 x 0.5 m plate, t thick (z)."""
+    return trimesh.creation.box(extents=(0.5, 0.5, t))
+
+
+def rod(d: float) -> trimesh.Trimesh:
+    """Cylinder of diameter d, 0.6 m long (z)."""
+    return trimesh.creation.cylinder(radius=d / 2, height=0.6, sections=48)
+
+
+def l_bracket(t: float) -> trimesh.Trimesh:
+    """Two t-thick plates (0.6 x 0.3 and 0.3 x 0.5 m) meeting at a right angle."""
+    a = trimesh.creation.box(extents=(0.6, 0.3, t))
+    a.apply_translation((0, 0, t / 2))
+    b = trimesh.creation.box(extents=(t, 0.3, 0.5))
+    b.apply_translation((0.3 - t / 2, 0, 0.25))
+    return a.union(b)
+
+
+def sphere_with_fin(t: float) -> trimesh.Trimesh:
+    """Sphere of radius 0.2 m with a 0.3 x 0.2 m fin, t thick, sticking out along +x."""
+    s = trimesh.creation.icosphere(subdivisions=3, radius=0.2)
+    f = trimesh.creation.box(extents=(0.3, 0.2, t))
+    f.apply_translation((0.3, 0, 0))
+    return s.union(f)
+
+
+DOMAIN = {"origin": (-0.5, -0.5, -0.5), "size": 1.0}
+
+
+@pytest.fixture
+def domain():
+    return dict(DOMAIN)

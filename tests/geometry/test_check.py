@@ -1,0 +1,49 @@
+import json
+
+import pytest
+import trimesh
+
+from mpmfx.geometry.check import run_check
+
+from .conftest import slab, sphere_with_fin
+
+
+def test_check_writes_report_and_heatmap(tmp_path, capsys):
+    path = tmp_path / "fin.obj"
+    sphere_with_fin(0.05).export(path)
+    code = run_check(str(path), grid_n=24, out_dir=tmp_path / "out")
+    assert code == 1  # fin is ~1.1 cells at grid 24 with the padded default domain
+    out = capsys.readouterr().out
+    assert "FAIL" in out
+    report = json.loads((tmp_path / "out" / "report.json").read_text())
+    assert report["verdict"] == "fail" and report["grid_n"] == 24
+    assert report["domain"]["size"] == pytest.approx(0.65 * 1.1)
+    png = tmp_path / "out" / "thickness.png"
+    import imageio.v3 as iio
+
+    img = iio.imread(png)
+    assert img.shape[0] > 100 and img.std() > 5  # not a blank frame
+    red = (img[..., 0] > 150) & (img[..., 1] < 100)
+    assert red.sum() > 50  # the fin shows red
+
+
+def test_check_json_and_pass(tmp_path, capsys):
+    path = tmp_path / "ball.stl"
+    trimesh.creation.icosphere(subdivisions=3, radius=0.5).export(path)
+    code = run_check(str(path), grid_n=16, as_json=True, out_dir=tmp_path / "o")
+    assert code == 0
+    assert json.loads(capsys.readouterr().out)["verdict"] == "pass"
+
+
+def test_check_explicit_domain(tmp_path, capsys):
+    path = tmp_path / "slab.ply"
+    slab(0.1).export(path)
+    assert run_check(str(path), grid_n=40, origin=(-0.5, -0.5, -0.5), size=1.0,
+                     out_dir=tmp_path / "o") == 0  # 4 cells: WARN exits 0
+    assert "WARN" in capsys.readouterr().out
+
+
+def test_check_bad_input_exits_2(tmp_path, capsys):
+    assert run_check(str(tmp_path / "nope.obj"), grid_n=32, out_dir=tmp_path) == 2
+    assert "nope.obj" in capsys.readouterr().err
+    assert run_check(str(tmp_path / "nope.obj"), grid_n=0, out_dir=tmp_path) == 2

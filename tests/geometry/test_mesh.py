@@ -1,0 +1,113 @@
+from pathlib import Path
+
+import numpy as np
+import pytest
+import trimesh
+
+from mpmfx.geometry.mesh import MeshError, check_in_domain, load_mesh, transform_mesh
+
+BOX = trimesh.creation.box(extents=(0.2, 0.4, 0.6))
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".ply", ".stl", ".glb"])
+def test_trimesh_formats_round_trip(tmp_path, suffix):
+    path = tmp_path / f"box{suffix}"
+    BOX.export(path)
+    mesh = load_mesh(path)
+    assert mesh.is_watertight
+    assert mesh.volume == pytest.approx(0.2 * 0.4 * 0.6, rel=1e-6)
+    np.testing.assert_allclose(mesh.extents, (0.2, 0.4, 0.6), rtol=1e-6)
+
+
+def _write_usda(path: Path, mesh, *, meters_per_unit=1.0, translate=(0, 0, 0), quads=False):
+    from pxr import Gf, Usd, UsdGeom
+
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+    xf = UsdGeom.Xform.Define(stage, "/world")
+    xf.AddTranslateOp().Set(Gf.Vec3d(*translate))
+    geom = UsdGeom.Mesh.Define(stage, "/world/box")
+    if quads:  # a unit cube as 6 quads: exercises n-gon triangulation
+        v = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+        f = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+        geom.CreatePointsAttr([Gf.Vec3f(*p) for p in v])
+        geom.CreateFaceVertexCountsAttr([4] * 6)
+        geom.CreateFaceVertexIndicesAttr([i for q in f for i in q])
+    else:
+        geom.CreatePointsAttr([Gf.Vec3f(*p) for p in mesh.vertices])
+        geom.CreateFaceVertexCountsAttr([3] * len(mesh.faces))
+        geom.CreateFaceVertexIndicesAttr([int(i) for i in mesh.faces.ravel()])
+    stage.GetRootLayer().Save()
+
+
+def test_usda_applies_transform_and_meters_per_unit(tmp_path):
+    path = tmp_path / "box.usda"
+    _write_usda(path, BOX, meters_per_unit=0.01, translate=(100, 0, 0))  # centimetres
+    mesh = load_mesh(path)
+    np.testing.assert_allclose(mesh.extents, (0.002, 0.004, 0.006), rtol=1e-5)
+    np.testing.assert_allclose(mesh.bounds.mean(0), (1.0, 0, 0), atol=1e-6)
+
+
+def test_usda_quads_are_triangulated_into_a_closed_cube(tmp_path):
+    path = tmp_path / "quads.usda"
+    _write_usda(path, None, quads=True)
+    mesh = load_mesh(path)
+    assert len(mesh.faces) == 12 and mesh.is_watertight
+    assert abs(mesh.volume) == pytest.approx(1.0)
+
+
+def test_usd_prim_path_selects_and_errors(tmp_path):
+    path = tmp_path / "box.usda"
+    _write_usda(path, BOX)
+    assert len(load_mesh(path, prim_path="/world/box").faces) == 12
+    with pytest.raises(MeshError, match="/nope.*not found"):
+        load_mesh(path, prim_path="/nope")
+
+
+def test_warp_bunny_loads_from_usd():
+    import warp
+
+    path = Path(warp.__file__).parent / "examples" / "assets" / "bunny.usd"
+    mesh = load_mesh(path)
+    assert len(mesh.faces) > 1000
+    assert 0 < mesh.extents.min() < mesh.extents.max()
+
+
+@pytest.mark.parametrize("make, match", [
+    (lambda d: d / "missing.obj", "no such file"),
+    (lambda d: _text(d / "junk.usda", "this is not usd"), "cannot be opened as a USD stage"),
+    (lambda d: _text(d / "junk.glb", "garbage"), "cannot be read as a mesh"),
+    (lambda d: _text(d / "points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n"), "no triangles"),
+    (lambda d: _text(d / "flat.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n"),
+     "flat"),
+    (lambda d: _text(d / "mesh.xyz", "1 2 3"), "unsupported format"),
+])
+def test_bad_files_raise_mesh_error_naming_file(tmp_path, make, match):
+    path = make(tmp_path)
+    with pytest.raises(MeshError, match=match) as info:
+        load_mesh(path)
+    assert path.name in str(info.value)
+    assert isinstance(info.value, ValueError)
+
+
+def _text(path, text):
+    path.write_text(text)
+    return path
+
+
+def test_transform_scales_rotates_then_translates():
+    out = transform_mesh(BOX, scale=2.0, rotate_deg=(0, 0, 90), translate=(1, 0, 0))
+    # 0.2 x 0.4 scaled to 0.4 x 0.8, then turned 90 deg about z: 0.8 x 0.4.
+    np.testing.assert_allclose(out.extents, (0.8, 0.4, 1.2), atol=1e-9)
+    np.testing.assert_allclose(out.bounds.mean(0), (1, 0, 0), atol=1e-9)
+    assert BOX.extents[0] == pytest.approx(0.2)  # input untouched
+    with pytest.raises(MeshError, match="positive"):
+        transform_mesh(BOX, scale=(1, -1, 1))
+
+
+def test_check_in_domain_messages_say_what_to_change():
+    check_in_domain(BOX, origin=(-0.5, -0.5, -0.5), size=1.0, name="box")
+    with pytest.raises(MeshError, match=r"box: .*larger than the domain.*scale it by at most 0.5"):
+        check_in_domain(BOX, origin=(0, 0, 0), size=0.3, name="box")
+    with pytest.raises(MeshError, match=r"outside the domain.*translate it by \(0.1, 0.2, 0.3\)"):
+        check_in_domain(BOX, origin=(0, 0, 0), size=1.0, name="box")

@@ -1,0 +1,118 @@
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from mpmfx.geometry.thickness import Verdict, check_thickness, local_thickness
+
+from .conftest import l_bracket, rod, slab, sphere_with_fin
+
+# (shape, true thickness in metres): thin part of each.
+SHAPES = {"slab": (slab, 0.1), "rod": (rod, 0.12), "L": (l_bracket, 0.08),
+          "fin": (sphere_with_fin, 0.05)}
+
+
+def _expected(cells: float) -> Verdict:
+    return Verdict.FAIL if cells < 3 else Verdict.WARN if cells < 5 else Verdict.PASS
+
+
+@pytest.mark.parametrize("name", list(SHAPES))
+@pytest.mark.parametrize("grid_n", [16, 40])
+def test_thin_part_measured_within_one_cell(domain, name, grid_n):
+    make, t = SHAPES[name]
+    report = check_thickness(make(t), grid_n=grid_n, name=name, **domain)
+    truth = t * grid_n
+    assert report.min_thickness_cells == pytest.approx(truth, abs=1.0)
+    if abs(truth - 3) > 1 and abs(truth - 5) > 1:  # away from the thresholds
+        assert report.verdict is _expected(truth)
+
+
+@pytest.mark.parametrize("grid_n, verdict", [(20, Verdict.FAIL), (36, Verdict.WARN),
+                                             (56, Verdict.PASS)])
+def test_verdict_flips_with_grid_n(domain, grid_n, verdict):
+    # 0.1 m slab: 2, 3.6 and 5.6 cells thick.
+    report = check_thickness(slab(0.1), grid_n=grid_n, **domain)
+    assert report.verdict is verdict
+    if verdict is not Verdict.PASS:
+        assert report.min_grid_n_to_pass >= grid_n
+        again = check_thickness(slab(0.1), grid_n=report.min_grid_n_to_pass + 2, **domain)
+        assert again.verdict is Verdict.PASS
+
+
+def test_thick_shapes_pass_and_edges_are_not_thin(domain):
+    for mesh, t in [(trimesh.creation.box(extents=(0.4,) * 3), 0.4),
+                    (trimesh.creation.icosphere(subdivisions=3, radius=0.3), 0.6)]:
+        report = check_thickness(mesh, grid_n=24, **domain)
+        assert report.verdict is Verdict.PASS and not report.regions
+        assert report.min_thickness_cells == pytest.approx(t * 24, rel=0.25)
+        assert report.vertex_thickness_cells.min() >= 5.0
+
+
+def test_fin_region_is_located_on_the_fin(domain):
+    report = check_thickness(sphere_with_fin(0.05), grid_n=32, **domain)
+    assert report.verdict is Verdict.FAIL and len(report.regions) == 1
+    region = report.regions[0]
+    assert region.bbox_min[0] > 0.15 and region.bbox_max[0] == pytest.approx(0.45, abs=0.02)
+    # The fin pokes out of the sphere from x ~ 0.19 to 0.45 m.
+    assert region.volume == pytest.approx(0.26 * 0.2 * 0.05, rel=0.3)
+    on_fin = report.vertex_thickness_cells[np.asarray(sphere_with_fin(0.05).vertices)[:, 0] > 0.25]
+    assert np.all(on_fin < 3)
+    assert 0 < report.fraction_under < 0.2
+
+
+def test_feature_thinner_than_raster_is_caught(domain):
+    mesh = trimesh.util.concatenate([trimesh.creation.box(extents=(0.3,) * 3),
+                                     _moved(trimesh.creation.box(extents=(0.2, 0.2, 0.002)),
+                                            (0.3, 0, 0))])
+    report = check_thickness(mesh, grid_n=16, **domain)
+    assert report.verdict is Verdict.FAIL
+    assert report.regions[0].thickness_cells == 0.0
+    assert report.regions[0].bbox_min[0] == pytest.approx(0.2, abs=1e-6)
+
+
+def _moved(mesh, offset):
+    mesh.apply_translation(offset)
+    return mesh
+
+
+def test_local_thickness_of_a_voxel_slab_and_ball():
+    inside = np.zeros((30, 30, 30), bool)
+    inside[5:25, 5:25, 10:17] = True  # 7 voxels thick
+    t = local_thickness(inside, voxel=0.5)
+    assert np.all(t[~inside] == 0)
+    assert np.median(t[inside]) == pytest.approx(3.5)
+    g = np.indices((41, 41, 41)) - 20
+    ball = (g ** 2).sum(0) <= 15 ** 2
+    tb = local_thickness(ball, voxel=1.0)
+    assert np.median(tb[ball]) == pytest.approx(31, abs=2.0)  # raster: +-1 voxel a side
+
+
+def test_report_serialises_and_formats(domain):
+    report = check_thickness(sphere_with_fin(0.05), grid_n=16, name="finny", **domain)
+    data = json.loads(json.dumps(report.to_dict()))
+    assert data["verdict"] == "fail" and data["asset"] == "finny"
+    assert len(data["regions"]) == len(report.regions)
+    table = report.format_table()
+    assert "FAIL" in table and "finny" in table and "grid_n to pass" in table
+
+
+def test_pyvista_ant_legs_are_thin():
+    from pyvista import examples
+
+    ant = examples.load_ant().triangulate()
+    faces = ant.faces.reshape(-1, 4)[:, 1:]
+    mesh = trimesh.Trimesh(np.asarray(ant.points, float), faces)
+    size = float(mesh.extents.max()) * 1.1
+    origin = mesh.bounds.mean(0) - size / 2
+    report = check_thickness(mesh, grid_n=32, origin=origin, size=size, name="ant")
+    assert report.verdict is Verdict.FAIL
+    # The thinnest parts are the legs: thin vertices lie away from the body's long axis.
+    verts = np.asarray(mesh.vertices)
+    thin = report.vertex_thickness_cells < report.fail_cells
+    assert thin.mean() > 0.1
+    body_axis = int(np.argmax(mesh.extents))
+    off_axis = [a for a in range(3) if a != body_axis]
+    centre = mesh.bounds.mean(0)[off_axis]
+    spread = np.abs(verts[:, off_axis] - centre).max(1)
+    assert np.median(spread[thin]) > np.median(spread[~thin])
