@@ -13,7 +13,7 @@ class Method(enum.Enum):
     """How particles become an implicit field before the level set is extracted."""
 
     SPHERES = "spheres"
-    """Union of spheres of radius r: exact for lone particles, blobby on bulk material."""
+    """Union of spheres of radius r: blobby; closes a cubic lattice of spacing h only for r > 0.87 h."""
     ZHU_BRIDSON = "zhu_bridson"
     """phi = |x - xbar(x)| - r with xbar a kernel-weighted particle average (Zhu & Bridson 2005)."""
 
@@ -32,7 +32,8 @@ class SurfaceParams:
     band_voxels: narrow-band half width in voxels; the level set is clipped to +-band*voxel.
     kernel_radius: Zhu-Bridson kernel support R in units of particle_radius. With the
         (1 - s^2)^3 kernel the weighted centroid of a half-space ball sits 0.246 R deep, so
-        R = 4.06 r puts the zero level exactly on a flat material boundary (no shrinkage).
+        R = 4.06 r puts the zero level on a flat boundary of a continuum; on discrete layers
+        3.7 measured best (box faces within 0.02 h, sphere volume +0.3 %, r = 0.5 h).
     """
 
     particle_radius: float
@@ -43,7 +44,7 @@ class SurfaceParams:
     min_feature_particles: int = 0
     method: Method = Method.ZHU_BRIDSON
     band_voxels: int = 3
-    kernel_radius: float = 4.06
+    kernel_radius: float = 3.7
 
     def __post_init__(self) -> None:
         def bad(field: str, fix: str) -> ValueError:
@@ -66,7 +67,7 @@ class SurfaceParams:
         if self.band_voxels < 1:
             raise bad("band_voxels", f"got {self.band_voxels}; give at least 1 voxel")
         if not (math.isfinite(self.kernel_radius) and self.kernel_radius >= 1.0):
-            raise bad("kernel_radius", f"got {self.kernel_radius!r}; give >= 1 (x particle_radius), 4.06 by default")
+            raise bad("kernel_radius", f"got {self.kernel_radius!r}; give >= 1 (x particle_radius), 3.7 by default")
 
     @property
     def resolved_voxel_size(self) -> float:
