@@ -1,0 +1,122 @@
+"""`mpmfx bench accuracy`: speed against error on the validation cases (validation.md §1-3).
+
+Sweeps grid_n and CFL per case (mpmfx.bench.cases), prints one table (error, wall time,
+particle-substeps/s, device), the observed convergence orders in space (halve dx at fixed CFL
+and particles per cell, error against the exact solution) and in time (halve dt at fixed grid,
+error against the smallest-CFL run: self-convergence, since the spatial error does not vanish
+with dt), and writes accuracy.csv/json, orders.csv/json and accuracy.png (speed against error,
+log-log) under `out`. Needs numpy + warp + mpmfx.mpm only; the PNG needs pyvista and is
+skipped with a message without it.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from mpmfx.bench import cases
+from mpmfx.bench.snow_table import snow_compression
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """Which settings to run. grids: grid_n per case; cfls: CFL values of the time sweep."""
+
+    free_fall: tuple = (16, 32)
+    rotation: tuple = (16,)
+    revolutions: float = 1.0
+    bar: tuple = (20, 40)
+    wave: tuple = (16, 32, 64)
+    wave_cfls: tuple = (0.4, 0.2, 0.1)
+    wave_cfl_grid: int = 16
+    wave_cfl_ref: float = 0.0125
+    hydrostatic: tuple = (16, 32)
+    disks: tuple = (24, 32)
+
+
+QUICK = Sweep()
+FULL = Sweep(free_fall=(32, 64, 128), rotation=(32, 64), revolutions=10.0, bar=(40, 80, 160),
+             wave=(16, 32, 64, 128, 256), wave_cfls=(0.8, 0.4, 0.2, 0.1, 0.05), wave_cfl_grid=64,
+             wave_cfl_ref=0.00625, hydrostatic=(32, 64, 128), disks=(32, 64, 128))
+
+
+def observed_order(h: list[float], err: list[float]) -> list[float]:
+    """Orders log(e_i / e_{i+1}) / log(h_i / h_{i+1}) between successive settings."""
+    return [math.log(err[i] / err[i + 1]) / math.log(h[i] / h[i + 1])
+            if err[i] > 0 and err[i + 1] > 0 else float("nan") for i in range(len(err) - 1)]
+
+
+def time_sweep(sweep: Sweep, device) -> tuple[list[cases.CaseResult], list[float]]:
+    """Standing wave at one grid, CFL halved each run; errors are RMS |x - x_ref| / A against
+    the run at sweep.wave_cfl_ref (same particles, same end time)."""
+    ref = cases.standing_wave(grid_n=sweep.wave_cfl_grid, cfl=sweep.wave_cfl_ref, device=device)
+    runs = [cases.standing_wave(grid_n=sweep.wave_cfl_grid, cfl=c, device=device) for c in sweep.wave_cfls]
+    amp = 0.2 / (math.pi / 0.5)  # A = strain / k of cases.standing_wave
+    errs = [float(np.sqrt(np.mean((r.x_final - ref.x_final) ** 2)) / amp) for r in runs]
+    return runs, errs
+
+
+def run_sweep(sweep: Sweep, device=None) -> tuple[list[dict], list[dict]]:
+    """All cases of `sweep`; returns (rows, order rows)."""
+    results: list[cases.CaseResult] = []
+    results += [cases.free_fall(grid_n=n, device=device) for n in sweep.free_fall]
+    for n in sweep.rotation:
+        for pic in (False, True):
+            results.append(cases.rigid_rotation(grid_n=n, revolutions=sweep.revolutions, pic=pic, device=device))
+    results += [cases.vibrating_bar(grid_n=n, device=device) for n in sweep.bar]
+    wave = [cases.standing_wave(grid_n=n, device=device) for n in sweep.wave]
+    results += wave
+    results += [cases.hydrostatic_column(grid_n=n, device=device) for n in sweep.hydrostatic]
+    results += [cases.colliding_disks(grid_n=n, device=device) for n in sweep.disks]
+    t_runs, t_errs = time_sweep(sweep, device)
+    rows = [r.row() for r in results]
+    for r, e in zip(t_runs, t_errs):
+        row = r.row()
+        row.update(case="standing_wave_dt", error=e, metric=f"rms|x-x(cfl={sweep.wave_cfl_ref})|/A")
+        rows.append(row)
+    snow = snow_compression(device=device)
+    rows.append({k: v for k, v in snow.items() if k != "table"})
+    orders = _order_rows(results, t_runs, t_errs)
+    return rows, orders
+
+
+def _order_rows(results, t_runs, t_errs) -> list[dict]:
+    out = []
+    by_case: dict[str, list] = {}
+    for r in results:
+        by_case.setdefault(r.case, []).append(r)
+    for case in ("standing_wave", "vibrating_bar", "hydrostatic", "colliding_disks"):
+        rs = sorted(by_case.get(case, []), key=lambda r: r.grid_n)
+        orders = observed_order([1 / r.grid_n for r in rs], [r.error for r in rs])
+        out += [{"case": case, "in": "space", "from": f"grid_n={a.grid_n}", "to": f"grid_n={b.grid_n}",
+                 "error_from": a.error, "error_to": b.error, "order": o}
+                for a, b, o in zip(rs, rs[1:], orders)]
+    orders = observed_order([r.extra["dt"] for r in t_runs], t_errs)
+    out += [{"case": "standing_wave", "in": "time", "from": f"cfl={a.cfl}", "to": f"cfl={b.cfl}",
+             "error_from": ea, "error_to": eb, "order": o}
+            for a, b, ea, eb, o in zip(t_runs, t_runs[1:], t_errs, t_errs[1:], orders)]
+    return out
+
+
+COLUMNS = ["case", "grid_n", "cfl", "ppc", "particles", "substeps", "error", "metric", "wall_s",
+           "Mparticle_substeps_per_s", "device"]
+
+
+def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench") -> int:
+    from mpmfx.bench.report import print_table, write_rows
+    sweep = QUICK if quick else FULL
+    rows, orders = run_sweep(sweep, device)
+    print_table(rows, COLUMNS)
+    print()
+    print_table(orders)
+    write_rows(rows, out, "accuracy")
+    write_rows(orders, out, "accuracy_orders")
+    try:
+        from mpmfx.bench.plot import speed_error_plot
+        path = speed_error_plot(rows, out)
+        print(f"plot: {path}")
+    except ImportError as err:
+        print(f"plot skipped: {err} (pip install pyvista to draw accuracy.png; the CSV/JSON are written)")
+    ok = all(np.isfinite(r["error"]) for r in rows)
+    return 0 if ok else 1
