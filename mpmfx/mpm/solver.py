@@ -61,7 +61,8 @@ class Particles:
 class StepReport:
     """What one `advance` did. Times in s, speeds domain/s, mass in density*domain^3.
 
-    cfl_used: largest dt * (c_max + |v|max) / dx actually taken; momentum: (3,);
+    cfl_used: largest dt * (c_max + |v|max) / dx, with c and |v| measured at the end of
+    each accepted substep (the CFL actually experienced); momentum: (3,);
     elastic_energy: None (not computed); j_min, j_max: range of J (det F for solids, J for
     water) over the accepted substeps.
     """
@@ -309,7 +310,7 @@ class Solver:
             if counts[: g2p_mod.COUNT_LOST].sum() + counts[g2p_mod.COUNT_GRID_NONFINITE] > 0:
                 rejected += 1
                 state.clock.dt_scale *= 0.5  # redo at half dt (Ziran)
-                self._last_bad = counts
+                self._last_bad = counts  # for the error message if dt runs out
                 continue
             state.swap()
             done = total if last else done + dt
@@ -336,14 +337,17 @@ class Solver:
     def _raise_too_small(self, state: State, t: float, dt: float) -> None:
         bad = getattr(self, "_last_bad", None)
         per_mat = [] if bad is None else bad[g2p_mod.COUNT_PER_MATERIAL:]
-        n_bad = 0 if bad is None else int(bad[g2p_mod.COUNT_NONFINITE] + bad[g2p_mod.COUNT_TOO_FAR])
         names = [self._describe_material(i) for i, k in enumerate(per_mat) if k > 0] or [
             self._describe_material(i) for i in range(len(self.materials))]
+        n_bad = 0 if bad is None else int(bad[g2p_mod.COUNT_NONFINITE] + bad[g2p_mod.COUNT_TOO_FAR])
+        what = (f"the last rejected substep had {n_bad} particle(s) non-finite or moving more than "
+                f"one cell" if bad is not None else "no substep was rejected; the CFL step is this small")
         raise SimulationError(
-            f"t={t:.4f}s: the substep fell to dt={dt:.3g}s < dt_min={self.config.dt_min:g}s; "
-            f"{n_bad} particle(s) of {', '.join(names)} went non-finite or moved more than one cell "
-            f"per substep ('{_SYMPTOM}', guide §9.3). Lower youngs_modulus / bulk_modulus, "
-            f"raise damping, or lower SolverConfig.cfl; dt_min={self.config.dt_min:g} is the floor")
+            f"t={t:.4f}s: the substep fell to dt={dt:.3g}s < dt_min={self.config.dt_min:g}s "
+            f"({state.n} particles, max speed {state.clock.max_speed:.3g} domain/s, c_max "
+            f"{self.wave_speed(state.clock):.3g} domain/s); {what}, in {', '.join(names)} "
+            f"('{_SYMPTOM}', guide §9.3). Lower youngs_modulus / bulk_modulus, raise damping, or "
+            f"lower SolverConfig.cfl (<= 0.5); or lower SolverConfig.dt_min if this dt is intended")
 
     def _describe_material(self, i: int) -> str:
         m = self.materials[i]
