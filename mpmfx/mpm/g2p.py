@@ -20,7 +20,6 @@ from .constitutive import (
     hardening_factor,
     sand_return_map,
     snow_return_map,
-    unpack_f,
 )
 from .state import SceneFlags
 
@@ -44,13 +43,63 @@ class G2PParams:
     remove: int
 
 
+@wp.func
+def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float):
+    """Gather from the particle's 3x3x3 nodes: v = sum w v_i, and the APIC/MLS affine
+    velocity C = (sum w v_i dpos^T) D^-1 with D^-1 = 4 / dx^2 (guide §6)."""
+    dx = 1.0 / inv_dx
+    xg = x * inv_dx
+    bi = int(wp.floor(xg[0] - 0.5))
+    bj = int(wp.floor(xg[1] - 0.5))
+    bk = int(wp.floor(xg[2] - 0.5))
+    fx = xg - wp.vec3(float(bi), float(bj), float(bk))
+    W = bspline_weights(fx)  # once per particle per transfer
+    v = wp.vec3(0.0)
+    B = wp.mat33(0.0)
+    for i in range(3):
+        for j in range(3):
+            for k in range(3):
+                w = W[i, 0] * W[j, 1] * W[k, 2]
+                g = grid_v[bi + i, bj + j, bk + k]
+                v += w * g
+                B += w * wp.outer(g, (wp.vec3(float(i), float(j), float(k)) - fx) * dx)
+    return v, (4.0 * inv_dx * inv_dx) * B
+
+
+@wp.func
+def plastic_update(mat: MaterialParams, F: wp.mat33, jp: float, C: wp.mat33, dt: float):
+    """F^{n+1} = (I + dt C) F^n, then the return map of the particle's mode (guide §7.2).
+    Returns (elastic F, new Jp slot)."""
+    Ft = (wp.identity(n=3, dtype=float) + dt * C) * F
+    r = wp.mat44(0.0)
+    if mat.mode == MODE_SNOW:
+        r = snow_return_map(mat, Ft, jp)
+    else:
+        r = sand_return_map(mat, Ft, jp)
+    Fe = wp.mat33(r[0, 0], r[0, 1], r[0, 2], r[1, 0], r[1, 1], r[1, 2], r[2, 0], r[2, 1], r[2, 2])
+    return Fe, r[3, 3]
+
+
+@wp.func
+def keep_in_domain(gp: G2PParams, x: wp.vec3, alive_out: wp.array(dtype=wp.int32), p: int,
+                   counts: wp.array(dtype=wp.int32)) -> wp.vec3:
+    """Clamp x into [lo, hi]^3, or deactivate the particle in REMOVE mode."""
+    inside = x[0] >= gp.lo and x[0] <= gp.hi and x[1] >= gp.lo
+    inside = inside and x[1] <= gp.hi and x[2] >= gp.lo and x[2] <= gp.hi
+    if inside:
+        return x
+    if gp.remove != 0:
+        alive_out[p] = 0
+        wp.atomic_add(counts, COUNT_LOST, 1)
+        return x
+    return wp.vec3(wp.clamp(x[0], gp.lo, gp.hi), wp.clamp(x[1], gp.lo, gp.hi), wp.clamp(x[2], gp.lo, gp.hi))
+
+
 @functools.lru_cache(maxsize=None)
 def make_g2p(flags: SceneFlags):
     """G2P kernel specialised for the scene's materials (see p2g.make_p2g)."""
     has_solid = flags.solid
     has_water = flags.water
-    has_snow = flags.snow
-    has_sand = flags.sand
 
     @wp.kernel(enable_backward=False, module=flags.key)
     def g2p(
@@ -58,25 +107,17 @@ def make_g2p(flags: SceneFlags):
         grid_v: wp.array3d(dtype=wp.vec3),
         materials: wp.array(dtype=MaterialParams),
         material: wp.array(dtype=wp.int32),
-        x: wp.array(dtype=wp.vec3),
-        v: wp.array(dtype=wp.vec3),
-        C: wp.array(dtype=wp.mat33),
-        F: wp.array(dtype=wp.mat33),
-        J: wp.array(dtype=float),
-        Jp: wp.array(dtype=float),
+        x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
+        F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
         alive: wp.array(dtype=wp.int32),
-        x_out: wp.array(dtype=wp.vec3),
-        v_out: wp.array(dtype=wp.vec3),
-        C_out: wp.array(dtype=wp.mat33),
-        F_out: wp.array(dtype=wp.mat33),
-        J_out: wp.array(dtype=float),
-        Jp_out: wp.array(dtype=float),
+        x_out: wp.array(dtype=wp.vec3), v_out: wp.array(dtype=wp.vec3), C_out: wp.array(dtype=wp.mat33),
+        F_out: wp.array(dtype=wp.mat33), J_out: wp.array(dtype=float), Jp_out: wp.array(dtype=float),
         alive_out: wp.array(dtype=wp.int32),
         stats: wp.array(dtype=float),
         counts: wp.array(dtype=wp.int32),
     ):
         p = wp.tid()
-        # carry everything over first; the branches below overwrite what changes
+        # carry everything over first; what changes is overwritten below
         x_out[p] = x[p]
         v_out[p] = v[p]
         C_out[p] = C[p]
@@ -88,47 +129,21 @@ def make_g2p(flags: SceneFlags):
             J_out[p] = J[p]
         if alive[p] == 0:
             return
-        dx = 1.0 / gp.inv_dx
-        xg = x[p] * gp.inv_dx
-        bi = int(wp.floor(xg[0] - 0.5))
-        bj = int(wp.floor(xg[1] - 0.5))
-        bk = int(wp.floor(xg[2] - 0.5))
-        fx = xg - wp.vec3(float(bi), float(bj), float(bk))
-        W = bspline_weights(fx)  # once per particle per transfer
-        v_new = wp.vec3(0.0)
-        B = wp.mat33(0.0)
-        for i in range(3):
-            for j in range(3):
-                for k in range(3):
-                    w = W[i, 0] * W[j, 1] * W[k, 2]
-                    g = grid_v[bi + i, bj + j, bk + k]
-                    dpos = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
-                    v_new += w * g
-                    B += w * wp.outer(g, dpos)
-        # APIC/MLS: C = B D^-1 with D^-1 = 4/dx^2; drag blends it toward PIC at a rate
-        C_new = (4.0 * gp.inv_dx * gp.inv_dx * gp.affine_keep) * B
+        v_new, C_new = gather(grid_v, x[p], gp.inv_dx)
+        C_new = gp.affine_keep * C_new  # drag: blend toward PIC at a rate (guide §6 trap)
         mid = material[p]
         mat = materials[mid]
         j_now = float(1.0)
-        bad = int(0)
+        finite = bool(True)
         if wp.static(has_solid):
             if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
-                # F^{n+1} = (I + dt C) F^n, then project onto the yield surface
-                Ft = (wp.identity(n=3, dtype=float) + gp.dt * C_new) * F[p]
-                r = wp.mat44(0.0)
-                if wp.static(has_snow):
-                    if mat.mode == MODE_SNOW:
-                        r = snow_return_map(mat, Ft, Jp[p])
-                        wp.atomic_max(stats, STAT_MAX_HARDENING, hardening_factor(mat, r[3, 3]))
-                if wp.static(has_sand):
-                    if mat.mode == MODE_SAND:
-                        r = sand_return_map(mat, Ft, Jp[p])
-                Fn = unpack_f(r)
-                F_out[p] = Fn
-                Jp_out[p] = r[3, 3]
-                j_now = wp.determinant(Fn)
-                if not (wp.isfinite(Fn) and wp.isfinite(r[3, 3])):
-                    bad = 1
+                Fe, jp_new = plastic_update(mat, F[p], Jp[p], C_new, gp.dt)
+                F_out[p] = Fe
+                Jp_out[p] = jp_new
+                j_now = wp.determinant(Fe)
+                finite = wp.isfinite(Fe) and wp.isfinite(jp_new)
+                if mat.mode == MODE_SNOW:
+                    wp.atomic_max(stats, STAT_MAX_HARDENING, hardening_factor(mat, jp_new))
         if wp.static(has_water):
             if mat.mode == MODE_WATER:
                 # water keeps only its volume ratio: J^{n+1} = det(I + dt C) J^n
@@ -141,30 +156,20 @@ def make_g2p(flags: SceneFlags):
                 wp.atomic_min(stats, STAT_WATER_J_MIN, j_now)
         x_new = x[p] + gp.dt * v_new
         speed = wp.length(v_new)
-        if not (wp.isfinite(x_new) and wp.isfinite(C_new) and wp.isfinite(j_now)):
-            bad = 1
-        if bad != 0:
+        finite = finite and wp.isfinite(x_new) and wp.isfinite(C_new) and wp.isfinite(j_now)
+        if not finite:
             wp.atomic_add(counts, COUNT_NONFINITE, 1)
             wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
-            return
-        if gp.dt * speed > dx:
+            return  # the substep is rejected; nothing of it is committed
+        if gp.dt * speed > 1.0 / gp.inv_dx:
             # more than a cell in one substep: the stencil never saw where it lands
             wp.atomic_add(counts, COUNT_TOO_FAR, 1)
             wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
         wp.atomic_max(stats, STAT_MAX_SPEED, speed)
         wp.atomic_min(stats, STAT_J_MIN, j_now)
         wp.atomic_max(stats, STAT_J_MAX, j_now)
-        inside = x_new[0] >= gp.lo and x_new[0] <= gp.hi and x_new[1] >= gp.lo
-        inside = inside and x_new[1] <= gp.hi and x_new[2] >= gp.lo and x_new[2] <= gp.hi
-        if not inside:
-            if gp.remove != 0:
-                alive_out[p] = 0
-                wp.atomic_add(counts, COUNT_LOST, 1)
-            else:
-                x_new = wp.vec3(
-                    wp.clamp(x_new[0], gp.lo, gp.hi), wp.clamp(x_new[1], gp.lo, gp.hi), wp.clamp(x_new[2], gp.lo, gp.hi)
-                )
-        x_out[p] = x_new
+        x_out[p] = keep_in_domain(gp, x_new, alive_out, p, counts)
         v_out[p] = v_new
         C_out[p] = C_new
+
     return g2p

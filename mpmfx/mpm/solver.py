@@ -131,6 +131,7 @@ class Solver:
             self._stats_init = wp.array(init, dtype=float)
         self._q_mass = 1.0
         self._q_mom = 1.0
+        self._last_bad = None  # counts of the last rejected substep, for error messages
 
     # ------------------------------------------------------------------ setup
     def _allocate_grid(self) -> None:
@@ -287,6 +288,7 @@ class Solver:
         if not t1 >= t0:
             raise ValueError(f"Solver.advance: t1 = {t1} must be >= t0 = {t0}")
         wall0 = time.perf_counter()
+        self._last_bad = None
         total = (t1 - t0) * cfg.time_scale
         done, substeps, rejected = 0.0, 0, 0
         dts, cfl_used, vmax, jmin, jmax, lost = [], 0.0, 0.0, math.inf, -math.inf, 0
