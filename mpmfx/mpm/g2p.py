@@ -81,18 +81,16 @@ def plastic_update(mat: MaterialParams, F: wp.mat33, jp: float, C: wp.mat33, dt:
 
 
 @wp.func
-def keep_in_domain(gp: G2PParams, x: wp.vec3, alive_out: wp.array(dtype=wp.int32), p: int,
-                   counts: wp.array(dtype=wp.int32)) -> wp.vec3:
-    """Clamp x into [lo, hi]^3, or deactivate the particle in REMOVE mode."""
+def keep_in_domain(gp: G2PParams, x: wp.vec3, counts: wp.array(dtype=wp.int32)):
+    """Clamp x into [lo, hi]^3, or (REMOVE mode) flag the particle dead. Returns (x, alive)."""
     inside = x[0] >= gp.lo and x[0] <= gp.hi and x[1] >= gp.lo
     inside = inside and x[1] <= gp.hi and x[2] >= gp.lo and x[2] <= gp.hi
     if inside:
-        return x
+        return x, 1
     if gp.remove != 0:
-        alive_out[p] = 0
         wp.atomic_add(counts, COUNT_LOST, 1)
-        return x
-    return wp.vec3(wp.clamp(x[0], gp.lo, gp.hi), wp.clamp(x[1], gp.lo, gp.hi), wp.clamp(x[2], gp.lo, gp.hi))
+        return x, 0
+    return wp.vec3(wp.clamp(x[0], gp.lo, gp.hi), wp.clamp(x[1], gp.lo, gp.hi), wp.clamp(x[2], gp.lo, gp.hi)), 1
 
 
 @functools.lru_cache(maxsize=None)
@@ -117,59 +115,65 @@ def make_g2p(flags: SceneFlags):
         counts: wp.array(dtype=wp.int32),
     ):
         p = wp.tid()
-        # carry everything over first; what changes is overwritten below
-        x_out[p] = x[p]
-        v_out[p] = v[p]
-        C_out[p] = C[p]
-        Jp_out[p] = Jp[p]
-        alive_out[p] = alive[p]
+        F_new = wp.mat33(0.0)
         if wp.static(has_solid):
-            F_out[p] = F[p]
+            F_new = F[p]
+        J_new = float(1.0)
         if wp.static(has_water):
-            J_out[p] = J[p]
-        if alive[p] == 0:
-            return
-        v_new, C_new = gather(grid_v, x[p], gp.inv_dx)
-        C_new = gp.affine_keep * C_new  # drag: blend toward PIC at a rate (guide §6 trap)
-        mid = material[p]
-        mat = materials[mid]
-        j_now = float(1.0)
-        finite = bool(True)
-        if wp.static(has_solid):
-            if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
-                Fe, jp_new = plastic_update(mat, F[p], Jp[p], C_new, gp.dt)
-                F_out[p] = Fe
-                Jp_out[p] = jp_new
-                j_now = wp.determinant(Fe)
-                finite = wp.isfinite(Fe) and wp.isfinite(jp_new)
-                if mat.mode == MODE_SNOW:
-                    wp.atomic_max(stats, STAT_MAX_HARDENING, hardening_factor(mat, jp_new))
-        if wp.static(has_water):
-            if mat.mode == MODE_WATER:
-                # water keeps only its volume ratio: J^{n+1} = det(I + dt C) J^n
-                j_now = J[p] * wp.determinant(wp.identity(n=3, dtype=float) + gp.dt * C_new)
-                if mat.clamp_pressure != 0:
-                    # no tension: a separating splash must not remember its expansion, or
-                    # it lands fluffy and stress-free until squeezed back to J = 1
-                    j_now = wp.min(j_now, 1.0)
-                J_out[p] = j_now
-                wp.atomic_min(stats, STAT_WATER_J_MIN, j_now)
-        x_new = x[p] + gp.dt * v_new
-        speed = wp.length(v_new)
-        finite = finite and wp.isfinite(x_new) and wp.isfinite(C_new) and wp.isfinite(j_now)
-        if not finite:
-            wp.atomic_add(counts, COUNT_NONFINITE, 1)
-            wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
-            return  # the substep is rejected; nothing of it is committed
-        if gp.dt * speed > 1.0 / gp.inv_dx:
-            # more than a cell in one substep: the stencil never saw where it lands
-            wp.atomic_add(counts, COUNT_TOO_FAR, 1)
-            wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
-        wp.atomic_max(stats, STAT_MAX_SPEED, speed)
-        wp.atomic_min(stats, STAT_J_MIN, j_now)
-        wp.atomic_max(stats, STAT_J_MAX, j_now)
-        x_out[p] = keep_in_domain(gp, x_new, alive_out, p, counts)
+            J_new = J[p]
+        jp_new = Jp[p]
+        x_new = x[p]
+        v_new = v[p]
+        C_new = C[p]
+        alive_new = alive[p]
+        if alive_new != 0:
+            v_new, C_new = gather(grid_v, x[p], gp.inv_dx)
+            C_new = gp.affine_keep * C_new  # drag: blend toward PIC at a rate (guide §6 trap)
+            mid = material[p]
+            mat = materials[mid]
+            j_now = float(1.0)
+            finite = bool(True)
+            if wp.static(has_solid):
+                if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
+                    F_new, jp_new = plastic_update(mat, F_new, jp_new, C_new, gp.dt)
+                    j_now = wp.determinant(F_new)
+                    finite = wp.isfinite(F_new) and wp.isfinite(jp_new)
+                    if mat.mode == MODE_SNOW:
+                        wp.atomic_max(stats, STAT_MAX_HARDENING, hardening_factor(mat, jp_new))
+            if wp.static(has_water):
+                if mat.mode == MODE_WATER:
+                    # water keeps only its volume ratio: J^{n+1} = det(I + dt C) J^n
+                    J_new = J_new * wp.determinant(wp.identity(n=3, dtype=float) + gp.dt * C_new)
+                    if mat.clamp_pressure != 0:
+                        # no tension: a separating splash must not remember its expansion,
+                        # or it lands fluffy and stress-free until squeezed back to J = 1
+                        J_new = wp.min(J_new, 1.0)
+                    j_now = J_new
+                    wp.atomic_min(stats, STAT_WATER_J_MIN, J_new)
+            x_new = x_new + gp.dt * v_new
+            speed = wp.length(v_new)
+            finite = finite and wp.isfinite(x_new) and wp.isfinite(C_new) and wp.isfinite(j_now)
+            if not finite:
+                wp.atomic_add(counts, COUNT_NONFINITE, 1)
+                wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
+                return  # the substep is rejected; nothing of it is committed
+            if gp.dt * speed > 1.0 / gp.inv_dx:
+                # more than a cell in one substep: the stencil never saw where it lands
+                wp.atomic_add(counts, COUNT_TOO_FAR, 1)
+                wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
+            wp.atomic_max(stats, STAT_MAX_SPEED, speed)
+            wp.atomic_min(stats, STAT_J_MIN, j_now)
+            wp.atomic_max(stats, STAT_J_MAX, j_now)
+            x_new, alive_new = keep_in_domain(gp, x_new, counts)
+        # each output written once (G2P is memory bound)
+        x_out[p] = x_new
         v_out[p] = v_new
         C_out[p] = C_new
+        Jp_out[p] = jp_new
+        alive_out[p] = alive_new
+        if wp.static(has_solid):
+            F_out[p] = F_new
+        if wp.static(has_water):
+            J_out[p] = J_new
 
     return g2p

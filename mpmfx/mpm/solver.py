@@ -403,7 +403,12 @@ class Solver:
 
     def restore(self, data: dict[str, np.ndarray]) -> tuple[State, float]:
         """State and shot time t from `checkpoint` output (ValueError if it does not fit)."""
-        meta = np.asarray(data.get("meta", [-1, -1, -1]))
+        required = {*ParticleBuffers.NAMES, "mass", "volume", "material", "body", "clock", "t", "meta"}
+        missing = sorted(required - set(data))
+        if missing:
+            raise ValueError(f"checkpoint: missing arrays {', '.join(missing)}; it was not written by "
+                             "Solver.checkpoint (or is truncated); re-simulate from the start")
+        meta = np.asarray(data["meta"])
         if int(meta[0]) != CHECKPOINT_VERSION or int(meta[1]) != self.config.grid_n:
             raise ValueError(
                 f"checkpoint: version/grid_n {meta[:2].tolist()} do not match this solver "

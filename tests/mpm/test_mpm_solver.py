@@ -126,6 +126,8 @@ def test_checkpoint_restore_equals_uninterrupted_run():
     assert [r.substeps for r in got] == [r.substeps for r in ref]
     with pytest.raises(ValueError, match="grid_n"):
         Solver([preset("Soft")], SolverConfig(grid_n=24), device="cpu").restore(ckpt)
+    with pytest.raises(ValueError, match="missing arrays clock"):
+        fresh.restore({k: v for k, v in ckpt.items() if k != "clock"})
 
 
 def test_substeps_land_on_the_frame_and_follow_cfl():
