@@ -33,7 +33,7 @@ N_STATS = 5
 class G2PParams:
     """dt: s; inv_dx: 1/domain; affine_keep: 1 - drag*dt, the APIC -> PIC blend of C;
     lo, hi: allowed particle coordinate range, domain units; remove: 1 to deactivate
-    particles that leave [lo, hi] instead of clamping them."""
+    particles that leave [lo, hi] instead of clamping them; nodes: grid nodes per axis."""
 
     dt: float
     inv_dx: float
@@ -41,12 +41,14 @@ class G2PParams:
     lo: float
     hi: float
     remove: int
+    nodes: int
 
 
 @wp.func
-def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float):
+def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float, field_offset: int):
     """Gather from the particle's 3x3x3 nodes: v = sum w v_i, and the APIC/MLS affine
-    velocity C = (sum w v_i dpos^T) D^-1 with D^-1 = 4 / dx^2 (guide §6)."""
+    velocity C = (sum w v_i dpos^T) D^-1 with D^-1 = 4 / dx^2 (guide §6).
+    field_offset: first-axis offset of the particle's velocity field (multi-field)."""
     dx = 1.0 / inv_dx
     xg = x * inv_dx
     bi = int(wp.floor(xg[0] - 0.5))
@@ -60,7 +62,7 @@ def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float):
         for j in range(3):
             for k in range(3):
                 w = W[i, 0] * W[j, 1] * W[k, 2]
-                g = grid_v[bi + i, bj + j, bk + k]
+                g = grid_v[field_offset + bi + i, bj + j, bk + k]
                 v += w * g
                 B += w * wp.outer(g, (wp.vec3(float(i), float(j), float(k)) - fx) * dx)
     return v, (4.0 * inv_dx * inv_dx) * B
@@ -105,6 +107,7 @@ def make_g2p(flags: SceneFlags):
         grid_v: wp.array3d(dtype=wp.vec3),
         materials: wp.array(dtype=MaterialParams),
         material: wp.array(dtype=wp.int32),
+        field_id: wp.array(dtype=wp.int32),
         x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
         F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
         alive: wp.array(dtype=wp.int32),
@@ -127,7 +130,7 @@ def make_g2p(flags: SceneFlags):
         C_new = C[p]
         alive_new = alive[p]
         if alive_new != 0:
-            v_new, C_new = gather(grid_v, x[p], gp.inv_dx)
+            v_new, C_new = gather(grid_v, x[p], gp.inv_dx, field_id[p] * gp.nodes)
             C_new = gp.affine_keep * C_new  # drag: blend toward PIC at a rate (guide §6 trap)
             mid = material[p]
             mat = materials[mid]

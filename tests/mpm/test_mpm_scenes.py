@@ -140,3 +140,49 @@ def test_keyframed_box_collider_pushes_material():
     # the box face ends at 0.55: the block was pushed ahead of it
     assert x[:, 0].min() > x_before + 0.05
     assert x[:, 0].min() > 0.55 - 1.0 / grid_n
+
+
+def _slide(multi_field, contact_friction=0.0):
+    grid_n = 24
+    lower = block((0.2, 3 / 24, 0.3), (0.8, 0.3, 0.7), grid_n=grid_n, body=0)
+    upper = block((0.25, 0.3, 0.35), (0.5, 0.5, 0.65), grid_n=grid_n, body=1, v=(1.0, 0.0, 0.0))
+    cfg = SolverConfig(grid_n=grid_n, multi_field=multi_field, contact_friction=contact_friction,
+                       wall_friction=1.0)
+    solver = Solver([preset("Elastic")], cfg, device="cpu")
+    state = solver.init_state(concat(lower, upper))
+    for f in range(3):
+        solver.advance(state, f / 30, (f + 1) / 30)
+    out = solver.state_to_numpy(state)
+    top = out["body"] == 1
+    return out["v"][top, 0].mean(), out["v"][~top, 0].mean(), out["x"][top, 1].min()
+
+
+def test_multi_field_bodies_slide_past_each_other_instead_of_fusing():
+    """guide §9.3: one velocity field per node makes bodies fuse; with one field per
+    body a block slides over another (frictionless contact) and rests on it."""
+    v_top, v_bottom, _ = _slide(False)
+    assert v_top < 0.3 and v_bottom > 0.1  # single field: the top drags the bottom along
+    v_top, v_bottom, y_top = _slide(True)
+    assert v_top > 0.7 and abs(v_bottom) < 0.05
+    assert y_top > 0.3 - 1.0 / 24  # resting on the lower body, not sunk into it
+    v_top_f, _, _ = _slide(True, contact_friction=0.5)
+    assert v_top_f < v_top - 0.1  # Coulomb friction between the bodies
+
+
+def test_multi_field_head_on_collision_conserves_momentum_and_parts():
+    grid_n = 16
+    a = block((0.25, 0.4, 0.4), (0.45, 0.6, 0.6), grid_n=grid_n, body=0, v=(1.0, 0.0, 0.0))
+    b = block((0.55, 0.4, 0.4), (0.75, 0.6, 0.6), grid_n=grid_n, body=1, v=(-1.0, 0.0, 0.0))
+    cfg = SolverConfig(grid_n=grid_n, gravity=ZERO_G, multi_field=True, deterministic=True)
+    solver = Solver([preset("Elastic")], cfg, device="cpu")
+    state = solver.init_state(concat(a, b))
+    p_scale = float(state.mass.numpy().sum())  # |momentum| of each body * 2
+    min_gap = 1.0
+    for f in range(3):
+        report = solver.advance(state, f / 30, (f + 1) / 30)
+        out = solver.state_to_numpy(state)
+        left = out["body"] == 0
+        min_gap = min(min_gap, out["x"][~left, 0].min() - out["x"][left, 0].max())
+        assert np.abs(report.momentum).max() < 1e-4 * p_scale
+    assert min_gap > -0.5 / grid_n  # no interpenetration beyond half a cell
+    assert out["v"][left, 0].mean() < -0.3 and out["v"][~left, 0].mean() > 0.3  # bounced apart
