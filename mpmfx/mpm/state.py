@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from .materials import Material, Mode
+from .materials import Mode
 
 __all__ = ["SceneFlags", "ParticleBuffers", "StepperClock", "State"]
 
@@ -37,7 +37,8 @@ class SceneFlags:
     @property
     def key(self) -> str:
         """Name of the Warp module holding this scene's specialised P2G and G2P."""
-        tag = "".join(c for c, on in (("s", self.snow), ("g", self.sand), ("w", self.water), ("m", self.multi_field)) if on)
+        flags = (("s", self.snow), ("g", self.sand), ("w", self.water), ("m", self.multi_field))
+        tag = "".join(c for c, on in flags if on)
         return f"mpmfx_mpm_scene_{tag or 'tracer'}"
 
 
