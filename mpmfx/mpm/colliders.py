@@ -40,8 +40,9 @@ class Collider:
         kind: ColliderKind.
         friction: Coulomb coefficient mu (>= 0), dt-independent.
         times: (k,) float seconds on the shot clock, increasing; held constant outside.
-        translations: (k, 3) float32, domain units: position of the local origin.
-        rotations: (k, 4) float32 quaternions (x, y, z, w), local -> domain.
+        translations: (k, 3) float32, domain units: position of the local origin
+            ((1, 3) = the same for all keyframes).
+        rotations: (k, 4) float32 quaternions (x, y, z, w), local -> domain ((1, 4) = same).
         normal: (3,) plane normal, local frame (PLANE).
         point: (3,) a point on the plane, local frame (PLANE).
         half_extents: (3,) domain units (BOX).
@@ -72,8 +73,11 @@ class Collider:
         if times.ndim != 1 or k < 1 or np.any(np.diff(times) <= 0):
             raise ValueError("Collider.times: give k >= 1 strictly increasing keyframe times (s)")
         set_("times", times)
-        set_("translations", _f32(self.translations, (k, 3), "translations"))
-        q = _f32(self.rotations, (k, 4), "rotations")
+        # a single translation / rotation holds for every keyframe
+        trans = np.asarray(self.translations, np.float32).reshape(-1, 3)
+        rots = np.asarray(self.rotations, np.float32).reshape(-1, 4)
+        set_("translations", _f32(np.repeat(trans, k, 0) if len(trans) == 1 else trans, (k, 3), "translations"))
+        q = _f32(np.repeat(rots, k, 0) if len(rots) == 1 else rots, (k, 4), "rotations")
         norms = np.linalg.norm(q, axis=1, keepdims=True)
         if np.any(norms < 1e-6):
             raise ValueError("Collider.rotations: quaternions must be non-zero (x, y, z, w)")

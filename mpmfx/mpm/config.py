@@ -52,7 +52,9 @@ class SolverConfig:
         max_substeps_per_frame: SimulationError past this many substeps in one advance().
         deterministic: P2G in fixed-point integer atomics so a replay is bit-identical
             (guide §10.1); see `mpmfx.mpm.p2g` for range and resolution.
-        multi_field: one velocity field per body (not implemented: NotImplementedError).
+        multi_field: one velocity field per body (Particles.body), so separate bodies collide
+            and part instead of fusing (guide §9.3); costs one grid per body (at most 8).
+        contact_friction: Coulomb mu between bodies in multi-field mode.
         out_of_domain: OutOfDomain (or its string value).
     """
 
@@ -70,6 +72,7 @@ class SolverConfig:
     max_substeps_per_frame: int = 20000
     deterministic: bool = False
     multi_field: bool = False
+    contact_friction: float = 0.0
     out_of_domain: OutOfDomain | str = OutOfDomain.CLAMP
 
     def __post_init__(self) -> None:
@@ -103,6 +106,7 @@ class SolverConfig:
             ("drag", self.drag >= 0, "must be >= 0 (a rate, 1/s)"),
             ("time_scale", self.time_scale > 0, "must be > 0"),
             ("wall_friction", self.wall_friction >= 0, "must be >= 0"),
+            ("contact_friction", self.contact_friction >= 0, "must be >= 0"),
             ("boundary_cells", 2 <= self.boundary_cells < self.grid_n // 2,
              "must be >= 2 and < grid_n / 2"),
             ("dt_min", 0 < self.dt_min <= self.dt_max, "needs 0 < dt_min <= dt_max"),

@@ -91,6 +91,16 @@ def bspline_weights(fx: wp.vec3) -> wp.mat33:
 
 
 @wp.func
+def bspline_gradients(fx: wp.vec3) -> wp.mat33:
+    """d/dfx of bspline_weights, per cell (multiply by 1/dx for domain units); rows as there."""
+    return wp.mat33(
+        fx[0] - 1.5, fx[1] - 1.5, fx[2] - 1.5,
+        -2.0 * (fx[0] - 1.0), -2.0 * (fx[1] - 1.0), -2.0 * (fx[2] - 1.0),
+        fx[0] - 0.5, fx[1] - 0.5, fx[2] - 0.5,
+    )
+
+
+@wp.func
 def hardening_factor(mat: MaterialParams, jp: float) -> float:
     """exp(xi (1 - Jp)): how much stiffer (Jp < 1) or softer a packed snow particle is."""
     return wp.exp(mat.hardening * (1.0 - jp))

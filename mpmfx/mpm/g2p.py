@@ -20,7 +20,6 @@ from .constitutive import (
     hardening_factor,
     sand_return_map,
     snow_return_map,
-    unpack_f,
 )
 from .state import SceneFlags
 
@@ -34,7 +33,7 @@ N_STATS = 5
 class G2PParams:
     """dt: s; inv_dx: 1/domain; affine_keep: 1 - drag*dt, the APIC -> PIC blend of C;
     lo, hi: allowed particle coordinate range, domain units; remove: 1 to deactivate
-    particles that leave [lo, hi] instead of clamping them."""
+    particles that leave [lo, hi] instead of clamping them; nodes: grid nodes per axis."""
 
     dt: float
     inv_dx: float
@@ -42,6 +41,58 @@ class G2PParams:
     lo: float
     hi: float
     remove: int
+    nodes: int
+
+
+@wp.func
+def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float, field_offset: int):
+    """Gather from the particle's 3x3x3 nodes: v = sum w v_i, and the APIC/MLS affine
+    velocity C = (sum w v_i dpos^T) D^-1 with D^-1 = 4 / dx^2 (guide §6).
+    field_offset: first-axis offset of the particle's velocity field (multi-field)."""
+    dx = 1.0 / inv_dx
+    xg = x * inv_dx
+    bi = int(wp.floor(xg[0] - 0.5))
+    bj = int(wp.floor(xg[1] - 0.5))
+    bk = int(wp.floor(xg[2] - 0.5))
+    fx = xg - wp.vec3(float(bi), float(bj), float(bk))
+    W = bspline_weights(fx)  # once per particle per transfer
+    v = wp.vec3(0.0)
+    B = wp.mat33(0.0)
+    for i in range(3):
+        for j in range(3):
+            for k in range(3):
+                w = W[i, 0] * W[j, 1] * W[k, 2]
+                g = grid_v[field_offset + bi + i, bj + j, bk + k]
+                v += w * g
+                B += w * wp.outer(g, (wp.vec3(float(i), float(j), float(k)) - fx) * dx)
+    return v, (4.0 * inv_dx * inv_dx) * B
+
+
+@wp.func
+def plastic_update(mat: MaterialParams, F: wp.mat33, jp: float, C: wp.mat33, dt: float):
+    """F^{n+1} = (I + dt C) F^n, then the return map of the particle's mode (guide §7.2).
+    Returns (elastic F, new Jp slot)."""
+    Ft = (wp.identity(n=3, dtype=float) + dt * C) * F
+    r = wp.mat44(0.0)
+    if mat.mode == MODE_SNOW:
+        r = snow_return_map(mat, Ft, jp)
+    else:
+        r = sand_return_map(mat, Ft, jp)
+    Fe = wp.mat33(r[0, 0], r[0, 1], r[0, 2], r[1, 0], r[1, 1], r[1, 2], r[2, 0], r[2, 1], r[2, 2])
+    return Fe, r[3, 3]
+
+
+@wp.func
+def keep_in_domain(gp: G2PParams, x: wp.vec3, counts: wp.array(dtype=wp.int32)):
+    """Clamp x into [lo, hi]^3, or (REMOVE mode) flag the particle dead. Returns (x, alive)."""
+    inside = x[0] >= gp.lo and x[0] <= gp.hi and x[1] >= gp.lo
+    inside = inside and x[1] <= gp.hi and x[2] >= gp.lo and x[2] <= gp.hi
+    if inside:
+        return x, 1
+    if gp.remove != 0:
+        wp.atomic_add(counts, COUNT_LOST, 1)
+        return x, 0
+    return wp.vec3(wp.clamp(x[0], gp.lo, gp.hi), wp.clamp(x[1], gp.lo, gp.hi), wp.clamp(x[2], gp.lo, gp.hi)), 1
 
 
 @functools.lru_cache(maxsize=None)
@@ -49,8 +100,6 @@ def make_g2p(flags: SceneFlags):
     """G2P kernel specialised for the scene's materials (see p2g.make_p2g)."""
     has_solid = flags.solid
     has_water = flags.water
-    has_snow = flags.snow
-    has_sand = flags.sand
 
     @wp.kernel(enable_backward=False, module=flags.key)
     def g2p(
@@ -58,113 +107,76 @@ def make_g2p(flags: SceneFlags):
         grid_v: wp.array3d(dtype=wp.vec3),
         materials: wp.array(dtype=MaterialParams),
         material: wp.array(dtype=wp.int32),
-        x: wp.array(dtype=wp.vec3),
-        v: wp.array(dtype=wp.vec3),
-        C: wp.array(dtype=wp.mat33),
-        F: wp.array(dtype=wp.mat33),
-        J: wp.array(dtype=float),
-        Jp: wp.array(dtype=float),
+        field_id: wp.array(dtype=wp.int32),
+        x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
+        F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
         alive: wp.array(dtype=wp.int32),
-        x_out: wp.array(dtype=wp.vec3),
-        v_out: wp.array(dtype=wp.vec3),
-        C_out: wp.array(dtype=wp.mat33),
-        F_out: wp.array(dtype=wp.mat33),
-        J_out: wp.array(dtype=float),
-        Jp_out: wp.array(dtype=float),
+        x_out: wp.array(dtype=wp.vec3), v_out: wp.array(dtype=wp.vec3), C_out: wp.array(dtype=wp.mat33),
+        F_out: wp.array(dtype=wp.mat33), J_out: wp.array(dtype=float), Jp_out: wp.array(dtype=float),
         alive_out: wp.array(dtype=wp.int32),
         stats: wp.array(dtype=float),
         counts: wp.array(dtype=wp.int32),
     ):
         p = wp.tid()
-        # carry everything over first; the branches below overwrite what changes
-        x_out[p] = x[p]
-        v_out[p] = v[p]
-        C_out[p] = C[p]
-        Jp_out[p] = Jp[p]
-        alive_out[p] = alive[p]
+        F_new = wp.mat33(0.0)
         if wp.static(has_solid):
-            F_out[p] = F[p]
+            F_new = F[p]
+        J_new = float(1.0)
         if wp.static(has_water):
-            J_out[p] = J[p]
-        if alive[p] == 0:
-            return
-        dx = 1.0 / gp.inv_dx
-        xg = x[p] * gp.inv_dx
-        bi = int(wp.floor(xg[0] - 0.5))
-        bj = int(wp.floor(xg[1] - 0.5))
-        bk = int(wp.floor(xg[2] - 0.5))
-        fx = xg - wp.vec3(float(bi), float(bj), float(bk))
-        W = bspline_weights(fx)  # once per particle per transfer
-        v_new = wp.vec3(0.0)
-        B = wp.mat33(0.0)
-        for i in range(3):
-            for j in range(3):
-                for k in range(3):
-                    w = W[i, 0] * W[j, 1] * W[k, 2]
-                    g = grid_v[bi + i, bj + j, bk + k]
-                    dpos = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
-                    v_new += w * g
-                    B += w * wp.outer(g, dpos)
-        # APIC/MLS: C = B D^-1 with D^-1 = 4/dx^2; drag blends it toward PIC at a rate
-        C_new = (4.0 * gp.inv_dx * gp.inv_dx * gp.affine_keep) * B
-        mid = material[p]
-        mat = materials[mid]
-        j_now = float(1.0)
-        bad = int(0)
-        if wp.static(has_solid):
-            if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
-                # F^{n+1} = (I + dt C) F^n, then project onto the yield surface
-                Ft = (wp.identity(n=3, dtype=float) + gp.dt * C_new) * F[p]
-                r = wp.mat44(0.0)
-                if wp.static(has_snow):
+            J_new = J[p]
+        jp_new = Jp[p]
+        x_new = x[p]
+        v_new = v[p]
+        C_new = C[p]
+        alive_new = alive[p]
+        if alive_new != 0:
+            v_new, C_new = gather(grid_v, x[p], gp.inv_dx, field_id[p] * gp.nodes)
+            C_new = gp.affine_keep * C_new  # drag: blend toward PIC at a rate (guide §6 trap)
+            mid = material[p]
+            mat = materials[mid]
+            j_now = float(1.0)
+            finite = bool(True)
+            if wp.static(has_solid):
+                if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
+                    F_new, jp_new = plastic_update(mat, F_new, jp_new, C_new, gp.dt)
+                    j_now = wp.determinant(F_new)
+                    finite = wp.isfinite(F_new) and wp.isfinite(jp_new)
                     if mat.mode == MODE_SNOW:
-                        r = snow_return_map(mat, Ft, Jp[p])
-                        wp.atomic_max(stats, STAT_MAX_HARDENING, hardening_factor(mat, r[3, 3]))
-                if wp.static(has_sand):
-                    if mat.mode == MODE_SAND:
-                        r = sand_return_map(mat, Ft, Jp[p])
-                Fn = unpack_f(r)
-                F_out[p] = Fn
-                Jp_out[p] = r[3, 3]
-                j_now = wp.determinant(Fn)
-                if not (wp.isfinite(Fn) and wp.isfinite(r[3, 3])):
-                    bad = 1
-        if wp.static(has_water):
-            if mat.mode == MODE_WATER:
-                # water keeps only its volume ratio: J^{n+1} = det(I + dt C) J^n
-                j_now = J[p] * wp.determinant(wp.identity(n=3, dtype=float) + gp.dt * C_new)
-                if mat.clamp_pressure != 0:
-                    # no tension: a separating splash must not remember its expansion, or
-                    # it lands fluffy and stress-free until squeezed back to J = 1
-                    j_now = wp.min(j_now, 1.0)
-                J_out[p] = j_now
-                wp.atomic_min(stats, STAT_WATER_J_MIN, j_now)
-        x_new = x[p] + gp.dt * v_new
-        speed = wp.length(v_new)
-        if not (wp.isfinite(x_new) and wp.isfinite(C_new) and wp.isfinite(j_now)):
-            bad = 1
-        if bad != 0:
-            wp.atomic_add(counts, COUNT_NONFINITE, 1)
-            wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
-            return
-        if gp.dt * speed > dx:
-            # more than a cell in one substep: the stencil never saw where it lands
-            wp.atomic_add(counts, COUNT_TOO_FAR, 1)
-            wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
-        wp.atomic_max(stats, STAT_MAX_SPEED, speed)
-        wp.atomic_min(stats, STAT_J_MIN, j_now)
-        wp.atomic_max(stats, STAT_J_MAX, j_now)
-        inside = x_new[0] >= gp.lo and x_new[0] <= gp.hi and x_new[1] >= gp.lo
-        inside = inside and x_new[1] <= gp.hi and x_new[2] >= gp.lo and x_new[2] <= gp.hi
-        if not inside:
-            if gp.remove != 0:
-                alive_out[p] = 0
-                wp.atomic_add(counts, COUNT_LOST, 1)
-            else:
-                x_new = wp.vec3(
-                    wp.clamp(x_new[0], gp.lo, gp.hi), wp.clamp(x_new[1], gp.lo, gp.hi), wp.clamp(x_new[2], gp.lo, gp.hi)
-                )
+                        wp.atomic_max(stats, STAT_MAX_HARDENING, hardening_factor(mat, jp_new))
+            if wp.static(has_water):
+                if mat.mode == MODE_WATER:
+                    # water keeps only its volume ratio: J^{n+1} = det(I + dt C) J^n
+                    J_new = J_new * wp.determinant(wp.identity(n=3, dtype=float) + gp.dt * C_new)
+                    if mat.clamp_pressure != 0:
+                        # no tension: a separating splash must not remember its expansion,
+                        # or it lands fluffy and stress-free until squeezed back to J = 1
+                        J_new = wp.min(J_new, 1.0)
+                    j_now = J_new
+                    wp.atomic_min(stats, STAT_WATER_J_MIN, J_new)
+            x_new = x_new + gp.dt * v_new
+            speed = wp.length(v_new)
+            finite = finite and wp.isfinite(x_new) and wp.isfinite(C_new) and wp.isfinite(j_now)
+            if not finite:
+                wp.atomic_add(counts, COUNT_NONFINITE, 1)
+                wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
+                return  # the substep is rejected; nothing of it is committed
+            if gp.dt * speed > 1.0 / gp.inv_dx:
+                # more than a cell in one substep: the stencil never saw where it lands
+                wp.atomic_add(counts, COUNT_TOO_FAR, 1)
+                wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
+            wp.atomic_max(stats, STAT_MAX_SPEED, speed)
+            wp.atomic_min(stats, STAT_J_MIN, j_now)
+            wp.atomic_max(stats, STAT_J_MAX, j_now)
+            x_new, alive_new = keep_in_domain(gp, x_new, counts)
+        # each output written once (G2P is memory bound)
         x_out[p] = x_new
         v_out[p] = v_new
         C_out[p] = C_new
+        Jp_out[p] = jp_new
+        alive_out[p] = alive_new
+        if wp.static(has_solid):
+            F_out[p] = F_new
+        if wp.static(has_water):
+            J_out[p] = J_new
+
     return g2p

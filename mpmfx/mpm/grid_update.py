@@ -2,6 +2,13 @@
 
 This is the only place two pieces of material influence each other, and where all
 contact happens. One thread per node; nodes sit at i * dx, i = 0..grid_n.
+
+Multi-field contact (opt-in, guide §9.3 "two separate bodies fuse on contact"): each body
+has its own velocity field (its own block of nodes, first grid axis = field * nodes + i).
+Where several fields meet at a node, a field moving toward the others along its outward
+normal (minus its mass gradient) gets that normal velocity replaced by the node's
+centre-of-mass one; its tangential slip keeps all but Coulomb friction (Bardenhagen et al.
+2000). Fields separating from each other pass freely, so bodies part instead of fusing.
 """
 
 from __future__ import annotations
@@ -27,7 +34,8 @@ class GridParams:
     walls_lo / walls_hi: wall codes of the -x,-y,-z / +x,+y,+z faces; wall_friction: mu;
     boundary_cells: wall layer thickness, cells; n_cells: grid_n; deterministic: 1 when
     P2G accumulated in fixed point; q_mass / q_mom: fixed-point quanta (mass, momentum);
-    num_colliders: entries used in the collider array.
+    num_colliders: entries used in the collider array; nodes: grid_n + 1; n_fields: velocity
+    fields (1 unless multi-field); contact_friction: Coulomb mu between fields.
     """
 
     dt: float
@@ -43,6 +51,9 @@ class GridParams:
     q_mass: float
     q_mom: float
     num_colliders: int
+    nodes: int
+    n_fields: int
+    contact_friction: float
 
 
 @wp.func
@@ -76,18 +87,10 @@ def apply_walls(v: wp.vec3, node: wp.vec3i, gp: GridParams) -> wp.vec3:
     return out
 
 
-@wp.kernel(enable_backward=False)
-def grid_update(
-    gp: GridParams,
-    grid_m: wp.array3d(dtype=float),
-    grid_mv: wp.array3d(dtype=wp.vec3),
-    grid_fixed: wp.array4d(dtype=wp.int64),
-    colliders: wp.array(dtype=ColliderParams),
-    sdf: wp.array(dtype=float),
-    grid_v: wp.array3d(dtype=wp.vec3),
-    counts: wp.array(dtype=wp.int32),
-):
-    i, j, k = wp.tid()
+@wp.func
+def node_velocity(gp: GridParams, grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
+                  grid_fixed: wp.array4d(dtype=wp.int64), i: int, j: int, k: int):
+    """(mass, velocity after gravity and damping) of one node of one field; v = 0 if empty."""
     m = float(0.0)
     mv = wp.vec3(0.0)
     if gp.deterministic != 0:
@@ -102,11 +105,72 @@ def grid_update(
     if m > 0.0:
         v = mv / m  # grid_mv held momentum until here
         v = (v + gp.dt * gp.gravity) * gp.damping_factor
-        xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
-        for c in range(gp.num_colliders):
-            v = apply_collider(colliders[c], sdf, xn, v, 0.5 * gp.dx)
-        v = apply_walls(v, wp.vec3i(i, j, k), gp)
-        if not wp.isfinite(v):
-            wp.atomic_add(counts, COUNT_GRID_NONFINITE, 1)
-            v = wp.vec3(0.0)  # the substep is rejected anyway; keep G2P finite
-    grid_v[i, j, k] = v
+    return m, v
+
+
+@wp.func
+def mass_gradient(gp: GridParams, grid_normal: wp.array3d(dtype=wp.vec3), grid_fixed: wp.array4d(dtype=wp.int64),
+                  i: int, j: int, k: int) -> wp.vec3:
+    """Mass gradient of one field at a node (any consistent scale; only its direction is used)."""
+    if gp.deterministic != 0:
+        return wp.vec3(float(grid_fixed[i, j, k, 4]), float(grid_fixed[i, j, k, 5]), float(grid_fixed[i, j, k, 6]))
+    return grid_normal[i, j, k]
+
+
+@wp.func
+def field_contact(v: wp.vec3, v_cm: wp.vec3, normal_in: wp.vec3, mu: float) -> wp.vec3:
+    """Multi-field contact: normal_in is the field's mass gradient (points into its body)."""
+    ln = wp.length(normal_in)
+    if ln < 1.0e-20:
+        return v
+    n = -normal_in / ln  # outward normal of this body
+    dv = v - v_cm
+    dn = wp.dot(dv, n)
+    if dn <= 0.0:
+        return v  # separating or sliding: no contact force
+    dvt = dv - dn * n
+    lt = wp.length(dvt)
+    if lt > 0.0:
+        dvt = dvt * wp.max(0.0, 1.0 - mu * dn / lt)
+    return v_cm + dvt
+
+
+@wp.kernel(enable_backward=False)
+def grid_update(
+    gp: GridParams,
+    grid_m: wp.array3d(dtype=float),
+    grid_mv: wp.array3d(dtype=wp.vec3),
+    grid_normal: wp.array3d(dtype=wp.vec3),
+    grid_fixed: wp.array4d(dtype=wp.int64),
+    colliders: wp.array(dtype=ColliderParams),
+    sdf: wp.array(dtype=float),
+    grid_v: wp.array3d(dtype=wp.vec3),
+    counts: wp.array(dtype=wp.int32),
+):
+    i, j, k = wp.tid()
+    m_tot = float(0.0)
+    p_tot = wp.vec3(0.0)
+    grad_tot = wp.vec3(0.0)
+    if gp.n_fields > 1:
+        for f in range(gp.n_fields):
+            m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, f * gp.nodes + i, j, k)
+            m_tot += m
+            p_tot += m * v
+            grad_tot += mass_gradient(gp, grid_normal, grid_fixed, f * gp.nodes + i, j, k)
+    xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
+    for f in range(gp.n_fields):
+        fi = f * gp.nodes + i
+        m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, fi, j, k)
+        if m > 0.0:
+            if m < m_tot * (1.0 - 1.0e-6):  # another field shares this node
+                g = mass_gradient(gp, grid_normal, grid_fixed, fi, j, k)
+                # own gradient minus the others': for two fields the normals are exactly
+                # opposite, so the contact impulses cancel and momentum is conserved
+                v = field_contact(v, p_tot / m_tot, 2.0 * g - grad_tot, gp.contact_friction)
+            for c in range(gp.num_colliders):
+                v = apply_collider(colliders[c], sdf, xn, v, 0.5 * gp.dx)
+            v = apply_walls(v, wp.vec3i(i, j, k), gp)
+            if not wp.isfinite(v):
+                wp.atomic_add(counts, COUNT_GRID_NONFINITE, 1)
+                v = wp.vec3(0.0)  # the substep is rejected anyway; keep G2P finite
+        grid_v[fi, j, k] = v

@@ -23,7 +23,8 @@ class Mode(enum.IntEnum):
     SNOW = 0  # fixed-corotated elasticity + Stomakhin singular-value clamp (+ hardening)
     SAND = 1  # Drucker-Prager on Hencky strain (Klar et al. 2016)
     WATER = 2  # weakly compressible Tait fluid: pressure only, tracks J not F
-    TRACER = 3  # massless marker advected with the grid velocity; exerts nothing
+    TRACER = 3  # massless marker: takes the grid velocity of the material around it and
+    # exerts nothing; in empty space (no material nodes) it stands still
 
 
 @dataclass(frozen=True)

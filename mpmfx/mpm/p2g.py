@@ -17,6 +17,10 @@ Range: |node sum| < 2^63 quanta, i.e. node mass < 2^31 m_ref and node momentum
 ~1e8 domain/s (which the CFL step rejects long before), to overflow. Resolution: the
 rounding error per contribution is <= half a quantum, ~1e-10 of one particle's m * (1
 domain/s), below float32 resolution for speeds above ~1e-3 domain/s.
+
+Multi-field contact (opt-in): every body field has its own block of nodes; the grid's
+first axis is field * nodes + i. Each particle also scatters its mass gradient
+m * grad(w) (in 1/cell units) so the grid update can find the contact normal.
 """
 
 from __future__ import annotations
@@ -25,10 +29,32 @@ import functools
 
 import warp as wp
 
-from .constitutive import MODE_SAND, MODE_SNOW, MODE_WATER, MaterialParams, bspline_weights, solid_tau, tait_pressure
+from .constitutive import (
+    MODE_SAND,
+    MODE_SNOW,
+    MODE_WATER,
+    MaterialParams,
+    bspline_gradients,
+    bspline_weights,
+    solid_tau,
+    tait_pressure,
+)
 from .state import SceneFlags
 
 FIXED_POINT_BITS = 32  # see module docstring
+
+
+@wp.struct
+class P2GParams:
+    """inv_dx: 1/domain; dt: s; nodes: grid nodes per axis (grid_n + 1); deterministic: 1
+    for fixed-point accumulation; q_mass_inv, q_mom_inv: 1 / fixed-point quanta."""
+
+    inv_dx: float
+    dt: float
+    nodes: int
+    deterministic: int
+    q_mass_inv: float
+    q_mom_inv: float
 
 
 @wp.func
@@ -43,27 +69,22 @@ def make_p2g(flags: SceneFlags):
     so a water-only scene compiles no SVD). One kernel per scene flags, shared by solvers."""
     has_solid = flags.solid
     has_water = flags.water
+    multi = flags.multi_field
 
     @wp.kernel(enable_backward=False, module=flags.key)
     def p2g(
-        x: wp.array(dtype=wp.vec3),
-        v: wp.array(dtype=wp.vec3),
-        C: wp.array(dtype=wp.mat33),
-        F: wp.array(dtype=wp.mat33),
-        J: wp.array(dtype=float),
-        Jp: wp.array(dtype=float),
+        pp: P2GParams,
+        x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
+        F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
         alive: wp.array(dtype=wp.int32),
         mass: wp.array(dtype=float),
         volume: wp.array(dtype=float),
         material: wp.array(dtype=wp.int32),
+        field_id: wp.array(dtype=wp.int32),
         materials: wp.array(dtype=MaterialParams),
-        inv_dx: float,
-        dt: float,
-        deterministic: int,
-        q_mass_inv: float,
-        q_mom_inv: float,
         grid_m: wp.array3d(dtype=float),
         grid_mv: wp.array3d(dtype=wp.vec3),
+        grid_normal: wp.array3d(dtype=wp.vec3),
         grid_fixed: wp.array4d(dtype=wp.int64),
     ):
         p = wp.tid()
@@ -80,9 +101,10 @@ def make_p2g(flags: SceneFlags):
                 Jw = J[p]
                 # pressure only, isotropic: tau = -p J I (guide §8.1)
                 tau = wp.identity(n=3, dtype=float) * (-tait_pressure(mat, Jw) * Jw)
+        inv_dx = pp.inv_dx
         dx = 1.0 / inv_dx
         # D^-1 = 4 / dx^2 for quadratic B-splines
-        affine = (-dt * volume[p] * 4.0 * inv_dx * inv_dx) * tau + m * C[p]
+        affine = (-pp.dt * volume[p] * 4.0 * inv_dx * inv_dx) * tau + m * C[p]
         mv = m * v[p]
         xg = x[p] * inv_dx
         bi = int(wp.floor(xg[0] - 0.5))
@@ -90,19 +112,29 @@ def make_p2g(flags: SceneFlags):
         bk = int(wp.floor(xg[2] - 0.5))
         fx = xg - wp.vec3(float(bi), float(bj), float(bk))
         W = bspline_weights(fx)  # once per particle per transfer
+        dW = bspline_gradients(fx)
+        bi += field_id[p] * pp.nodes  # this body's block of nodes (0 unless multi-field)
         for i in range(3):
             for j in range(3):
                 for k in range(3):
                     w = W[i, 0] * W[j, 1] * W[k, 2]
                     dpos = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
                     mom = w * (mv + affine * dpos)
-                    if deterministic != 0:
-                        wp.atomic_add(grid_fixed, bi + i, bj + j, bk + k, 0, to_fixed(w * m, q_mass_inv))
-                        wp.atomic_add(grid_fixed, bi + i, bj + j, bk + k, 1, to_fixed(mom[0], q_mom_inv))
-                        wp.atomic_add(grid_fixed, bi + i, bj + j, bk + k, 2, to_fixed(mom[1], q_mom_inv))
-                        wp.atomic_add(grid_fixed, bi + i, bj + j, bk + k, 3, to_fixed(mom[2], q_mom_inv))
+                    gm = wp.vec3(0.0)
+                    if wp.static(multi):
+                        # mass gradient w.r.t. the node position (d/dx_node = -d/dfx), per cell
+                        gm = -m * wp.vec3(dW[i, 0] * W[j, 1] * W[k, 2], W[i, 0] * dW[j, 1] * W[k, 2],
+                                          W[i, 0] * W[j, 1] * dW[k, 2])
+                    if pp.deterministic != 0:
+                        wp.atomic_add(grid_fixed, bi + i, bj + j, bk + k, 0, to_fixed(w * m, pp.q_mass_inv))
+                        for c in range(3):
+                            wp.atomic_add(grid_fixed, bi + i, bj + j, bk + k, 1 + c, to_fixed(mom[c], pp.q_mom_inv))
+                            if wp.static(multi):
+                                wp.atomic_add(grid_fixed, bi + i, bj + j, bk + k, 4 + c, to_fixed(gm[c], pp.q_mass_inv))
                     else:
                         wp.atomic_add(grid_m, bi + i, bj + j, bk + k, w * m)
                         wp.atomic_add(grid_mv, bi + i, bj + j, bk + k, mom)
+                        if wp.static(multi):
+                            wp.atomic_add(grid_normal, bi + i, bj + j, bk + k, gm)
 
     return p2g

@@ -28,12 +28,13 @@ from .constitutive import MaterialParams, pack_material
 from .g2p import G2PParams, make_g2p
 from .grid_update import WALL_CODES, GridParams, grid_update
 from .materials import Material, Mode
-from .p2g import FIXED_POINT_BITS, make_p2g
+from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
 from .state import ParticleBuffers, SceneFlags, State, StepperClock
 
 __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
 
 CHECKPOINT_VERSION = 1
+MAX_FIELDS = 8  # multi-field contact: grid memory grows with the number of fields
 _SYMPTOM = "Everything explodes / NaNs"  # the guide §9.3 row the errors point at
 
 
@@ -61,7 +62,8 @@ class Particles:
 class StepReport:
     """What one `advance` did. Times in s, speeds domain/s, mass in density*domain^3.
 
-    cfl_used: largest dt * (c_max + |v|max) / dx actually taken; momentum: (3,);
+    cfl_used: largest dt * (c_max + |v|max) / dx, with c and |v| measured at the end of
+    each accepted substep (the CFL actually experienced); momentum: (3,);
     elastic_energy: None (not computed); j_min, j_max: range of J (det F for solids, J for
     water) over the accepted substeps.
     """
@@ -106,20 +108,15 @@ class Solver:
                     f"materials[{i}].volume_recovery=True: grid volume recovery is not implemented "
                     "yet; set it False"
                 )
-        if config.multi_field:
-            raise NotImplementedError(
-                "SolverConfig.multi_field=True: multi-field contact (one velocity field per body) "
-                "is not implemented yet; set multi_field=False (bodies share one velocity field "
-                "and fuse on contact, guide §9.3)"
-            )
         self.config = config
         self.colliders = tuple(colliders)
         self.device = wp.get_device(device)
-        self.flags = SceneFlags.of(self.materials)
+        self.flags = SceneFlags.of(self.materials, multi_field=config.multi_field)
         # specialised kernels for this scene: both land in one Warp module per flags
         self._p2g = make_p2g(self.flags)
         self._g2p = make_g2p(self.flags)
-        self._allocate_grid()
+        self._n_fields = 0
+        self._allocate_grid(1)
         with wp.ScopedDevice(self.device):
             self._materials_dev = wp.array([pack_material(m) for m in self.materials], dtype=MaterialParams)
             self._sdf = wp.array(concat_sdfs(self.colliders), dtype=float)
@@ -130,17 +127,37 @@ class Solver:
             self._stats_init = wp.array(init, dtype=float)
         self._q_mass = 1.0
         self._q_mom = 1.0
+        self._last_bad = None  # counts of the last rejected substep, for error messages
 
     # ------------------------------------------------------------------ setup
-    def _allocate_grid(self) -> None:
+    def _allocate_grid(self, n_fields: int) -> None:
+        """Dense grid, one block of nodes per velocity field along the first axis
+        (allocated when a state with a new field count is built, never per step)."""
+        if n_fields == self._n_fields:
+            return
+        self._n_fields = n_fields
         nn = self.config.grid_n + 1  # nodes at i * dx, i = 0..grid_n
-        det = self.config.deterministic
+        det, multi = self.config.deterministic, self.flags.multi_field
+        full = (n_fields * nn, nn, nn)
         with wp.ScopedDevice(self.device):
-            shape = (nn, nn, nn) if not det else (1, 1, 1)
-            self._grid_m = wp.zeros(shape, dtype=float)
-            self._grid_mv = wp.zeros(shape, dtype=wp.vec3)
-            self._grid_fixed = wp.zeros((nn, nn, nn, 4) if det else (1, 1, 1, 4), dtype=wp.int64)
-            self._grid_v = wp.zeros((nn, nn, nn), dtype=wp.vec3)
+            self._grid_m = wp.zeros(full if not det else (1, 1, 1), dtype=float)
+            self._grid_mv = wp.zeros(full if not det else (1, 1, 1), dtype=wp.vec3)
+            self._grid_normal = wp.zeros(full if multi and not det else (1, 1, 1), dtype=wp.vec3)
+            channels = 7 if multi else 4  # mass, momentum (3), mass gradient (3, multi-field)
+            self._grid_fixed = wp.zeros(full + (channels,) if det else (1, 1, 1, channels), dtype=wp.int64)
+            self._grid_v = wp.zeros(full, dtype=wp.vec3)
+
+    def _field_ids(self, body: np.ndarray) -> tuple[np.ndarray, int]:
+        """Velocity field of each particle: its body's rank in multi-field mode, else 0."""
+        if not self.config.multi_field:
+            return np.zeros(len(body), np.int32), 1
+        bodies, ids = np.unique(body, return_inverse=True)
+        if len(bodies) > MAX_FIELDS:
+            raise ValueError(
+                f"Particles.body: {len(bodies)} distinct bodies, but multi-field contact keeps at most "
+                f"{MAX_FIELDS} velocity fields; give bodies that never touch the same id, or set "
+                "SolverConfig.multi_field=False")
+        return ids.astype(np.int32), len(bodies)
 
     def _check_particles(self, p: Particles) -> int:
         x = np.asarray(p.x)
@@ -190,6 +207,8 @@ class Solver:
 
     def _build_state(self, data: dict, clock: StepperClock) -> State:
         n = int(data["x"].shape[0])
+        field_id, n_fields = self._field_ids(np.asarray(data["body"]))
+        self._allocate_grid(n_fields)
         with wp.ScopedDevice(self.device):
             cur = ParticleBuffers.allocate(n, self.flags, self.device)
             nxt = ParticleBuffers.allocate(n, self.flags, self.device)
@@ -202,6 +221,7 @@ class Solver:
                 volume=wp.array(np.asarray(data["volume"], np.float32), dtype=float),
                 material=wp.array(np.asarray(data["material"], np.int32), dtype=wp.int32),
                 body=wp.array(np.asarray(data["body"], np.int32), dtype=wp.int32),
+                field_id=wp.array(field_id, dtype=wp.int32), n_fields=n_fields,
                 clock=clock,
             )
         m = np.asarray(data["mass"], np.float64)
@@ -227,17 +247,23 @@ class Solver:
         wp.copy(self._stats, self._stats_init)
         self._counts.zero_()
         # 1 · clear
-        clear_grid(self._grid_m, self._grid_mv, self._grid_fixed, deterministic=cfg.deterministic)
+        clear_grid(self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
+                   deterministic=cfg.deterministic, multi_field=self.flags.multi_field)
         # 2 · P2G
+        pp = P2GParams()
+        pp.inv_dx, pp.dt, pp.nodes = inv_dx, float(dt), cfg.grid_n + 1
+        pp.deterministic = int(cfg.deterministic)
+        pp.q_mass_inv, pp.q_mom_inv = 1.0 / self._q_mass, 1.0 / self._q_mom
         wp.launch(self._p2g, dim=state.n, device=self.device, inputs=[
-            cur.x, cur.v, cur.C, cur.F, cur.J, cur.Jp, cur.alive, state.mass, state.volume,
-            state.material, self._materials_dev, inv_dx, float(dt), int(cfg.deterministic),
-            1.0 / self._q_mass, 1.0 / self._q_mom, self._grid_m, self._grid_mv, self._grid_fixed])
+            pp, cur.x, cur.v, cur.C, cur.F, cur.J, cur.Jp, cur.alive, state.mass, state.volume,
+            state.material, state.field_id, self._materials_dev,
+            self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed])
         # 3 · grid update
         if self.colliders:
             self._colliders_dev.assign(pack_colliders(self.colliders, t0, t1, dt))
-        wp.launch(grid_update, dim=self._grid_v.shape, device=self.device, inputs=[
-            self._grid_params(dt), self._grid_m, self._grid_mv, self._grid_fixed,
+        nn = cfg.grid_n + 1
+        wp.launch(grid_update, dim=(nn, nn, nn), device=self.device, inputs=[
+            self._grid_params(dt, state.n_fields), self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
             self._colliders_dev, self._sdf, self._grid_v, self._counts])
         # 4 · G2P
         gp = G2PParams()
@@ -245,11 +271,12 @@ class Solver:
         gp.affine_keep = max(0.0, 1.0 - cfg.drag * dt)  # a rate, not a per-substep fraction
         gp.lo, gp.hi = 1.0 / cfg.grid_n, 1.0 - 1.0 / cfg.grid_n  # stencil stays on the grid
         gp.remove = int(cfg.out_of_domain == OutOfDomain.REMOVE)
+        gp.nodes = nn
         wp.launch(self._g2p, dim=state.n, device=self.device, inputs=[
-            gp, self._grid_v, self._materials_dev, state.material, *cur.arrays(), *nxt.arrays(),
+            gp, self._grid_v, self._materials_dev, state.material, state.field_id, *cur.arrays(), *nxt.arrays(),
             self._stats, self._counts])
 
-    def _grid_params(self, dt: float) -> GridParams:
+    def _grid_params(self, dt: float, n_fields: int) -> GridParams:
         cfg = self.config
         gp = GridParams()
         gp.dt, gp.dx = float(dt), cfg.dx
@@ -264,6 +291,8 @@ class Solver:
         gp.deterministic = int(cfg.deterministic)
         gp.q_mass, gp.q_mom = self._q_mass, self._q_mom
         gp.num_colliders = len(self.colliders)
+        gp.nodes, gp.n_fields = cfg.grid_n + 1, n_fields
+        gp.contact_friction = cfg.contact_friction
         return gp
 
     # ------------------------------------------------------------------ stepper
@@ -286,6 +315,7 @@ class Solver:
         if not t1 >= t0:
             raise ValueError(f"Solver.advance: t1 = {t1} must be >= t0 = {t0}")
         wall0 = time.perf_counter()
+        self._last_bad = None
         total = (t1 - t0) * cfg.time_scale
         done, substeps, rejected = 0.0, 0, 0
         dts, cfl_used, vmax, jmin, jmax, lost = [], 0.0, 0.0, math.inf, -math.inf, 0
@@ -309,7 +339,7 @@ class Solver:
             if counts[: g2p_mod.COUNT_LOST].sum() + counts[g2p_mod.COUNT_GRID_NONFINITE] > 0:
                 rejected += 1
                 state.clock.dt_scale *= 0.5  # redo at half dt (Ziran)
-                self._last_bad = counts
+                self._last_bad = counts  # for the error message if dt runs out
                 continue
             state.swap()
             done = total if last else done + dt
@@ -336,14 +366,17 @@ class Solver:
     def _raise_too_small(self, state: State, t: float, dt: float) -> None:
         bad = getattr(self, "_last_bad", None)
         per_mat = [] if bad is None else bad[g2p_mod.COUNT_PER_MATERIAL:]
-        n_bad = 0 if bad is None else int(bad[g2p_mod.COUNT_NONFINITE] + bad[g2p_mod.COUNT_TOO_FAR])
         names = [self._describe_material(i) for i, k in enumerate(per_mat) if k > 0] or [
             self._describe_material(i) for i in range(len(self.materials))]
+        n_bad = 0 if bad is None else int(bad[g2p_mod.COUNT_NONFINITE] + bad[g2p_mod.COUNT_TOO_FAR])
+        what = (f"the last rejected substep had {n_bad} particle(s) non-finite or moving more than "
+                f"one cell" if bad is not None else "no substep was rejected; the CFL step is this small")
         raise SimulationError(
-            f"t={t:.4f}s: the substep fell to dt={dt:.3g}s < dt_min={self.config.dt_min:g}s; "
-            f"{n_bad} particle(s) of {', '.join(names)} went non-finite or moved more than one cell "
-            f"per substep ('{_SYMPTOM}', guide §9.3). Lower youngs_modulus / bulk_modulus, "
-            f"raise damping, or lower SolverConfig.cfl; dt_min={self.config.dt_min:g} is the floor")
+            f"t={t:.4f}s: the substep fell to dt={dt:.3g}s < dt_min={self.config.dt_min:g}s "
+            f"({state.n} particles, max speed {state.clock.max_speed:.3g} domain/s, c_max "
+            f"{self.wave_speed(state.clock):.3g} domain/s); {what}, in {', '.join(names)} "
+            f"('{_SYMPTOM}', guide §9.3). Lower youngs_modulus / bulk_modulus, raise damping, or "
+            f"lower SolverConfig.cfl (<= 0.5); or lower SolverConfig.dt_min if this dt is intended")
 
     def _describe_material(self, i: int) -> str:
         m = self.materials[i]
@@ -397,7 +430,12 @@ class Solver:
 
     def restore(self, data: dict[str, np.ndarray]) -> tuple[State, float]:
         """State and shot time t from `checkpoint` output (ValueError if it does not fit)."""
-        meta = np.asarray(data.get("meta", [-1, -1, -1]))
+        required = {*ParticleBuffers.NAMES, "mass", "volume", "material", "body", "clock", "t", "meta"}
+        missing = sorted(required - set(data))
+        if missing:
+            raise ValueError(f"checkpoint: missing arrays {', '.join(missing)}; it was not written by "
+                             "Solver.checkpoint (or is truncated); re-simulate from the start")
+        meta = np.asarray(data["meta"])
         if int(meta[0]) != CHECKPOINT_VERSION or int(meta[1]) != self.config.grid_n:
             raise ValueError(
                 f"checkpoint: version/grid_n {meta[:2].tolist()} do not match this solver "

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-from .materials import Material, Mode
+from .materials import Mode
 
 __all__ = ["SceneFlags", "ParticleBuffers", "StepperClock", "State"]
 
@@ -22,11 +22,12 @@ class SceneFlags:
     snow: bool
     sand: bool
     water: bool
+    multi_field: bool = False
 
     @classmethod
-    def of(cls, materials) -> "SceneFlags":
+    def of(cls, materials, *, multi_field: bool = False) -> "SceneFlags":
         modes = {m.mode for m in materials}
-        return cls(Mode.SNOW in modes, Mode.SAND in modes, Mode.WATER in modes)
+        return cls(Mode.SNOW in modes, Mode.SAND in modes, Mode.WATER in modes, bool(multi_field))
 
     @property
     def solid(self) -> bool:
@@ -36,7 +37,8 @@ class SceneFlags:
     @property
     def key(self) -> str:
         """Name of the Warp module holding this scene's specialised P2G and G2P."""
-        tag = "".join(c for c, on in (("s", self.snow), ("g", self.sand), ("w", self.water)) if on)
+        flags = (("s", self.snow), ("g", self.sand), ("w", self.water), ("m", self.multi_field))
+        tag = "".join(c for c, on in flags if on)
         return f"mpmfx_mpm_scene_{tag or 'tracer'}"
 
 
@@ -114,7 +116,9 @@ class State:
     constant per-particle arrays and the stepper clock.
 
     mass: (n,) float32 (0 for tracers); volume: (n,) float32 rest volume, domain^3;
-    material: (n,) int32 row in the solver's material table; body: (n,) int32 object id.
+    material: (n,) int32 row in the solver's material table; body: (n,) int32 object id;
+    field_id: (n,) int32 velocity field of the particle (0, or the body's field in multi-field
+    mode); n_fields: number of fields.
     """
 
     n: int
@@ -124,6 +128,8 @@ class State:
     volume: wp.array
     material: wp.array
     body: wp.array
+    field_id: wp.array
+    n_fields: int = 1
     clock: StepperClock = field(default_factory=StepperClock)
 
     def swap(self) -> None:

@@ -1,0 +1,43 @@
+"""Tiny Warp kernels that evaluate the solver's own wp.funcs per particle, for unit tests."""
+
+import warp as wp
+
+from mpmfx.mpm.constitutive import (
+    MaterialParams,
+    bspline_weights,
+    fixed_corotated_tau,
+    hardening_factor,
+    sand_return_map,
+    snow_return_map,
+    unpack_f,
+)
+
+
+@wp.kernel
+def eval_weights(fx: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.mat33)):
+    i = wp.tid()
+    out[i] = bspline_weights(fx[i])
+
+
+@wp.kernel
+def eval_return_map(
+    mat: MaterialParams,
+    F: wp.array(dtype=wp.mat33),
+    jp: wp.array(dtype=float),
+    F_out: wp.array(dtype=wp.mat33),
+    jp_out: wp.array(dtype=float),
+    cauchy: wp.array(dtype=wp.mat33),
+):
+    """Return map of snow (mode 0) or sand (mode 1), then the Cauchy stress tau / J of
+    the (hardened, for snow) elastic part."""
+    i = wp.tid()
+    r = wp.mat44(0.0)
+    if mat.mode == 0:
+        r = snow_return_map(mat, F[i], jp[i])
+    else:
+        r = sand_return_map(mat, F[i], jp[i])
+    Fe = unpack_f(r)
+    F_out[i] = Fe
+    jp_out[i] = r[3, 3]
+    h = hardening_factor(mat, r[3, 3])
+    cauchy[i] = fixed_corotated_tau(Fe, mat.mu0 * h, mat.lambda0 * h) / wp.determinant(Fe)
