@@ -17,8 +17,9 @@ NAME, VERSION, PER_FRAME, FRAME_EXT = "surface", 1, True, "npz"
 
 
 def params(shot: Shot) -> dict:
-    return {"surface": shot.surface.model_dump(mode="json"), "spacing": particle_spacing(shot),
-            "groups": group_names(shot)}
+    # The resolved surfacer parameters, not the config section: a changed default re-runs surface.
+    resolved = {k: getattr(v, "value", v) for k, v in vars(surface_params(shot)).items()}
+    return {"surface": resolved, "groups": group_names(shot)}
 
 
 def inputs(shot: Shot) -> dict[str, str]:
