@@ -101,7 +101,8 @@ class SolverConfig:
         set_("gravity", gravity)
         checks = [
             ("grid_n", 8 <= self.grid_n <= 4096, "must be in [8, 4096]"),
-            ("cfl", 0 < self.cfl <= 2.0, "must be in (0, 2]; 0.3-0.5 is usual"),
+            ("cfl", 0 < self.cfl <= 1.0, "must be in (0, 1]: above 1 a particle outruns the grid "
+             "and elastic energy grows without any non-finite value to catch (guide 9.5); 0.3-0.5 is usual"),
             ("damping", self.damping >= 0, "must be >= 0 (a rate, 1/s)"),
             ("drag", self.drag >= 0, "must be >= 0 (a rate, 1/s)"),
             ("time_scale", self.time_scale > 0, "must be > 0"),

@@ -20,6 +20,8 @@ def flags(qa: dict[int, dict]) -> dict[int, list[str]]:
         ke = q.get("kinetic_energy")
         if prev is not None and ke is not None and prev > 1e-12 and ke > ENERGY_JUMP * prev:
             why.append(f"kinetic energy x{ke / prev:.1f}")
+        if q.get("j_min") is not None and q["j_min"] <= 0:
+            why.append(f"inverted particles (J min {q['j_min']:.3g})")
         if q.get("particles_lost"):
             why.append(f"{q['particles_lost']} particles lost")
         if q.get("rejected_substeps"):
