@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# The GPU session's benchmark runs, one table each (see README "Benchmarks").
+# Usage on the GPU machine (after ../shared/gpu/prepare-warp.sh's two stages):
+#   bash scripts/gpu_bench.sh solver|pipeline|surface|accuracy ...   results under ${OUT:-renders/bench}
+set -uo pipefail
+export PYTHONUNBUFFERED=1 PYTHONPATH=/opt/wp/site:$PWD${PYTHONPATH:+:$PYTHONPATH}
+out=${OUT:-renders/bench}
+mkdir -p "$out"
+nvidia-smi --query-gpu=name,memory.total --format=csv,noheader
+for what in "$@"; do
+  echo "=== $what"
+  t0=$(date +%s)
+  case $what in
+    solver|surface|accuracy) timeout 280 python3 -m mpmfx.cli bench "$what" --device cuda --out "$out" 2>&1 | grep -v '^Module' ;;
+    pipeline) MPMFX_CACHE=/tmp/mpmfx-cache timeout 280 python3 -m mpmfx.cli run pipeline/shots/jelly_splash.toml \
+                --until surface --device cuda -q 2>&1 | grep -v '^Module' ;;
+  esac
+  echo "=== $what took $(( $(date +%s) - t0 )) s"
+done
