@@ -16,8 +16,8 @@ def render_thickness_heatmap(mesh, vertex_thickness_cells: np.ndarray, path: str
     """
     try:
         import pyvista as pv
-    except ImportError as exc:  # pragma: no cover - pyvista is a dependency
-        raise RuntimeError("the thickness heatmap needs pyvista: pip install pyvista") from exc
+    except ImportError as exc:  # a GPU farm node may run voxelise without pyvista
+        raise ImportError("the thickness heatmap needs pyvista: run `bash setup.sh` (or pip install pyvista)") from exc
     values = np.asarray(vertex_thickness_cells, float)
     if values.shape != (len(mesh.vertices),):
         raise ValueError(f"vertex_thickness_cells has shape {values.shape}; expected "

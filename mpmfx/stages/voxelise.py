@@ -77,8 +77,8 @@ def _thickness(ctx, obj, mesh, check_thickness, Verdict):
         try:
             from mpmfx.render.thickness import render_thickness_heatmap
             render_thickness_heatmap(mesh, report.vertex_thickness_cells, ctx.entry.root / f"thickness_{obj.name}.png")
-        except ImportError:
-            pass
+        except ImportError as exc:  # the report still stands; only the picture is missing
+            ctx.notes.append(f"objects.{obj.name}: no thickness heatmap ({exc})")
     if report.verdict is not Verdict.PASS and mode is not Thickness.IGNORE:
         msg = (f"objects.{obj.name}: thinnest feature {report.min_thickness_cells:.1f} cells at grid_n "
                f"{dom.grid_n} ({len(report.regions)} thin regions; under ~5 cells a feature cannot hold its "
