@@ -22,17 +22,17 @@ def at(mesh, x, y, z):
 
 
 def jelly_bear():
-    """A gummy bear, 0.32 m tall, standing on y = 0; every limb >= 0.06 m across."""
+    """A gummy bear, ~0.4 m tall, standing on y = 0; every limb >= 0.1 m across (5 cells at dx 2 cm)."""
     body = icosphere(3, 0.09)
     body.apply_scale([1.0, 1.2, 0.85])
-    parts = [at(body, 0, 0.14, 0), at(icosphere(3, 0.075), 0, 0.27, 0),
-             at(icosphere(3, 0.032), -0.055, 0.335, 0), at(icosphere(3, 0.032), 0.055, 0.335, 0),
-             at(icosphere(3, 0.03), 0, 0.255, 0.065)]
+    parts = [at(body, 0, 0.14, 0), at(icosphere(3, 0.08), 0, 0.28, 0),
+             at(icosphere(3, 0.06), -0.065, 0.35, 0), at(icosphere(3, 0.06), 0.065, 0.35, 0),
+             at(icosphere(3, 0.045), 0, 0.26, 0.06)]
     for s in (-1, 1):
-        arm = capsule(height=0.07, radius=0.032)
+        arm = capsule(height=0.06, radius=0.05)
         arm.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2.6 * s, [0, 0, 1]))
-        parts.append(at(arm, 0.095 * s, 0.17, 0))
-        parts.append(at(capsule(height=0.05, radius=0.036), 0.05 * s, 0.05, 0))
+        parts.append(at(arm, 0.09 * s, 0.17, 0))
+        parts.append(at(capsule(height=0.04, radius=0.055), 0.05 * s, 0.05, 0))
     m = union(*parts)
     m.apply_translation([0, -m.bounds[0][1], 0])
     return m

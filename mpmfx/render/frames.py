@@ -5,20 +5,13 @@ from pathlib import Path
 
 import numpy as np
 
+from mpmfx.render import import_pyvista
+
 # Colour per material family, keyed by preset name (unknown names fall back to grey).
 COLOURS = {"Soft": "#f4f7fb", "Mushy": "#eef2f7", "Goopy": "#e3e9f0", "Wet": "#d5e2ec", "Slush": "#c9dbe8",
            "Elastic": "#e8577a", "Granular": "#d8b47c", "CohesiveGranular": "#c79f6a", "Water": "#3d8fd6",
            "Tracer": "#ffd23f"}
 PALETTE = ["#e8577a", "#3d8fd6", "#d8b47c", "#7ac74f", "#f4f7fb", "#b07cc6"]
-
-
-def _pv():
-    try:
-        import pyvista as pv
-    except ImportError as exc:  # pragma: no cover - installed by setup.sh
-        raise ImportError("rendering needs pyvista: run `bash setup.sh` (or pip install pyvista)") from exc
-    pv.OFF_SCREEN = True
-    return pv
 
 
 def colour_for(name: str, index: int) -> str:
@@ -29,7 +22,7 @@ class FrameRenderer:
     """One plotter reused for every frame of a shot (creating a render window is the slow part)."""
 
     def __init__(self, *, size: tuple[int, int], camera: tuple, domain: tuple, title: str = ""):
-        pv = self.pv = _pv()
+        pv = self.pv = import_pyvista()
         self.plotter = pv.Plotter(off_screen=True, window_size=size, lighting="three lights")
         self.plotter.set_background("#20242c", top="#5d6d82")
         origin, L = np.asarray(domain[0], float), float(domain[1])

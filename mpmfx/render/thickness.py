@@ -14,10 +14,8 @@ def render_thickness_heatmap(mesh, vertex_thickness_cells: np.ndarray, path: str
     mesh: trimesh.Trimesh in metres. vertex_thickness_cells: (v,) thickness per vertex in
     sim cells. Colour runs red (0 cells) through yellow to green (2 x warn_cells and above).
     """
-    try:
-        import pyvista as pv
-    except ImportError as exc:  # a GPU farm node may run voxelise without pyvista
-        raise ImportError("the thickness heatmap needs pyvista: run `bash setup.sh` (or pip install pyvista)") from exc
+    from mpmfx.render import import_pyvista
+    pv = import_pyvista()
     values = np.asarray(vertex_thickness_cells, float)
     if values.shape != (len(mesh.vertices),):
         raise ValueError(f"vertex_thickness_cells has shape {values.shape}; expected "

@@ -22,8 +22,18 @@ NAME, VERSION, PER_FRAME, FRAME_EXT = "voxelise", 1, False, "npz"
 def params(shot: Shot) -> dict:
     objects = [o.model_dump(mode="json", include={"name", "prim_path", "translate", "rotate", "scale",
                                                   "velocity", "angular_velocity"}) for o in shot.objects]
+    for o, fluid in zip(objects, _fluid(shot)):
+        o["fluid"] = fluid
     return {"domain": shot.domain.model_dump(mode="json"), "objects": objects,
             "voxelise": shot.voxelise.model_dump(mode="json")}
+
+
+def _fluid(shot: Shot) -> list[bool]:
+    """Per object: is its material a fluid (water, tracer)? Fluids hold no shape: no thickness rule."""
+    from mpmfx.mpm.materials import PRESETS, Mode
+    by_name = {k.lower(): m for k, m in PRESETS.items()}
+    return [o.material.lower() in by_name and by_name[o.material.lower()].mode in (Mode.WATER, Mode.TRACER)
+            for o in shot.objects]
 
 
 def inputs(shot: Shot) -> dict[str, str]:
@@ -37,6 +47,7 @@ def run(ctx: Context) -> dict:
 
     shot, dom = ctx.shot, ctx.shot.domain
     xs, vs, vols, bodies, reports = [], [], [], [], {}
+    fluid = _fluid(shot)
     for body, obj in enumerate(ctx.progress(shot.objects, total=len(shot.objects), desc="voxelise")):
         path = shot.resolve(obj.mesh)
         try:
@@ -45,8 +56,10 @@ def run(ctx: Context) -> dict:
             check_in_domain(mesh, origin=dom.origin, size=dom.size, name=f"objects.{obj.name} ({path})")
         except MeshError as exc:
             raise StageError(str(exc)) from None
-        report = _thickness(ctx, obj, mesh, check_thickness, Verdict)
-        reports[obj.name] = report.to_dict()
+        if fluid[body]:
+            reports[obj.name] = {"skipped": "fluid: the five-cell rule is about holding a shape"}
+        else:
+            reports[obj.name] = _thickness(ctx, obj, mesh, check_thickness, Verdict).to_dict()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             vox = voxelise(mesh, origin=dom.origin, size=dom.size, grid_n=dom.grid_n,
@@ -66,7 +79,7 @@ def run(ctx: Context) -> dict:
     write_arrays(ctx.entry.root / "particles.npz", {"x": np.concatenate(xs), "v": np.concatenate(vs),
                                                     "volume": np.concatenate(vols), "body": np.concatenate(bodies)})
     n = sum(len(x) for x in xs)
-    return {"particles": n, "thickness": {k: r["verdict"] for k, r in reports.items()}}
+    return {"particles": n, "thickness": {k: r.get("verdict", "skipped") for k, r in reports.items()}}
 
 
 def _thickness(ctx, obj, mesh, check_thickness, Verdict):
