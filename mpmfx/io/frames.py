@@ -14,12 +14,16 @@ from mpmfx.cache import atomic_path
 FRAME_FORMAT = 1
 
 
-def write_arrays(path: str | Path, arrays: dict[str, np.ndarray]) -> Path:
-    """Write `arrays` to `path` (.npz) so that the file is complete or absent."""
+def write_arrays(path: str | Path, arrays: dict[str, np.ndarray], *, compress: bool = False) -> Path:
+    """Write `arrays` to `path` (.npz) so that the file is complete or absent.
+
+    compress: zlib (deterministic too); worth it for level sets, which are mostly +-background.
+    """
     path = Path(path)
+    save = np.savez_compressed if compress else np.savez
     with atomic_path(path) as tmp:
         with open(tmp, "wb") as f:
-            np.savez(f, _format=np.int32(FRAME_FORMAT), **arrays)
+            save(f, _format=np.int32(FRAME_FORMAT), **arrays)
     return path
 
 

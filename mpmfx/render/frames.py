@@ -82,7 +82,8 @@ def write_movie(frames: list[Path], path: Path, *, fps: float) -> Path:
     """H.264 mp4 of the PNGs (imageio-ffmpeg ships its own ffmpeg binary), written atomically."""
     import imageio.v2 as imageio
     tmp = path.with_name(f".{path.stem}.tmp.mp4")
-    with imageio.get_writer(tmp, fps=fps, codec="libx264", quality=8, macro_block_size=8) as w:
+    # H.264 needs even sizes only; 8 would resize 540-high frames
+    with imageio.get_writer(tmp, fps=fps, codec="libx264", quality=8, macro_block_size=2) as w:
         for f in frames:
             w.append_data(imageio.imread(f))
     tmp.replace(path)

@@ -77,7 +77,7 @@ def run(ctx: Context) -> dict:
                 out[f"{g}.vel_grid"] = res.velocity
             stats["vertices"] += len(m.vertices)
             stats["faces"] += len(m.faces)
-        write_arrays(entry.frame_path(f, FRAME_EXT), out)
+        write_arrays(entry.frame_path(f, FRAME_EXT), out, compress=True)
     return {"this_run": stats}
 
 
