@@ -8,6 +8,7 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import mpmfx
@@ -134,3 +135,33 @@ def test_cli_bad_config_exit_2(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "solver.cfll" in err and "did you mean 'cfl'" in err
     assert not (tmp_path / "c").exists()  # nothing cached from a bad config
+
+
+def test_exported_usd_matches_voxelised_plus_simulated(first_run):
+    """World mapping at the export boundary: USD points = voxelised position + simulated displacement."""
+    from pxr import Usd, UsdGeom
+
+    from mpmfx.io.frames import read_arrays
+    from mpmfx.io.usd import validate_stage
+    _, _, results = first_run
+    vox, sim, exp = results[0].entry, results[1].entry, results[3].entry
+    stage = Usd.Stage.Open(str(exp / "shot.usda"))
+    assert UsdGeom.GetStageUpAxis(stage) == "Y" and stage.GetTimeCodesPerSecond() == 24
+    points = UsdGeom.Points(stage.GetPrimAtPath("/World/cube/particles"))
+    x0 = read_arrays(vox / "particles.npz")["x"]
+    usd1 = np.asarray(points.GetPointsAttr().Get(1))
+    assert np.allclose(usd1, x0, atol=1e-6)  # frame 1 is the voxelised state, in metres
+    f6 = read_arrays(sim / "frames" / "0006.npz")
+    usd6 = np.asarray(points.GetPointsAttr().Get(6))
+    assert np.array_equal(usd6, f6["x"]) and not np.allclose(usd6, usd1)  # it moved, and export kept it exact
+    assert validate_stage(exp / "shot.usda") == []
+
+
+def test_exported_vdb_is_a_level_set(first_run):
+    from mpmfx.io.vdb import read_vdb
+    _, _, results = first_run
+    vdbs = sorted(results[3].entry.rglob("*.vdb"))
+    info = read_vdb(vdbs[0])
+    grid = info["grids"]["surface"]
+    assert grid["class"] == "level_set" and grid["active_voxel_count"] > 0
+    assert info["metadata"]["shot"] == "tiny"
