@@ -165,3 +165,31 @@ def test_exported_vdb_is_a_level_set(first_run):
     grid = info["grids"]["surface"]
     assert grid["class"] == "level_set" and grid["active_voxel_count"] > 0
     assert info["metadata"]["shot"] == "tiny"
+
+
+COLLIDER = """
+[[colliders]]
+name = "paddle"
+shape = "box"
+half_extents = [0.3, 0.04, 0.3]
+friction = 0.0
+keyframes = [{ time = 0.0, translate = [0.5, 0.2, 0.5] }, { time = 0.25, translate = [0.5, 0.28, 0.5] }]
+"""
+
+
+def test_moving_collider_holds_material_and_is_exported(tmp_path):
+    """A keyframed box rising under the falling cube: no particle ends inside it; USD has its motion."""
+    from pxr import Usd, UsdGeom
+    shot = write_tiny_shot(tmp_path, extra=COLLIDER)
+    results = mpmfx.load_shot(shot, cache_root=tmp_path / "c", quiet=True).run(until="export")
+    from mpmfx.io.frames import read_arrays
+    x = read_arrays(results[1].entry / "frames" / "0006.npz")["x"]
+    dx = 1.0 / 24
+    top = 0.2 + 0.08 * (5 / 24) / 0.25 + 0.04  # the paddle's top at frame 6 (t = 5/24 s)
+    # without the paddle the cube would have fallen to ~0.13 m; with it, it rests on the paddle's top
+    assert top - dx / 2 < x[:, 1].min() < top + 2 * dx
+    stage = Usd.Stage.Open(str(results[3].entry / "shot.usda"))
+    xf = UsdGeom.Xformable(stage.GetPrimAtPath("/World/colliders/paddle"))
+    y1 = xf.ComputeLocalToWorldTransform(1).ExtractTranslation()[1]
+    y6 = xf.ComputeLocalToWorldTransform(6).ExtractTranslation()[1]
+    assert y1 == pytest.approx(0.2) and y6 == pytest.approx(0.2 + 0.08 * (5 / 24) / 0.25)
