@@ -62,8 +62,8 @@ def thin_fin():
 
 def main():
     meshes = {"jelly_bear.obj": jelly_bear(), "snowball.obj": snowball(), "sand_column.obj": sand_column(),
-              "water_pool.obj": slab(0.7, 0.06, 0.7), "water_dam.obj": slab(0.35, 0.5, 0.9),
-              "snow_block.obj": slab(0.5, 0.2, 0.5), "thin_fin.obj": thin_fin()}
+              "water_pool.obj": slab(0.7, 0.06, 0.7), "water_dam.obj": slab(0.3, 0.4, 0.5),
+              "snow_block.obj": slab(0.3, 0.15, 0.3), "thin_fin.obj": thin_fin()}
     for name, m in meshes.items():
         assert m.is_watertight, name
         m.export(HERE / name)

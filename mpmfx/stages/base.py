@@ -50,3 +50,9 @@ class Stage(Protocol):
 
 
 ProgressFn = Callable[[int], None]
+
+
+def quiet_warp() -> None:
+    """Silence Warp's start-up banner and per-module compile lines; the stage has its own progress bar."""
+    import warp as wp
+    wp.config.quiet = True

@@ -17,7 +17,7 @@ from mpmfx.cache import write_json
 from mpmfx.config import Shot, ShotError
 from mpmfx.io.frames import read_arrays, write_arrays
 from mpmfx.stages import colliders as collider_build
-from mpmfx.stages.base import Context, StageError
+from mpmfx.stages.base import Context, StageError, quiet_warp
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "simulate", 1, True, "npz"
 KEEP_CHECKPOINTS = 2
@@ -67,6 +67,7 @@ def run(ctx: Context) -> dict:
     from mpmfx.mpm import Particles, SimulationError, Solver
     from mpmfx.stages import voxelise
 
+    quiet_warp()
     shot, entry = ctx.shot, ctx.entry
     origin, size = np.asarray(shot.domain.origin), shot.domain.size
     mats, obj_mat = materials(shot)

@@ -11,7 +11,7 @@ import numpy as np
 
 from mpmfx.config import Shot, SurfaceGroup
 from mpmfx.io.frames import read_arrays, write_arrays
-from mpmfx.stages.base import Context
+from mpmfx.stages.base import Context, quiet_warp
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "surface", 1, True, "npz"
 
@@ -56,6 +56,7 @@ def run(ctx: Context) -> dict:
     from mpmfx.stages.simulate import load_frame
     from mpmfx.surface import surface_particles
 
+    quiet_warp()
     shot, entry = ctx.shot, ctx.entry
     sp = surface_params(shot)
     names = group_names(shot)
