@@ -26,7 +26,7 @@ def jelly_bear():
     body = icosphere(3, 0.09)
     body.apply_scale([1.0, 1.2, 0.85])
     parts = [at(body, 0, 0.14, 0), at(icosphere(3, 0.08), 0, 0.28, 0),
-             at(icosphere(3, 0.06), -0.065, 0.35, 0), at(icosphere(3, 0.06), 0.065, 0.35, 0),
+             at(icosphere(3, 0.07), -0.07, 0.35, 0), at(icosphere(3, 0.07), 0.07, 0.35, 0),
              at(icosphere(3, 0.045), 0, 0.26, 0.06)]
     for s in (-1, 1):
         arm = capsule(height=0.06, radius=0.05)
