@@ -116,3 +116,61 @@ def test_pyvista_ant_legs_are_thin():
     centre = mesh.bounds.mean(0)[off_axis]
     spread = np.abs(verts[:, off_axis] - centre).max(1)
     assert np.median(spread[thin]) > np.median(spread[~thin])
+
+
+def test_thick_part_reads_within_ten_percent(domain):
+    # 12.8 cells: above warn_cells the sweep is coarser, but must stay within 10 %.
+    report = check_thickness(trimesh.creation.box(extents=(0.4,) * 3), grid_n=32, **domain)
+    assert report.min_thickness_cells == pytest.approx(12.8, rel=0.1)
+    assert report.min_grid_n_to_pass == 13  # 0.4 m is 5 cells at grid 12.5
+
+
+@pytest.mark.parametrize("mesh", [trimesh.creation.box(extents=(0.3,) * 3), rod(0.12)],
+                         ids=["box", "rod"])
+def test_min_grid_n_to_pass_is_the_smallest_passing_grid(domain, mesh):
+    need = check_thickness(mesh, grid_n=16, **domain).min_grid_n_to_pass
+    assert check_thickness(mesh, grid_n=need, **domain).verdict is Verdict.PASS
+    assert check_thickness(mesh, grid_n=need - 2, **domain).verdict is not Verdict.PASS
+
+
+def _max_inscribed_diameter(mesh, lo, hi, rng, n=20000):
+    """Independent of the raster: 2 x the largest exact distance to the mesh surface over
+    random points inside ``mesh`` and inside the box [lo, hi] (metres)."""
+    from trimesh.triangles import closest_point
+
+    from mpmfx.geometry.inside import winding_number
+
+    lo, hi = np.maximum(lo, mesh.bounds[0]), np.minimum(hi, mesh.bounds[1])
+    tris = np.asarray(mesh.triangles)
+    p = lo + rng.random((n, 3)) * (hi - lo)
+    p = p[winding_number(tris, p) > 0.5]
+    d = np.full(len(p), np.inf)
+    for f in range(len(tris)):
+        q = closest_point(np.repeat(tris[f:f + 1], len(p), 0), p)
+        d = np.minimum(d, np.linalg.norm(q - p, axis=1))
+    return 2.0 * d.max()
+
+
+def test_pyvista_ant_leg_thickness_matches_the_mesh():
+    from pyvista import examples
+
+    ant = examples.load_ant().triangulate()
+    mesh = trimesh.Trimesh(np.asarray(ant.points, float), ant.faces.reshape(-1, 4)[:, 1:])
+    size = float(mesh.extents.max()) * 1.1
+    report = check_thickness(mesh, grid_n=32, origin=mesh.bounds.mean(0) - size / 2,
+                             size=size, name="ant")
+    dx = report.dx
+    # No region for the pinched joints and leg tips (vertices meeting at a point).
+    assert all(r.thickness_cells > 0 for r in report.regions)
+    legs = [b for b in mesh.split(only_watertight=False) if 80 < len(b.faces) < 100][:2]
+    rng = np.random.default_rng(1)
+    checked = 0
+    for leg in legs:
+        for r in report.regions:
+            if np.all(r.bbox_min >= leg.bounds[0] - dx) and np.all(r.bbox_max <= leg.bounds[1] + dx):
+                truth = _max_inscribed_diameter(leg, r.bbox_min, r.bbox_max, rng) / dx
+                # The region reads its median thickness: below the thickest cross-section
+                # (the legs taper to their joints) but within a cell of it.
+                assert truth - 1.0 < r.thickness_cells <= truth + 0.1
+                checked += 1
+    assert checked >= 2
