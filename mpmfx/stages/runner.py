@@ -112,7 +112,14 @@ class ShotRun:
             ctx = Context(self.shot, entry, up, wanted if wanted is not None else [], self.device, self.quiet)
             t0 = time.perf_counter()
             entry.root.mkdir(parents=True, exist_ok=True)
-            extra = mod.run(ctx) or {}
+            try:
+                extra = mod.run(ctx) or {}
+            except BaseException:
+                # Complete frames stay (a re-run resumes from them); an entry with none is removed,
+                # so a failed run never leaves a half-made cache entry behind.
+                if state == "ran" and not (mod.PER_FRAME and entry.done_frames(mod.FRAME_EXT)):
+                    entry.remove()
+                raise
             seconds = time.perf_counter() - t0
             done = entry.done_frames(mod.FRAME_EXT) if mod.PER_FRAME else []
             old = entry.manifest() or {}

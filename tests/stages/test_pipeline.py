@@ -193,3 +193,13 @@ def test_moving_collider_holds_material_and_is_exported(tmp_path):
     y1 = xf.ComputeLocalToWorldTransform(1).ExtractTranslation()[1]
     y6 = xf.ComputeLocalToWorldTransform(6).ExtractTranslation()[1]
     assert y1 == pytest.approx(0.2) and y6 == pytest.approx(0.2 + 0.08 * (5 / 24) / 0.25)
+
+
+def test_mesh_outside_domain_fails_clearly_and_caches_nothing(tmp_path, capsys):
+    from mpmfx.cli import main
+    shot = write_tiny_shot(tmp_path)
+    code = main(["run", str(shot), "--set", "objects.0.translate=[3.0, 0.4, 0.5]", "--cache", str(tmp_path / "c")])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "objects.cube" in err and "cube.obj" in err and "domain" in err
+    assert not list((tmp_path / "c").rglob("voxelise-*"))  # no half-made entry
