@@ -26,13 +26,14 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import uuid
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from mpmfx.cache import atomic_path
 
 INSTALL_HINT = ("pxr (usd-core) is not importable: run `bash setup.sh`, or "
                 "`pip install usd-core` in the environment that runs mpmfx")
@@ -108,17 +109,9 @@ class ColliderSample:
 
 @contextlib.contextmanager
 def _atomic_target(path: Path) -> Iterator[Path]:
-    """Yield a fresh temp path beside `path` with the same suffix (USD picks the format from
-    it); rename it over `path` on success, delete it on failure: `path` is complete or untouched.
-    The writer creates the temp file itself, so it gets the usual (umask) permissions."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp_path = path.with_name(f".{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
-    try:
-        yield tmp_path
-        os.replace(tmp_path, path)
-    finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
+    """`mpmfx.cache.atomic_path`, then reload a layer this process already holds for `path`."""
+    with atomic_path(path) as tmp:
+        yield tmp
     _reload_if_open(path)
 
 

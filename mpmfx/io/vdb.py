@@ -8,17 +8,16 @@ pyopenvdb (Debian's python3-openvdb 10) is imported only inside the functions th
 """
 from __future__ import annotations
 
-import contextlib
 import enum
 import math
-import os
-import uuid
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from mpmfx.cache import atomic_path
 
 INSTALL_HINT = ("pyopenvdb is not importable: run `bash setup.sh` (it installs Debian's "
                 "python3-openvdb and links it into the venv), or as root "
@@ -70,21 +69,6 @@ def import_pyopenvdb() -> Any:
     except ImportError as exc:
         raise ImportError(INSTALL_HINT) from exc
     return pyopenvdb
-
-
-@contextlib.contextmanager
-def _atomic_target(path: Path) -> Iterator[Path]:
-    """Yield a fresh temp path beside `path` with the same suffix; rename it over `path` on
-    success, delete it on failure, so `path` is complete or untouched. The writer creates the
-    temp file itself, so it gets the usual (umask) permissions."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp_path = path.with_name(f".{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
-    try:
-        yield tmp_path
-        os.replace(tmp_path, path)
-    finally:
-        if tmp_path.exists():
-            tmp_path.unlink()
 
 
 def _check_grid(grid: VdbGrid, path: Path) -> np.ndarray:
@@ -187,7 +171,7 @@ def write_vdb(path: str | Path, grids: Sequence[VdbGrid], *, metadata: dict[str,
     file_metadata = _check_metadata(metadata, path)
     vdb = import_pyopenvdb()
     vdb_grids = [_build_grid(vdb, g, values) for g, values in checked]
-    with _atomic_target(path) as tmp:
+    with atomic_path(path) as tmp:
         vdb.write(str(tmp), grids=vdb_grids, metadata=file_metadata)
     return path
 

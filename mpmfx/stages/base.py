@@ -56,3 +56,4 @@ def quiet_warp() -> None:
     """Silence Warp's start-up banner and per-module compile lines; the stage has its own progress bar."""
     import warp as wp
     wp.config.quiet = True
+    wp.config.log_level = wp.LOG_WARNING  # Warp 1.19 prints module loads at INFO

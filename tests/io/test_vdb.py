@@ -121,7 +121,8 @@ def test_failed_write_leaves_no_file_and_keeps_the_old_one(tmp_path, monkeypatch
     def crash(*args, **kwargs):
         raise OSError("disk full")
 
-    monkeypatch.setattr(vdbio.os, "replace", crash)
+    import mpmfx.cache
+    monkeypatch.setattr(mpmfx.cache.os, "replace", crash)
     with pytest.raises(OSError, match="disk full"):
         write_vdb(path, _sphere_grids(), metadata={})
     monkeypatch.undo()
