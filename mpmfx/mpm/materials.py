@@ -55,8 +55,16 @@ class Material:
         bulk_modulus: Tait bulk modulus K, mass/(domain*s^2) (water):
             p = K * (J^-gamma - 1).
         eos_gamma: Tait exponent gamma, dimensionless (water).
-        volume_recovery: water grid volume recovery (guide §9.3). Not implemented yet:
-            the solver raises NotImplementedError when a material sets it.
+        volume_recovery: water only; grid volume recovery (guide §9.3 "fluid level slowly
+            drops"). J integrated through det(I + dt C) does not see particles packing
+            closer under shear, so the level sinks while J stays ~1. With this on, every
+            substep also measures J from the grid, J_grid = density / (grid density at the
+            particle), and relaxes J toward min(J_grid, 1) at `volume_recovery_rate`. The
+            target is capped at 1 because a free surface looks like expansion to the grid.
+            The grid density counts every material sharing the velocity field: near a
+            solid of another density use multi_field.
+        volume_recovery_rate: 1/s, how fast J relaxes toward the grid's J (a rate, so the
+            result does not depend on dt): J += (J_grid - J) * (1 - exp(-rate * dt)).
         clamp_pressure: water only; clamp the pressure to p >= 0 so water in tension
             does not clump into strings (validation.md §5).
     """
@@ -76,6 +84,7 @@ class Material:
     bulk_modulus: float = 100.0
     eos_gamma: float = 7.0
     volume_recovery: bool = False
+    volume_recovery_rate: float = 10.0
     clamp_pressure: bool = True
 
     def __post_init__(self) -> None:
@@ -98,6 +107,7 @@ class Material:
             ("cohesion", self.cohesion >= 0, "must be >= 0"),
             ("bulk_modulus", self.bulk_modulus > 0, "must be > 0"),
             ("eos_gamma", self.eos_gamma >= 1, "must be >= 1"),
+            ("volume_recovery_rate", self.volume_recovery_rate >= 0, "must be >= 0 (a rate, 1/s)"),
         ]
         for name, ok, what in checks:
             value = getattr(self, name)
