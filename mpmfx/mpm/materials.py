@@ -59,10 +59,13 @@ class Material:
             drops"). J integrated through det(I + dt C) does not see particles packing
             closer under shear, so the level sinks while J stays ~1. With this on, every
             substep also measures J from the grid, J_grid = density / (grid density at the
-            particle), and relaxes J toward min(J_grid, 1) at `volume_recovery_rate`. The
-            target is capped at 1 because a free surface looks like expansion to the grid.
-            The grid density counts every material sharing the velocity field: near a
-            solid of another density use multi_field.
+            particle), and relaxes J toward min(J_grid, 1) at `volume_recovery_rate`, where
+            every node of the particle's stencil is at least half full. A free surface looks
+            like expansion to the grid, so the top ~1.5 cells are left alone (and the target
+            is capped at 1). It restores volume lost by packing; it does not remove volume
+            gained by aeration (stirred water trapping one-cell voids: the grid cannot tell
+            those from a surface). The grid density counts every material sharing the
+            velocity field: next to a solid of another density use multi_field.
         volume_recovery_rate: 1/s, how fast J relaxes toward the grid's J (a rate, so the
             result does not depend on dt): J += (J_grid - J) * (1 - exp(-rate * dt)).
         clamp_pressure: water only; clamp the pressure to p >= 0 so water in tension
