@@ -37,6 +37,9 @@ class MaterialParams:
     bulk_modulus: float
     eos_gamma: float
     clamp_pressure: int
+    density: float
+    volume_recovery: int
+    volume_recovery_rate: float
 
 
 def pack_material(m: Material) -> MaterialParams:
@@ -57,6 +60,9 @@ def pack_material(m: Material) -> MaterialParams:
     p.bulk_modulus = m.bulk_modulus
     p.eos_gamma = m.eos_gamma
     p.clamp_pressure = int(m.clamp_pressure)
+    p.density = m.density
+    p.volume_recovery = int(m.volume_recovery and m.mode == Mode.WATER)
+    p.volume_recovery_rate = m.volume_recovery_rate
     return p
 
 
@@ -153,7 +159,10 @@ def solid_tau(mat: MaterialParams, F: wp.mat33, jp: float) -> wp.mat33:
 def snow_return_map(mat: MaterialParams, F: wp.mat33, jp: float) -> wp.mat44:
     """Stomakhin clamp (guide §7.2): singular values of the trial elastic F into
     [1 - theta_c, 1 + theta_s]; the clamped-away volume goes into Jp, clamped to
-    [jp_min, jp_max]. Returns mat44 packing (new F in the 3x3 block, new Jp at [3,3])."""
+    [jp_min, jp_max]. Returns mat44 packing (new F in the 3x3 block, new Jp at [3,3]).
+    F must not be inverted (G2P mirrors inverted particles first, see `uninvert`).
+    F is rebuilt from its SVD only when the clamp fires: each rebuild shrinks the
+    singular values by ~1e-6 (float32 SVD), which would otherwise creep in every substep."""
     Fe = F
     jp_new = jp
     if mat.plastic != 0:
@@ -161,9 +170,11 @@ def snow_return_map(mat: MaterialParams, F: wp.mat33, jp: float) -> wp.mat44:
         lo = 1.0 - mat.theta_c
         hi = 1.0 + mat.theta_s
         sc = wp.vec3(wp.clamp(sig[0], lo, hi), wp.clamp(sig[1], lo, hi), wp.clamp(sig[2], lo, hi))
-        jp_new = jp * (sig[0] * sig[1] * sig[2]) / (sc[0] * sc[1] * sc[2])
-        jp_new = wp.clamp(jp_new, mat.jp_min, mat.jp_max)
-        Fe = U * wp.diag(sc) * wp.transpose(V)
+        clamped = sc[0] != sig[0] or sc[1] != sig[1] or sc[2] != sig[2]
+        if clamped:
+            jp_new = jp * (sig[0] * sig[1] * sig[2]) / (sc[0] * sc[1] * sc[2])
+            jp_new = wp.clamp(jp_new, mat.jp_min, mat.jp_max)
+            Fe = U * wp.diag(sc) * wp.transpose(V)
     return pack_f_jp(Fe, jp_new)
 
 
@@ -185,6 +196,7 @@ def sand_return_map(mat: MaterialParams, F: wp.mat33, vc: float) -> wp.mat44:
     trc = tr - mat.cohesion
     vc_new = float(0.0)
     eps_new = eps
+    projected = bool(True)
     if trc >= 0.0:
         # beyond the apex: no strength at all; keep the cohesive part only
         eps_new = wp.vec3(mat.cohesion / 3.0)
@@ -192,7 +204,66 @@ def sand_return_map(mat: MaterialParams, F: wp.mat33, vc: float) -> wp.mat44:
             vc_new = trc
     else:
         dgamma = norm + (3.0 * mat.lambda0 + 2.0 * mat.mu0) / (2.0 * mat.mu0) * trc * mat.dp_alpha
-        if dgamma > 0.0:
+        projected = dgamma > 0.0
+        if projected:
             eps_new = eps - (dgamma / norm) * eps_hat
-    s = wp.vec3(wp.exp(eps_new[0]), wp.exp(eps_new[1]), wp.exp(eps_new[2]))
-    return pack_f_jp(U * wp.diag(s) * wp.transpose(V), vc_new)
+    Fe = F
+    if projected:  # rebuild only when projected (each SVD rebuild drifts ~1e-6)
+        s = wp.vec3(wp.exp(eps_new[0]), wp.exp(eps_new[1]), wp.exp(eps_new[2]))
+        Fe = U * wp.diag(s) * wp.transpose(V)
+    return pack_f_jp(Fe, vc_new)
+
+
+@wp.func
+def uninvert(F: wp.mat33) -> wp.mat33:
+    """Mirror an inverted F (det F <= 0) back out: U diag(|sigma|) V^T.
+
+    wp.svd3 returns rotations U, V (det +1) and puts the sign of det F on the smallest
+    singular value, so R = U V^T is a proper rotation and fixed-corotated stays well defined
+    through inversion (Irving et al. 2004). That alone does not save a particle whose
+    neighbours are not inverted: all of them share one smooth grid velocity, and the joint
+    energy of an inverted and a non-inverted particle is smallest at J = 0, so the body
+    flattens. An inversion is therefore treated as a plastic event: the particle keeps the
+    magnitude of its stretches and forgets the reflection (a sigma of -0.1 becomes 0.1, still
+    compressed and pushing outward; a mirror image F = diag(-1, 1, 1) becomes a rotation)."""
+    U, sig, V = wp.svd3(F)
+    s = wp.vec3(wp.abs(sig[0]), wp.abs(sig[1]), wp.abs(sig[2]))
+    return U * wp.diag(s) * wp.transpose(V)
+
+
+@wp.func
+def solid_energy_density(mat: MaterialParams, F: wp.mat33, jp: float) -> float:
+    """Elastic energy per rest volume, mass/(domain*s^2): hardened fixed-corotated
+    mu h sum (sigma_i - 1)^2 + lambda h / 2 (J - 1)^2 (snow), or St. Venant-Kirchhoff on
+    Hencky strain mu sum eps_i^2 + lambda / 2 (tr eps)^2 (sand). Both are the potentials of
+    the stresses `solid_tau` applies."""
+    U, sig, V = wp.svd3(F)
+    if mat.mode == MODE_SAND:
+        eps = wp.vec3(
+            wp.log(wp.max(wp.abs(sig[0]), 1.0e-4)),
+            wp.log(wp.max(wp.abs(sig[1]), 1.0e-4)),
+            wp.log(wp.max(wp.abs(sig[2]), 1.0e-4)),
+        )
+        tr = eps[0] + eps[1] + eps[2]
+        return mat.mu0 * wp.dot(eps, eps) + 0.5 * mat.lambda0 * tr * tr
+    h = hardening_factor(mat, jp)
+    d = sig - wp.vec3(1.0)
+    J = sig[0] * sig[1] * sig[2]
+    return h * (mat.mu0 * wp.dot(d, d) + 0.5 * mat.lambda0 * (J - 1.0) * (J - 1.0))
+
+
+@wp.func
+def tait_energy_density(mat: MaterialParams, J: float) -> float:
+    """Energy per rest volume stored by the Tait pressure, psi(J) = -int_1^J p dJ:
+    K ((J^(1-gamma) - 1) / (gamma - 1) + J - 1), K (J - 1 - ln J) for gamma = 1.
+    Zero in tension when the pressure is clamped to p >= 0 (nothing stores it there)."""
+    Jc = wp.max(J, 1.0e-4)
+    if mat.clamp_pressure != 0 and Jc >= 1.0:
+        return 0.0
+    g = mat.eos_gamma
+    psi = float(0.0)
+    if g - 1.0 < 1.0e-6:
+        psi = Jc - 1.0 - wp.log(Jc)
+    else:
+        psi = (wp.pow(Jc, 1.0 - g) - 1.0) / (g - 1.0) + Jc - 1.0
+    return mat.bulk_modulus * psi

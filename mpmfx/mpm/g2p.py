@@ -20,12 +20,14 @@ from .constitutive import (
     hardening_factor,
     sand_return_map,
     snow_return_map,
+    uninvert,
 )
 from .state import SceneFlags
 
 # stats[] (float32) and counts[] (int32) slots, read by the stepper in solver.py
 STAT_MAX_SPEED, STAT_MAX_HARDENING, STAT_WATER_J_MIN, STAT_J_MIN, STAT_J_MAX = range(5)
-COUNT_NONFINITE, COUNT_TOO_FAR, COUNT_LOST, COUNT_GRID_NONFINITE, COUNT_PER_MATERIAL = range(5)
+# COUNT_INVERTED: particle-substeps whose trial F was inverted and got mirrored (not a rejection)
+COUNT_NONFINITE, COUNT_TOO_FAR, COUNT_LOST, COUNT_GRID_NONFINITE, COUNT_INVERTED, COUNT_PER_MATERIAL = range(6)
 N_STATS = 5
 
 
@@ -33,7 +35,9 @@ N_STATS = 5
 class G2PParams:
     """dt: s; inv_dx: 1/domain; affine_keep: 1 - drag*dt, the APIC -> PIC blend of C;
     lo, hi: allowed particle coordinate range, domain units; remove: 1 to deactivate
-    particles that leave [lo, hi] instead of clamping them; nodes: grid nodes per axis."""
+    particles that leave [lo, hi] instead of clamping them; nodes: grid nodes per axis;
+    deterministic, q_mass: how P2G stored the node masses (fixed point and its quantum),
+    read by water volume recovery."""
 
     dt: float
     inv_dx: float
@@ -42,6 +46,8 @@ class G2PParams:
     hi: float
     remove: int
     nodes: int
+    deterministic: int
+    q_mass: float
 
 
 @wp.func
@@ -69,17 +75,49 @@ def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float, field_o
 
 
 @wp.func
+def grid_density(gp: G2PParams, grid_m: wp.array3d(dtype=float), grid_fixed: wp.array4d(dtype=wp.int64),
+                 x: wp.vec3, field_offset: int):
+    """Grid density at the particle, mass/domain^3: sum w_i m_i / dx^3 over its 27 nodes
+    (exactly the rest density inside a uniformly sampled body at J = 1), and the smallest
+    node density among them (low near a free surface). Returns (density, smallest)."""
+    xg = x * gp.inv_dx
+    bi = int(wp.floor(xg[0] - 0.5))
+    bj = int(wp.floor(xg[1] - 0.5))
+    bk = int(wp.floor(xg[2] - 0.5))
+    W = bspline_weights(xg - wp.vec3(float(bi), float(bj), float(bk)))
+    bi += field_offset
+    rho = float(0.0)
+    m_min = float(1.0e30)
+    for i in range(3):
+        for j in range(3):
+            for k in range(3):
+                m = float(0.0)
+                if gp.deterministic != 0:
+                    m = float(grid_fixed[bi + i, bj + j, bk + k, 0]) * gp.q_mass
+                else:
+                    m = grid_m[bi + i, bj + j, bk + k]
+                rho += W[i, 0] * W[j, 1] * W[k, 2] * m
+                m_min = wp.min(m_min, m)
+    inv_vol = gp.inv_dx * gp.inv_dx * gp.inv_dx
+    return rho * inv_vol, m_min * inv_vol
+
+
+@wp.func
 def plastic_update(mat: MaterialParams, F: wp.mat33, jp: float, C: wp.mat33, dt: float):
-    """F^{n+1} = (I + dt C) F^n, then the return map of the particle's mode (guide §7.2).
-    Returns (elastic F, new Jp slot)."""
+    """F^{n+1} = (I + dt C) F^n, mirrored out if inverted (see constitutive.uninvert), then
+    the return map of the particle's mode (guide §7.2).
+    Returns (elastic F, new Jp slot, det of the trial F: <= 0 means it was inverted)."""
     Ft = (wp.identity(n=3, dtype=float) + dt * C) * F
+    jt = wp.determinant(Ft)
+    if jt <= 0.0:
+        Ft = uninvert(Ft)
     r = wp.mat44(0.0)
     if mat.mode == MODE_SNOW:
         r = snow_return_map(mat, Ft, jp)
     else:
         r = sand_return_map(mat, Ft, jp)
     Fe = wp.mat33(r[0, 0], r[0, 1], r[0, 2], r[1, 0], r[1, 1], r[1, 2], r[2, 0], r[2, 1], r[2, 2])
-    return Fe, r[3, 3]
+    return Fe, r[3, 3], jt
 
 
 @wp.func
@@ -95,16 +133,34 @@ def keep_in_domain(gp: G2PParams, x: wp.vec3, counts: wp.array(dtype=wp.int32)):
     return wp.vec3(wp.clamp(x[0], gp.lo, gp.hi), wp.clamp(x[1], gp.lo, gp.hi), wp.clamp(x[2], gp.lo, gp.hi)), 1
 
 
+@wp.func
+def recover_volume(gp: G2PParams, mat: MaterialParams, grid_m: wp.array3d(dtype=float),
+                   grid_fixed: wp.array4d(dtype=wp.int64), x: wp.vec3, field_offset: int, J: float) -> float:
+    """Water grid volume recovery (materials.Material.volume_recovery): relax J toward the
+    volume ratio the grid measures, capped at 1. Only where every node of the stencil is at
+    least half full: near a free surface the grid reads missing neighbours as expansion, and
+    relaxing toward it takes the pressure away there, so the top layer packs and the level
+    sinks (measured: 0.25 % of the depth per second in a still tank)."""
+    rho, rho_min = grid_density(gp, grid_m, grid_fixed, x, field_offset)
+    if rho_min < 0.5 * mat.density:
+        return J
+    target = wp.min(mat.density / rho, 1.0)
+    return J + (target - J) * (1.0 - wp.exp(-mat.volume_recovery_rate * gp.dt))
+
+
 @functools.lru_cache(maxsize=None)
 def make_g2p(flags: SceneFlags):
     """G2P kernel specialised for the scene's materials (see p2g.make_p2g)."""
     has_solid = flags.solid
     has_water = flags.water
+    recovery = flags.volume_recovery
 
     @wp.kernel(enable_backward=False, module=flags.key)
     def g2p(
         gp: G2PParams,
         grid_v: wp.array3d(dtype=wp.vec3),
+        grid_m: wp.array3d(dtype=float),
+        grid_fixed: wp.array4d(dtype=wp.int64),
         materials: wp.array(dtype=MaterialParams),
         material: wp.array(dtype=wp.int32),
         field_id: wp.array(dtype=wp.int32),
@@ -138,8 +194,12 @@ def make_g2p(flags: SceneFlags):
             finite = bool(True)
             if wp.static(has_solid):
                 if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
-                    F_new, jp_new = plastic_update(mat, F_new, jp_new, C_new, gp.dt)
+                    F_new, jp_new, j_trial = plastic_update(mat, F_new, jp_new, C_new, gp.dt)
                     j_now = wp.determinant(F_new)
+                    if j_trial <= 0.0:
+                        # mirrored back out; the J stats keep the inversion so QA sees it
+                        wp.atomic_add(counts, COUNT_INVERTED, 1)
+                        j_now = j_trial
                     finite = wp.isfinite(F_new) and wp.isfinite(jp_new)
                     if mat.mode == MODE_SNOW:
                         wp.atomic_max(stats, STAT_MAX_HARDENING, hardening_factor(mat, jp_new))
@@ -147,6 +207,9 @@ def make_g2p(flags: SceneFlags):
                 if mat.mode == MODE_WATER:
                     # water keeps only its volume ratio: J^{n+1} = det(I + dt C) J^n
                     J_new = J_new * wp.determinant(wp.identity(n=3, dtype=float) + gp.dt * C_new)
+                    if wp.static(recovery):
+                        if mat.volume_recovery != 0:
+                            J_new = recover_volume(gp, mat, grid_m, grid_fixed, x[p], field_id[p] * gp.nodes, J_new)
                     if mat.clamp_pressure != 0:
                         # no tension: a separating splash must not remember its expansion,
                         # or it lands fluffy and stress-free until squeezed back to J = 1

@@ -55,8 +55,19 @@ class Material:
         bulk_modulus: Tait bulk modulus K, mass/(domain*s^2) (water):
             p = K * (J^-gamma - 1).
         eos_gamma: Tait exponent gamma, dimensionless (water).
-        volume_recovery: water grid volume recovery (guide §9.3). Not implemented yet:
-            the solver raises NotImplementedError when a material sets it.
+        volume_recovery: water only; grid volume recovery (guide §9.3 "fluid level slowly
+            drops"). J integrated through det(I + dt C) does not see particles packing
+            closer under shear, so the level sinks while J stays ~1. With this on, every
+            substep also measures J from the grid, J_grid = density / (grid density at the
+            particle), and relaxes J toward min(J_grid, 1) at `volume_recovery_rate`, where
+            every node of the particle's stencil is at least half full. A free surface looks
+            like expansion to the grid, so the top ~1.5 cells are left alone (and the target
+            is capped at 1). It restores volume lost by packing; it does not remove volume
+            gained by aeration (stirred water trapping one-cell voids: the grid cannot tell
+            those from a surface). The grid density counts every material sharing the
+            velocity field: next to a solid of another density use multi_field.
+        volume_recovery_rate: 1/s, how fast J relaxes toward the grid's J (a rate, so the
+            result does not depend on dt): J += (J_grid - J) * (1 - exp(-rate * dt)).
         clamp_pressure: water only; clamp the pressure to p >= 0 so water in tension
             does not clump into strings (validation.md §5).
     """
@@ -76,6 +87,7 @@ class Material:
     bulk_modulus: float = 100.0
     eos_gamma: float = 7.0
     volume_recovery: bool = False
+    volume_recovery_rate: float = 10.0
     clamp_pressure: bool = True
 
     def __post_init__(self) -> None:
@@ -98,6 +110,7 @@ class Material:
             ("cohesion", self.cohesion >= 0, "must be >= 0"),
             ("bulk_modulus", self.bulk_modulus > 0, "must be > 0"),
             ("eos_gamma", self.eos_gamma >= 1, "must be >= 1"),
+            ("volume_recovery_rate", self.volume_recovery_rate >= 0, "must be >= 0 (a rate, 1/s)"),
         ]
         for name, ok, what in checks:
             value = getattr(self, name)

@@ -25,6 +25,7 @@ from .clear_grid import clear_grid
 from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
 from .constitutive import MaterialParams, pack_material
+from .energy import make_energy
 from .g2p import G2PParams, make_g2p
 from .grid_update import WALL_CODES, GridParams, grid_update
 from .materials import Material, Mode
@@ -64,8 +65,12 @@ class StepReport:
 
     cfl_used: largest dt * (c_max + |v|max) / dx, with c and |v| measured at the end of
     each accepted substep (the CFL actually experienced); momentum: (3,);
-    elastic_energy: None (not computed); j_min, j_max: range of J (det F for solids, J for
-    water) over the accepted substeps.
+    kinetic_energy, elastic_energy: at the end of the advance, mass*domain^2/s^2 (see
+    `Solver.elastic_energy`); their sum is conserved by an undamped scene without walls;
+    j_min, j_max: range of J (det F for solids, J for water) over the accepted substeps;
+    j_min <= 0 when a particle inverted, even though it was mirrored back out;
+    inverted: particle-substeps whose F inverted (det F <= 0) and was mirrored back out
+    (see `constitutive.uninvert`); 0 in a healthy run.
     """
 
     substeps: int
@@ -82,6 +87,7 @@ class StepReport:
     j_min: float
     j_max: float
     wall_time_s: float
+    inverted: int = 0
 
 
 def _pow2_at_least(x: float) -> float:
@@ -103,18 +109,15 @@ class Solver:
         for i, m in enumerate(self.materials):
             if not isinstance(m, Material):
                 raise ValueError(f"Solver: materials[{i}] is {type(m).__name__}, not a Material")
-            if m.volume_recovery:
-                raise NotImplementedError(
-                    f"materials[{i}].volume_recovery=True: grid volume recovery is not implemented "
-                    "yet; set it False"
-                )
         self.config = config
         self.colliders = tuple(colliders)
         self.device = wp.get_device(device)
         self.flags = SceneFlags.of(self.materials, multi_field=config.multi_field)
-        # specialised kernels for this scene: both land in one Warp module per flags
+        # specialised kernels for this scene: all three land in one Warp module per flags,
+        # built before the first launch so the module compiles once
         self._p2g = make_p2g(self.flags)
         self._g2p = make_g2p(self.flags)
+        self._energy = make_energy(self.flags)
         self._n_fields = 0
         self._allocate_grid(1)
         with wp.ScopedDevice(self.device):
@@ -122,6 +125,7 @@ class Solver:
             self._sdf = wp.array(concat_sdfs(self.colliders), dtype=float)
             self._colliders_dev = wp.empty(max(1, len(self.colliders)), dtype=ColliderParams)
             self._stats = wp.zeros(g2p_mod.N_STATS, dtype=float)
+            self._energy_sum = wp.zeros(1, dtype=wp.float64)
             self._counts = wp.zeros(g2p_mod.COUNT_PER_MATERIAL + len(self.materials), dtype=wp.int32)
             init = np.array([0.0, 0.0, 1e30, 1e30, -1e30], dtype=np.float32)
             self._stats_init = wp.array(init, dtype=float)
@@ -272,8 +276,9 @@ class Solver:
         gp.lo, gp.hi = 1.0 / cfg.grid_n, 1.0 - 1.0 / cfg.grid_n  # stencil stays on the grid
         gp.remove = int(cfg.out_of_domain == OutOfDomain.REMOVE)
         gp.nodes = nn
+        gp.deterministic, gp.q_mass = int(cfg.deterministic), self._q_mass
         wp.launch(self._g2p, dim=state.n, device=self.device, inputs=[
-            gp, self._grid_v, self._materials_dev, state.material, state.field_id, *cur.arrays(), *nxt.arrays(),
+            gp, self._grid_v, self._grid_m, self._grid_fixed, self._materials_dev, state.material, state.field_id, *cur.arrays(), *nxt.arrays(),
             self._stats, self._counts])
 
     def _grid_params(self, dt: float, n_fields: int) -> GridParams:
@@ -318,7 +323,7 @@ class Solver:
         self._last_bad = None
         total = (t1 - t0) * cfg.time_scale
         done, substeps, rejected = 0.0, 0, 0
-        dts, cfl_used, vmax, jmin, jmax, lost = [], 0.0, 0.0, math.inf, -math.inf, 0
+        dts, cfl_used, vmax, jmin, jmax, lost, inverted = [], 0.0, 0.0, math.inf, -math.inf, 0, 0
         while done < total:
             remaining = total - done
             dt_cfl = self._cfl_dt(state.clock)
@@ -361,7 +366,10 @@ class Solver:
                 jmin = min(jmin, float(stats[g2p_mod.STAT_J_MIN]))
                 jmax = max(jmax, float(stats[g2p_mod.STAT_J_MAX]))
             lost += int(counts[g2p_mod.COUNT_LOST])
-        return self._report(state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0)
+            inverted += int(counts[g2p_mod.COUNT_INVERTED])
+        report = self._report(state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0)
+        report.inverted = inverted
+        return report
 
     def _raise_too_small(self, state: State, t: float, dt: float) -> None:
         bad = getattr(self, "_last_bad", None)
@@ -393,9 +401,22 @@ class Solver:
             dt_min=min(dts) if dts else 0.0, dt_max=max(dts) if dts else 0.0,
             max_speed=vmax, cfl_used=cfl_used, particles_lost=lost, mass=float(m.sum()),
             momentum=(m[:, None] * v).sum(axis=0),
-            kinetic_energy=float(0.5 * (m * (v * v).sum(axis=1)).sum()), elastic_energy=None,
+            kinetic_energy=float(0.5 * (m * (v * v).sum(axis=1)).sum()),
+            elastic_energy=self.elastic_energy(state),
             j_min=jmin if dts else 1.0, j_max=jmax if dts else 1.0,
             wall_time_s=time.perf_counter() - wall0)
+
+    def elastic_energy(self, state: State) -> float:
+        """Energy stored in the particles' elastic state, mass*domain^2/s^2 (same units as
+        kinetic energy): sum of rest volume * energy density, with the hardened moduli of
+        snow, Hencky StVK for sand, the Tait potential for water, 0 for tracers. One
+        reduction kernel; `advance` calls it once per frame for the report."""
+        self._energy_sum.zero_()
+        cur = state.cur
+        wp.launch(self._energy, dim=state.n, device=self.device, inputs=[
+            self._materials_dev, state.material, state.volume, cur.F, cur.J, cur.Jp, cur.alive,
+            self._energy_sum])
+        return float(self._energy_sum.numpy()[0])
 
     # ------------------------------------------------------------------ I/O
     def state_to_numpy(self, state: State) -> dict[str, np.ndarray]:

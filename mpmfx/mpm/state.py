@@ -16,18 +16,21 @@ __all__ = ["SceneFlags", "ParticleBuffers", "StepperClock", "State"]
 class SceneFlags:
     """Which constitutive branches a scene compiles (guide: model only what the scene needs).
 
-    A water-only scene compiles no SVD and keeps no F; a snow-only scene keeps no J.
+    A water-only scene compiles no SVD and keeps no F; a snow-only scene keeps no J;
+    only a scene with water volume recovery compiles the grid-density gather.
     """
 
     snow: bool
     sand: bool
     water: bool
     multi_field: bool = False
+    volume_recovery: bool = False
 
     @classmethod
     def of(cls, materials, *, multi_field: bool = False) -> "SceneFlags":
         modes = {m.mode for m in materials}
-        return cls(Mode.SNOW in modes, Mode.SAND in modes, Mode.WATER in modes, bool(multi_field))
+        recovery = any(m.mode == Mode.WATER and m.volume_recovery for m in materials)
+        return cls(Mode.SNOW in modes, Mode.SAND in modes, Mode.WATER in modes, bool(multi_field), recovery)
 
     @property
     def solid(self) -> bool:
@@ -37,7 +40,8 @@ class SceneFlags:
     @property
     def key(self) -> str:
         """Name of the Warp module holding this scene's specialised P2G and G2P."""
-        flags = (("s", self.snow), ("g", self.sand), ("w", self.water), ("m", self.multi_field))
+        flags = (("s", self.snow), ("g", self.sand), ("w", self.water), ("m", self.multi_field),
+                 ("r", self.volume_recovery))
         tag = "".join(c for c, on in flags if on)
         return f"mpmfx_mpm_scene_{tag or 'tracer'}"
 

@@ -72,3 +72,8 @@ def test_solver_config_validation():
         SolverConfig(cfl=0.0)
     with pytest.raises(ValueError, match="damping.*rate"):
         SolverConfig(damping=-1.0)
+
+
+def test_volume_recovery_rate_is_validated():
+    with pytest.raises(ValueError, match="volume_recovery_rate.*rate"):
+        preset("Water", volume_recovery=True, volume_recovery_rate=-1.0)

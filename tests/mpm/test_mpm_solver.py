@@ -215,8 +215,6 @@ def test_bad_inputs_raise_clear_errors():
         solver.init_state(Particles(p.x, p.v, p.volume, p.material + 1, p.body))
     with pytest.raises(ValueError, match=r"Particles.v: shape"):
         solver.init_state(Particles(p.x, p.v[:-1], p.volume, p.material, p.body))
-    with pytest.raises(NotImplementedError, match="volume_recovery"):
-        Solver([preset("Water", volume_recovery=True)], SolverConfig(), device="cpu")
     multi = Solver([preset("Soft")], SolverConfig(grid_n=16, multi_field=True), device="cpu")
     with pytest.raises(ValueError, match="Particles.body: 9 distinct bodies.*multi_field=False"):
         multi.init_state(Particles(p.x, p.v, p.volume, p.material, np.arange(len(p.x)) % 9))
