@@ -40,6 +40,17 @@ def file_hash(path: str | Path) -> str:
     return h.hexdigest()
 
 
+def code_hash(package: str) -> str:
+    """sha256 over a package's .py sources: a cache made by other solver/surfacer code is stale."""
+    import importlib.util
+    spec = importlib.util.find_spec(package)
+    folder = Path(spec.origin).parent
+    h = hashlib.sha256()
+    for p in sorted(folder.rglob("*.py")):
+        h.update(p.relative_to(folder).as_posix().encode() + b"\0" + p.read_bytes())
+    return h.hexdigest()
+
+
 def stage_key(stage: str, version: int, params: dict, upstream: dict[str, str], inputs: dict[str, str]) -> str:
     """sha256 over what determines a stage's output. `inputs`: name -> file hash."""
     payload = {"stage": stage, "version": version, "params": params, "upstream": upstream, "inputs": inputs}

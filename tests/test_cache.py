@@ -28,3 +28,9 @@ def test_entry_complete_only_with_manifest(tmp_path):
     assert e.done_frames("npz") == [1] and not e.complete([1])
     e.write_manifest(frames=[1], timings={})
     assert e.complete([1]) and not e.complete([1, 2])
+
+
+def test_code_hash_tracks_the_package_sources():
+    from mpmfx.cache import code_hash
+    assert code_hash("mpmfx.mpm") == code_hash("mpmfx.mpm")  # stable
+    assert code_hash("mpmfx.mpm") != code_hash("mpmfx.surface")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from mpmfx.cache import code_hash
 from mpmfx.config import Shot
 from mpmfx.stages.base import Context
 
@@ -20,7 +21,7 @@ def params(shot: Shot) -> dict:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {}
+    return {"code": code_hash("mpmfx.io")}
 
 
 def run(ctx: Context) -> dict:

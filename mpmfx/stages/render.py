@@ -8,6 +8,7 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
+from mpmfx.cache import code_hash
 from mpmfx.config import Shot
 from mpmfx.stages.base import Context
 
@@ -21,7 +22,7 @@ def params(shot: Shot) -> dict:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {}
+    return {"code": code_hash("mpmfx.render")}
 
 
 def run(ctx: Context) -> dict:

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from mpmfx.cache import write_json
+from mpmfx.cache import code_hash, write_json
 from mpmfx.config import Shot, ShotError
 from mpmfx.io.frames import read_arrays, write_arrays
 from mpmfx.stages import colliders as collider_build
@@ -34,7 +34,7 @@ def params(shot: Shot) -> dict:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return collider_build.inputs(shot)
+    return {"code": code_hash("mpmfx.mpm"), **collider_build.inputs(shot)}
 
 
 def materials(shot: Shot) -> tuple[list, list[int]]:

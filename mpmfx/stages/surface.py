@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from mpmfx.cache import code_hash
+
 from mpmfx.config import Shot, SurfaceGroup
 from mpmfx.io.frames import read_arrays, write_arrays
 from mpmfx.stages.base import Context, quiet_warp
@@ -23,7 +25,7 @@ def params(shot: Shot) -> dict:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {}
+    return {"code": code_hash("mpmfx.surface")}
 
 
 def particle_spacing(shot: Shot) -> float:

@@ -11,7 +11,7 @@ import warnings
 
 import numpy as np
 
-from mpmfx.cache import file_hash, write_json
+from mpmfx.cache import code_hash, file_hash, write_json
 from mpmfx.config import Shot, Thickness
 from mpmfx.io.frames import write_arrays
 from mpmfx.stages.base import Context, StageError
@@ -37,7 +37,7 @@ def _fluid(shot: Shot) -> list[bool]:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {o.name: file_hash(shot.resolve(o.mesh)) for o in shot.objects}
+    return {"code": code_hash("mpmfx.geometry"), **{o.name: file_hash(shot.resolve(o.mesh)) for o in shot.objects}}
 
 
 def run(ctx: Context) -> dict:
