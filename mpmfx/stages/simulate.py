@@ -25,10 +25,11 @@ KEEP_CHECKPOINTS = 2
 
 def params(shot: Shot) -> dict:
     # frame_end is left out on purpose: a longer shot continues from the cached frames.
+    mats, object_material = materials(shot)
     return {"domain": shot.domain.model_dump(mode="json"),
             "solver": shot.solver.model_dump(mode="json", exclude={"checkpoint_every"}),
-            "materials": [m.__dict__ | {"mode": int(m.mode)} for m in materials(shot)[0]],
-            "object_material": materials(shot)[1],
+            "materials": [m.__dict__ | {"mode": int(m.mode)} for m in mats],
+            "object_material": object_material,
             "colliders": [c.model_dump(mode="json") for c in shot.colliders],
             "time": {"fps": shot.shot.fps, "frame_start": shot.shot.frame_start}}
 
@@ -118,7 +119,8 @@ def _write_frame(ctx, solver, state, frame: int, origin, size: float) -> None:
 
 
 def _qa(report, size: float) -> dict:
-    """The frame's observables in world units (issue 5), JSON-safe."""
+    """The frame's observables (issue 5), JSON-safe: max_speed in m/s; mass, momentum and
+    energies in the solver's domain units (the presets' units), comparable frame to frame."""
     d = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in vars(report).items()}
     if "max_speed" in d:
         d["max_speed"] = float(d["max_speed"]) * size
