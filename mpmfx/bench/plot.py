@@ -17,10 +17,8 @@ def speed_error_plot(rows: list[dict], out: str | Path, *, name: str = "accuracy
     """One line per case: x = wall seconds of stepping, y = error (both log10). Rows with a
     non-positive error or time (exact to round-off) cannot sit on a log axis and are left
     out. Writes `<out>/<name>.png` (1000 x 700) and returns its path."""
-    try:
-        import pyvista as pv
-    except ImportError as err:
-        raise ImportError("pyvista is not installed (pip install pyvista)") from err
+    from mpmfx.render import import_pyvista
+    pv = import_pyvista()
     chart = pv.Chart2D(x_label="wall time of the run, s (log)", y_label="error against reference (log)")
     chart.title = "mpmfx bench accuracy: speed against error"
     drawn = 0

@@ -88,3 +88,14 @@ def write_movie(frames: list[Path], path: Path, *, fps: float) -> Path:
             w.append_data(imageio.imread(f))
     tmp.replace(path)
     return path
+
+
+def contact_sheet(frames: list[Path], path: Path, *, count: int = 4, scale: int = 2) -> Path:
+    """`count` evenly spaced frames side by side, each downsampled by `scale`: one picture of a shot."""
+    import imageio.v2 as imageio
+    picks = [frames[round(i * (len(frames) - 1) / max(count - 1, 1))] for i in range(min(count, len(frames)))]
+    images = [np.asarray(imageio.imread(p))[::scale, ::scale, :3] for p in picks]
+    tmp = path.with_name(f".{path.stem}.tmp.png")
+    imageio.imwrite(tmp, np.concatenate(images, axis=1))
+    tmp.replace(path)
+    return path

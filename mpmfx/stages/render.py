@@ -27,7 +27,7 @@ def inputs(shot: Shot) -> dict[str, str]:
 
 def run(ctx: Context) -> dict:
     from mpmfx.render.camera import default_camera
-    from mpmfx.render.frames import FrameRenderer, colour_for, write_movie
+    from mpmfx.render.frames import FrameRenderer, colour_for, contact_sheet, write_movie
     from mpmfx.stages import simulate
     from mpmfx.stages.surface import group_names, load_frame_groups, particle_spacing
 
@@ -56,16 +56,17 @@ def run(ctx: Context) -> dict:
     movie = None
     if r.movie and len(pngs) > 1:
         movie = write_movie(pngs, entry.root / f"{shot.shot.name}.mp4", fps=shot.shot.fps)
-    out = publish(shot, pngs, movie)
+    sheet = contact_sheet(pngs, entry.root / "contact.png") if pngs else None
+    out = publish(shot, pngs, [p for p in (movie, sheet) if p is not None])
     return {"published": str(out)}
 
 
-def publish(shot: Shot, pngs: list[Path], movie: Path | None) -> Path:
-    """Copy the frames and movie to renders/<shot>/ (next to the working directory's cache)."""
+def publish(shot: Shot, pngs: list[Path], extras: list[Path]) -> Path:
+    """Copy the frames, the movie and the contact sheet to renders/<shot>/ (in the working directory)."""
     out = Path("renders") / shot.shot.name
     out.mkdir(parents=True, exist_ok=True)
     for p in pngs:
         shutil.copyfile(p, out / p.name)
-    if movie is not None:
-        shutil.copyfile(movie, out / movie.name)
+    for p in extras:
+        shutil.copyfile(p, out / p.name)
     return out

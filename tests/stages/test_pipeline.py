@@ -50,7 +50,8 @@ def test_full_run_produces_every_output(first_run):
     assert (exp / "shot.usda").is_file() and len(list((exp / "frames").glob("*.usdc"))) == 6
     assert len(list(exp.rglob("*.vdb"))) == 6
     assert len(list((ren / "frames").glob("*.png"))) == 6
-    assert len(list((shot.parent / "renders" / "tiny").glob("*.png"))) == 6
+    assert len(list((shot.parent / "renders" / "tiny").glob("[0-9]*.png"))) == 6
+    assert (shot.parent / "renders" / "tiny" / "contact.png").is_file()
 
 
 def test_second_run_is_all_cache_hits(first_run):
