@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from mpmfx.surface.params import LevelSet, Method, SurfaceMesh, SurfaceParams, SurfaceResult
+from mpmfx.surface.params import Grid, LevelSet, Method, SurfaceMesh, SurfaceParams, SurfaceResult
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +48,11 @@ def surface_particles(
 
     wp.init()
     dev = wp.get_device(device)
+    if params.grid is Grid.SPARSE and params.method is Method.ZHU_BRIDSON and params.min_feature_particles == 0:
+        from mpmfx.surface.sparse import surface_sparse
+
+        with wp.ScopedDevice(dev):
+            return surface_sparse(wp, x, v, params)
     timings: dict[str, float] = {}
     grid = _Grid.fit(x, params)
     with wp.ScopedDevice(dev):
