@@ -31,6 +31,9 @@ MAX_BLOCKS = 1 << 28  # block-grid cells (int32 each): 2^28 blocks = 2^37 voxels
 MAX_GROW_STEPS = 4096
 CHECK_EVERY = 8  # propagation steps between convergence checks (each check synchronises)
 
+last_stats: dict = {}
+"""Cumulative seconds after each stage, active blocks, flood-fill steps of the latest call (for the bench)."""
+
 
 class SparseGrid:
     """Block grid aligned to multiples of 8 voxels (OpenVDB leaf alignment), with empty margins."""
@@ -44,8 +47,10 @@ class SparseGrid:
         self.far_vox = max(self.kernel_vox, self.r_vox + params.band_voxels + 1.0)
         self.wide = float(params.band_voxels + params.smooth_iters + 2)
         # a voxel whose field matters lies within kernel support + dilation + band + blur of a particle
-        reach = self.kernel_vox + max(params.dilate, 0.0) / self.voxel + self.wide + 1.0
-        self.reach_blocks = int(math.ceil(reach / BS))
+        # a voxel whose final value is not +background lies within r + dilation + band + blur of
+        # a particle; +2 voxels for the gradient stencils
+        self.reach_vox = self.r_vox + max(params.dilate, 0.0) / self.voxel + self.wide + 2.0
+        self.reach_blocks = int(math.ceil(max(self.reach_vox, self.kernel_vox) / BS))
         self.dense_reach = int(math.ceil(self.kernel_vox / BS))
         # particles per block in a full packing (spacing ~ 2 r); a quarter of that marks "dense"
         self.dense_min = max(1, int((BS * self.voxel / (2.0 * params.particle_radius)) ** 3 / 4))
@@ -74,7 +79,7 @@ def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParam
     n = x.shape[0]
     g = wp.array(((x - grid.origin) / grid.voxel).astype(np.float32), dtype=wp.vec3)
     counts, starts, order = _bin_particles(wp, S, g, grid)
-    bmap, bcoord = _classify(wp, S, counts, grid)
+    bmap, bcoord = _classify(wp, S, g, counts, grid)
     nact = bcoord.shape[0]
     nvox = nact * BS**3
     timings["blocks"] = _lap(wp, t0)
@@ -94,7 +99,7 @@ def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParam
     mark = wp.zeros(max(nvox, 1), dtype=wp.int32)
     wp.launch(S.mark_particle_voxels, n, inputs=[g, bmap, mark])
     tiles = (grid.far_vox, -grid.r_vox)  # (outside, inside) tile values of the raw field
-    _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, use_marks=True)
+    steps = _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, use_marks=True)
     timings["topology"] = _lap(wp, t0)
     if params.dilate != 0.0 and nvox:
         wp.launch(S.add_scalar, nvox, inputs=[phi, -params.dilate / grid.voxel])
@@ -104,7 +109,7 @@ def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParam
     tiles = (grid.wide, -grid.wide)
     phi = _smooth(wp, S, bcoord, bmap, dist, params.smooth_iters, tiles)
     if params.smooth_iters > 0:
-        _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, use_marks=False)
+        steps += _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, use_marks=False)
     values = wp.empty_like(phi)
     _launch(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, grid.voxel, grid.background, values])
     tiles = (grid.background, -grid.background)
@@ -116,6 +121,8 @@ def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParam
     result = _dense_output(wp, S, bcoord, bmap, values, w, vel if with_v else None, grid, params, n, with_v)
     result.mesh, result.sparse = mesh, sparse
     timings["output"] = _lap(wp, t0)
+    last_stats.clear()
+    last_stats.update(timings, active_blocks=nact, fill_steps=steps)
     log.debug("surface_sparse n=%d blocks=%s active=%d timings=%s", n, grid.nblocks, nact, timings)
     return result
 
@@ -148,13 +155,15 @@ def _bin_particles(wp, S, g, grid: SparseGrid):
     return counts, starts, order
 
 
-def _classify(wp, S, counts, grid: SparseGrid):
+def _classify(wp, S, g, counts, grid: SparseGrid):
     """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates)."""
     from mpmfx.surface import kernels as K
     from mpmfx.surface.reconstruct import _sweep_until_stable
 
+    near = wp.zeros(grid.nblocks, dtype=wp.int32)
+    wp.launch(S.mark_near_blocks, g.shape[0], inputs=[g, grid.reach_vox, near])
     state = wp.empty(grid.nblocks, dtype=wp.int32)
-    wp.launch(S.classify_blocks, grid.nblocks, inputs=[counts, grid.reach_blocks, grid.dense_reach, grid.dense_min, state])
+    wp.launch(S.classify_blocks, grid.nblocks, inputs=[counts, near, grid.dense_reach, grid.dense_min, state])
     labels = wp.empty(grid.nblocks, dtype=wp.int32)
     wp.launch(S.outside_block_labels, grid.nblocks, inputs=[state, labels])
     _sweep_until_stable(wp, K, labels)

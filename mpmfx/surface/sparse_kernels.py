@@ -71,27 +71,52 @@ def count_blocks(
 
 
 @wp.kernel
+def mark_near_blocks(g: wp.array(dtype=wp.vec3), reach: float, near: wp.array3d(dtype=wp.int32)):
+    """near = 1 on blocks with a voxel within `reach` voxels of a particle (box distance)."""
+    p = wp.tid()
+    gp = g[p]
+    lo = wp.vec3i(0)
+    hi = wp.vec3i(0)
+    for a in range(3):
+        lo[a] = wp.max(int(wp.floor((gp[a] - reach) / 8.0)), 0)
+        hi[a] = wp.min(int(wp.floor((gp[a] + reach) / 8.0)), near.shape[a] - 1)
+    r2 = reach * reach
+    for bi in range(lo[0], hi[0] + 1):
+        for bj in range(lo[1], hi[1] + 1):
+            for bk in range(lo[2], hi[2] + 1):
+                b = wp.vec3i(bi, bj, bk)
+                d2 = float(0.0)
+                for a in range(3):
+                    # distance from the particle to the block's voxel span [8 b, 8 b + 7]
+                    e = wp.max(wp.max(float(b[a] * BS) - gp[a], gp[a] - float(b[a] * BS + BS - 1)), 0.0)
+                    d2 += e * e
+                if d2 <= r2 and near[bi, bj, bk] == 0:
+                    near[bi, bj, bk] = 1
+
+
+@wp.kernel
 def classify_blocks(
-    counts: wp.array3d(dtype=wp.int32), reach: int, dense_reach: int, dense_min: int, state: wp.array3d(dtype=wp.int32)
+    counts: wp.array3d(dtype=wp.int32),
+    near: wp.array3d(dtype=wp.int32),
+    dense_reach: int,
+    dense_min: int,
+    state: wp.array3d(dtype=wp.int32),
 ):
-    """OUTSIDE: no particle within `reach` blocks; INSIDE: every block within `dense_reach` holds
-    >= dense_min particles (the kernel support is then full, so the field is deep inside); else ACTIVE."""
+    """OUTSIDE: no particle near; INSIDE: every block within `dense_reach` holds >= dense_min
+    particles (the kernel support is then full, so the field is deep inside); else ACTIVE."""
     i, j, k = wp.tid()
     n = wp.vec3i(counts.shape[0], counts.shape[1], counts.shape[2])
-    any_p = int(0)
     dense = int(1)
-    for a in range(i - reach, i + reach + 1):
-        for b in range(j - reach, j + reach + 1):
-            for c in range(k - reach, k + reach + 1):
+    for a in range(i - dense_reach, i + dense_reach + 1):
+        for b in range(j - dense_reach, j + dense_reach + 1):
+            for c in range(k - dense_reach, k + dense_reach + 1):
                 cnt = int(0)
                 if a >= 0 and b >= 0 and c >= 0 and a < n[0] and b < n[1] and c < n[2]:
                     cnt = counts[a, b, c]
-                if cnt > 0:
-                    any_p = 1
-                if wp.abs(a - i) <= dense_reach and wp.abs(b - j) <= dense_reach and wp.abs(c - k) <= dense_reach and cnt < dense_min:
+                if cnt < dense_min:
                     dense = 0
     s = TILE_ACTIVE
-    if any_p == 0:
+    if near[i, j, k] == 0:
         s = TILE_OUTSIDE
     elif dense == 1:
         s = TILE_INSIDE
