@@ -150,6 +150,20 @@ class SparseLevelSet:
     voxel_size: float
     background: float
 
+    def to_dense(self) -> LevelSet:
+        """The same level set as a dense LevelSet over the active blocks' bounding box."""
+        if len(self.block_ijk) == 0:
+            return LevelSet(np.zeros((0, 0, 0), np.float32), np.zeros(3, np.int64), self.voxel_size, self.background)
+        lo = self.block_ijk.min(axis=0)
+        shape = tuple(int(s) for s in self.block_ijk.max(axis=0) - lo + 8)
+        values = np.full(shape, self.background, np.float32)
+        for ijk in self.inside_ijk - lo:
+            if np.all(ijk >= 0) and np.all(ijk < shape):
+                values[ijk[0] : ijk[0] + 8, ijk[1] : ijk[1] + 8, ijk[2] : ijk[2] + 8] = -self.background
+        for ijk, block in zip(self.block_ijk - lo, self.values):
+            values[ijk[0] : ijk[0] + 8, ijk[1] : ijk[1] + 8, ijk[2] : ijk[2] + 8] = block
+        return LevelSet(values, lo.astype(np.int64), self.voxel_size, self.background)
+
 
 @dataclass
 class SurfaceResult:

@@ -29,6 +29,8 @@ log = logging.getLogger(__name__)
 BS = 8
 MAX_BLOCKS = 1 << 28  # block-grid cells (int32 each): 2^28 blocks = 2^37 voxels of bounding box
 MAX_GROW_STEPS = 4096
+SEED_DEPTH = 0.5  # x particle radius: how deep a particle's voxel must be to seed a genuine inside component
+SEED_DEPTH_SMOOTHED = 0.25  # voxels, the same after smoothing (a lone particle's blob is ~1 voxel deep then)
 CHECK_EVERY = 8  # propagation steps between convergence checks (each check synchronises)
 
 last_stats: dict = {}
@@ -99,7 +101,7 @@ def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParam
     mark = wp.zeros(max(nvox, 1), dtype=wp.int32)
     wp.launch(S.mark_particle_voxels, n, inputs=[g, bmap, mark])
     tiles = (grid.far_vox, -grid.r_vox)  # (outside, inside) tile values of the raw field
-    steps = _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, use_marks=True)
+    steps = _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH * grid.r_vox)
     timings["topology"] = _lap(wp, t0)
     if params.dilate != 0.0 and nvox:
         wp.launch(S.add_scalar, nvox, inputs=[phi, -params.dilate / grid.voxel])
@@ -109,7 +111,8 @@ def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParam
     tiles = (grid.wide, -grid.wide)
     phi = _smooth(wp, S, bcoord, bmap, dist, params.smooth_iters, tiles)
     if params.smooth_iters > 0:
-        steps += _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, use_marks=False)
+        # blurring closes thin outside tunnels (new bubbles) and cuts thin inside necks (specks)
+        steps += _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH_SMOOTHED)
     values = wp.empty_like(phi)
     _launch(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, grid.voxel, grid.background, values])
     tiles = (grid.background, -grid.background)
@@ -177,13 +180,14 @@ def _classify(wp, S, g, counts, grid: SparseGrid):
     return bmap, bcoord[:nact]
 
 
-def _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, *, use_marks: bool) -> int:
-    """Flip bubbles to inside and particle-less inside specks to outside; returns steps used."""
+def _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, *, seed_depth: float | None) -> int:
+    """Flip bubbles to inside and, unless seed_depth is None, inside specks that hold no particle
+    at least seed_depth deep to outside; returns the flood-fill steps used."""
     nvox = phi.shape[0]
     if nvox == 0:
         return 0
     reached = wp.empty(nvox, dtype=wp.int32)
-    wp.launch(S.seed_reached, nvox, inputs=[bcoord, bmap, phi, mark, int(use_marks), reached])
+    wp.launch(S.seed_reached, nvox, inputs=[bcoord, bmap, phi, mark, seed_depth or 0.0, int(seed_depth is None), reached])
     changed = wp.zeros(1, dtype=wp.int32)
     steps = 0
     while steps < MAX_GROW_STEPS:

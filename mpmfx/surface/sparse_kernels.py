@@ -249,19 +249,21 @@ def seed_reached(
     bmap: wp.array3d(dtype=wp.int32),
     phi: wp.array(dtype=float),
     mark: wp.array(dtype=wp.int32),
-    use_marks: int,
+    seed_depth: float,
+    all_inside: int,
     reached: wp.array(dtype=wp.int32),
 ):
-    """Seeds: outside voxels touching an OUTSIDE tile; inside voxels touching an INSIDE tile or
-    holding a particle (when use_marks)."""
+    """Seeds: outside voxels touching an OUTSIDE tile; inside voxels touching an INSIDE tile, or
+    holding a particle and at least `seed_depth` deep (a lone particle is ~r deep at its centre;
+    a voxel that the noise of an irregular sample flips is barely below zero)."""
     t = wp.tid()
     c = voxel_of(t, bcoord)
     out = phi[t] > 0.0
     r = int(0)
-    if not out and use_marks != 0 and mark[t] != 0:
+    if mark[t] != 0 and phi[t] <= -seed_depth:
         r = 1
-    if not out and use_marks == 0:
-        r = 1  # inside components are all kept
+    if all_inside != 0 and not out:
+        r = 1  # only bubbles are looked for
     for n in range(6):
         o = wp.vec3i(0)
         o[n // 2] = 2 * (n % 2) - 1
