@@ -8,8 +8,8 @@
    blocks within the kernel support (no atomics);
 3. topology: outside voxels not connected to an OUTSIDE block are bubbles (-> inside); inside
    voxels not connected to a particle or an INSIDE block are specks of the noisy field (->
-   outside). Flood fill by in-place neighbour propagation, which settles in a few dozen steps
-   because the band is thin;
+   outside). Flood fill by line sweeps along block rows (8 voxels of progress per launch),
+   which settles in a few rounds because the band is thin;
 4. dilate, renormalise, smooth, topology again, renormalise to world units (as the dense path);
 5. marching cubes over active cells (warp.geometry's tables), normals and velocities.
 """
@@ -28,13 +28,12 @@ log = logging.getLogger(__name__)
 
 BS = 8
 MAX_BLOCKS = 1 << 28  # block-grid cells (int32 each): 2^28 blocks = 2^37 voxels of bounding box
-MAX_GROW_STEPS = 4096
+MAX_SWEEP_ROUNDS = 1024
 SEED_DEPTH = 0.5  # x particle radius: how deep a particle's voxel must be to seed a genuine inside component
 SEED_DEPTH_SMOOTHED = 0.25  # voxels, the same after smoothing (a lone particle's blob is ~1 voxel deep then)
-CHECK_EVERY = 8  # propagation steps between convergence checks (each check synchronises)
 
 last_stats: dict = {}
-"""Cumulative seconds after each stage, active blocks, flood-fill steps of the latest call (for the bench)."""
+"""Cumulative seconds after each stage, active blocks, flood-fill sweep rounds of the latest call (for the bench)."""
 
 
 class SparseGrid:
@@ -79,7 +78,11 @@ def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParam
     timings: dict[str, float] = {}
     grid = SparseGrid(x, params)
     n = x.shape[0]
-    g = wp.array(((x - grid.origin) / grid.voxel).astype(np.float32), dtype=wp.vec3)
+    # grid coordinates on the device: float32 keeps 1e-4 voxel at 2000 voxels across
+    xd = wp.array(np.ascontiguousarray(x, dtype=np.float32), dtype=wp.vec3)
+    g = wp.empty(n, dtype=wp.vec3)
+    wp.launch(S.to_grid, n, inputs=[xd, wp.vec3(*grid.origin.astype(np.float32)), 1.0 / grid.voxel, g])
+    del xd
     counts, starts, order = _bin_particles(wp, S, g, grid)
     bmap, bcoord = _classify(wp, S, g, counts, grid)
     nact = bcoord.shape[0]
@@ -125,7 +128,7 @@ def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParam
     result.mesh, result.sparse = mesh, sparse
     timings["output"] = _lap(wp, t0)
     last_stats.clear()
-    last_stats.update(timings, active_blocks=nact, fill_steps=steps)
+    last_stats.update(timings, active_blocks=nact, fill_rounds=steps)
     log.debug("surface_sparse n=%d blocks=%s active=%d timings=%s", n, grid.nblocks, nact, timings)
     return result
 
@@ -182,25 +185,26 @@ def _classify(wp, S, g, counts, grid: SparseGrid):
 
 def _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, *, seed_depth: float | None) -> int:
     """Flip bubbles to inside and, unless seed_depth is None, inside specks that hold no particle
-    at least seed_depth deep to outside; returns the flood-fill steps used."""
+    at least seed_depth deep to outside; returns the sweep rounds used."""
     nvox = phi.shape[0]
     if nvox == 0:
         return 0
     reached = wp.empty(nvox, dtype=wp.int32)
     wp.launch(S.seed_reached, nvox, inputs=[bcoord, bmap, phi, mark, seed_depth or 0.0, int(seed_depth is None), reached])
     changed = wp.zeros(1, dtype=wp.int32)
-    steps = 0
-    while steps < MAX_GROW_STEPS:
+    nact = bcoord.shape[0]
+    rounds = 0
+    while rounds < MAX_SWEEP_ROUNDS:
         changed.zero_()
-        for _ in range(CHECK_EVERY):
-            wp.launch(S.grow_reached, nvox, inputs=[bcoord, bmap, phi, reached, changed])
-        steps += CHECK_EVERY
+        for axis in range(3):
+            wp.launch(S.sweep_reached, nact * 64, inputs=[bcoord, bmap, phi, reached, axis, changed])
+        rounds += 1
         if int(changed.numpy()[0]) == 0:
             break
     else:
-        log.warning("topology flood fill did not settle in %d steps; some bubbles may remain", MAX_GROW_STEPS)
+        log.warning("topology flood fill did not settle in %d rounds; some bubbles may remain", MAX_SWEEP_ROUNDS)
     wp.launch(S.flip_unreached, nvox, inputs=[phi, reached, tiles[1], tiles[0]])
-    return steps
+    return rounds
 
 
 def _smooth(wp, S, bcoord, bmap, phi, iters: int, tiles):
