@@ -150,19 +150,30 @@ class SparseLevelSet:
     voxel_size: float
     background: float
 
-    def to_dense(self) -> LevelSet:
-        """The same level set as a dense LevelSet over the active blocks' bounding box."""
-        if len(self.block_ijk) == 0:
-            return LevelSet(np.zeros((0, 0, 0), np.float32), np.zeros(3, np.int64), self.voxel_size, self.background)
-        lo = self.block_ijk.min(axis=0)
-        shape = tuple(int(s) for s in self.block_ijk.max(axis=0) - lo + 8)
+    def to_dense(self, *, ijk0: np.ndarray | None = None, shape: tuple[int, int, int] | None = None) -> LevelSet:
+        """The same level set as a dense LevelSet: over voxels ijk0 .. ijk0 + shape - 1, by default
+        the bounding box of the stored blocks."""
+        if ijk0 is None or shape is None:
+            if len(self.block_ijk) == 0:
+                return LevelSet(np.zeros((0, 0, 0), np.float32), np.zeros(3, np.int64), self.voxel_size, self.background)
+            ijk0 = self.block_ijk.min(axis=0)
+            shape = tuple(int(s) for s in self.block_ijk.max(axis=0) - ijk0 + 8)
+        ijk0 = np.asarray(ijk0, np.int64)
         values = np.full(shape, self.background, np.float32)
-        for ijk in self.inside_ijk - lo:
-            if np.all(ijk >= 0) and np.all(ijk < shape):
-                values[ijk[0] : ijk[0] + 8, ijk[1] : ijk[1] + 8, ijk[2] : ijk[2] + 8] = -self.background
-        for ijk, block in zip(self.block_ijk - lo, self.values):
-            values[ijk[0] : ijk[0] + 8, ijk[1] : ijk[1] + 8, ijk[2] : ijk[2] + 8] = block
-        return LevelSet(values, lo.astype(np.int64), self.voxel_size, self.background)
+
+        def paste(corner: np.ndarray, block) -> None:
+            lo = corner - ijk0
+            a = np.maximum(lo, 0)
+            b = np.minimum(lo + 8, shape)
+            if np.all(b > a):
+                src = block if np.isscalar(block) else block[tuple(slice(x - y, z - y) for x, y, z in zip(a, lo, b))]
+                values[tuple(slice(x, z) for x, z in zip(a, b))] = src
+
+        for corner in self.inside_ijk:
+            paste(corner, -self.background)
+        for corner, block in zip(self.block_ijk, self.values):
+            paste(corner, block)
+        return LevelSet(values, ijk0, self.voxel_size, self.background)
 
 
 @dataclass

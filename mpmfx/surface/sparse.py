@@ -123,7 +123,7 @@ def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParam
     timings["smooth"] = _lap(wp, t0)
     mesh = _extract_mesh(wp, S, bcoord, bmap, values, tiles, vel if with_v else None, grid)
     timings["mesh"] = _lap(wp, t0)
-    sparse = _sparse_output(wp, bcoord, bmap, values, vel if with_v else None, grid)
+    sparse = _sparse_output(wp, S, bcoord, bmap, values, vel if with_v else None, grid)
     result = _dense_output(wp, S, bcoord, bmap, values, w, vel if with_v else None, grid, params, n, with_v)
     result.mesh, result.sparse = mesh, sparse
     timings["output"] = _lap(wp, t0)
@@ -255,14 +255,30 @@ def _extract_mesh(wp, S, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
     return SurfaceMesh(world.numpy(), f.astype(np.int32), normals.numpy(), velocities.numpy())
 
 
-def _sparse_output(wp, bcoord, bmap, values, vel, grid: SparseGrid) -> SparseLevelSet:
+def _sparse_output(wp, S, bcoord, bmap, values, vel, grid: SparseGrid) -> SparseLevelSet:
+    """Blocks holding a voxel inside the band; blocks wholly at -background join the inside tiles,
+    wholly at +background are dropped (what OpenVDB's pruning would do)."""
     nact = bcoord.shape[0]
+    kind = wp.empty(max(nact, 1), dtype=wp.int32)
+    _launch(wp, S.classify_output_blocks, nact, [values, grid.background, kind])
+    keep = wp.empty_like(kind)
+    _launch(wp, S.kind_equals, nact, [kind, 2, keep])
+    offsets = _scan(wp, keep, inclusive=False)
+    m = int(offsets[-1:].numpy()[0] + keep[-1:].numpy()[0]) if nact else 0
+    out = wp.empty(max(m, 1) * BS**3, dtype=float)
+    _launch(wp, S.gather_blocks, nact * BS**3, [keep, offsets, values, out])
+    velocity = None
+    if vel is not None:
+        vout = wp.empty(max(m, 1) * BS**3, dtype=wp.vec3)
+        _launch(wp, S.gather_blocks_vec, nact * BS**3, [keep, offsets, vel, vout])
+        velocity = vout.numpy()[: m * BS**3].reshape(m, BS, BS, BS, 3)
+    kinds = kind.numpy()[:nact]
     blocks = bcoord.numpy().astype(np.int64).reshape(-1, 3)
-    inside = np.argwhere(bmap.numpy() == -2).astype(np.int64)
+    inside = np.concatenate([np.argwhere(bmap.numpy() == -2).astype(np.int64), blocks[kinds == 1]])
     return SparseLevelSet(
-        block_ijk=blocks * BS + grid.ijk0,
-        values=values.numpy().reshape(nact, BS, BS, BS),
-        velocity=vel.numpy().reshape(nact, BS, BS, BS, 3) if vel is not None else None,
+        block_ijk=blocks[kinds == 2] * BS + grid.ijk0,
+        values=out.numpy()[: m * BS**3].reshape(m, BS, BS, BS),
+        velocity=velocity,
         inside_ijk=inside * BS + grid.ijk0,
         voxel_size=grid.voxel,
         background=grid.background,

@@ -564,3 +564,56 @@ def fill_tiles(bmap: wp.array3d(dtype=wp.int32), blo: wp.vec3i, out_v: float, in
     i, j, k = wp.tid()
     s = bmap[blo[0] + i // BS, blo[1] + j // BS, blo[2] + k // BS]
     dense[i, j, k] = wp.where(s == TILE_INSIDE, in_v, out_v)
+
+
+@wp.kernel
+def classify_output_blocks(values: wp.array(dtype=float), background: float, kind: wp.array(dtype=wp.int32)):
+    """kind = 0: every voxel +background (drop), 1: every voxel -background (an inside tile), 2: keep."""
+    b = wp.tid()
+    n_out = int(0)
+    n_in = int(0)
+    for q in range(BV):
+        v = values[b * BV + q]
+        if v >= background:
+            n_out += 1
+        elif v <= -background:
+            n_in += 1
+    k = int(2)
+    if n_out == BV:
+        k = 0
+    elif n_in == BV:
+        k = 1
+    kind[b] = k
+
+
+@wp.kernel
+def gather_blocks(
+    keep: wp.array(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    values: wp.array(dtype=float),
+    out: wp.array(dtype=float),
+):
+    """Copy the voxels of kept blocks (keep[b] == 1) to their compacted slots."""
+    t = wp.tid()
+    b = t // BV
+    if keep[b] != 0:
+        out[offsets[b] * BV + t - b * BV] = values[t]
+
+
+@wp.kernel
+def gather_blocks_vec(
+    keep: wp.array(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    values: wp.array(dtype=wp.vec3),
+    out: wp.array(dtype=wp.vec3),
+):
+    t = wp.tid()
+    b = t // BV
+    if keep[b] != 0:
+        out[offsets[b] * BV + t - b * BV] = values[t]
+
+
+@wp.kernel
+def kind_equals(kind: wp.array(dtype=wp.int32), value: int, out: wp.array(dtype=wp.int32)):
+    b = wp.tid()
+    out[b] = wp.where(kind[b] == value, 1, 0)
