@@ -196,12 +196,13 @@ def bench_surface(
     splashsurf: bool = False,
     echo: bool = True,
     grids: Sequence[Grid] = (Grid.SPARSE,),
-    dense_output_below: int = 2_000_000,
+    dense_output: bool = False,
     stages: bool = False,
 ) -> list[dict]:
     """Measure every (count, shape, sampling, method, grid); print a table when `echo`. One row each.
 
-    Sparse runs at `dense_output_below` particles or more return only the sparse level set.
+    Sparse runs return only the sparse level set unless `dense_output` (dense arrays cost
+    O(bounding box) to fill and copy to the host).
     """
     for grid in grids:  # compile
         surface_particles(sample_shape("sphere", 500, "lattice")[0], None, SurfaceParams(0.01, grid=grid), device=device)
@@ -211,7 +212,7 @@ def bench_surface(
             for sampling in samplings:
                 for method in methods:
                     for grid in grids:
-                        dense_out = grid is Grid.DENSE or count < dense_output_below
+                        dense_out = grid is Grid.DENSE or dense_output
                         rows.append(
                             measure(shape, count, sampling, device=device, method=method, grid=grid, dense_output=dense_out)
                         )
@@ -249,6 +250,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--methods", nargs="+", default=["ZHU_BRIDSON"], choices=[m.name for m in Method])
     ap.add_argument("--grids", nargs="+", default=["SPARSE"], choices=[g.name for g in Grid])
     ap.add_argument("--stages", action="store_true", help="print the sparse path's cumulative stage times")
+    ap.add_argument("--dense-output", action="store_true", help="sparse runs also return dense arrays")
     ap.add_argument("--device", default=None)
     ap.add_argument("--splashsurf", action="store_true", help="also run pysplashsurf (unverified settings)")
     args = ap.parse_args(argv)
@@ -262,6 +264,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         splashsurf=args.splashsurf,
         grids=[Grid[g] for g in args.grids],
         stages=args.stages,
+        dense_output=args.dense_output,
     )
 
 

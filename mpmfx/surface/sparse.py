@@ -183,14 +183,22 @@ def _classify(wp, S, g, counts, grid: SparseGrid):
     return bmap, bcoord[:nact]
 
 
-def _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, *, seed_depth: float | None) -> int:
-    """Flip bubbles to inside and, unless seed_depth is None, inside specks that hold no particle
-    at least seed_depth deep to outside; returns the sweep rounds used."""
-    nvox = phi.shape[0]
-    if nvox == 0:
+def _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, *, seed_depth: float) -> int:
+    """Fill bubbles (outside voxels the boundary does not reach), then turn inside specks that
+    hold no particle at least seed_depth deep to outside; returns the sweep rounds used.
+    Bubbles first: a speck inside a bubble is then part of the body, and a speck turned outside
+    joins an outside region the boundary reaches, so neither step undoes the other."""
+    if phi.shape[0] == 0:
         return 0
+    rounds = _flood(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth, specks=False)
+    rounds += _flood(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth, specks=True)
+    return rounds
+
+
+def _flood(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: bool) -> int:
+    nvox = phi.shape[0]
     reached = wp.empty(nvox, dtype=wp.int32)
-    wp.launch(S.seed_reached, nvox, inputs=[bcoord, bmap, phi, mark, seed_depth or 0.0, int(seed_depth is None), reached])
+    wp.launch(S.seed_reached, nvox, inputs=[bcoord, bmap, phi, mark, seed_depth, int(specks), reached])
     changed = wp.zeros(1, dtype=wp.int32)
     nact = bcoord.shape[0]
     rounds = 0
@@ -203,6 +211,7 @@ def _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, *, seed_depth: float | 
             break
     else:
         log.warning("topology flood fill did not settle in %d rounds; some bubbles may remain", MAX_SWEEP_ROUNDS)
+    # unreached outside voxels are bubbles (-> inside), unreached inside ones specks (-> outside)
     wp.launch(S.flip_unreached, nvox, inputs=[phi, reached, tiles[1], tiles[0]])
     return rounds
 

@@ -256,26 +256,28 @@ def seed_reached(
     phi: wp.array(dtype=float),
     mark: wp.array(dtype=wp.int32),
     seed_depth: float,
-    all_inside: int,
+    specks: int,
     reached: wp.array(dtype=wp.int32),
 ):
-    """Seeds: outside voxels touching an OUTSIDE tile; inside voxels touching an INSIDE tile, or
-    holding a particle and at least `seed_depth` deep (a lone particle is ~r deep at its centre;
-    a voxel that the noise of an irregular sample flips is barely below zero)."""
+    """Seeds of a flood fill looking for bubbles (specks == 0: every inside voxel is a seed, and
+    outside voxels touching an OUTSIDE tile) or for specks (specks == 1: every outside voxel,
+    inside voxels touching an INSIDE tile, and particle voxels at least `seed_depth` deep: a lone
+    particle is ~r deep at its centre, a voxel that sampling noise flips is barely below zero)."""
     t = wp.tid()
     c = voxel_of(t, bcoord)
     out = phi[t] > 0.0
     r = int(0)
-    if mark[t] != 0 and phi[t] <= -seed_depth:
+    if specks == 0 and not out:
         r = 1
-    if all_inside != 0 and not out:
-        r = 1  # only bubbles are looked for
-    for n in range(6):
-        o = wp.vec3i(0)
-        o[n // 2] = 2 * (n % 2) - 1
-        s = slot(bmap, c[0] + o[0], c[1] + o[1], c[2] + o[2])
-        if (out and s == TILE_OUTSIDE) or ((not out) and s == TILE_INSIDE):
-            r = 1
+    if specks != 0 and (out or (mark[t] != 0 and phi[t] <= -seed_depth)):
+        r = 1
+    if r == 0:
+        for n in range(6):
+            o = wp.vec3i(0)
+            o[n // 2] = 2 * (n % 2) - 1
+            s = slot(bmap, c[0] + o[0], c[1] + o[1], c[2] + o[2])
+            if (out and s == TILE_OUTSIDE) or ((not out) and s == TILE_INSIDE):
+                r = 1
     reached[t] = r
 
 
