@@ -25,7 +25,7 @@ class Grid(enum.Enum):
     """Every voxel of the particles' bounding box (scatter from particles); simple, O(volume)."""
     SPARSE = "sparse"
     """Blocks of 8^3 voxels near the surface only (gather from particles); O(surface area).
-    Falls back to DENSE for Method.SPHERES and for min_feature_particles > 0."""
+    Falls back to DENSE for Method.SPHERES."""
 
 
 @dataclass(frozen=True)

@@ -48,7 +48,7 @@ def surface_particles(
 
     wp.init()
     dev = wp.get_device(device)
-    if params.grid is Grid.SPARSE and params.method is Method.ZHU_BRIDSON and params.min_feature_particles == 0:
+    if params.grid is Grid.SPARSE and params.method is Method.ZHU_BRIDSON:
         from mpmfx.surface.sparse import surface_sparse
 
         with wp.ScopedDevice(dev):

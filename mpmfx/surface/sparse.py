@@ -116,6 +116,8 @@ def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParam
     if params.smooth_iters > 0:
         # blurring closes thin outside tunnels (new bubbles) and cuts thin inside necks (specks)
         steps += _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH_SMOOTHED)
+    if params.min_feature_particles > 0 and nvox:
+        _remove_small(wp, S, bcoord, bmap, phi, g, params.min_feature_particles, tiles)
     values = wp.empty_like(phi)
     _launch(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, grid.voxel, grid.background, values])
     tiles = (grid.background, -grid.background)
@@ -214,6 +216,24 @@ def _flood(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: 
     # unreached outside voxels are bubbles (-> inside), unreached inside ones specks (-> outside)
     wp.launch(S.flip_unreached, nvox, inputs=[phi, reached, tiles[1], tiles[0]])
     return rounds
+
+
+def _remove_small(wp, S, bcoord, bmap, phi, g, min_count: int, tiles) -> None:
+    """Inside components (6-connected) holding fewer than min_count particles become outside;
+    components touching an INSIDE tile are large by construction and stay."""
+    nvox = phi.shape[0]
+    labels = wp.empty(nvox, dtype=wp.int32)
+    wp.launch(S.init_inside_labels, nvox, inputs=[bcoord, bmap, phi, labels])
+    changed = wp.zeros(1, dtype=wp.int32)
+    for _ in range(MAX_SWEEP_ROUNDS):
+        changed.zero_()
+        for axis in range(3):
+            wp.launch(S.sweep_min_labels, bcoord.shape[0] * 64, inputs=[bcoord, bmap, labels, axis, changed])
+        if int(changed.numpy()[0]) == 0:
+            break
+    counts = wp.zeros(nvox + 1, dtype=wp.int32)
+    wp.launch(S.count_component_particles, g.shape[0], inputs=[g, bmap, labels, counts])
+    wp.launch(S.remove_small_components, nvox, inputs=[labels, counts, min_count, tiles[0], phi])
 
 
 def _smooth(wp, S, bcoord, bmap, phi, iters: int, tiles):

@@ -619,3 +619,77 @@ def gather_blocks_vec(
 def kind_equals(kind: wp.array(dtype=wp.int32), value: int, out: wp.array(dtype=wp.int32)):
     b = wp.tid()
     out[b] = wp.where(kind[b] == value, 1, 0)
+
+
+@wp.kernel
+def init_inside_labels(
+    bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), labels: wp.array(dtype=wp.int32)
+):
+    """Inside voxels: own label t + 1, or 0 when touching an INSIDE tile (a big body); else -1."""
+    t = wp.tid()
+    lab = LABEL_NONE
+    if phi[t] <= 0.0:
+        lab = t + 1
+        c = voxel_of(t, bcoord)
+        for n in range(6):
+            o = wp.vec3i(0)
+            o[n // 2] = 2 * (n % 2) - 1
+            if slot(bmap, c[0] + o[0], c[1] + o[1], c[2] + o[2]) == TILE_INSIDE:
+                lab = 0
+    labels[t] = lab
+
+
+@wp.kernel
+def sweep_min_labels(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    labels: wp.array(dtype=wp.int32),
+    axis: int,
+    changed: wp.array(dtype=wp.int32),
+):
+    """Carry the smallest label through labelled voxels along one block line, both ways."""
+    tid = wp.tid()
+    b = tid // 64
+    l = tid - b * 64
+    base = bcoord[b] * BS
+    count = int(0)
+    for dirn in range(2):
+        start = line_voxel(axis, wp.where(dirn == 0, -1, BS), l) + base
+        sl = slot(bmap, start[0], start[1], start[2])
+        carry = LABEL_NONE
+        if sl >= 0:
+            carry = labels[sl]
+        for q in range(BS):
+            lc = line_voxel(axis, wp.where(dirn == 0, q, BS - 1 - q), l)
+            t = b * BV + (lc[0] * BS + lc[1]) * BS + lc[2]
+            lab = labels[t]
+            if lab >= 0 and carry >= 0 and carry < lab:
+                labels[t] = carry
+                lab = carry
+                count += 1
+            carry = lab
+    if count > 0:
+        wp.atomic_add(changed, 0, count)
+
+
+@wp.kernel
+def count_component_particles(
+    g: wp.array(dtype=wp.vec3), bmap: wp.array3d(dtype=wp.int32), labels: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32)
+):
+    p = wp.tid()
+    gp = g[p]
+    s = slot(bmap, int(wp.round(gp[0])), int(wp.round(gp[1])), int(wp.round(gp[2])))
+    if s >= 0:
+        lab = labels[s]
+        if lab > 0:
+            wp.atomic_add(counts, lab, 1)
+
+
+@wp.kernel
+def remove_small_components(
+    labels: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), min_count: int, outside_value: float, phi: wp.array(dtype=float)
+):
+    t = wp.tid()
+    lab = labels[t]
+    if lab > 0 and counts[lab] < min_count:
+        phi[t] = outside_value
