@@ -1,5 +1,8 @@
 """Particles -> narrow-band level set -> triangle mesh, on any Warp device.
 
+SurfaceParams.grid = Grid.SPARSE (the default) runs :mod:`mpmfx.surface.sparse` (8^3 blocks near
+the surface only); this module is the Grid.DENSE path, also used for Method.SPHERES:
+
 Stages (each a Warp kernel launch over a dense grid covering the particles' bounding box
 plus the kernel support; the grid is aligned to multiples of the voxel size):
 

@@ -126,7 +126,7 @@ def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParam
     mesh = _extract_mesh(wp, S, bcoord, bmap, values, tiles, vel if with_v else None, grid)
     timings["mesh"] = _lap(wp, t0)
     sparse = _sparse_output(wp, S, bcoord, bmap, values, vel if with_v else None, grid)
-    result = _dense_output(wp, S, bcoord, bmap, values, w, vel if with_v else None, grid, params, n, with_v)
+    result = _dense_output(wp, S, bcoord, bmap, counts, values, w, vel if with_v else None, grid, params, n, with_v)
     result.mesh, result.sparse = mesh, sparse
     timings["output"] = _lap(wp, t0)
     last_stats.clear()
@@ -314,7 +314,7 @@ def _sparse_output(wp, S, bcoord, bmap, values, vel, grid: SparseGrid) -> Sparse
     )
 
 
-def _dense_output(wp, S, bcoord, bmap, values, w, vel, grid, params, n, with_v) -> SurfaceResult:
+def _dense_output(wp, S, bcoord, bmap, counts, values, w, vel, grid, params, n, with_v) -> SurfaceResult:
     """Level set, velocity and density as dense arrays over the active blocks' bounding box."""
     nact = bcoord.shape[0]
     if not params.dense_output or nact == 0:
@@ -330,8 +330,8 @@ def _dense_output(wp, S, bcoord, bmap, values, w, vel, grid, params, n, with_v) 
     wp.launch(S.densify, values.shape[0], inputs=[bcoord, values, lo, dense])
     radius = params.kernel_radius * params.particle_radius
     kernel_volume = 4.0 * math.pi * radius**3 * 16.0 / 315.0
-    # INSIDE blocks were never evaluated: give them the bulk number density of the particles
-    occupied = float((bc.shape[0] + int((bmap.numpy() == -2).sum())) * (BS * grid.voxel) ** 3)
+    # INSIDE blocks were never evaluated: give them the mean number density of occupied blocks
+    occupied = float(np.count_nonzero(counts.numpy()) * (BS * grid.voxel) ** 3)
     bulk_w = n / occupied * kernel_volume
     wd = wp.empty(shape, dtype=float)
     wp.launch(S.fill_tiles, shape, inputs=[bmap, bt, 0.0, bulk_w, wd])
