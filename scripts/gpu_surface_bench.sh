@@ -10,9 +10,9 @@ export PYTHONUNBUFFERED=1 PYTHONPATH=/opt/wp/site:$PWD${PYTHONPATH:+:$PYTHONPATH
 nvidia-smi --query-gpu=name,memory.total --format=csv,noheader
 t0=$(date +%s)
 {
-  timeout 200 python3 -m mpmfx.surface.bench --counts 1000000 10000000 --device cuda --stages
-  timeout 45 python3 -m mpmfx.surface.bench --counts 1000000 --shapes sphere --samplings random --device cuda \
+  timeout 220 python3 -m mpmfx.surface.bench --counts 1000000 10000000 --device cuda --stages
+  timeout 35 python3 -m mpmfx.surface.bench --counts 1000000 --shapes sphere --samplings random --device cuda \
     --dense-output | tail -n +2
-  timeout 45 python3 -m mpmfx.surface.bench --counts 1000000 --shapes sphere --grids DENSE --device cuda | tail -n +2
+  timeout 35 python3 -m mpmfx.surface.bench --counts 1000000 --shapes sphere --grids DENSE --device cuda | tail -n +2
 } 2>&1 | grep -v '^Module\|^Warp\|^   '
 echo "took $(( $(date +%s) - t0 )) s"
