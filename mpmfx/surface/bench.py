@@ -16,7 +16,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from mpmfx.surface.params import Method, SurfaceParams
+from mpmfx.surface.params import Grid, Method, SurfaceParams
 from mpmfx.surface.reconstruct import surface_particles
 
 SPHERE_RADIUS = 0.3
@@ -104,6 +104,14 @@ def measure(
     t0 = time.perf_counter()
     res = surface_particles(x, None, params, device=device)
     seconds = time.perf_counter() - t0
+    from mpmfx.surface import sparse
+
+    stats = dict(sparse.last_stats) if params.grid is Grid.SPARSE else {}
+    sparse.last_stats.clear()
+    if res.sparse is not None and res.level_set.values.size == 0:
+        grid_txt = f"{len(res.sparse.block_ijk)}blk"
+    else:
+        grid_txt = "x".join(map(str, res.level_set.values.shape))
     verts, faces = res.mesh.vertices, res.mesh.faces
     err = np.abs(sdf(verts.astype(np.float64))) if len(verts) else np.array([np.nan])
     mesh_volume, pieces = mesh_stats(verts, faces)
@@ -112,8 +120,9 @@ def measure(
         "sampling": sampling,
         "particles": len(x),
         "h": h,
-        "method": params.method.name,
-        "grid": "x".join(map(str, res.level_set.values.shape)),
+        "method": params.method.name + ("" if params.grid is Grid.DENSE or not stats else "/sparse"),
+        "grid": grid_txt,
+        "stages": stats,
         "seconds": seconds,
         "particles_per_s": len(x) / seconds,
         "err_mean": float(err.mean()),
@@ -186,17 +195,31 @@ def bench_surface(
     methods: Sequence[Method] = (Method.ZHU_BRIDSON,),
     splashsurf: bool = False,
     echo: bool = True,
+    grids: Sequence[Grid] = (Grid.SPARSE,),
+    dense_output: bool = False,
+    stages: bool = False,
 ) -> list[dict]:
-    """Measure every (count, shape, sampling, method); print a table when `echo`. One row each."""
-    surface_particles(sample_shape("sphere", 500, "lattice")[0], None, SurfaceParams(0.01), device=device)  # compile
+    """Measure every (count, shape, sampling, method, grid); print a table when `echo`. One row each.
+
+    Sparse runs return only the sparse level set unless `dense_output` (dense arrays cost
+    O(bounding box) to fill and copy to the host).
+    """
+    for grid in grids:  # compile
+        surface_particles(sample_shape("sphere", 500, "lattice")[0], None, SurfaceParams(0.01, grid=grid), device=device)
     rows = []
     for count in counts:
         for shape in shapes:
             for sampling in samplings:
                 for method in methods:
-                    rows.append(measure(shape, count, sampling, device=device, method=method))
-                    if echo:
-                        print(format_row(rows[-1]), flush=True)
+                    for grid in grids:
+                        dense_out = grid is Grid.DENSE or dense_output
+                        rows.append(
+                            measure(shape, count, sampling, device=device, method=method, grid=grid, dense_output=dense_out)
+                        )
+                        if echo:
+                            print(format_row(rows[-1]), flush=True)
+                            if stages and rows[-1]["stages"]:
+                                print("  stages (cumulative s):", rows[-1]["stages"], flush=True)
                 peer = measure_splashsurf(shape, count, sampling) if splashsurf else None
                 if peer is not None:
                     rows.append(peer)
@@ -225,6 +248,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--shapes", nargs="+", default=["sphere", "torus", "box"])
     ap.add_argument("--samplings", nargs="+", default=["lattice", "random"])
     ap.add_argument("--methods", nargs="+", default=["ZHU_BRIDSON"], choices=[m.name for m in Method])
+    ap.add_argument("--grids", nargs="+", default=["SPARSE"], choices=[g.name for g in Grid])
+    ap.add_argument("--stages", action="store_true", help="print the sparse path's cumulative stage times")
+    ap.add_argument("--dense-output", action="store_true", help="sparse runs also return dense arrays")
     ap.add_argument("--device", default=None)
     ap.add_argument("--splashsurf", action="store_true", help="also run pysplashsurf (unverified settings)")
     args = ap.parse_args(argv)
@@ -236,6 +262,9 @@ def main(argv: Sequence[str] | None = None) -> None:
         args.device,
         methods=[Method[m] for m in args.methods],
         splashsurf=args.splashsurf,
+        grids=[Grid[g] for g in args.grids],
+        stages=args.stages,
+        dense_output=args.dense_output,
     )
 
 

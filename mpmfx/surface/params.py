@@ -18,6 +18,16 @@ class Method(enum.Enum):
     """phi = |x - xbar(x)| - r with xbar a kernel-weighted particle average (Zhu & Bridson 2005)."""
 
 
+class Grid(enum.Enum):
+    """Where the field is evaluated."""
+
+    DENSE = "dense"
+    """Every voxel of the particles' bounding box (scatter from particles); simple, O(volume)."""
+    SPARSE = "sparse"
+    """Blocks of 8^3 voxels near the surface only (gather from particles); O(surface area).
+    Falls back to DENSE for Method.SPHERES."""
+
+
 @dataclass(frozen=True)
 class SurfaceParams:
     """Settings of :func:`mpmfx.surface.surface_particles`. Lengths are world units (m).
@@ -34,6 +44,10 @@ class SurfaceParams:
         (1 - s^2)^3 kernel the weighted centroid of a half-space ball sits 0.246 R deep, so
         R = 4.06 r puts the zero level on a flat boundary of a continuum; on discrete layers
         3.7 measured best (box faces within 0.02 h, sphere volume +0.3 %, r = 0.5 h).
+    grid: see :class:`Grid`.
+    dense_output: with Grid.SPARSE, also return the level set (and velocity, density) as dense
+        arrays over the band's bounding box; False returns only `SurfaceResult.sparse` (the
+        dense arrays are then empty) -- what to use at millions of particles.
     """
 
     particle_radius: float
@@ -45,6 +59,8 @@ class SurfaceParams:
     method: Method = Method.ZHU_BRIDSON
     band_voxels: int = 3
     kernel_radius: float = 3.7
+    grid: Grid = Grid.SPARSE
+    dense_output: bool = True
 
     def __post_init__(self) -> None:
         def bad(field: str, fix: str) -> ValueError:
@@ -64,6 +80,8 @@ class SurfaceParams:
             raise bad("min_feature_particles", f"got {self.min_feature_particles}; give 0 (off) or more")
         if not isinstance(self.method, Method):
             raise bad("method", f"got {self.method!r}; use one of {[m.name for m in Method]}")
+        if not isinstance(self.grid, Grid):
+            raise bad("grid", f"got {self.grid!r}; use one of {[g.name for g in Grid]}")
         if self.band_voxels < 1:
             raise bad("band_voxels", f"got {self.band_voxels}; give at least 1 voxel")
         if not (math.isfinite(self.kernel_radius) and self.kernel_radius >= 1.0):
@@ -115,6 +133,50 @@ class SurfaceMesh:
 
 
 @dataclass
+class SparseLevelSet:
+    """The level set as OpenVDB-style leaves: blocks of 8^3 voxels near the surface.
+
+    block_ijk: (m, 3) int64 index of each block's first voxel (multiples of 8; voxel index space
+        as LevelSet.ijk0, world = index * voxel_size); values: (m, 8, 8, 8) float32 world units,
+        clipped to +-background; velocity: (m, 8, 8, 8, 3) float32 or None; inside_ijk: (k, 3)
+        int64 first voxels of blocks wholly inside (value -background); every other voxel is
+        outside (+background).
+    """
+
+    block_ijk: np.ndarray
+    values: np.ndarray
+    velocity: np.ndarray | None
+    inside_ijk: np.ndarray
+    voxel_size: float
+    background: float
+
+    def to_dense(self, *, ijk0: np.ndarray | None = None, shape: tuple[int, int, int] | None = None) -> LevelSet:
+        """The same level set as a dense LevelSet: over voxels ijk0 .. ijk0 + shape - 1, by default
+        the bounding box of the stored blocks."""
+        if ijk0 is None or shape is None:
+            if len(self.block_ijk) == 0:
+                return LevelSet(np.zeros((0, 0, 0), np.float32), np.zeros(3, np.int64), self.voxel_size, self.background)
+            ijk0 = self.block_ijk.min(axis=0)
+            shape = tuple(int(s) for s in self.block_ijk.max(axis=0) - ijk0 + 8)
+        ijk0 = np.asarray(ijk0, np.int64)
+        values = np.full(shape, self.background, np.float32)
+
+        def paste(corner: np.ndarray, block) -> None:
+            lo = corner - ijk0
+            a = np.maximum(lo, 0)
+            b = np.minimum(lo + 8, shape)
+            if np.all(b > a):
+                src = block if np.isscalar(block) else block[tuple(slice(x - y, z - y) for x, y, z in zip(a, lo, b))]
+                values[tuple(slice(x, z) for x, z in zip(a, b))] = src
+
+        for corner in self.inside_ijk:
+            paste(corner, -self.background)
+        for corner, block in zip(self.block_ijk, self.values):
+            paste(corner, block)
+        return LevelSet(values, ijk0, self.voxel_size, self.background)
+
+
+@dataclass
 class SurfaceResult:
     """Output of :func:`surface_particles`.
 
@@ -127,3 +189,5 @@ class SurfaceResult:
     mesh: SurfaceMesh
     velocity: np.ndarray | None
     density: np.ndarray | None
+    sparse: SparseLevelSet | None = None
+    """Set by Grid.SPARSE."""

@@ -1,5 +1,8 @@
 """Particles -> narrow-band level set -> triangle mesh, on any Warp device.
 
+SurfaceParams.grid = Grid.SPARSE (the default) runs :mod:`mpmfx.surface.sparse` (8^3 blocks near
+the surface only); this module is the Grid.DENSE path, also used for Method.SPHERES:
+
 Stages (each a Warp kernel launch over a dense grid covering the particles' bounding box
 plus the kernel support; the grid is aligned to multiples of the voxel size):
 
@@ -21,7 +24,7 @@ import time
 
 import numpy as np
 
-from mpmfx.surface.params import LevelSet, Method, SurfaceMesh, SurfaceParams, SurfaceResult
+from mpmfx.surface.params import Grid, LevelSet, Method, SurfaceMesh, SurfaceParams, SurfaceResult
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +51,11 @@ def surface_particles(
 
     wp.init()
     dev = wp.get_device(device)
+    if params.grid is Grid.SPARSE and params.method is Method.ZHU_BRIDSON:
+        from mpmfx.surface.sparse import surface_sparse
+
+        with wp.ScopedDevice(dev):
+            return surface_sparse(wp, x, v, params)
     timings: dict[str, float] = {}
     grid = _Grid.fit(x, params)
     with wp.ScopedDevice(dev):

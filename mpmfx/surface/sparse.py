@@ -1,0 +1,345 @@
+"""Sparse (block) surfacer: the work follows the surface, not the bounding-box volume.
+
+1. blocks: particles are binned into blocks of 8^3 voxels (count, radix sort by block);
+   a block is OUTSIDE (no particle within the kernel reach), INSIDE (it and its neighbours
+   within the kernel support all hold particles: the field there is deep inside), or ACTIVE.
+   OUTSIDE blocks the grid boundary does not reach (large voids) become INSIDE.
+2. field: Zhu-Bridson phi at each voxel of ACTIVE blocks, GATHERED from the particles of the
+   blocks within the kernel support (no atomics);
+3. topology: outside voxels not connected to an OUTSIDE block are bubbles (-> inside); inside
+   voxels not connected to a particle or an INSIDE block are specks of the noisy field (->
+   outside). Flood fill by line sweeps along block rows (8 voxels of progress per launch),
+   which settles in a few rounds because the band is thin;
+4. dilate, renormalise, smooth, topology again, renormalise to world units (as the dense path);
+5. marching cubes over active cells (warp.geometry's tables), normals and velocities.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+
+import numpy as np
+
+from mpmfx.surface.params import LevelSet, SparseLevelSet, SurfaceMesh, SurfaceParams, SurfaceResult
+
+log = logging.getLogger(__name__)
+
+BS = 8
+MAX_BLOCKS = 1 << 28  # block-grid cells (int32 each): 2^28 blocks = 2^37 voxels of bounding box
+MAX_SWEEP_ROUNDS = 1024
+SEED_DEPTH = 0.5  # x particle radius: how deep a particle's voxel must be to seed a genuine inside component
+SEED_DEPTH_SMOOTHED = 0.25  # voxels, the same after smoothing (a lone particle's blob is ~1 voxel deep then)
+
+last_stats: dict = {}
+"""Cumulative seconds after each stage, active blocks, flood-fill sweep rounds of the latest call (for the bench)."""
+
+
+class SparseGrid:
+    """Block grid aligned to multiples of 8 voxels (OpenVDB leaf alignment), with empty margins."""
+
+    def __init__(self, x: np.ndarray, params: SurfaceParams):
+        self.voxel = params.resolved_voxel_size
+        r = params.particle_radius * params.radius_scale
+        self.r_vox = r / self.voxel
+        self.kernel_vox = params.kernel_radius * params.particle_radius / self.voxel
+        self.background = params.band_voxels * self.voxel
+        self.far_vox = max(self.kernel_vox, self.r_vox + params.band_voxels + 1.0)
+        self.wide = float(params.band_voxels + params.smooth_iters + 2)
+        # a voxel whose field matters lies within kernel support + dilation + band + blur of a particle
+        # a voxel whose final value is not +background lies within r + dilation + band + blur of
+        # a particle; +2 voxels for the gradient stencils
+        self.reach_vox = self.r_vox + max(params.dilate, 0.0) / self.voxel + self.wide + 2.0
+        self.reach_blocks = int(math.ceil(max(self.reach_vox, self.kernel_vox) / BS))
+        self.dense_reach = int(math.ceil(self.kernel_vox / BS))
+        # particles per block in a full packing (spacing ~ 2 r); a quarter of that marks "dense"
+        self.dense_min = max(1, int((BS * self.voxel / (2.0 * params.particle_radius)) ** 3 / 4))
+        lo = np.floor(x.min(axis=0).astype(np.float64) / self.voxel)
+        hi = np.floor(x.max(axis=0).astype(np.float64) / self.voxel)
+        margin = self.reach_blocks + 1  # boundary blocks are always OUTSIDE: flood-fill seeds
+        blo = np.floor(lo / BS).astype(np.int64) - margin
+        bhi = np.floor(hi / BS).astype(np.int64) + margin
+        self.nblocks = tuple(int(s) for s in (bhi - blo + 1))
+        if math.prod(self.nblocks) > MAX_BLOCKS:
+            raise ValueError(
+                f"SurfaceParams.voxel_size: a block grid of {self.nblocks} would cover these particles; "
+                f"raise voxel_size (now {self.voxel:g} m) or drop far-flung particles before surfacing"
+            )
+        self.ijk0 = blo * BS  # voxel index of grid coordinate 0
+        self.origin = self.ijk0.astype(np.float64) * self.voxel
+
+
+def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParams) -> SurfaceResult:
+    """Grid.SPARSE path of :func:`mpmfx.surface.surface_particles` (inputs already checked)."""
+    from mpmfx.surface import sparse_kernels as S
+
+    t0 = time.perf_counter()
+    timings: dict[str, float] = {}
+    grid = SparseGrid(x, params)
+    n = x.shape[0]
+    # grid coordinates on the device: float32 keeps 1e-4 voxel at 2000 voxels across
+    xd = wp.array(np.ascontiguousarray(x, dtype=np.float32), dtype=wp.vec3)
+    g = wp.empty(n, dtype=wp.vec3)
+    wp.launch(S.to_grid, n, inputs=[xd, wp.vec3(*grid.origin.astype(np.float32)), 1.0 / grid.voxel, g])
+    del xd
+    counts, starts, order = _bin_particles(wp, S, g, grid)
+    bmap, bcoord = _classify(wp, S, g, counts, grid)
+    nact = bcoord.shape[0]
+    nvox = nact * BS**3
+    timings["blocks"] = _lap(wp, t0)
+    with_v = v is not None
+    va = wp.array(v if with_v else np.zeros((1, 3), np.float32), dtype=wp.vec3)
+    phi = wp.empty(nvox, dtype=float)
+    w = wp.empty(nvox, dtype=float)
+    vel = wp.empty(nvox if with_v else 1, dtype=wp.vec3)
+    if nvox:
+        wp.launch(
+            S.gather_zhu_bridson,
+            nvox,
+            inputs=[bcoord, counts, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
+            outputs=[phi, w, vel],
+        )
+    timings["field"] = _lap(wp, t0)
+    mark = wp.zeros(max(nvox, 1), dtype=wp.int32)
+    wp.launch(S.mark_particle_voxels, n, inputs=[g, bmap, mark])
+    tiles = (grid.far_vox, -grid.r_vox)  # (outside, inside) tile values of the raw field
+    steps = _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH * grid.r_vox)
+    timings["topology"] = _lap(wp, t0)
+    if params.dilate != 0.0 and nvox:
+        wp.launch(S.add_scalar, nvox, inputs=[phi, -params.dilate / grid.voxel])
+        tiles = (tiles[0] - params.dilate / grid.voxel, tiles[1])
+    dist = wp.empty_like(phi)
+    _launch(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, 1.0, grid.wide, dist])
+    tiles = (grid.wide, -grid.wide)
+    phi = _smooth(wp, S, bcoord, bmap, dist, params.smooth_iters, tiles)
+    if params.smooth_iters > 0:
+        # blurring closes thin outside tunnels (new bubbles) and cuts thin inside necks (specks)
+        steps += _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH_SMOOTHED)
+    if params.min_feature_particles > 0 and nvox:
+        _remove_small(wp, S, bcoord, bmap, phi, g, params.min_feature_particles, tiles)
+    values = wp.empty_like(phi)
+    _launch(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, grid.voxel, grid.background, values])
+    tiles = (grid.background, -grid.background)
+    _launch(wp, S.match_tiles, nvox, [bcoord, bmap, values, 1e-3 * grid.voxel])
+    timings["smooth"] = _lap(wp, t0)
+    mesh = _extract_mesh(wp, S, bcoord, bmap, values, tiles, vel if with_v else None, grid)
+    timings["mesh"] = _lap(wp, t0)
+    sparse = _sparse_output(wp, S, bcoord, bmap, values, vel if with_v else None, grid)
+    result = _dense_output(wp, S, bcoord, bmap, counts, values, w, vel if with_v else None, grid, params, n, with_v)
+    result.mesh, result.sparse = mesh, sparse
+    timings["output"] = _lap(wp, t0)
+    last_stats.clear()
+    last_stats.update(timings, active_blocks=nact, fill_rounds=steps)
+    log.debug("surface_sparse n=%d blocks=%s active=%d timings=%s", n, grid.nblocks, nact, timings)
+    return result
+
+
+def _lap(wp, t0: float) -> float:
+    wp.synchronize()
+    return round(time.perf_counter() - t0, 4)
+
+
+def _launch(wp, kernel, dim: int, inputs: list) -> None:
+    if dim:
+        wp.launch(kernel, dim, inputs=inputs)
+
+
+def _scan(wp, a, *, inclusive: bool):
+    out = wp.empty_like(a)
+    wp.utils.array_scan(a, out, inclusive=inclusive)
+    return out
+
+
+def _bin_particles(wp, S, g, grid: SparseGrid):
+    """(counts per block (3-D int32), first sorted slot per block (flat), particle order)."""
+    n = g.shape[0]
+    counts = wp.zeros(grid.nblocks, dtype=wp.int32)
+    keys = wp.empty(2 * n, dtype=wp.int32)
+    order = wp.empty(2 * n, dtype=wp.int32)
+    wp.launch(S.count_blocks, n, inputs=[g, counts, keys, order])
+    wp.utils.radix_sort_pairs(keys, order, n)
+    starts = _scan(wp, counts.flatten(), inclusive=False)
+    return counts, starts, order
+
+
+def _classify(wp, S, g, counts, grid: SparseGrid):
+    """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates)."""
+    from mpmfx.surface import kernels as K
+    from mpmfx.surface.reconstruct import _sweep_until_stable
+
+    near = wp.zeros(grid.nblocks, dtype=wp.int32)
+    wp.launch(S.mark_near_blocks, g.shape[0], inputs=[g, grid.reach_vox, near])
+    state = wp.empty(grid.nblocks, dtype=wp.int32)
+    wp.launch(S.classify_blocks, grid.nblocks, inputs=[counts, near, grid.dense_reach, grid.dense_min, state])
+    labels = wp.empty(grid.nblocks, dtype=wp.int32)
+    wp.launch(S.outside_block_labels, grid.nblocks, inputs=[state, labels])
+    _sweep_until_stable(wp, K, labels)
+    flags = wp.empty(math.prod(grid.nblocks), dtype=wp.int32)
+    wp.launch(S.active_flags, grid.nblocks, inputs=[state, flags])
+    offsets = _scan(wp, flags, inclusive=False)
+    nact = int(offsets[-1:].numpy()[0] + flags[-1:].numpy()[0])
+    bmap = wp.empty(grid.nblocks, dtype=wp.int32)
+    bcoord = wp.empty(max(nact, 1), dtype=wp.vec3i)
+    wp.launch(S.compact_blocks, grid.nblocks, inputs=[state, labels, offsets, bmap, bcoord])
+    return bmap, bcoord[:nact]
+
+
+def _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, *, seed_depth: float) -> int:
+    """Fill bubbles (outside voxels the boundary does not reach), then turn inside specks that
+    hold no particle at least seed_depth deep to outside; returns the sweep rounds used.
+    Bubbles first: a speck inside a bubble is then part of the body, and a speck turned outside
+    joins an outside region the boundary reaches, so neither step undoes the other."""
+    if phi.shape[0] == 0:
+        return 0
+    rounds = _flood(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth, specks=False)
+    rounds += _flood(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth, specks=True)
+    return rounds
+
+
+def _flood(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: bool) -> int:
+    nvox = phi.shape[0]
+    reached = wp.empty(nvox, dtype=wp.int32)
+    wp.launch(S.seed_reached, nvox, inputs=[bcoord, bmap, phi, mark, seed_depth, int(specks), reached])
+    changed = wp.zeros(1, dtype=wp.int32)
+    nact = bcoord.shape[0]
+    rounds = 0
+    while rounds < MAX_SWEEP_ROUNDS:
+        changed.zero_()
+        for axis in range(3):
+            wp.launch(S.sweep_reached, nact * 64, inputs=[bcoord, bmap, phi, reached, axis, changed])
+        rounds += 1
+        if int(changed.numpy()[0]) == 0:
+            break
+    else:
+        log.warning("topology flood fill did not settle in %d rounds; some bubbles may remain", MAX_SWEEP_ROUNDS)
+    # unreached outside voxels are bubbles (-> inside), unreached inside ones specks (-> outside)
+    wp.launch(S.flip_unreached, nvox, inputs=[phi, reached, tiles[1], tiles[0]])
+    return rounds
+
+
+def _remove_small(wp, S, bcoord, bmap, phi, g, min_count: int, tiles) -> None:
+    """Inside components (6-connected) holding fewer than min_count particles become outside;
+    components touching an INSIDE tile are large by construction and stay."""
+    nvox = phi.shape[0]
+    labels = wp.empty(nvox, dtype=wp.int32)
+    wp.launch(S.init_inside_labels, nvox, inputs=[bcoord, bmap, phi, labels])
+    changed = wp.zeros(1, dtype=wp.int32)
+    for _ in range(MAX_SWEEP_ROUNDS):
+        changed.zero_()
+        for axis in range(3):
+            wp.launch(S.sweep_min_labels, bcoord.shape[0] * 64, inputs=[bcoord, bmap, labels, axis, changed])
+        if int(changed.numpy()[0]) == 0:
+            break
+    counts = wp.zeros(nvox + 1, dtype=wp.int32)
+    wp.launch(S.count_component_particles, g.shape[0], inputs=[g, bmap, labels, counts])
+    wp.launch(S.remove_small_components, nvox, inputs=[labels, counts, min_count, tiles[0], phi])
+
+
+def _smooth(wp, S, bcoord, bmap, phi, iters: int, tiles):
+    tmp = wp.empty_like(phi)
+    for _ in range(iters):
+        for axis in range(3):
+            _launch(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
+            phi, tmp = tmp, phi
+    return phi
+
+
+def _extract_mesh(wp, S, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> SurfaceMesh:
+    from warp._src.geometry import marching_cubes as mc  # tables only (pinned warp 1.19)
+
+    nvox = values.shape[0]
+    if nvox == 0:
+        return SurfaceMesh.empty()
+    dev = values.device
+    ecount = wp.empty(nvox * 3, dtype=wp.int32)
+    edge_vert = wp.empty(nvox * 3, dtype=wp.int32)
+    wp.launch(S.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
+    eoff = _scan(wp, ecount, inclusive=True)
+    m = int(eoff[-1:].numpy()[0])
+    if m == 0:
+        return SurfaceMesh.empty()
+    verts = wp.empty(m, dtype=wp.vec3)
+    wp.launch(S.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
+    tables = [mc._get_mc_case_to_tri_range_table(dev), mc._get_mc_tri_local_inds_table(dev), mc._get_mc_edge_offset_table(dev)]
+    fcount = wp.empty(nvox, dtype=wp.int32)
+    wp.launch(S.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
+    foff = _scan(wp, fcount, inclusive=True)
+    k = int(foff[-1:].numpy()[0])
+    faces = wp.empty(max(3 * k, 1), dtype=wp.int32)
+    wp.launch(S.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
+    world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
+    vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
+    origin = wp.vec3(*grid.origin.astype(np.float32))
+    wp.launch(
+        S.sample_vertices,
+        m,
+        inputs=[bmap, values, *tiles, vel_arg, int(vel is not None), verts, origin, grid.voxel, world, normals, velocities],
+    )
+    f = faces.numpy()[: 3 * k].reshape(-1, 3)
+    bad = (f < 0).any(axis=1)
+    if bad.any():  # a crossing on a tile face: match_tiles should make this impossible
+        log.warning("sparse marching cubes: %d triangles touched a constant tile and were dropped", int(bad.sum()))
+        f = f[~bad]
+    return SurfaceMesh(world.numpy(), f.astype(np.int32), normals.numpy(), velocities.numpy())
+
+
+def _sparse_output(wp, S, bcoord, bmap, values, vel, grid: SparseGrid) -> SparseLevelSet:
+    """Blocks holding a voxel inside the band; blocks wholly at -background join the inside tiles,
+    wholly at +background are dropped (what OpenVDB's pruning would do)."""
+    nact = bcoord.shape[0]
+    kind = wp.empty(max(nact, 1), dtype=wp.int32)
+    _launch(wp, S.classify_output_blocks, nact, [values, grid.background, kind])
+    keep = wp.empty_like(kind)
+    _launch(wp, S.kind_equals, nact, [kind, 2, keep])
+    offsets = _scan(wp, keep, inclusive=False)
+    m = int(offsets[-1:].numpy()[0] + keep[-1:].numpy()[0]) if nact else 0
+    out = wp.empty(max(m, 1) * BS**3, dtype=float)
+    _launch(wp, S.gather_blocks, nact * BS**3, [keep, offsets, values, out])
+    velocity = None
+    if vel is not None:
+        vout = wp.empty(max(m, 1) * BS**3, dtype=wp.vec3)
+        _launch(wp, S.gather_blocks_vec, nact * BS**3, [keep, offsets, vel, vout])
+        velocity = vout.numpy()[: m * BS**3].reshape(m, BS, BS, BS, 3)
+    kinds = kind.numpy()[:nact]
+    blocks = bcoord.numpy().astype(np.int64).reshape(-1, 3)
+    inside = np.concatenate([np.argwhere(bmap.numpy() == -2).astype(np.int64), blocks[kinds == 1]])
+    return SparseLevelSet(
+        block_ijk=blocks[kinds == 2] * BS + grid.ijk0,
+        values=out.numpy()[: m * BS**3].reshape(m, BS, BS, BS),
+        velocity=velocity,
+        inside_ijk=inside * BS + grid.ijk0,
+        voxel_size=grid.voxel,
+        background=grid.background,
+    )
+
+
+def _dense_output(wp, S, bcoord, bmap, counts, values, w, vel, grid, params, n, with_v) -> SurfaceResult:
+    """Level set, velocity and density as dense arrays over the active blocks' bounding box."""
+    nact = bcoord.shape[0]
+    if not params.dense_output or nact == 0:
+        ls = LevelSet(np.zeros((0, 0, 0), np.float32), grid.ijk0.copy(), grid.voxel, grid.background)
+        return SurfaceResult(ls, SurfaceMesh.empty(), np.zeros((0, 0, 0, 3), np.float32) if with_v else None, np.zeros((0, 0, 0), np.float32))
+    bc = bcoord.numpy()
+    blo, bhi = bc.min(axis=0), bc.max(axis=0)
+    shape = tuple(int(s) for s in (bhi - blo + 1) * BS)
+    lo = wp.vec3i(*(blo * BS).tolist())
+    bt = wp.vec3i(*blo.tolist())
+    dense = wp.empty(shape, dtype=float)
+    wp.launch(S.fill_tiles, shape, inputs=[bmap, bt, grid.background, -grid.background, dense])
+    wp.launch(S.densify, values.shape[0], inputs=[bcoord, values, lo, dense])
+    radius = params.kernel_radius * params.particle_radius
+    kernel_volume = 4.0 * math.pi * radius**3 * 16.0 / 315.0
+    # INSIDE blocks were never evaluated: give them the mean number density of occupied blocks
+    occupied = float(np.count_nonzero(counts.numpy()) * (BS * grid.voxel) ** 3)
+    bulk_w = n / occupied * kernel_volume
+    wd = wp.empty(shape, dtype=float)
+    wp.launch(S.fill_tiles, shape, inputs=[bmap, bt, 0.0, bulk_w, wd])
+    wp.launch(S.densify, values.shape[0], inputs=[bcoord, w, lo, wd])
+    velocity = None
+    if with_v:
+        vd = wp.zeros(shape, dtype=wp.vec3)
+        wp.launch(S.densify_vec, values.shape[0], inputs=[bcoord, vel, lo, vd])
+        velocity = vd.numpy()
+    ls = LevelSet(dense.numpy(), grid.ijk0 + blo.astype(np.int64) * BS, grid.voxel, grid.background)
+    return SurfaceResult(ls, SurfaceMesh.empty(), velocity, (wd.numpy() / kernel_volume).astype(np.float32))

@@ -1,0 +1,695 @@
+"""Warp kernels of the sparse (block) surfacer: one module, compiled once per device.
+
+Layout: the grid is cut into blocks of 8^3 voxels (an OpenVDB leaf). `bmap[bi, bj, bk]` holds
+the index of an active block (>= 0) or a constant tile: OUTSIDE (-1) or INSIDE (-2). Voxel
+data of active block b live at `data[b * 512 + (li * 8 + lj) * 8 + lk]`. Voxel (i, j, k) sits at
+grid coordinates (i, j, k), i.e. world `origin + (i, j, k) * voxel` as in the dense surfacer.
+"""
+
+import warp as wp
+
+BS = wp.constant(8)  # block edge in voxels
+BV = wp.constant(512)  # voxels per block
+TILE_OUTSIDE = wp.constant(-1)
+TILE_INSIDE = wp.constant(-2)
+TILE_ACTIVE = wp.constant(-3)  # before compaction
+LABEL_NONE = wp.constant(-1)
+LABEL_BIG = wp.constant(2147483647)
+
+
+@wp.func
+def voxel_of(tid: int, bcoord: wp.array(dtype=wp.vec3i)):
+    """Global voxel index of thread `tid` over active voxels."""
+    b = tid // BV
+    l = tid - b * BV
+    c = bcoord[b] * BS
+    return wp.vec3i(c[0] + l // 64, c[1] + (l // 8) % 8, c[2] + l % 8)
+
+
+@wp.func
+def slot(bmap: wp.array3d(dtype=wp.int32), i: int, j: int, k: int):
+    """Data index of voxel (i, j, k), or TILE_OUTSIDE / TILE_INSIDE for constant tiles."""
+    if i < 0 or j < 0 or k < 0:
+        return TILE_OUTSIDE
+    bi = i // BS
+    bj = j // BS
+    bk = k // BS
+    if bi >= bmap.shape[0] or bj >= bmap.shape[1] or bk >= bmap.shape[2]:
+        return TILE_OUTSIDE
+    b = bmap[bi, bj, bk]
+    if b < 0:
+        return b
+    return b * BV + ((i - bi * BS) * BS + (j - bj * BS)) * BS + (k - bk * BS)
+
+
+@wp.func
+def get(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), i: int, j: int, k: int, out_v: float, in_v: float):
+    s = slot(bmap, i, j, k)
+    if s >= 0:
+        return data[s]
+    if s == TILE_INSIDE:
+        return in_v
+    return out_v
+
+
+@wp.kernel
+def to_grid(x: wp.array(dtype=wp.vec3), origin: wp.vec3, inv_voxel: float, g: wp.array(dtype=wp.vec3)):
+    p = wp.tid()
+    g[p] = (x[p] - origin) * inv_voxel
+
+
+@wp.kernel
+def count_blocks(
+    g: wp.array(dtype=wp.vec3),
+    counts: wp.array3d(dtype=wp.int32),
+    keys: wp.array(dtype=wp.int32),
+    order: wp.array(dtype=wp.int32),
+):
+    """Particles per block; keys[p] = linear block index of particle p, order[p] = p (to sort)."""
+    p = wp.tid()
+    gp = g[p]
+    bi = int(wp.floor(gp[0])) // BS
+    bj = int(wp.floor(gp[1])) // BS
+    bk = int(wp.floor(gp[2])) // BS
+    wp.atomic_add(counts, bi, bj, bk, 1)
+    keys[p] = (bi * counts.shape[1] + bj) * counts.shape[2] + bk
+    order[p] = p
+
+
+@wp.kernel
+def mark_near_blocks(g: wp.array(dtype=wp.vec3), reach: float, near: wp.array3d(dtype=wp.int32)):
+    """near = 1 on blocks with a voxel within `reach` voxels of a particle (box distance)."""
+    p = wp.tid()
+    gp = g[p]
+    lo = wp.vec3i(0)
+    hi = wp.vec3i(0)
+    for a in range(3):
+        lo[a] = wp.max(int(wp.floor((gp[a] - reach) / 8.0)), 0)
+        hi[a] = wp.min(int(wp.floor((gp[a] + reach) / 8.0)), near.shape[a] - 1)
+    r2 = reach * reach
+    for bi in range(lo[0], hi[0] + 1):
+        for bj in range(lo[1], hi[1] + 1):
+            for bk in range(lo[2], hi[2] + 1):
+                b = wp.vec3i(bi, bj, bk)
+                d2 = float(0.0)
+                for a in range(3):
+                    # distance from the particle to the block's voxel span [8 b, 8 b + 7]
+                    e = wp.max(wp.max(float(b[a] * BS) - gp[a], gp[a] - float(b[a] * BS + BS - 1)), 0.0)
+                    d2 += e * e
+                if d2 <= r2 and near[bi, bj, bk] == 0:
+                    near[bi, bj, bk] = 1
+
+
+@wp.kernel
+def classify_blocks(
+    counts: wp.array3d(dtype=wp.int32),
+    near: wp.array3d(dtype=wp.int32),
+    dense_reach: int,
+    dense_min: int,
+    state: wp.array3d(dtype=wp.int32),
+):
+    """OUTSIDE: no particle near; INSIDE: every block within `dense_reach` holds >= dense_min
+    particles (the kernel support is then full, so the field is deep inside); else ACTIVE."""
+    i, j, k = wp.tid()
+    n = wp.vec3i(counts.shape[0], counts.shape[1], counts.shape[2])
+    dense = int(1)
+    for a in range(i - dense_reach, i + dense_reach + 1):
+        for b in range(j - dense_reach, j + dense_reach + 1):
+            for c in range(k - dense_reach, k + dense_reach + 1):
+                cnt = int(0)
+                if a >= 0 and b >= 0 and c >= 0 and a < n[0] and b < n[1] and c < n[2]:
+                    cnt = counts[a, b, c]
+                if cnt < dense_min:
+                    dense = 0
+    s = TILE_ACTIVE
+    if near[i, j, k] == 0:
+        s = TILE_OUTSIDE
+    elif dense == 1:
+        s = TILE_INSIDE
+    state[i, j, k] = s
+
+
+@wp.kernel
+def outside_block_labels(state: wp.array3d(dtype=wp.int32), labels: wp.array3d(dtype=wp.int32)):
+    """Flood-fill seeds over constant-outside blocks: label 0 on the grid's faces."""
+    i, j, k = wp.tid()
+    if state[i, j, k] == TILE_OUTSIDE:
+        if i == 0 or j == 0 or k == 0 or i == state.shape[0] - 1 or j == state.shape[1] - 1 or k == state.shape[2] - 1:
+            labels[i, j, k] = 0
+        else:
+            labels[i, j, k] = LABEL_BIG
+    else:
+        labels[i, j, k] = LABEL_NONE
+
+
+@wp.kernel
+def compact_blocks(
+    state: wp.array3d(dtype=wp.int32),
+    labels: wp.array3d(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    bmap: wp.array3d(dtype=wp.int32),
+    bcoord: wp.array(dtype=wp.vec3i),
+):
+    """bmap = active index (exclusive scan of ACTIVE flags) or a constant tile; enclosed
+    outside blocks (voids the boundary does not reach) become INSIDE."""
+    i, j, k = wp.tid()
+    s = state[i, j, k]
+    if s == TILE_ACTIVE:
+        lin = (i * state.shape[1] + j) * state.shape[2] + k
+        b = offsets[lin]
+        bmap[i, j, k] = b
+        bcoord[b] = wp.vec3i(i, j, k)
+    elif s == TILE_OUTSIDE and labels[i, j, k] != 0:
+        bmap[i, j, k] = TILE_INSIDE
+    else:
+        bmap[i, j, k] = s
+
+
+@wp.kernel
+def active_flags(state: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32)):
+    i, j, k = wp.tid()
+    flags[(i * state.shape[1] + j) * state.shape[2] + k] = wp.where(state[i, j, k] == TILE_ACTIVE, 1, 0)
+
+
+@wp.kernel
+def gather_zhu_bridson(
+    bcoord: wp.array(dtype=wp.vec3i),
+    counts: wp.array3d(dtype=wp.int32),
+    starts: wp.array(dtype=wp.int32),
+    order: wp.array(dtype=wp.int32),
+    g: wp.array(dtype=wp.vec3),
+    v: wp.array(dtype=wp.vec3),
+    with_v: int,
+    reach: float,
+    radius_vox: float,
+    far_vox: float,
+    phi: wp.array(dtype=float),
+    w_out: wp.array(dtype=float),
+    vel: wp.array(dtype=wp.vec3),
+):
+    """Zhu-Bridson phi at one active voxel, gathered from particles of nearby blocks.
+
+    phi = -(x - xbar) . n - r with n = -grad w / |grad w| (the projected variant of the dense
+    surfacer; the analytic kernel gradient replaces its finite difference of w).
+    """
+    t = wp.tid()
+    c = voxel_of(t, bcoord)
+    x = wp.vec3(float(c[0]), float(c[1]), float(c[2]))
+    r2 = reach * reach
+    lo = wp.vec3i(0)
+    hi = wp.vec3i(0)
+    for a in range(3):
+        lo[a] = wp.max(int(wp.floor((x[a] - reach) / 8.0)), 0)
+        hi[a] = wp.min(int(wp.floor((x[a] + reach) / 8.0)), counts.shape[a] - 1)
+    w = float(0.0)
+    dw = wp.vec3(0.0)  # sum w * (x_p - x)
+    gw = wp.vec3(0.0)  # gradient of w (up to the factor 6 / R^2)
+    vw = wp.vec3(0.0)
+    for bi in range(lo[0], hi[0] + 1):
+        for bj in range(lo[1], hi[1] + 1):
+            for bk in range(lo[2], hi[2] + 1):
+                cnt = counts[bi, bj, bk]
+                if cnt > 0:
+                    s = starts[(bi * counts.shape[1] + bj) * counts.shape[2] + bk]
+                    for q in range(s, s + cnt):
+                        p = order[q]
+                        d = g[p] - x
+                        d2 = wp.dot(d, d)
+                        if d2 < r2:
+                            u = 1.0 - d2 / r2
+                            wk = u * u * u
+                            w += wk
+                            dw += wk * d
+                            gw += (u * u) * d
+                            if with_v != 0:
+                                vw += wk * v[p]
+    w_out[t] = w
+    if w <= 0.0:
+        phi[t] = far_vox
+        if with_v != 0:
+            vel[t] = wp.vec3(0.0)
+        return
+    d = -dw / w  # x - xbar
+    dist = wp.length(d)
+    gl = wp.length(gw)
+    if gl > 0.0:
+        dist = -wp.dot(d, gw) / gl  # gw points inward (towards the particles)
+    phi[t] = dist - radius_vox
+    if with_v != 0:
+        vel[t] = vw / w
+
+
+@wp.kernel
+def mark_particle_voxels(g: wp.array(dtype=wp.vec3), bmap: wp.array3d(dtype=wp.int32), mark: wp.array(dtype=wp.int32)):
+    """mark = 1 at the voxel nearest to each particle (seeds of genuine inside components)."""
+    p = wp.tid()
+    gp = g[p]
+    s = slot(bmap, int(wp.round(gp[0])), int(wp.round(gp[1])), int(wp.round(gp[2])))
+    if s >= 0:
+        mark[s] = 1
+
+
+@wp.kernel
+def seed_reached(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    mark: wp.array(dtype=wp.int32),
+    seed_depth: float,
+    specks: int,
+    reached: wp.array(dtype=wp.int32),
+):
+    """Seeds of a flood fill looking for bubbles (specks == 0: every inside voxel is a seed, and
+    outside voxels touching an OUTSIDE tile) or for specks (specks == 1: every outside voxel,
+    inside voxels touching an INSIDE tile, and particle voxels at least `seed_depth` deep: a lone
+    particle is ~r deep at its centre, a voxel that sampling noise flips is barely below zero)."""
+    t = wp.tid()
+    c = voxel_of(t, bcoord)
+    out = phi[t] > 0.0
+    r = int(0)
+    if specks == 0 and not out:
+        r = 1
+    if specks != 0 and (out or (mark[t] != 0 and phi[t] <= -seed_depth)):
+        r = 1
+    if r == 0:
+        for n in range(6):
+            o = wp.vec3i(0)
+            o[n // 2] = 2 * (n % 2) - 1
+            s = slot(bmap, c[0] + o[0], c[1] + o[1], c[2] + o[2])
+            if (out and s == TILE_OUTSIDE) or ((not out) and s == TILE_INSIDE):
+                r = 1
+    reached[t] = r
+
+
+@wp.func
+def line_voxel(axis: int, s: int, l: int):
+    """Local coordinates of step s along `axis` of line l (0..63) of a block."""
+    c = wp.vec3i(0)
+    u = l // BS
+    w = l - u * BS
+    if axis == 0:
+        c = wp.vec3i(s, u, w)
+    elif axis == 1:
+        c = wp.vec3i(u, s, w)
+    else:
+        c = wp.vec3i(u, w, s)
+    return c
+
+
+@wp.kernel
+def sweep_reached(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    reached: wp.array(dtype=wp.int32),
+    axis: int,
+    changed: wp.array(dtype=wp.int32),
+):
+    """Flood fill through same-sign voxels along one block line, forward then backward,
+    starting from the neighbouring block's voxel: 8 voxels of progress per launch."""
+    tid = wp.tid()
+    b = tid // 64
+    l = tid - b * 64
+    base = bcoord[b] * BS
+    count = int(0)
+    for dirn in range(2):
+        start = line_voxel(axis, wp.where(dirn == 0, -1, BS), l) + base
+        sl = slot(bmap, start[0], start[1], start[2])
+        carry_r = int(0)
+        carry_out = False
+        if sl >= 0:
+            carry_r = reached[sl]
+            carry_out = phi[sl] > 0.0
+        for q in range(BS):
+            lc = line_voxel(axis, wp.where(dirn == 0, q, BS - 1 - q), l)
+            t = b * BV + (lc[0] * BS + lc[1]) * BS + lc[2]
+            out = phi[t] > 0.0
+            r = reached[t]
+            if r == 0 and carry_r != 0 and carry_out == out:
+                reached[t] = 1
+                r = 1
+                count += 1
+            carry_r = r
+            carry_out = out
+    if count > 0:
+        wp.atomic_add(changed, 0, count)
+
+
+@wp.kernel
+def flip_unreached(phi: wp.array(dtype=float), reached: wp.array(dtype=wp.int32), inside_value: float, outside_value: float):
+    """Outside voxels the boundary does not reach are bubbles (-> inside); inside voxels no
+    particle reaches are specks of a noisy field (-> outside)."""
+    t = wp.tid()
+    if reached[t] == 0:
+        if phi[t] > 0.0:
+            phi[t] = inside_value
+        else:
+            phi[t] = outside_value
+
+
+@wp.kernel
+def add_scalar(a: wp.array(dtype=float), value: float):
+    t = wp.tid()
+    a[t] = a[t] + value
+
+
+@wp.kernel
+def renormalise(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    scale: float,
+    clip: float,
+    out: wp.array(dtype=float),
+):
+    """out = clip(phi / |grad phi| * scale, +-clip) (see kernels.renormalise)."""
+    t = wp.tid()
+    c = voxel_of(t, bcoord)
+    i = c[0]
+    j = c[1]
+    k = c[2]
+    gx = get(bmap, phi, i + 1, j, k, out_v, in_v) - get(bmap, phi, i - 1, j, k, out_v, in_v)
+    gy = get(bmap, phi, i, j + 1, k, out_v, in_v) - get(bmap, phi, i, j - 1, k, out_v, in_v)
+    gz = get(bmap, phi, i, j, k + 1, out_v, in_v) - get(bmap, phi, i, j, k - 1, out_v, in_v)
+    grad = 0.5 * wp.length(wp.vec3(gx, gy, gz))
+    out[t] = wp.clamp(phi[t] / wp.max(grad, 0.05) * scale, -clip, clip)
+
+
+@wp.kernel
+def blur_axis(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    src: wp.array(dtype=float),
+    axis: int,
+    out_v: float,
+    in_v: float,
+    dst: wp.array(dtype=float),
+):
+    t = wp.tid()
+    c = voxel_of(t, bcoord)
+    o = wp.vec3i(0)
+    o[axis] = 1
+    lo = c - o
+    hi = c + o
+    a = get(bmap, src, lo[0], lo[1], lo[2], out_v, in_v)
+    b = get(bmap, src, hi[0], hi[1], hi[2], out_v, in_v)
+    dst[t] = 0.25 * a + 0.5 * src[t] + 0.25 * b
+
+
+@wp.kernel
+def match_tiles(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), eps: float):
+    """Give voxels next to a constant tile that tile's sign, so no zero crossing touches a tile
+    (marching cubes runs only on cells whose lower corner is active)."""
+    t = wp.tid()
+    c = voxel_of(t, bcoord)
+    v = phi[t]
+    for n in range(27):
+        s = slot(bmap, c[0] + n // 9 - 1, c[1] + (n // 3) % 3 - 1, c[2] + n % 3 - 1)
+        if s == TILE_OUTSIDE and v <= 0.0:
+            v = eps
+        if s == TILE_INSIDE and v > 0.0:
+            v = -eps
+    phi[t] = v
+
+
+@wp.kernel
+def mc_vertices(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    offsets: wp.array(dtype=wp.int32),
+    count_only: int,
+    counts: wp.array(dtype=wp.int32),
+    edge_vert: wp.array(dtype=wp.int32),
+    verts: wp.array(dtype=wp.vec3),
+):
+    """One thread per (active voxel, axis): a vertex where phi changes sign along the edge."""
+    t, axis = wp.tid()
+    c = voxel_of(t, bcoord)
+    o = wp.vec3i(0)
+    o[axis] = 1
+    a = phi[t]
+    b = get(bmap, phi, c[0] + o[0], c[1] + o[1], c[2] + o[2], out_v, in_v)
+    e = t * 3 + axis
+    crossing = (a >= 0.0) != (b >= 0.0)
+    if count_only != 0:
+        counts[e] = wp.where(crossing, 1, 0)
+        return
+    if not crossing:
+        edge_vert[e] = -1
+        return
+    f = wp.clamp(a / (a - b), 0.0, 1.0)
+    idx = offsets[e] - 1  # inclusive scan
+    edge_vert[e] = idx
+    p = wp.vec3(float(c[0]), float(c[1]), float(c[2]))
+    p[axis] = p[axis] + f
+    verts[idx] = p
+
+
+@wp.kernel
+def mc_faces(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    edge_vert: wp.array(dtype=wp.int32),
+    tri_range: wp.array(dtype=wp.int32),
+    tri_local: wp.array(dtype=wp.int32),
+    edge_offset: wp.array2d(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    count_only: int,
+    counts: wp.array(dtype=wp.int32),
+    faces: wp.array(dtype=wp.int32),
+):
+    """Triangles of the cell whose lower corner is active voxel t (warp.geometry's tables)."""
+    t = wp.tid()
+    c = voxel_of(t, bcoord)
+    code = int(0)
+    for n in range(8):
+        # corner order of warp.geometry: (0,0,0) (1,0,0) (1,1,0) (0,1,0), then z + 1
+        q = n % 4
+        dx = wp.where(q == 1 or q == 2, 1, 0)
+        dy = wp.where(q >= 2, 1, 0)
+        dz = n // 4
+        if get(bmap, phi, c[0] + dx, c[1] + dy, c[2] + dz, out_v, in_v) >= 0.0:
+            code += 1 << n
+    start = tri_range[code]
+    ntri = (tri_range[code + 1] - start) // 3
+    if count_only != 0:
+        counts[t] = ntri
+        return
+    if ntri == 0:
+        return
+    base = offsets[t] - ntri  # inclusive scan
+    for m in range(ntri):
+        for s in range(3):
+            le = tri_local[start + 3 * m + s]
+            sl = slot(bmap, c[0] + edge_offset[le, 0], c[1] + edge_offset[le, 1], c[2] + edge_offset[le, 2])
+            idx = int(-1)
+            if sl >= 0:
+                idx = edge_vert[sl * 3 + edge_offset[le, 3]]
+            faces[3 * (base + m) + s] = idx
+
+
+@wp.kernel
+def sample_vertices(
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    vel: wp.array(dtype=wp.vec3),
+    with_v: int,
+    verts: wp.array(dtype=wp.vec3),
+    origin: wp.vec3,
+    voxel: float,
+    world: wp.array(dtype=wp.vec3),
+    normals: wp.array(dtype=wp.vec3),
+    velocities: wp.array(dtype=wp.vec3),
+):
+    """World position, outward normal (trilinear gradient) and trilinear velocity per vertex."""
+    t = wp.tid()
+    g = verts[t]
+    c = wp.vec3i(int(wp.floor(g[0])), int(wp.floor(g[1])), int(wp.floor(g[2])))
+    f = g - wp.vec3(float(c[0]), float(c[1]), float(c[2]))
+    grad = wp.vec3(0.0)
+    vv = wp.vec3(0.0)
+    for n in range(8):
+        ox = n & 1
+        oy = (n >> 1) & 1
+        oz = (n >> 2) & 1
+        wx = wp.where(ox == 1, f[0], 1.0 - f[0])
+        wy = wp.where(oy == 1, f[1], 1.0 - f[1])
+        wz = wp.where(oz == 1, f[2], 1.0 - f[2])
+        val = get(bmap, phi, c[0] + ox, c[1] + oy, c[2] + oz, out_v, in_v)
+        sx = wp.where(ox == 1, 1.0, -1.0)
+        sy = wp.where(oy == 1, 1.0, -1.0)
+        sz = wp.where(oz == 1, 1.0, -1.0)
+        grad += val * wp.vec3(sx * wy * wz, sy * wx * wz, sz * wx * wy)
+        if with_v != 0:
+            s = slot(bmap, c[0] + ox, c[1] + oy, c[2] + oz)
+            if s >= 0:
+                vv += (wx * wy * wz) * vel[s]
+    ln = wp.length(grad)
+    normals[t] = wp.where(ln > 0.0, grad / wp.max(ln, 1.0e-20), wp.vec3(0.0, 0.0, 1.0))
+    velocities[t] = vv
+    world[t] = origin + g * voxel
+
+
+@wp.kernel
+def densify(
+    bcoord: wp.array(dtype=wp.vec3i),
+    data: wp.array(dtype=float),
+    lo: wp.vec3i,
+    dense: wp.array3d(dtype=float),
+):
+    """Copy active voxels into a dense array whose [0, 0, 0] is voxel `lo` (pre-filled with tiles)."""
+    t = wp.tid()
+    c = voxel_of(t, bcoord) - lo
+    dense[c[0], c[1], c[2]] = data[t]
+
+
+@wp.kernel
+def densify_vec(bcoord: wp.array(dtype=wp.vec3i), data: wp.array(dtype=wp.vec3), lo: wp.vec3i, dense: wp.array3d(dtype=wp.vec3)):
+    t = wp.tid()
+    c = voxel_of(t, bcoord) - lo
+    dense[c[0], c[1], c[2]] = data[t]
+
+
+@wp.kernel
+def fill_tiles(bmap: wp.array3d(dtype=wp.int32), blo: wp.vec3i, out_v: float, in_v: float, dense: wp.array3d(dtype=float)):
+    """Constant-tile value of every voxel of the dense array (active voxels are overwritten)."""
+    i, j, k = wp.tid()
+    s = bmap[blo[0] + i // BS, blo[1] + j // BS, blo[2] + k // BS]
+    dense[i, j, k] = wp.where(s == TILE_INSIDE, in_v, out_v)
+
+
+@wp.kernel
+def classify_output_blocks(values: wp.array(dtype=float), background: float, kind: wp.array(dtype=wp.int32)):
+    """kind = 0: every voxel +background (drop), 1: every voxel -background (an inside tile), 2: keep."""
+    b = wp.tid()
+    n_out = int(0)
+    n_in = int(0)
+    for q in range(BV):
+        v = values[b * BV + q]
+        if v >= background:
+            n_out += 1
+        elif v <= -background:
+            n_in += 1
+    k = int(2)
+    if n_out == BV:
+        k = 0
+    elif n_in == BV:
+        k = 1
+    kind[b] = k
+
+
+@wp.kernel
+def gather_blocks(
+    keep: wp.array(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    values: wp.array(dtype=float),
+    out: wp.array(dtype=float),
+):
+    """Copy the voxels of kept blocks (keep[b] == 1) to their compacted slots."""
+    t = wp.tid()
+    b = t // BV
+    if keep[b] != 0:
+        out[offsets[b] * BV + t - b * BV] = values[t]
+
+
+@wp.kernel
+def gather_blocks_vec(
+    keep: wp.array(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    values: wp.array(dtype=wp.vec3),
+    out: wp.array(dtype=wp.vec3),
+):
+    t = wp.tid()
+    b = t // BV
+    if keep[b] != 0:
+        out[offsets[b] * BV + t - b * BV] = values[t]
+
+
+@wp.kernel
+def kind_equals(kind: wp.array(dtype=wp.int32), value: int, out: wp.array(dtype=wp.int32)):
+    b = wp.tid()
+    out[b] = wp.where(kind[b] == value, 1, 0)
+
+
+@wp.kernel
+def init_inside_labels(
+    bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), labels: wp.array(dtype=wp.int32)
+):
+    """Inside voxels: own label t + 1, or 0 when touching an INSIDE tile (a big body); else -1."""
+    t = wp.tid()
+    lab = LABEL_NONE
+    if phi[t] <= 0.0:
+        lab = t + 1
+        c = voxel_of(t, bcoord)
+        for n in range(6):
+            o = wp.vec3i(0)
+            o[n // 2] = 2 * (n % 2) - 1
+            if slot(bmap, c[0] + o[0], c[1] + o[1], c[2] + o[2]) == TILE_INSIDE:
+                lab = 0
+    labels[t] = lab
+
+
+@wp.kernel
+def sweep_min_labels(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    labels: wp.array(dtype=wp.int32),
+    axis: int,
+    changed: wp.array(dtype=wp.int32),
+):
+    """Carry the smallest label through labelled voxels along one block line, both ways."""
+    tid = wp.tid()
+    b = tid // 64
+    l = tid - b * 64
+    base = bcoord[b] * BS
+    count = int(0)
+    for dirn in range(2):
+        start = line_voxel(axis, wp.where(dirn == 0, -1, BS), l) + base
+        sl = slot(bmap, start[0], start[1], start[2])
+        carry = LABEL_NONE
+        if sl >= 0:
+            carry = labels[sl]
+        for q in range(BS):
+            lc = line_voxel(axis, wp.where(dirn == 0, q, BS - 1 - q), l)
+            t = b * BV + (lc[0] * BS + lc[1]) * BS + lc[2]
+            lab = labels[t]
+            if lab >= 0 and carry >= 0 and carry < lab:
+                labels[t] = carry
+                lab = carry
+                count += 1
+            carry = lab
+    if count > 0:
+        wp.atomic_add(changed, 0, count)
+
+
+@wp.kernel
+def count_component_particles(
+    g: wp.array(dtype=wp.vec3), bmap: wp.array3d(dtype=wp.int32), labels: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32)
+):
+    p = wp.tid()
+    gp = g[p]
+    s = slot(bmap, int(wp.round(gp[0])), int(wp.round(gp[1])), int(wp.round(gp[2])))
+    if s >= 0:
+        lab = labels[s]
+        if lab > 0:
+            wp.atomic_add(counts, lab, 1)
+
+
+@wp.kernel
+def remove_small_components(
+    labels: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), min_count: int, outside_value: float, phi: wp.array(dtype=float)
+):
+    t = wp.tid()
+    lab = labels[t]
+    if lab > 0 and counts[lab] < min_count:
+        phi[t] = outside_value
