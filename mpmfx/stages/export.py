@@ -71,14 +71,18 @@ def _meshes(groups: dict) -> dict:
 
 def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
     from mpmfx.io.vdb import VdbGrid, write_vdb
+    from mpmfx.stages.surface import level_set
     volumes = {}
     for g, d in groups.items():
-        if d["sdf"].size == 0:
+        sparse = level_set(d)
+        ls = sparse.to_dense()
+        if ls.values.size == 0:
             continue
-        ijk0, voxel = tuple(int(i) for i in d["ijk0"]), float(d["voxel_size"])
-        grids = [VdbGrid("surface", d["sdf"], ijk0, voxel, "level_set", float(d["background"]))]
-        if "vel_grid" in d:
-            grids.append(VdbGrid("vel", d["vel_grid"], ijk0, voxel, "unknown", 0.0))
+        ijk0 = tuple(int(i) for i in ls.ijk0)
+        grids = [VdbGrid("surface", ls.values, ijk0, ls.voxel_size, "level_set", ls.background)]
+        vel = sparse.velocity_dense(ls.ijk0, ls.values.shape)
+        if vel is not None:
+            grids.append(VdbGrid("vel", vel, ijk0, ls.voxel_size, "unknown", 0.0))
         rel = f"vdb/{g}/{frame:04d}.vdb"
         write_vdb(entry.root / rel, grids, metadata={"shot": shot.shot.name, "frame": frame, "units": "m",
                                                      "group": g})

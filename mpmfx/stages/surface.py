@@ -1,9 +1,11 @@
 """Stage 3: each frame's particles become narrow-band level sets and meshes (world units).
 
 Output `frames/NNNN.npz`: for each surface group G (a material, an object, or "all"):
-`G.vertices` (m,3) float32 m, `G.faces` (k,3) int32, `G.normals`, `G.velocities` (m,3) m/s,
-`G.sdf` (a,b,c) float32 m, `G.ijk0` (3,) int64, `G.voxel_size`, `G.background`, and
-`G.vel_grid` (a,b,c,3) when velocities were splatted. `groups` lists the group names.
+`G.vertices` (m,3) float32 m, `G.faces` (k,3) int32, `G.normals`, `G.velocities` (m,3) m/s, and
+the sparse level set as 8^3 leaves (its size follows the surface area, not the domain):
+`G.block_ijk` (b,3) int64, `G.blocks` (b,8,8,8) float32 m, `G.vel_blocks` (b,8,8,8,3) m/s,
+`G.inside_ijk` (k,3) int64 (leaves wholly inside), `G.voxel_size`, `G.background`.
+`groups` lists the group names.
 """
 from __future__ import annotations
 
@@ -15,7 +17,7 @@ from mpmfx.config import Shot, SurfaceGroup
 from mpmfx.io.frames import read_arrays, write_arrays
 from mpmfx.stages.base import Context, quiet_warp
 
-NAME, VERSION, PER_FRAME, FRAME_EXT = "surface", 1, True, "npz"
+NAME, VERSION, PER_FRAME, FRAME_EXT = "surface", 2, True, "npz"
 
 
 def params(shot: Shot) -> dict:
@@ -50,7 +52,7 @@ def surface_params(shot: Shot):
     # Default voxel: half the particle spacing, fine enough for a smooth render and ~10x cheaper
     # than the surfacer's own default (a quarter of the radius).
     return SurfaceParams(particle_radius=0.6 * h, radius_scale=s.radius_scale,
-                         voxel_size=s.voxel_size or 0.5 * h, smooth_iters=s.smooth_iters, dilate=s.dilate,
+                         voxel_size=s.voxel_size or 0.5 * h, dense_output=False, smooth_iters=s.smooth_iters, dilate=s.dilate,
                          min_feature_particles=s.min_feature_particles)
 
 
@@ -72,20 +74,30 @@ def run(ctx: Context) -> dict:
         for gi, g in enumerate(groups):
             sel = group_of == gi
             res = surface_particles(p["x"][sel], p["v"][sel], sp, device=ctx.device)
-            m, ls = res.mesh, res.level_set
+            m, ls = res.mesh, res.sparse
             out |= {f"{g}.vertices": m.vertices, f"{g}.faces": m.faces, f"{g}.normals": m.normals,
-                    f"{g}.velocities": m.velocities, f"{g}.sdf": ls.values, f"{g}.ijk0": np.asarray(ls.ijk0),
-                    f"{g}.voxel_size": np.float64(ls.voxel_size), f"{g}.background": np.float64(ls.background)}
-            if res.velocity is not None:
-                out[f"{g}.vel_grid"] = res.velocity
+                    f"{g}.velocities": m.velocities, f"{g}.block_ijk": ls.block_ijk, f"{g}.blocks": ls.values,
+                    f"{g}.inside_ijk": ls.inside_ijk, f"{g}.voxel_size": np.float64(ls.voxel_size),
+                    f"{g}.background": np.float64(ls.background)}
+            if ls.velocity is not None:
+                out[f"{g}.vel_blocks"] = ls.velocity
             stats["vertices"] += len(m.vertices)
             stats["faces"] += len(m.faces)
         write_arrays(entry.frame_path(f, FRAME_EXT), out, compress=True)
     return {"this_run": stats}
 
 
+def level_set(group: dict):
+    """A group's stored leaves as `mpmfx.surface.SparseLevelSet` (to_dense / velocity_dense)."""
+    from mpmfx.surface import SparseLevelSet
+    return SparseLevelSet(block_ijk=group["block_ijk"], values=group["blocks"], velocity=group.get("vel_blocks"),
+                          inside_ijk=group["inside_ijk"], voxel_size=float(group["voxel_size"]),
+                          background=float(group["background"]))
+
+
 def load_frame_groups(entry, frame: int) -> dict[str, dict[str, np.ndarray]]:
-    """{group: {vertices, faces, normals, velocities, sdf, ijk0, voxel_size, background[, vel_grid]}}."""
+    """{group: {vertices, faces, normals, velocities, block_ijk, blocks, inside_ijk, voxel_size,
+    background[, vel_blocks]}} (see the module docstring)."""
     data = read_arrays(entry.frame_path(frame, FRAME_EXT))
     return {str(g): {k.split(".", 1)[1]: v for k, v in data.items() if k.startswith(f"{g}.")}
             for g in data["groups"]}

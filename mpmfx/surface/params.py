@@ -175,6 +175,18 @@ class SparseLevelSet:
             paste(corner, block)
         return LevelSet(values, ijk0, self.voxel_size, self.background)
 
+    def velocity_dense(self, ijk0: np.ndarray, shape: tuple[int, int, int]) -> np.ndarray | None:
+        """(a, b, c, 3) float32 velocity over the same voxels as `to_dense` (0 outside stored blocks)."""
+        if self.velocity is None:
+            return None
+        out = np.zeros((*shape, 3), np.float32)
+        for corner, block in zip(self.block_ijk - np.asarray(ijk0, np.int64), self.velocity):
+            a, b = np.maximum(corner, 0), np.minimum(corner + 8, shape)
+            if np.all(b > a):
+                out[tuple(slice(x, z) for x, z in zip(a, b))] = block[tuple(slice(x - y, z - y)
+                                                                            for x, y, z in zip(a, corner, b))]
+        return out
+
 
 @dataclass
 class SurfaceResult:
