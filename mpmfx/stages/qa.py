@@ -4,11 +4,16 @@ from __future__ import annotations
 import math
 
 MASS_TOL = 1e-4          # relative change of total mass that counts as "mass changed"
-ENERGY_JUMP = 1.5        # kinetic energy growing by more than this factor in one frame, with no collider
+ENERGY_JUMP = 1.5        # kinetic + elastic energy growing by more than this factor in one frame ...
+SPEED_SLACK = 2.0        # ... while the top speed grew faster than SPEED_SLACK x gravity alone allows
 
 
-def flags(qa: dict[int, dict]) -> dict[int, list[str]]:
-    """Frame -> reasons it looks wrong (mass changed, energy jumped, particles lost, rejected substeps)."""
+def flags(qa: dict[int, dict], *, gravity: float = 9.81, frame_dt: float = 1 / 24) -> dict[int, list[str]]:
+    """Frame -> reasons it looks wrong (mass changed, energy jumped, particles lost, rejected substeps).
+
+    Energy released by gravity is not a jump: a frame is flagged only when kinetic + elastic
+    energy grew ENERGY_JUMP-fold and the top speed (m/s) grew faster than gravity (m/s^2) can
+    explain over frame_dt (s)."""
     out: dict[int, list[str]] = {}
     frames = sorted(qa)
     m0 = qa[frames[0]].get("mass") if frames else None
@@ -17,9 +22,11 @@ def flags(qa: dict[int, dict]) -> dict[int, list[str]]:
         q, why = qa[f], []
         if m0 and q.get("mass") is not None and abs(q["mass"] - m0) > MASS_TOL * abs(m0):
             why.append(f"mass changed {100 * (q['mass'] - m0) / m0:+.3f} %")
-        ke = q.get("kinetic_energy")
-        if prev is not None and ke is not None and prev > 1e-12 and ke > ENERGY_JUMP * prev:
-            why.append(f"kinetic energy x{ke / prev:.1f}")
+        ke = (q.get("kinetic_energy") or 0.0) + (q.get("elastic_energy") or 0.0)
+        speed = q.get("max_speed") or 0.0
+        if prev is not None and prev[0] > 1e-12 and ke > ENERGY_JUMP * prev[0] \
+                and speed > prev[1] + SPEED_SLACK * gravity * frame_dt:
+            why.append(f"energy x{ke / prev[0]:.1f} beyond what gravity explains")
         if q.get("j_min") is not None and q["j_min"] <= 0:
             why.append(f"inverted particles (J min {q['j_min']:.3g})")
         if q.get("particles_lost"):
@@ -28,7 +35,7 @@ def flags(qa: dict[int, dict]) -> dict[int, list[str]]:
             why.append(f"{q['rejected_substeps']} substeps rejected")
         if why:
             out[f] = why
-        prev = ke
+        prev = (ke, speed)
     return out
 
 
@@ -39,8 +46,11 @@ def print_qa(run) -> int:
         print("no simulation QA yet: run the shot first")
         return 1
     qa = {int(k): v for k, v in man["qa"].items()}
-    bad = flags(qa)
-    cols = ["mass", "kinetic_energy", "j_min", "j_max", "max_speed", "substeps", "rejected_substeps", "cfl_used"]
+    shot = run.shot
+    bad = flags(qa, gravity=float(sum(g * g for g in shot.solver.gravity) ** 0.5),
+                frame_dt=shot.solver.time_scale / shot.shot.fps)
+    cols = ["mass", "kinetic_energy", "elastic_energy", "j_min", "j_max", "max_speed", "substeps",
+            "rejected_substeps", "cfl_used"]
     print("frame  " + "  ".join(f"{c[:12]:>12}" for c in cols) + "  flags")
     for f in sorted(qa):
         vals = [qa[f].get(c) for c in cols]
