@@ -52,8 +52,12 @@ class Stage(Protocol):
 ProgressFn = Callable[[int], None]
 
 
-def quiet_warp() -> None:
-    """Silence Warp's start-up banner and per-module compile lines; the stage has its own progress bar."""
+def quiet_warp(device: str | None = None) -> None:
+    """Silence Warp's start-up banner and per-module compile lines (the stage has its own progress
+    bar), and check that the asked-for device exists before any kernel is built."""
     import warp as wp
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # Warp 1.19 prints module loads at INFO
+    if device and device.startswith("cuda") and not wp.is_cuda_available():
+        raise StageError("--device cuda: Warp finds no CUDA device or driver on this machine; "
+                         "run with --device cpu (the same kernels, slower) or on a GPU machine")

@@ -68,7 +68,7 @@ def run(ctx: Context) -> dict:
     from mpmfx.mpm import Particles, SimulationError, Solver
     from mpmfx.stages import voxelise
 
-    quiet_warp()
+    quiet_warp(ctx.device)
     shot, entry = ctx.shot, ctx.entry
     origin, size = np.asarray(shot.domain.origin), shot.domain.size
     mats, obj_mat = materials(shot)

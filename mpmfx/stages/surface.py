@@ -60,7 +60,7 @@ def run(ctx: Context) -> dict:
     from mpmfx.stages.simulate import load_frame
     from mpmfx.surface import surface_particles
 
-    quiet_warp()
+    quiet_warp(ctx.device)
     shot, entry = ctx.shot, ctx.entry
     sp = surface_params(shot)
     names = group_names(shot)

@@ -204,3 +204,18 @@ def test_mesh_outside_domain_fails_clearly_and_caches_nothing(tmp_path, capsys):
     assert code == 1
     assert "objects.cube" in err and "cube.obj" in err and "domain" in err
     assert not list((tmp_path / "c").rglob("voxelise-*"))  # no half-made entry
+
+
+def _cuda_available() -> bool:
+    import warp as wp
+    wp.config.quiet = True
+    return wp.is_cuda_available()
+
+
+@pytest.mark.skipif(_cuda_available(), reason="this machine has CUDA: the message is for machines without it")
+def test_device_cuda_without_gpu_says_what_to_do(tmp_path, capsys):
+    from mpmfx.cli import main
+    shot = write_tiny_shot(tmp_path)
+    assert main(["run", str(shot), "--device", "cuda", "-q", "--cache", str(tmp_path / "c")]) == 1
+    assert "--device cpu" in capsys.readouterr().err
+    assert not list((tmp_path / "c").rglob("simulate-*"))
