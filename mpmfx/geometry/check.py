@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from mpmfx.geometry.mesh import MeshError, load_mesh
-from mpmfx.geometry.thickness import Verdict, check_thickness
+from mpmfx.geometry.thickness import Verdict, check_thickness, refine_for_heatmap
 
 # The default domain is the mesh's bounding cube grown by this fraction.
 DEFAULT_PADDING = 0.10
@@ -42,6 +42,7 @@ def run_check(asset: str, *, grid_n: int, origin=None, size=None, as_json: bool 
             origin, size = default_domain(mesh)
         elif size <= 0:
             raise MeshError(f"--domain size {size}: must be positive")
+        mesh = refine_for_heatmap(mesh, grid_n=grid_n, size=size)
         report = check_thickness(mesh, grid_n=grid_n, origin=origin, size=size,
                                  name=Path(asset).name)
     except ValueError as exc:  # MeshError included

@@ -363,3 +363,14 @@ def _lost_regions(mesh, lost: np.ndarray, *, min_extent: float) -> list[ThinRegi
         out.append(ThinRegion(bbox_min=v.min(0), bbox_max=v.max(0), volume=0.0,
                               thickness_cells=0.0))
     return out
+
+
+def refine_for_heatmap(mesh, *, grid_n: int, size: float, max_faces: int = 2_000_000):
+    """`mesh` with no edge longer than one sim cell, so per-vertex thickness can be shown on
+    long faces (a box fin has only corner vertices). Same geometry; capped at `max_faces`."""
+    dx = size / grid_n
+    if len(mesh.faces) >= max_faces or mesh.edges_unique_length.max() <= dx:
+        return mesh
+    import trimesh
+    v, f = trimesh.remesh.subdivide_to_size(mesh.vertices, mesh.faces, max_edge=dx, max_iter=12)
+    return mesh if len(f) > max_faces else trimesh.Trimesh(v, f, process=False)

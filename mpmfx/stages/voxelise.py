@@ -85,6 +85,8 @@ def run(ctx: Context) -> dict:
 def _thickness(ctx, obj, mesh, check_thickness, Verdict):
     """Run the five-cell check and obey voxelise.thickness (error | warn | ignore)."""
     dom, mode = ctx.shot.domain, ctx.shot.voxelise.thickness
+    from mpmfx.geometry.thickness import refine_for_heatmap
+    mesh = refine_for_heatmap(mesh, grid_n=dom.grid_n, size=dom.size)
     report = check_thickness(mesh, grid_n=dom.grid_n, origin=dom.origin, size=dom.size, name=obj.name)
     if mode is not Thickness.IGNORE:
         try:
