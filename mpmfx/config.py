@@ -111,6 +111,9 @@ class Solver(_Section):
     dt_min: float = Field(1e-7, gt=0, description="Substep floor (s): below it the run stops with advice.")
     deterministic: bool = Field(True, description="Fixed-point P2G: bit-identical replays (guide 10.1).")
     multi_field: bool = Field(False, description="One velocity field per object so bodies don't fuse.")
+    contact_friction: float = Field(0.2, ge=0, description="Coulomb friction between objects (multi_field).")
+    out_of_domain: Literal["clamp", "remove"] = Field("clamp", description="Particles reaching the domain "
+                                                      "edge: clamped in, or removed and counted in the QA.")
     checkpoint_every: int = Field(5, ge=1, description="Frames between full-state checkpoints (resume points).")
 
     @field_validator("walls")

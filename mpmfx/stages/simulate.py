@@ -61,7 +61,8 @@ def solver_config(shot: Shot):
                         damping=s.damping, drag=s.drag, time_scale=s.time_scale,
                         walls=tuple(WallType(w) for w in walls), wall_friction=s.wall_friction,
                         dt_max=s.dt_max, dt_min=s.dt_min, deterministic=s.deterministic,
-                        multi_field=s.multi_field)
+                        multi_field=s.multi_field, contact_friction=s.contact_friction,
+                        out_of_domain=s.out_of_domain)
 
 
 def run(ctx: Context) -> dict:
