@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The GPU session's benchmark runs, one table each (see README "Benchmarks").
 # Usage on the GPU machine (after ../shared/gpu/prepare-warp.sh's two stages):
-#   bash scripts/gpu_bench.sh solver|pipeline|surface|accuracy ...   results under ${OUT:-renders/bench}
+#   bash scripts/gpu_bench.sh solver|pipeline|shots|surface|accuracy ...   results under ${OUT:-renders/bench}
 set -uo pipefail
 export PYTHONUNBUFFERED=1 PYTHONPATH=/opt/wp/site:$PWD${PYTHONPATH:+:$PYTHONPATH}
 out=${OUT:-renders/bench}
@@ -14,6 +14,11 @@ for what in "$@"; do
     solver|surface|accuracy) timeout 280 python3 -m mpmfx.cli bench "$what" --device cuda --out "$out" 2>&1 | grep -v '^Module' ;;
     pipeline) MPMFX_CACHE=/tmp/mpmfx-cache timeout 280 python3 -m mpmfx.cli run pipeline/shots/jelly_splash.toml \
                 --until surface --device cuda -q 2>&1 | grep -v '^Module' ;;
+    shots) for shot in pipeline/shots/*.toml; do  # every example, twice: the second run has warm kernels
+             echo "--- $shot"; rm -rf /tmp/mpmfx-shots
+             for i in 1 2; do MPMFX_CACHE=/tmp/mpmfx-shots timeout 120 python3 -m mpmfx.cli run "$shot" --until surface \
+                 --device cuda -q --force voxelise 2>&1 | grep -v '^Module' | tail -4; done
+           done ;;
   esac
   echo "=== $what took $(( $(date +%s) - t0 )) s"
 done
