@@ -17,7 +17,7 @@ for what in "$@"; do
     shots) for shot in pipeline/shots/*.toml; do  # every example, twice: the second run has warm kernels
              echo "--- $shot"; rm -rf /tmp/mpmfx-shots
              for i in 1 2; do MPMFX_CACHE=/tmp/mpmfx-shots timeout 120 python3 -m mpmfx.cli run "$shot" --until surface \
-                 --device cuda -q --force voxelise 2>&1 | grep -v '^Module' | tail -4; done
+                 --device cuda -q --force voxelise --force simulate --force surface 2>&1 | grep -v '^Module' | tail -4; done
            done ;;
   esac
   echo "=== $what took $(( $(date +%s) - t0 )) s"
