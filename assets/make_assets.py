@@ -43,7 +43,8 @@ def snowball():
 
 
 def sand_column():
-    c = cylinder(radius=0.12, height=0.4, sections=48)
+    c = cylinder(radius=0.12, height=0.4, sections=48)  # trimesh's axis is z; stand it up along y
+    c.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1, 0, 0]))
     c.apply_translation([0, 0.2, 0])
     return c
 
