@@ -140,7 +140,8 @@ class Surface(_Section):
 
 
 class Export(_Section):
-    usd: bool = Field(True, description="Write the USD stage.")
+    """The USD stage is always written (it is the stage's product); these add to it."""
+
     vdb: bool = Field(True, description="Write per-frame .vdb level sets.")
     points: bool = Field(True, description="Include particles as UsdGeomPoints.")
 

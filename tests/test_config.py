@@ -25,11 +25,11 @@ def test_defaults_and_units(tiny_shot):
 
 
 def test_unknown_key_names_file_key_and_suggestion(tmp_path):
-    path = write_tiny_shot(tmp_path, extra="\n[export]\nusdd = true\n")
+    path = write_tiny_shot(tmp_path, extra="\n[export]\npointz = true\n")
     with pytest.raises(ShotError) as err:
         load_shot_config(path)
     msg = str(err.value)
-    assert str(path) in msg and "export.usdd" in msg and "did you mean 'usd'" in msg
+    assert str(path) in msg and "export.pointz" in msg and "did you mean 'points'" in msg
 
 
 def test_wrong_type_and_range(tiny_shot):
