@@ -219,3 +219,14 @@ def test_device_cuda_without_gpu_says_what_to_do(tmp_path, capsys):
     assert main(["run", str(shot), "--device", "cuda", "-q", "--cache", str(tmp_path / "c")]) == 1
     assert "--device cpu" in capsys.readouterr().err
     assert not list((tmp_path / "c").rglob("simulate-*"))
+
+
+def test_particle_debug_render_reuses_the_simulation(first_run, tmp_path, monkeypatch):
+    """The guide's debug look (9.4): switching render.mode re-runs only render."""
+    shot, cache, _ = first_run
+    monkeypatch.chdir(tmp_path)
+    results = mpmfx.load_shot(shot, overrides=["render.mode=particles"], cache_root=cache, quiet=True).run()
+    assert _states(results) == {"voxelise": "cached", "simulate": "cached", "surface": "cached",
+                                "export": "cached", "render": "ran"}
+    pngs = sorted((tmp_path / "renders" / "tiny").glob("[0-9]*.png"))
+    assert len(pngs) == 6 and all(p.stat().st_size > 1000 for p in pngs)
