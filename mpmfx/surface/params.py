@@ -179,7 +179,7 @@ class SparseLevelSet:
         """(a, b, c, 3) float32 velocity over the same voxels as `to_dense` (0 outside stored blocks)."""
         if self.velocity is None:
             return None
-        out = np.zeros((*shape, 3), np.float32)
+        out = np.zeros((*shape, 3), np.float32)  # blocks may be stored as float16
         for corner, block in zip(self.block_ijk - np.asarray(ijk0, np.int64), self.velocity):
             a, b = np.maximum(corner, 0), np.minimum(corner + 8, shape)
             if np.all(b > a):
