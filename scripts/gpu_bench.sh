@@ -14,7 +14,7 @@ for what in "$@"; do
     solver|surface|accuracy) timeout 280 python3 -m mpmfx.cli bench "$what" --device cuda --out "$out" 2>&1 | grep -v '^Module' ;;
     pipeline) MPMFX_CACHE=/tmp/mpmfx-cache timeout 280 python3 -m mpmfx.cli run pipeline/shots/jelly_splash.toml \
                 --until surface --device cuda -q 2>&1 | grep -v '^Module' ;;
-    shots) for shot in pipeline/shots/*.toml; do  # every example, twice: the second run has warm kernels
+    shots) for shot in ${SHOTS:-pipeline/shots/*.toml}; do  # every example, twice: the second run has warm kernels
              echo "--- $shot"; rm -rf /tmp/mpmfx-shots
              for i in 1 2; do MPMFX_CACHE=/tmp/mpmfx-shots timeout 120 python3 -m mpmfx.cli run "$shot" --until surface \
                  --device cuda -q --force voxelise --force simulate --force surface 2>&1 | grep -v '^Module' | tail -4; done
