@@ -40,14 +40,14 @@ def file_hash(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def code_hash(package: str) -> str:
-    """sha256 over a package's .py sources: a cache made by other solver/surfacer code is stale."""
+def code_hash(package: str, *files: str | Path) -> str:
+    """sha256 over a package's .py sources and `files` (the stage module itself): a cache made
+    by other code is stale."""
     import importlib.util
-    spec = importlib.util.find_spec(package)
-    folder = Path(spec.origin).parent
+    folder = Path(importlib.util.find_spec(package).origin).parent
     h = hashlib.sha256()
-    for p in sorted(folder.rglob("*.py")):
-        h.update(p.relative_to(folder).as_posix().encode() + b"\0" + p.read_bytes())
+    for p in [*sorted(folder.rglob("*.py")), *map(Path, files)]:
+        h.update(p.name.encode() + b"\0" + p.read_bytes())
     return h.hexdigest()
 
 

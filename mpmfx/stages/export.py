@@ -21,7 +21,7 @@ def params(shot: Shot) -> dict:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {"code": code_hash("mpmfx.io")}
+    return {"code": code_hash("mpmfx.io", __file__)}
 
 
 def run(ctx: Context) -> dict:

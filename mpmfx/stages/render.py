@@ -18,11 +18,12 @@ NAME, VERSION, PER_FRAME, FRAME_EXT = "render", 1, True, "png"
 def params(shot: Shot) -> dict:
     from mpmfx.render.camera import default_camera
     return {"render": shot.render.model_dump(mode="json"), "camera": default_camera(shot),
-            "domain": shot.domain.model_dump(mode="json"), "materials": [o.material for o in shot.objects]}
+            "domain": shot.domain.model_dump(mode="json"), "materials": [o.material for o in shot.objects],
+            "colliders": [c.model_dump(mode="json") for c in shot.colliders]}
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {"code": code_hash("mpmfx.render")}
+    return {"code": code_hash("mpmfx.render", __file__)}
 
 
 def run(ctx: Context) -> dict:
@@ -49,6 +50,7 @@ def run(ctx: Context) -> dict:
                 groups = load_frame_groups(ctx.upstream["surface"], f)
                 meshes = {g: (d["vertices"], d["faces"], colour_for(material_of.get(g, g), i))
                           for i, (g, d) in enumerate(groups.items())}
+                meshes |= _collider_meshes(shot, f)
                 renderer.surfaces(meshes, entry.frame_path(f, FRAME_EXT), label=label)
     finally:
         renderer.close()
@@ -59,6 +61,18 @@ def run(ctx: Context) -> dict:
     sheet = contact_sheet(pngs, entry.root / "contact.png") if pngs else None
     out = publish(shot, pngs, [p for p in (movie, sheet) if p is not None])
     return {"published": str(out)}
+
+
+def _collider_meshes(shot: Shot, frame: int) -> dict:
+    """Each collider posed at this frame's time, in a neutral grey, so the audience sees what hits."""
+    from mpmfx.stages.colliders import collider_mesh, transform_at
+    t = (frame - shot.shot.frame_start) / shot.shot.fps
+    out = {}
+    for col in shot.colliders:
+        m = collider_mesh(shot, col)
+        xf = transform_at(col, t)
+        out[f"collider_{col.name}"] = (m.vertices @ xf[:3, :3].T + xf[:3, 3], m.faces, "#9aa0a8")
+    return out
 
 
 def publish(shot: Shot, pngs: list[Path], extras: list[Path]) -> Path:

@@ -35,7 +35,7 @@ def params(shot: Shot) -> dict:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {"code": code_hash("mpmfx.mpm"), **collider_build.inputs(shot)}
+    return {"code": code_hash("mpmfx.mpm", __file__), **collider_build.inputs(shot)}
 
 
 def materials(shot: Shot) -> tuple[list, list[int]]:

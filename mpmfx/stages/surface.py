@@ -27,7 +27,7 @@ def params(shot: Shot) -> dict:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {"code": code_hash("mpmfx.surface")}
+    return {"code": code_hash("mpmfx.surface", __file__)}
 
 
 def particle_spacing(shot: Shot) -> float:

@@ -37,7 +37,7 @@ def _fluid(shot: Shot) -> list[bool]:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {"code": code_hash("mpmfx.geometry"), **{o.name: file_hash(shot.resolve(o.mesh)) for o in shot.objects}}
+    return {"code": code_hash("mpmfx.geometry", __file__), **{o.name: file_hash(shot.resolve(o.mesh)) for o in shot.objects}}
 
 
 def run(ctx: Context) -> dict:
