@@ -24,3 +24,21 @@ def block(lo, hi, *, grid_n: int, material: int = 0, body: int | None = None, v=
 
 def concat(*parts: Particles) -> Particles:
     return Particles(*[np.concatenate([getattr(p, k) for p in parts]) for k in ("x", "v", "volume", "material", "body")])
+
+
+def free_bar(*, grid_n: int, half_width: float, length: float = 0.6, E: float = 100.0, v0: float = 0.1):
+    """validation.md §2's bar, free-free, in its first mode: v = v0 cos(kx) and C = dv/dx (for
+    APIC). Returns (solver, state, particles, k). No gravity, nu = 0, an Elastic-like clamp."""
+    from mpmfx.mpm import Material, Mode, Solver, SolverConfig
+    x0 = 0.5 - length / 2
+    p = block((x0, 0.5 - half_width, 0.5 - half_width), (x0 + length, 0.5 + half_width, 0.5 + half_width),
+              grid_n=grid_n)
+    k = np.pi / length
+    p.v[:, 0] = v0 * np.cos(k * (p.x[:, 0] - x0))
+    mat = Material(Mode.SNOW, youngs_modulus=E, poisson_ratio=0.0, theta_c=1e9, theta_s=1e9)
+    solver = Solver([mat], SolverConfig(grid_n=grid_n, gravity=(0.0, 0.0, 0.0)), device="cpu")
+    state = solver.init_state(p)
+    C = np.zeros((state.n, 3, 3), np.float32)
+    C[:, 0, 0] = -v0 * k * np.sin(k * (p.x[:, 0] - x0))
+    state.cur.C.assign(C)
+    return solver, state, p, k

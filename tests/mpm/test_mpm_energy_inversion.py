@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from mpm_helpers import block
+from mpm_helpers import block, free_bar
 from mpmfx.mpm import PRESETS, Material, Mode, Solver, SolverConfig, preset
 
 ZERO_G = (0.0, 0.0, 0.0)
@@ -71,17 +71,7 @@ def test_tait_energy_is_the_potential_of_the_pressure():
 def test_report_energy_is_exchanged_and_conserved_in_a_free_bar():
     """Undamped free bar in its first mode (validation.md §2): the report's kinetic and
     elastic energy trade places each quarter period and their sum stays put."""
-    grid_n, Lf, E, v0 = 16, 0.6, 100.0, 0.1
-    x0 = 0.5 - Lf / 2
-    p = block((x0, 0.4, 0.4), (x0 + Lf, 0.6, 0.6), grid_n=grid_n)
-    k = np.pi / Lf
-    p.v[:, 0] = v0 * np.cos(k * (p.x[:, 0] - x0))
-    mat = Material(Mode.SNOW, youngs_modulus=E, poisson_ratio=0.0, theta_c=1e9, theta_s=1e9)
-    solver = Solver([mat], SolverConfig(grid_n=grid_n, gravity=ZERO_G), device="cpu")
-    state = solver.init_state(p)
-    C = np.zeros((state.n, 3, 3), np.float32)
-    C[:, 0, 0] = -v0 * k * np.sin(k * (p.x[:, 0] - x0))
-    state.cur.C.assign(C)
+    solver, state, p, _ = free_bar(grid_n=16, half_width=0.1)
     ke0 = 0.5 * float((state.mass.numpy() * (p.v**2).sum(axis=1)).sum())
     reports = [solver.advance(state, f / 40, (f + 1) / 40) for f in range(12)]  # period 0.12 s
     ee = np.array([r.elastic_energy for r in reports])

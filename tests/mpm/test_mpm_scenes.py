@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from mpm_helpers import block, concat
+from mpm_helpers import block, concat, free_bar
 from mpmfx.mpm import PRESETS, Collider, ColliderKind, Material, Mode, Solver, SolverConfig, preset
 
 ZERO_G = (0.0, 0.0, 0.0)
@@ -69,17 +69,8 @@ def test_tracers_ride_with_the_material():
 def test_free_elastic_bar_period_matches_the_analytic_mode():
     """validation.md §2 (Buzzi et al.): a free-free bar of length Lf is two fixed-free bars
     of L = Lf/2; first mode period 4 L / sqrt(E / rho). E = 100, nu = 0: T = 0.12 s."""
-    grid_n, Lf, E, v0 = 32, 0.6, 100.0, 0.1
-    x0 = 0.5 - Lf / 2
-    p = block((x0, 0.44, 0.44), (x0 + Lf, 0.56, 0.56), grid_n=grid_n)
-    k = np.pi / Lf
-    p.v[:, 0] = v0 * np.cos(k * (p.x[:, 0] - x0))
-    mat = Material(Mode.SNOW, youngs_modulus=E, poisson_ratio=0.0, theta_c=1e9, theta_s=1e9)
-    solver = Solver([mat], SolverConfig(grid_n=grid_n, gravity=ZERO_G), device="cpu")
-    state = solver.init_state(p)
-    C = np.zeros((state.n, 3, 3), np.float32)
-    C[:, 0, 0] = -v0 * k * np.sin(k * (p.x[:, 0] - x0))  # the velocity gradient, for APIC
-    state.cur.C.assign(C)
+    Lf, E = 0.6, 100.0
+    solver, state, p, _ = free_bar(grid_n=32, half_width=0.06, length=Lf, E=E)
     left = p.x[:, 0] < 0.5
     dt = solver._cfl_dt(state.clock)
     times, momentum = [], []
