@@ -122,7 +122,7 @@ def _dt(solver, state, cfl: float, vmax: float) -> float:
 
 def _march(solver, state, dt: float, steps: int, observe=None, every: int = 1) -> float:
     """`steps` substeps of dt; observe(k) after substep k when k % every == 0. Returns
-    wall seconds (device synchronised; includes the observations' copies)."""
+    (wall seconds, device synchronised and including the observations' copies; simulated seconds)."""
     import warp as wp
     wp.synchronize_device(solver.device)
     t0 = time.perf_counter()
@@ -131,7 +131,7 @@ def _march(solver, state, dt: float, steps: int, observe=None, every: int = 1) -
         if observe is not None and k % every == 0:
             observe(k)
     wp.synchronize_device(solver.device)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, dt * steps
 
 
 def _result(case, solver, state, cfl, ppa, steps, wall, error, metric, **extra) -> CaseResult:
@@ -155,13 +155,13 @@ def free_fall(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, device=None) 
     dt0 = _dt(solver, state, cfl, float(np.linalg.norm(v0 + g * t_end)))
     steps = math.ceil(t_end / dt0)
     dt = t_end / steps
-    wall = _march(solver, state, dt, steps)
+    wall, sim_s = _march(solver, state, dt, steps)
     s = solver.state_to_numpy(state)
     exact = x0 + v0 * t_end + 0.5 * g * t_end**2 + 0.5 * g * t_end * dt
     err = np.abs(s["x"] - exact).max() / (0.5 * np.linalg.norm(g) * t_end**2)
     f_dev = float(np.abs(s["F"] - np.eye(3)).max())
     return _result("free_fall", solver, state, cfl, ppa, steps, wall, err, "max|x-x_exact|/drop",
-                   F_minus_I=f_dev)
+                   F_minus_I=f_dev, sim_s=sim_s)
 
 
 def _angular_momentum(s, c, dx) -> np.ndarray:
@@ -192,11 +192,11 @@ def rigid_rotation(*, grid_n: int = 16, cfl: float = 0.4, ppa: int = 2, revoluti
     L0 = _angular_momentum(solver.state_to_numpy(state), c, dx)
     t_end = revolutions * 2 * math.pi / np.linalg.norm(w)
     steps = math.ceil(t_end / _dt(solver, state, cfl, R * np.linalg.norm(w)))
-    wall = _march(solver, state, t_end / steps, steps)
+    wall, sim_s = _march(solver, state, t_end / steps, steps)
     L = _angular_momentum(solver.state_to_numpy(state), c, dx)
     err = np.linalg.norm(L - L0) / np.linalg.norm(L0)
     return _result("rotation_pic" if pic else "rotation_apic", solver, state, cfl, ppa, steps, wall,
-                   err, "|L-L0|/L0", revolutions=revolutions)
+                   err, "|L-L0|/L0", revolutions=revolutions, sim_s=sim_s)
 
 
 # ---------------------------------------------------------------------------- §2 elastic
@@ -220,7 +220,7 @@ def vibrating_bar(*, grid_n: int = 40, cfl: float = 0.4, ppa: int = 2, device=No
     dt = T / steps
     right = x[:, 0] > xc
     vcm = [float(v[right, 0].mean())]
-    wall = _march(solver, state, dt, int(steps * 1.05),
+    wall, sim_s = _march(solver, state, dt, int(steps * 1.05),
                   observe=lambda k: vcm.append(float(state.cur.v.numpy()[right, 0].mean())))
     t = np.arange(len(vcm)) * dt
     vc = np.array(vcm)
@@ -229,7 +229,7 @@ def vibrating_bar(*, grid_n: int = 40, cfl: float = 0.4, ppa: int = 2, device=No
     amp = 2 * v0 / math.pi
     amp_err = np.abs(vc[t <= T] - amp * np.cos(2 * math.pi * t[t <= T] / T)).max() / amp
     return _result("vibrating_bar", solver, state, cfl, ppa, len(vcm) - 1, wall, abs(period - T) / T,
-                   "|T-10|/10", period_s=period, vcm_error=float(amp_err))
+                   "|T-10|/10", period_s=period, vcm_error=float(amp_err), sim_s=sim_s)
 
 
 def standing_wave(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, strain: float = 0.2,
@@ -256,10 +256,10 @@ def standing_wave(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, strain: f
         u = solver.state_to_numpy(state)["x"][:, 0] - x0[:, 0]
         sq.append(np.mean((u - A * np.cos(k * X) * np.sin(w * step * dt)) ** 2))
 
-    wall = _march(solver, state, dt, per_q * quarters, observe=observe, every=per_q)
+    wall, sim_s = _march(solver, state, dt, per_q * quarters, observe=observe, every=per_q)
     err = math.sqrt(np.mean(sq)) / A
     return _result("standing_wave", solver, state, cfl, ppa, per_q * quarters, wall, err, "rms|u-u_exact|/A",
-                   dt=dt)
+                   dt=dt, sim_s=sim_s)
 
 
 def hydrostatic_column(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, device=None) -> CaseResult:
@@ -275,7 +275,7 @@ def hydrostatic_column(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, devi
                            gravity=(0.0, -g, 0.0), damping=40.0, device=device)
     t_end = 0.4
     steps = math.ceil(t_end / _dt(solver, state, cfl, 0.0))
-    wall = _march(solver, state, t_end / steps, steps)
+    wall, sim_s = _march(solver, state, t_end / steps, steps)
     s = solver.state_to_numpy(state)
     sig = fc_cauchy(s["F"].astype(np.float64), solver.materials[0].mu0, solver.materials[0].lambda0)[:, 1, 1]
     exact = -rho * g * (y0 + H - x0[:, 1].astype(np.float64))
@@ -285,7 +285,7 @@ def hydrostatic_column(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, devi
     sig, exact = sig[bulk], exact[bulk]
     err = np.linalg.norm(sig - exact) / np.linalg.norm(exact)
     return _result("hydrostatic", solver, state, cfl, ppa, steps, wall, err, "L2|s_yy-exact|/|exact|",
-                   bias=float(sig.sum() / exact.sum() - 1.0))
+                   bias=float(sig.sum() / exact.sum() - 1.0), sim_s=sim_s)
 
 
 def colliding_disks(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, t_end: float = 4.0,
@@ -315,8 +315,8 @@ def colliding_disks(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, t_end: 
 
     e0, _ = energy()
     steps = math.ceil(t_end / _dt(solver, state, cfl, 0.1 * s * math.sqrt(2)))
-    wall = _march(solver, state, t_end / steps, steps)
+    wall, sim_s = _march(solver, state, t_end / steps, steps)
     e1, st = energy()
     p = np.abs((m[:, None] * st["v"]).sum(0)).max() / (m * np.linalg.norm(v, axis=1)).sum()
     return _result("colliding_disks", solver, state, cfl, ppa, steps, wall, abs(e1 - e0) / e0,
-                   "|E-E0|/E0", momentum_error=float(p))
+                   "|E-E0|/E0", momentum_error=float(p), sim_s=sim_s)
