@@ -94,12 +94,27 @@ def mesh_stats(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, int]:
     return volume, len(np.unique(labels[used]))
 
 
+def _row(shape: str, sampling: str, x: np.ndarray, h: float, method: str, grid: str, seconds: float,
+         verts: np.ndarray, faces: np.ndarray) -> dict:
+    """One result row: timing, vertex distance to the analytic surface (m and h), volume, pieces."""
+    sdf, volume, _ = shape_sdf(shape)
+    err = np.abs(sdf(np.asarray(verts, np.float64))) if len(verts) else np.array([np.nan])
+    mesh_volume, pieces = mesh_stats(verts, faces)
+    return {
+        "shape": shape, "sampling": sampling, "particles": len(x), "h": h, "method": method, "grid": grid,
+        "seconds": seconds, "particles_per_s": len(x) / seconds,
+        "err_mean": float(err.mean()), "err_p99": float(np.percentile(err, 99)), "err_max": float(err.max()),
+        "err_mean_h": float(err.mean() / h), "err_p99_h": float(np.percentile(err, 99) / h),
+        "err_max_h": float(err.max() / h), "volume_err": mesh_volume / volume - 1.0, "components": pieces,
+        "vertices": len(verts),
+    }
+
+
 def measure(
     shape: str, count: int, sampling: str, *, radius_factor: float = 0.5, device: str | None = None, **overrides
 ) -> dict:
     """Reconstruct one sample and measure it (particle_radius = radius_factor * h)."""
     x, h = sample_shape(shape, count, sampling)
-    sdf, volume, _ = shape_sdf(shape)
     params = SurfaceParams(particle_radius=radius_factor * h, **overrides)
     t0 = time.perf_counter()
     res = surface_particles(x, None, params, device=device)
@@ -112,29 +127,9 @@ def measure(
         grid_txt = f"{len(res.sparse.block_ijk)}blk"
     else:
         grid_txt = "x".join(map(str, res.level_set.values.shape))
-    verts, faces = res.mesh.vertices, res.mesh.faces
-    err = np.abs(sdf(verts.astype(np.float64))) if len(verts) else np.array([np.nan])
-    mesh_volume, pieces = mesh_stats(verts, faces)
-    return {
-        "shape": shape,
-        "sampling": sampling,
-        "particles": len(x),
-        "h": h,
-        "method": params.method.name + ("" if params.grid is Grid.DENSE or not stats else "/sparse"),
-        "grid": grid_txt,
-        "stages": stats,
-        "seconds": seconds,
-        "particles_per_s": len(x) / seconds,
-        "err_mean": float(err.mean()),
-        "err_p99": float(np.percentile(err, 99)),
-        "err_max": float(err.max()),
-        "err_mean_h": float(err.mean() / h),
-        "err_p99_h": float(np.percentile(err, 99) / h),
-        "err_max_h": float(err.max() / h),
-        "volume_err": mesh_volume / volume - 1.0,
-        "components": pieces,
-        "vertices": len(verts),
-    }
+    method = params.method.name + ("" if params.grid is Grid.DENSE or not stats else "/sparse")
+    row = _row(shape, sampling, x, h, method, grid_txt, seconds, res.mesh.vertices, res.mesh.faces)
+    return {**row, "stages": stats}
 
 
 def measure_splashsurf(shape: str, count: int, sampling: str, *, kernel: float = 2.0, cube: float = 0.5) -> dict | None:
@@ -149,7 +144,6 @@ def measure_splashsurf(shape: str, count: int, sampling: str, *, kernel: float =
     except ImportError:
         return None
     x, h = sample_shape(shape, count, sampling)
-    sdf, volume, _ = shape_sdf(shape)
     r = 0.5 * h
     t0 = time.perf_counter()
     mesh = pysplashsurf.reconstruct_surface(
@@ -161,29 +155,8 @@ def measure_splashsurf(shape: str, count: int, sampling: str, *, kernel: float =
         iso_surface_threshold=0.6,
     ).mesh
     seconds = time.perf_counter() - t0
-    verts = np.asarray(mesh.vertices, dtype=np.float64)
-    faces = np.asarray(mesh.triangles, dtype=np.int64)
-    err = np.abs(sdf(verts))
-    mesh_volume, pieces = mesh_stats(verts, faces)
-    return {
-        "shape": shape,
-        "sampling": sampling,
-        "particles": len(x),
-        "h": h,
-        "method": f"splashsurf {kernel}/{cube}",
-        "grid": "-",
-        "seconds": seconds,
-        "particles_per_s": len(x) / seconds,
-        "err_mean": float(err.mean()),
-        "err_p99": float(np.percentile(err, 99)),
-        "err_max": float(err.max()),
-        "err_mean_h": float(err.mean() / h),
-        "err_p99_h": float(np.percentile(err, 99) / h),
-        "err_max_h": float(err.max() / h),
-        "volume_err": mesh_volume / volume - 1.0,
-        "components": pieces,
-        "vertices": len(verts),
-    }
+    return _row(shape, sampling, x, h, f"splashsurf {kernel}/{cube}", "-", seconds,
+                np.asarray(mesh.vertices, np.float64), np.asarray(mesh.triangles, np.int64))
 
 
 def bench_surface(
