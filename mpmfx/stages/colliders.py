@@ -91,15 +91,11 @@ def _mesh_sdf(shot: Shot, col: ColliderCfg):
 
 
 def transform_at(col: ColliderCfg, t: float) -> np.ndarray:
-    """(4,4) world transform at time t (s), linear in translation and slerp in rotation."""
+    """(4,4) world transform at time t (s): the solver's own keyframe interpolation (linear
+    translation, slerp rotation), so what USD and the renders show is what the material felt."""
+    from mpmfx.mpm import Collider, ColliderKind
     times, tr, rot = keyframes(col)
-    i = int(np.clip(np.searchsorted(times, t) - 1, 0, len(times) - 1))
-    j = min(i + 1, len(times) - 1)
-    a = 0.0 if j == i else float(np.clip((t - times[i]) / (times[j] - times[i]), 0, 1))
-    p = (1 - a) * tr[i] + a * tr[j]
-    q0, q1 = rot[i], rot[j] * (1 if np.dot(rot[i], rot[j]) >= 0 else -1)
-    q = (1 - a) * q0 + a * q1
-    x, y, z, w = q / np.linalg.norm(q)
+    p, (x, y, z, w) = Collider(kind=ColliderKind.PLANE, times=times, translations=tr, rotations=rot).pose(t)
     m = np.eye(4)
     m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
                  [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
