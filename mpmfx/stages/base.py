@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import sys
 from dataclasses import dataclass, field
-from typing import Callable, Protocol
+from typing import Protocol
 
 from mpmfx.cache import Entry
 from mpmfx.config import Shot
@@ -25,12 +25,12 @@ class Context:
     quiet: bool = False
     notes: list[str] = field(default_factory=list)
 
-    def progress(self, iterable, *, total: int | None = None, desc: str = ""):
+    def progress(self, iterable, *, total: int | None = None, desc: str = "", unit: str = "frame"):
         """A progress bar over frames on stderr (silent when quiet or not a terminal in tests)."""
         if self.quiet:
             return iterable
         from tqdm import tqdm
-        return tqdm(iterable, total=total, desc=f"{desc or self.entry.stage:>9}", unit="frame",
+        return tqdm(iterable, total=total, desc=f"{desc or self.entry.stage:>9}", unit=unit,
                     file=sys.stderr, leave=False, dynamic_ncols=True)
 
     def warn(self, message: str) -> None:
@@ -48,8 +48,6 @@ class Stage(Protocol):
     def inputs(self, shot: Shot) -> dict[str, str]: ...     # input files: name -> sha256
     def run(self, ctx: Context) -> dict: ...                # writes into ctx.entry; returns manifest extras
 
-
-ProgressFn = Callable[[int], None]
 
 
 def quiet_warp(device: str | None = None) -> None:

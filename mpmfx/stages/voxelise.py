@@ -6,14 +6,13 @@ m^3, body (n,) int32 (index into shot.objects); `thickness.json`, one heatmap PN
 """
 from __future__ import annotations
 
-import json
 import warnings
 
 import numpy as np
 
 from mpmfx.cache import code_hash, file_hash, write_json
 from mpmfx.config import Shot, Thickness
-from mpmfx.io.frames import write_arrays
+from mpmfx.io.frames import read_arrays, write_arrays
 from mpmfx.stages.base import Context, StageError
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "voxelise", 1, False, "npz"
@@ -48,7 +47,7 @@ def run(ctx: Context) -> dict:
     shot, dom = ctx.shot, ctx.shot.domain
     xs, vs, vols, bodies, reports = [], [], [], [], {}
     fluid = _fluid(shot)
-    for body, obj in enumerate(ctx.progress(shot.objects, total=len(shot.objects), desc="voxelise")):
+    for body, obj in enumerate(ctx.progress(shot.objects, total=len(shot.objects), desc="voxelise", unit="object")):
         path = shot.resolve(obj.mesh)
         try:
             mesh = transform_mesh(load_mesh(path, prim_path=obj.prim_path), translate=obj.translate,
@@ -106,9 +105,5 @@ def _thickness(ctx, obj, mesh, check_thickness, Verdict):
 
 
 def load(entry) -> dict[str, np.ndarray]:
-    from mpmfx.io.frames import read_arrays
     return read_arrays(entry.root / "particles.npz")
 
-
-def thickness_reports(entry) -> dict:
-    return json.loads((entry.root / "thickness.json").read_text())
