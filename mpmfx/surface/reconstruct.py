@@ -31,6 +31,7 @@ log = logging.getLogger(__name__)
 MAX_GRID_NODES = 1 << 28  # ~268 M voxels (~1 GB per float channel): beyond this a dense grid is a mistake
 MAX_SWEEP_ROUNDS = 256
 PROJECTED = 1
+ACCEPTS_DEVICE_ARRAYS = True  # surface_particles takes wp.array inputs (the benchmark times them on device)
 
 
 def surface_particles(
@@ -39,23 +40,28 @@ def surface_particles(
     """Reconstruct the surface of a particle cloud.
 
     x: (n, 3) float world positions (m); v: (n, 3) float world velocities (m/s) or None.
+    Either may also be a wp.array of wp.vec3 already on a device (the sparse path then runs
+    there without uploading them; non-finite positions are caught on the device).
     device: Warp device ("cpu", "cuda:0"); None -> Warp's default device.
     Returns a :class:`SurfaceResult`; n = 0 gives an empty level set and mesh.
     """
-    x, v = _check_inputs(x, v)
-    if x.shape[0] == 0:
-        return _empty_result(params, with_v=v is not None)
     import warp as wp
 
+    wp.init()
+    on_device = isinstance(x, wp.array)
+    x, v = _check_device_inputs(wp, x, v) if on_device else _check_inputs(x, v)
+    if x.shape[0] == 0:
+        return _empty_result(params, with_v=v is not None)
     from mpmfx.surface import kernels as K
 
-    wp.init()
-    dev = wp.get_device(device)
+    dev = x.device if on_device else wp.get_device(device)
     if params.grid is Grid.SPARSE and params.method is Method.ZHU_BRIDSON:
         from mpmfx.surface.sparse import surface_sparse
 
         with wp.ScopedDevice(dev):
             return surface_sparse(wp, x, v, params)
+    if on_device:  # the dense path sizes its grid on the host
+        x, v = _check_inputs(x.numpy(), None if v is None else v.numpy())
     timings: dict[str, float] = {}
     grid = _Grid.fit(x, params)
     with wp.ScopedDevice(dev):
@@ -140,6 +146,15 @@ def _check_inputs(x: np.ndarray, v: np.ndarray | None) -> tuple[np.ndarray, np.n
         if v.shape != x.shape:
             raise ValueError(f"surface_particles: v must have the shape of x {x.shape}, got {v.shape}")
         v = np.nan_to_num(v.astype(np.float32), nan=0.0, posinf=0.0, neginf=0.0)
+    return x, v
+
+
+def _check_device_inputs(wp, x, v):
+    if x.dtype != wp.vec3 or x.ndim != 1:
+        raise ValueError(f"surface_particles: a device x must be a 1-D wp.array of wp.vec3, got {x.dtype} ndim {x.ndim}")
+    if v is not None and (not isinstance(v, wp.array) or v.dtype != wp.vec3 or v.shape != x.shape
+                          or v.device != x.device):
+        raise ValueError("surface_particles: with a device x, v must be a wp.array of wp.vec3 of the same length and device")
     return x, v
 
 

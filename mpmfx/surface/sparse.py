@@ -19,6 +19,7 @@ from __future__ import annotations
 import logging
 import math
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -37,9 +38,11 @@ last_stats: dict = {}
 
 
 class SparseGrid:
-    """Block grid aligned to multiples of 8 voxels (OpenVDB leaf alignment), with empty margins."""
+    """Block grid aligned to multiples of 8 voxels (OpenVDB leaf alignment), with empty margins.
 
-    def __init__(self, x: np.ndarray, params: SurfaceParams):
+    lo, hi: (3,) world bounds of the particles (m)."""
+
+    def __init__(self, lo: np.ndarray, hi: np.ndarray, params: SurfaceParams):
         self.voxel = params.resolved_voxel_size
         r = params.particle_radius * params.radius_scale
         self.r_vox = r / self.voxel
@@ -47,7 +50,6 @@ class SparseGrid:
         self.background = params.band_voxels * self.voxel
         self.far_vox = max(self.kernel_vox, self.r_vox + params.band_voxels + 1.0)
         self.wide = float(params.band_voxels + params.smooth_iters + 2)
-        # a voxel whose field matters lies within kernel support + dilation + band + blur of a particle
         # a voxel whose final value is not +background lies within r + dilation + band + blur of
         # a particle; +2 voxels for the gradient stencils
         self.reach_vox = self.r_vox + max(params.dilate, 0.0) / self.voxel + self.wide + 2.0
@@ -55,8 +57,8 @@ class SparseGrid:
         self.dense_reach = int(math.ceil(self.kernel_vox / BS))
         # particles per block in a full packing (spacing ~ 2 r); a quarter of that marks "dense"
         self.dense_min = max(1, int((BS * self.voxel / (2.0 * params.particle_radius)) ** 3 / 4))
-        lo = np.floor(x.min(axis=0).astype(np.float64) / self.voxel)
-        hi = np.floor(x.max(axis=0).astype(np.float64) / self.voxel)
+        lo = np.floor(np.asarray(lo, np.float64) / self.voxel)
+        hi = np.floor(np.asarray(hi, np.float64) / self.voxel)
         margin = self.reach_blocks + 1  # boundary blocks are always OUTSIDE: flood-fill seeds
         blo = np.floor(lo / BS).astype(np.int64) - margin
         bhi = np.floor(hi / BS).astype(np.int64) + margin
@@ -70,26 +72,89 @@ class SparseGrid:
         self.origin = self.ijk0.astype(np.float64) * self.voxel
 
 
-def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParams) -> SurfaceResult:
-    """Grid.SPARSE path of :func:`mpmfx.surface.surface_particles` (inputs already checked)."""
+@dataclass
+class DeviceSurface:
+    """The sparse surfacer's result, still on the Warp device (what the benchmark times).
+
+    Active blocks: bcoord (m,) vec3i block coordinates, bmap (block grid) -> active index or
+    tile code, values (m * 512,) float32 world-unit level set, vel (m * 512,) vec3 or None,
+    w (m * 512,) kernel weight sums, counts (block grid) particles per block. Mesh: world (v,)
+    vec3 positions, normals, velocities, faces (3 k,) int32 (device arrays of exact size).
+    keep (m,) 1 where an active block holds a band voxel, kind (m,) 0 all-outside / 1
+    all-inside / 2 band (see classify_output_blocks)."""
+
+    grid: SparseGrid
+    n: int
+    bcoord: object
+    bmap: object
+    counts: object
+    values: object
+    w: object
+    vel: object
+    kind: object
+    mesh: tuple | None
+
+    def download(self, params: SurfaceParams) -> SurfaceResult:
+        """Copy to the host: mesh, sparse leaves and (params.dense_output) dense arrays."""
+        import warp as wp
+        from mpmfx.surface import sparse_kernels as S
+
+        mesh = _download_mesh(self.mesh)
+        sparse = _sparse_output(wp, S, self)
+        result = _dense_output(wp, S, self, params)
+        result.mesh, result.sparse = mesh, sparse
+        return result
+
+
+def surface_sparse(wp, x, v, params: SurfaceParams) -> SurfaceResult:
+    """Grid.SPARSE path of :func:`mpmfx.surface.surface_particles` (inputs already checked).
+
+    x: (n, 3) float32 numpy positions (m) or a wp.array of wp.vec3 on the current device;
+    v: the same for velocities (m/s), or None."""
+    if not isinstance(x, wp.array):
+        x = wp.array(np.ascontiguousarray(x, dtype=np.float32), dtype=wp.vec3)
+    if v is not None and not isinstance(v, wp.array):
+        v = wp.array(np.ascontiguousarray(v, dtype=np.float32), dtype=wp.vec3)
+    t0 = time.perf_counter()
+    dev = surface_on_device(wp, x, v, params)
+    last_stats["device"] = _lap(wp, t0)
+    result = dev.download(params)
+    last_stats["download"] = round(time.perf_counter() - t0 - last_stats["device"], 4)
+    return result
+
+
+def particle_bounds(wp, S, x) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) (3,) float64 world bounds of x (wp.array of vec3), computed on the device;
+    ValueError when a position is NaN or infinite."""
+    out = wp.array(np.array([np.inf] * 3 + [-np.inf] * 3 + [0.0], np.float32), dtype=float)
+    threads = min(x.shape[0], 1 << 16)  # each thread reduces a strided slice, then 7 atomics
+    wp.launch(S.bounds, threads, inputs=[x, threads, out])
+    b = out.numpy().astype(np.float64)
+    if b[6] > 0:
+        raise ValueError(f"surface_particles: x holds {int(b[6])} NaN or inf positions; fix the simulation frame")
+    return b[:3], b[3:6]
+
+
+def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
+    """Level set and mesh of particles x (wp.array of vec3, m) with velocities v (or None),
+    left on the device. A handful of host syncs read sizes (active blocks, vertices, faces,
+    flood-fill rounds); everything else stays on the GPU."""
     from mpmfx.surface import sparse_kernels as S
 
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
-    grid = SparseGrid(x, params)
+    grid = SparseGrid(*particle_bounds(wp, S, x), params)
     n = x.shape[0]
     # grid coordinates on the device: float32 keeps 1e-4 voxel at 2000 voxels across
-    xd = wp.array(np.ascontiguousarray(x, dtype=np.float32), dtype=wp.vec3)
     g = wp.empty(n, dtype=wp.vec3)
-    wp.launch(S.to_grid, n, inputs=[xd, wp.vec3(*grid.origin.astype(np.float32)), 1.0 / grid.voxel, g])
-    del xd
+    wp.launch(S.to_grid, n, inputs=[x, wp.vec3(*grid.origin.astype(np.float32)), 1.0 / grid.voxel, g])
     counts, starts, order = _bin_particles(wp, S, g, grid)
     bmap, bcoord = _classify(wp, S, g, counts, grid)
     nact = bcoord.shape[0]
     nvox = nact * BS**3
     timings["blocks"] = _lap(wp, t0)
     with_v = v is not None
-    va = wp.array(v if with_v else np.zeros((1, 3), np.float32), dtype=wp.vec3)
+    va = v if with_v else wp.zeros(1, dtype=wp.vec3)
     phi = wp.empty(nvox, dtype=float)
     w = wp.empty(nvox, dtype=float)
     vel = wp.empty(nvox if with_v else 1, dtype=wp.vec3)
@@ -125,14 +190,12 @@ def surface_sparse(wp, x: np.ndarray, v: np.ndarray | None, params: SurfaceParam
     timings["smooth"] = _lap(wp, t0)
     mesh = _extract_mesh(wp, S, bcoord, bmap, values, tiles, vel if with_v else None, grid)
     timings["mesh"] = _lap(wp, t0)
-    sparse = _sparse_output(wp, S, bcoord, bmap, values, vel if with_v else None, grid)
-    result = _dense_output(wp, S, bcoord, bmap, counts, values, w, vel if with_v else None, grid, params, n, with_v)
-    result.mesh, result.sparse = mesh, sparse
-    timings["output"] = _lap(wp, t0)
+    kind = wp.empty(max(nact, 1), dtype=wp.int32)
+    _launch(wp, S.classify_output_blocks, nact, [values, grid.background, kind])
     last_stats.clear()
     last_stats.update(timings, active_blocks=nact, fill_rounds=steps)
     log.debug("surface_sparse n=%d blocks=%s active=%d timings=%s", n, grid.nblocks, nact, timings)
-    return result
+    return DeviceSurface(grid, n, bcoord, bmap, counts, values, w, vel if with_v else None, kind[:nact], mesh)
 
 
 def _lap(wp, t0: float) -> float:
@@ -245,28 +308,29 @@ def _smooth(wp, S, bcoord, bmap, phi, iters: int, tiles):
     return phi
 
 
-def _extract_mesh(wp, S, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> SurfaceMesh:
+def _extract_mesh(wp, S, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> tuple | None:
+    """Marching cubes over active cells: (world, normals, velocities, faces) device arrays of
+    exact size, or None for an empty surface."""
     from warp._src.geometry import marching_cubes as mc  # tables only (pinned warp 1.19)
 
     nvox = values.shape[0]
     if nvox == 0:
-        return SurfaceMesh.empty()
+        return None
     dev = values.device
     ecount = wp.empty(nvox * 3, dtype=wp.int32)
     edge_vert = wp.empty(nvox * 3, dtype=wp.int32)
     wp.launch(S.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
     eoff = _scan(wp, ecount, inclusive=True)
-    m = int(eoff[-1:].numpy()[0])
-    if m == 0:
-        return SurfaceMesh.empty()
-    verts = wp.empty(m, dtype=wp.vec3)
-    wp.launch(S.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
     tables = [mc._get_mc_case_to_tri_range_table(dev), mc._get_mc_tri_local_inds_table(dev), mc._get_mc_edge_offset_table(dev)]
     fcount = wp.empty(nvox, dtype=wp.int32)
     wp.launch(S.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
     foff = _scan(wp, fcount, inclusive=True)
-    k = int(foff[-1:].numpy()[0])
-    faces = wp.empty(max(3 * k, 1), dtype=wp.int32)
+    m, k = (int(a[-1:].numpy()[0]) for a in (eoff, foff))  # the two sizes: one sync each
+    if m == 0 or k == 0:
+        return None
+    verts = wp.empty(m, dtype=wp.vec3)
+    wp.launch(S.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
+    faces = wp.empty(3 * k, dtype=wp.int32)
     wp.launch(S.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
@@ -276,34 +340,39 @@ def _extract_mesh(wp, S, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
         m,
         inputs=[bmap, values, *tiles, vel_arg, int(vel is not None), verts, origin, grid.voxel, world, normals, velocities],
     )
-    f = faces.numpy()[: 3 * k].reshape(-1, 3)
+    return world, normals, velocities, faces
+
+
+def _download_mesh(mesh: tuple | None) -> SurfaceMesh:
+    if mesh is None:
+        return SurfaceMesh.empty()
+    world, normals, velocities, faces = (a.numpy() for a in mesh)
+    f = faces.reshape(-1, 3)
     bad = (f < 0).any(axis=1)
     if bad.any():  # a crossing on a tile face: match_tiles should make this impossible
         log.warning("sparse marching cubes: %d triangles touched a constant tile and were dropped", int(bad.sum()))
         f = f[~bad]
-    return SurfaceMesh(world.numpy(), f.astype(np.int32), normals.numpy(), velocities.numpy())
+    return SurfaceMesh(world, f.astype(np.int32), normals, velocities)
 
 
-def _sparse_output(wp, S, bcoord, bmap, values, vel, grid: SparseGrid) -> SparseLevelSet:
+def _sparse_output(wp, S, d: DeviceSurface) -> SparseLevelSet:
     """Blocks holding a voxel inside the band; blocks wholly at -background join the inside tiles,
     wholly at +background are dropped (what OpenVDB's pruning would do)."""
-    nact = bcoord.shape[0]
-    kind = wp.empty(max(nact, 1), dtype=wp.int32)
-    _launch(wp, S.classify_output_blocks, nact, [values, grid.background, kind])
-    keep = wp.empty_like(kind)
-    _launch(wp, S.kind_equals, nact, [kind, 2, keep])
+    grid, nact = d.grid, d.bcoord.shape[0]
+    keep = wp.empty(max(nact, 1), dtype=wp.int32)
+    _launch(wp, S.kind_equals, nact, [d.kind, 2, keep])
     offsets = _scan(wp, keep, inclusive=False)
     m = int(offsets[-1:].numpy()[0] + keep[-1:].numpy()[0]) if nact else 0
     out = wp.empty(max(m, 1) * BS**3, dtype=float)
-    _launch(wp, S.gather_blocks, nact * BS**3, [keep, offsets, values, out])
+    _launch(wp, S.gather_blocks, nact * BS**3, [keep, offsets, d.values, out])
     velocity = None
-    if vel is not None:
+    if d.vel is not None:
         vout = wp.empty(max(m, 1) * BS**3, dtype=wp.vec3)
-        _launch(wp, S.gather_blocks_vec, nact * BS**3, [keep, offsets, vel, vout])
+        _launch(wp, S.gather_blocks_vec, nact * BS**3, [keep, offsets, d.vel, vout])
         velocity = vout.numpy()[: m * BS**3].reshape(m, BS, BS, BS, 3)
-    kinds = kind.numpy()[:nact]
-    blocks = bcoord.numpy().astype(np.int64).reshape(-1, 3)
-    inside = np.concatenate([np.argwhere(bmap.numpy() == -2).astype(np.int64), blocks[kinds == 1]])
+    kinds = d.kind.numpy()[:nact]
+    blocks = d.bcoord.numpy().astype(np.int64).reshape(-1, 3)
+    inside = np.concatenate([np.argwhere(d.bmap.numpy() == -2).astype(np.int64), blocks[kinds == 1]])
     return SparseLevelSet(
         block_ijk=blocks[kinds == 2] * BS + grid.ijk0,
         values=out.numpy()[: m * BS**3].reshape(m, BS, BS, BS),
@@ -314,32 +383,33 @@ def _sparse_output(wp, S, bcoord, bmap, values, vel, grid: SparseGrid) -> Sparse
     )
 
 
-def _dense_output(wp, S, bcoord, bmap, counts, values, w, vel, grid, params, n, with_v) -> SurfaceResult:
+def _dense_output(wp, S, d: DeviceSurface, params: SurfaceParams) -> SurfaceResult:
     """Level set, velocity and density as dense arrays over the active blocks' bounding box."""
-    nact = bcoord.shape[0]
+    grid, nact, with_v = d.grid, d.bcoord.shape[0], d.vel is not None
     if not params.dense_output or nact == 0:
         ls = LevelSet(np.zeros((0, 0, 0), np.float32), grid.ijk0.copy(), grid.voxel, grid.background)
-        return SurfaceResult(ls, SurfaceMesh.empty(), np.zeros((0, 0, 0, 3), np.float32) if with_v else None, np.zeros((0, 0, 0), np.float32))
-    bc = bcoord.numpy()
+        velocity = np.zeros((0, 0, 0, 3), np.float32) if with_v else None
+        return SurfaceResult(ls, SurfaceMesh.empty(), velocity, np.zeros((0, 0, 0), np.float32))
+    bc = d.bcoord.numpy()
     blo, bhi = bc.min(axis=0), bc.max(axis=0)
     shape = tuple(int(s) for s in (bhi - blo + 1) * BS)
     lo = wp.vec3i(*(blo * BS).tolist())
     bt = wp.vec3i(*blo.tolist())
     dense = wp.empty(shape, dtype=float)
-    wp.launch(S.fill_tiles, shape, inputs=[bmap, bt, grid.background, -grid.background, dense])
-    wp.launch(S.densify, values.shape[0], inputs=[bcoord, values, lo, dense])
+    wp.launch(S.fill_tiles, shape, inputs=[d.bmap, bt, grid.background, -grid.background, dense])
+    wp.launch(S.densify, d.values.shape[0], inputs=[d.bcoord, d.values, lo, dense])
     radius = params.kernel_radius * params.particle_radius
     kernel_volume = 4.0 * math.pi * radius**3 * 16.0 / 315.0
     # INSIDE blocks were never evaluated: give them the mean number density of occupied blocks
-    occupied = float(np.count_nonzero(counts.numpy()) * (BS * grid.voxel) ** 3)
-    bulk_w = n / occupied * kernel_volume
+    occupied = float(np.count_nonzero(d.counts.numpy()) * (BS * grid.voxel) ** 3)
+    bulk_w = d.n / occupied * kernel_volume
     wd = wp.empty(shape, dtype=float)
-    wp.launch(S.fill_tiles, shape, inputs=[bmap, bt, 0.0, bulk_w, wd])
-    wp.launch(S.densify, values.shape[0], inputs=[bcoord, w, lo, wd])
+    wp.launch(S.fill_tiles, shape, inputs=[d.bmap, bt, 0.0, bulk_w, wd])
+    wp.launch(S.densify, d.values.shape[0], inputs=[d.bcoord, d.w, lo, wd])
     velocity = None
     if with_v:
         vd = wp.zeros(shape, dtype=wp.vec3)
-        wp.launch(S.densify_vec, values.shape[0], inputs=[bcoord, vel, lo, vd])
+        wp.launch(S.densify_vec, d.values.shape[0], inputs=[d.bcoord, d.vel, lo, vd])
         velocity = vd.numpy()
     ls = LevelSet(dense.numpy(), grid.ijk0 + blo.astype(np.int64) * BS, grid.voxel, grid.background)
     return SurfaceResult(ls, SurfaceMesh.empty(), velocity, (wd.numpy() / kernel_volume).astype(np.float32))

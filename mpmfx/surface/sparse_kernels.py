@@ -53,6 +53,28 @@ def get(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), i: int, j
 
 
 @wp.kernel
+def bounds(x: wp.array(dtype=wp.vec3), threads: int, out: wp.array(dtype=float)):
+    """out[0:3] = min, out[3:6] = max of the finite positions, out[6] += count of non-finite
+    ones; each thread reduces x[t], x[t + threads], ... (coalesced), then 7 atomics."""
+    t = wp.tid()
+    lo = wp.vec3(1.0e30)
+    hi = wp.vec3(-1.0e30)
+    bad = float(0.0)
+    for p in range(t, x.shape[0], threads):
+        q = x[p]
+        if wp.isfinite(q[0]) and wp.isfinite(q[1]) and wp.isfinite(q[2]):
+            lo = wp.min(lo, q)
+            hi = wp.max(hi, q)
+        else:
+            bad += 1.0
+    for a in range(3):
+        wp.atomic_min(out, a, lo[a])
+        wp.atomic_max(out, 3 + a, hi[a])
+    if bad > 0.0:
+        wp.atomic_add(out, 6, bad)
+
+
+@wp.kernel
 def to_grid(x: wp.array(dtype=wp.vec3), origin: wp.vec3, inv_voxel: float, g: wp.array(dtype=wp.vec3)):
     p = wp.tid()
     g[p] = (x[p] - origin) * inv_voxel
