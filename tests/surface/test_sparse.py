@@ -83,3 +83,21 @@ def test_sparse_output_is_the_dense_level_set_in_8_cubed_leaves():
     assert np.all(np.any(np.abs(sp.values) < sp.background, axis=(1, 2, 3)))
     dense = sp.to_dense(ijk0=full.level_set.ijk0, shape=full.level_set.values.shape)
     assert np.array_equal(dense.values, full.level_set.values)
+
+
+def test_particles_already_on_the_device_give_the_same_surface():
+    # what the benchmark and a GPU pipeline pass: a wp.array, no host copy of the positions
+    import warp as wp
+
+    x, h = sample_shape("torus", 3000, "random")
+    v = np.tile(np.float32([[0.0, 1.0, 0.0]]), (len(x), 1))
+    host = surface_particles(x, v, SurfaceParams(0.5 * h, dense_output=False), device=DEVICE)
+    on_dev = surface_particles(wp.array(x, dtype=wp.vec3, device=DEVICE), wp.array(v, dtype=wp.vec3, device=DEVICE),
+                               SurfaceParams(0.5 * h, dense_output=False))
+    assert np.array_equal(host.mesh.faces, on_dev.mesh.faces)
+    assert np.array_equal(host.mesh.vertices, on_dev.mesh.vertices)
+    assert np.allclose(on_dev.mesh.velocities[:, 1], 1.0, atol=1e-5)
+    bad = x.copy()
+    bad[7] = np.inf
+    with pytest.raises(ValueError, match="1 NaN or inf"):
+        surface_particles(wp.array(bad, dtype=wp.vec3, device=DEVICE), None, SurfaceParams(0.5 * h))
