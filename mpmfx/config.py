@@ -137,6 +137,8 @@ class Surface(_Section):
     dilate: float = Field(0.0, description="Offset (m): + dilates, - erodes.")
     min_feature_particles: int = Field(8, ge=0, description="Blobs of fewer particles are removed (specks).")
     group: SurfaceGroup = Field(SurfaceGroup.MATERIAL, description="One surface per material, per object, or one.")
+    density: bool = Field(False, description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "
+                                             "the material) for granular / volume looks.")
 
 
 class Export(_Section):

@@ -1,7 +1,8 @@
 """Stage 4: USD for DCC tools (one crate layer per frame, stitched by value clips) and OpenVDB.
 
 Output: `shot.usda` (root stage), `frames/NNNN.usdc` (per-frame layers) and
-`vdb/<group>/NNNN.vdb` (level set `surface` + velocity `vel` per surface group).
+`vdb/<group>/NNNN.vdb` (level set `surface` + velocity `vel` per surface group, and the fog
+volume `density` when surface.density is on).
 """
 from __future__ import annotations
 
@@ -83,6 +84,9 @@ def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
         vel = sparse.velocity_dense(ls.ijk0, ls.values.shape)
         if vel is not None:
             grids.append(VdbGrid("vel", vel, ijk0, ls.voxel_size, "unknown", 0.0))
+        density = sparse.density_dense(ls.ijk0, ls.values.shape)
+        if density is not None:  # 0 outside the stored leaves: the writer leaves those voxels inactive
+            grids.append(VdbGrid("density", density, ijk0, ls.voxel_size, "fog_volume", 0.0))
         rel = f"vdb/{g}/{frame:04d}.vdb"
         write_vdb(entry.root / rel, grids, metadata={"shot": shot.shot.name, "frame": frame, "units": "m",
                                                      "group": g})

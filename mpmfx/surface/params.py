@@ -48,6 +48,9 @@ class SurfaceParams:
     dense_output: with Grid.SPARSE, also return the level set (and velocity, density) as dense
         arrays over the band's bounding box; False returns only `SurfaceResult.sparse` (the
         dense arrays are then empty) -- what to use at millions of particles.
+    density: with Grid.SPARSE, also return `SparseLevelSet.density`, a fog density (0..1,
+        dimensionless: kernel weight sum over its bulk value) on the stored leaves, for granular /
+        volume looks; False (the default) costs nothing.
     """
 
     particle_radius: float
@@ -61,6 +64,7 @@ class SurfaceParams:
     kernel_radius: float = 3.7
     grid: Grid = Grid.SPARSE
     dense_output: bool = True
+    density: bool = False
 
     def __post_init__(self) -> None:
         def bad(field: str, fix: str) -> ValueError:
@@ -86,6 +90,11 @@ class SurfaceParams:
             raise bad("band_voxels", f"got {self.band_voxels}; give at least 1 voxel")
         if not (math.isfinite(self.kernel_radius) and self.kernel_radius >= 1.0):
             raise bad("kernel_radius", f"got {self.kernel_radius!r}; give >= 1 (x particle_radius), 3.7 by default")
+        if not isinstance(self.density, bool):
+            raise bad("density", f"got {self.density!r}; give True or False")
+        if self.density and (self.grid is not Grid.SPARSE or self.method is not Method.ZHU_BRIDSON):
+            raise bad("density", "the fog density comes from the sparse Zhu-Bridson surfacer; "
+                                 "use grid=Grid.SPARSE and method=Method.ZHU_BRIDSON, or density=False")
 
     @property
     def resolved_voxel_size(self) -> float:
@@ -138,9 +147,12 @@ class SparseLevelSet:
 
     block_ijk: (m, 3) int64 index of each block's first voxel (multiples of 8; voxel index space
         as LevelSet.ijk0, world = index * voxel_size); values: (m, 8, 8, 8) float32 world units,
-        clipped to +-background; velocity: (m, 8, 8, 8, 3) float32 or None; inside_ijk: (k, 3)
+        clipped to +-background; velocity: (m, 8, 8, 8, 3) float32 m/s or None; inside_ijk: (k, 3)
         int64 first voxels of blocks wholly inside (value -background); every other voxel is
         outside (+background).
+    density: (m, 8, 8, 8) float32 fog density in [0, 1] (dimensionless: the kernel weight sum
+        over its value in the bulk of the material, clamped), 1 on the inside blocks and 0
+        elsewhere; or None (SurfaceParams.density off). The leaves may be stored as float16.
     """
 
     block_ijk: np.ndarray
@@ -149,6 +161,7 @@ class SparseLevelSet:
     inside_ijk: np.ndarray
     voxel_size: float
     background: float
+    density: np.ndarray | None = None
 
     def to_dense(self, *, ijk0: np.ndarray | None = None, shape: tuple[int, int, int] | None = None) -> LevelSet:
         """The same level set as a dense LevelSet: over voxels ijk0 .. ijk0 + shape - 1, by default
@@ -159,32 +172,42 @@ class SparseLevelSet:
             ijk0 = self.block_ijk.min(axis=0)
             shape = tuple(int(s) for s in self.block_ijk.max(axis=0) - ijk0 + 8)
         ijk0 = np.asarray(ijk0, np.int64)
-        values = np.full(shape, self.background, np.float32)
-
-        def paste(corner: np.ndarray, block) -> None:
-            lo = corner - ijk0
-            a = np.maximum(lo, 0)
-            b = np.minimum(lo + 8, shape)
-            if np.all(b > a):
-                src = block if np.isscalar(block) else block[tuple(slice(x - y, z - y) for x, y, z in zip(a, lo, b))]
-                values[tuple(slice(x, z) for x, z in zip(a, b))] = src
-
-        for corner in self.inside_ijk:
-            paste(corner, -self.background)
-        for corner, block in zip(self.block_ijk, self.values):
-            paste(corner, block)
+        values = self._paste(self.values, ijk0, shape, outside=self.background, inside=-self.background)
         return LevelSet(values, ijk0, self.voxel_size, self.background)
 
     def velocity_dense(self, ijk0: np.ndarray, shape: tuple[int, int, int]) -> np.ndarray | None:
-        """(a, b, c, 3) float32 velocity over the same voxels as `to_dense` (0 outside stored blocks)."""
+        """(a, b, c, 3) float32 velocity (m/s) over the same voxels as `to_dense` (0 outside stored blocks)."""
         if self.velocity is None:
             return None
-        out = np.zeros((*shape, 3), np.float32)  # blocks may be stored as float16
-        for corner, block in zip(self.block_ijk - np.asarray(ijk0, np.int64), self.velocity):
-            a, b = np.maximum(corner, 0), np.minimum(corner + 8, shape)
+        return self._paste(self.velocity, ijk0, shape, outside=0.0, inside=None)
+
+    def density_dense(self, ijk0: np.ndarray, shape: tuple[int, int, int]) -> np.ndarray | None:
+        """(a, b, c) float32 fog density (0..1) over the same voxels as `to_dense`: 1 on inside
+        blocks, 0 outside the stored ones; None when there is no density."""
+        if self.density is None:
+            return None
+        return self._paste(self.density, ijk0, shape, outside=0.0, inside=1.0)
+
+    def _paste(self, blocks: np.ndarray, ijk0, shape, *, outside: float, inside: float | None) -> np.ndarray:
+        """float32 array of `shape` (+ the blocks' trailing axes) holding `outside`, the inside
+        blocks at `inside` (None: left at `outside`) and the stored `blocks` (m, 8, 8, 8, ...)
+        over them, each clipped to the window that starts at voxel ijk0."""
+        shape = tuple(int(s) for s in shape)
+        out = np.full(shape + blocks.shape[4:], outside, np.float32)  # blocks may be stored as float16
+        ijk0 = np.asarray(ijk0, np.int64)
+
+        def paste(corner: np.ndarray, block) -> None:
+            lo = corner - ijk0
+            a, b = np.maximum(lo, 0), np.minimum(lo + 8, shape)
             if np.all(b > a):
-                out[tuple(slice(x, z) for x, z in zip(a, b))] = block[tuple(slice(x - y, z - y)
-                                                                            for x, y, z in zip(a, corner, b))]
+                src = block if np.isscalar(block) else block[tuple(slice(x - y, z - y) for x, y, z in zip(a, lo, b))]
+                out[tuple(slice(x, z) for x, z in zip(a, b))] = src
+
+        if inside is not None:
+            for corner in self.inside_ijk:
+                paste(corner, inside)
+        for corner, block in zip(self.block_ijk, blocks):
+            paste(corner, block)
         return out
 
 

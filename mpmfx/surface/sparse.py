@@ -95,12 +95,13 @@ class DeviceSurface:
     mesh: tuple | None
 
     def download(self, params: SurfaceParams) -> SurfaceResult:
-        """Copy to the host: mesh, sparse leaves and (params.dense_output) dense arrays."""
+        """Copy to the host: mesh, sparse leaves (with fog density if params.density) and
+        (params.dense_output) dense arrays."""
         import warp as wp
         from mpmfx.surface import sparse_kernels as S
 
         mesh = _download_mesh(self.mesh)
-        sparse = _sparse_output(wp, S, self)
+        sparse = _sparse_output(wp, S, self, params)
         result = _dense_output(wp, S, self, params)
         result.mesh, result.sparse = mesh, sparse
         return result
@@ -355,9 +356,10 @@ def _download_mesh(mesh: tuple | None) -> SurfaceMesh:
     return SurfaceMesh(world, f.astype(np.int32), normals, velocities)
 
 
-def _sparse_output(wp, S, d: DeviceSurface) -> SparseLevelSet:
+def _sparse_output(wp, S, d: DeviceSurface, params: SurfaceParams) -> SparseLevelSet:
     """Blocks holding a voxel inside the band; blocks wholly at -background join the inside tiles,
-    wholly at +background are dropped (what OpenVDB's pruning would do)."""
+    wholly at +background are dropped (what OpenVDB's pruning would do). params.density adds
+    the fog density of the kept blocks."""
     grid, nact = d.grid, d.bcoord.shape[0]
     keep = wp.empty(max(nact, 1), dtype=wp.int32)
     _launch(wp, S.kind_equals, nact, [d.kind, 2, keep])
@@ -373,6 +375,12 @@ def _sparse_output(wp, S, d: DeviceSurface) -> SparseLevelSet:
     kinds = d.kind.numpy()[:nact]
     blocks = d.bcoord.numpy().astype(np.int64).reshape(-1, 3)
     inside = np.concatenate([np.argwhere(d.bmap.numpy() == -2).astype(np.int64), blocks[kinds == 1]])
+    density = None
+    if params.density:
+        fog = wp.empty(max(m, 1) * BS**3, dtype=float)
+        _launch(wp, S.gather_blocks, nact * BS**3, [keep, offsets, d.w, fog])
+        _launch(wp, S.scale_clamp01, m * BS**3, [fog, 1.0 / _bulk_weight(d, params)])
+        density = fog.numpy()[: m * BS**3].reshape(m, BS, BS, BS)
     return SparseLevelSet(
         block_ijk=blocks[kinds == 2] * BS + grid.ijk0,
         values=out.numpy()[: m * BS**3].reshape(m, BS, BS, BS),
@@ -380,7 +388,30 @@ def _sparse_output(wp, S, d: DeviceSurface) -> SparseLevelSet:
         inside_ijk=inside * BS + grid.ijk0,
         voxel_size=grid.voxel,
         background=grid.background,
+        density=density,
     )
+
+
+def _bulk_weight(d: DeviceSurface, params: SurfaceParams) -> float:
+    """Kernel weight sum w deep inside the material (voxel units, as w): the mean particle count
+    of blocks full of particles per block volume, times the kernel's volume integral
+    4 pi R^3 16/315 for (1 - s^2)^3. A block counts as full when it and its 26 neighbours all
+    hold particles: surrounded, it cannot straddle the surface. (The mean over all occupied
+    blocks, as _dense_output uses for its tiles, also averages half-empty surface blocks and
+    spray, so a body would read 1 well before its surface.) Only spray and sheets thinner than
+    three blocks have no full block; the occupied mean is what is left for them."""
+    counts = d.counts.numpy()
+    occupied = counts > 0
+    full = occupied.copy()
+    for axis in range(3):  # 3x3x3 erosion, one axis at a time
+        a = np.moveaxis(full, axis, 0)
+        eroded = a.copy()
+        eroded[1:] &= a[:-1]
+        eroded[:-1] &= a[1:]
+        full = np.moveaxis(eroded, 0, axis)
+    per_block = float(counts[full].mean()) if full.any() else d.n / max(int(occupied.sum()), 1)
+    kernel_vox = params.kernel_radius * params.particle_radius / d.grid.voxel
+    return per_block / BS**3 * 4.0 * math.pi * kernel_vox**3 * 16.0 / 315.0
 
 
 def _dense_output(wp, S, d: DeviceSurface, params: SurfaceParams) -> SurfaceResult:

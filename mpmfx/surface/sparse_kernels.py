@@ -715,3 +715,10 @@ def remove_small_components(
     lab = labels[t]
     if lab > 0 and counts[lab] < min_count:
         phi[t] = outside_value
+
+
+@wp.kernel
+def scale_clamp01(a: wp.array(dtype=float), scale: float):
+    """a = clamp(a * scale, 0, 1): a kernel weight sum over its bulk value -> fog density."""
+    t = wp.tid()
+    a[t] = wp.clamp(a[t] * scale, 0.0, 1.0)

@@ -230,3 +230,58 @@ def test_particle_debug_render_reuses_the_simulation(first_run, tmp_path, monkey
                                 "export": "cached", "render": "ran"}
     pngs = sorted((tmp_path / "renders" / "tiny").glob("[0-9]*.png"))
     assert len(pngs) == 6 and all(p.stat().st_size > 1000 for p in pngs)
+
+
+@pytest.fixture(scope="module")
+def density_run(first_run):
+    """The tiny shot again with surface.density on, up to export, on first_run's cache."""
+    shot, cache, first = first_run
+    run = mpmfx.load_shot(shot, overrides=["surface.density=true"], cache_root=cache, quiet=True)
+    return mpmfx.load_shot(shot, cache_root=cache, quiet=True), run, run.run(until="export")
+
+
+def test_density_flag_changes_the_surface_key_and_reruns_from_surface(density_run):
+    off, on, results = density_run
+    assert _states(results) == {"voxelise": "cached", "simulate": "cached", "surface": "ran", "export": "ran"}
+    before, after = off.entries(), on.entries()
+    assert after["simulate"].key == before["simulate"].key
+    assert after["surface"].key != before["surface"].key
+
+
+def test_density_grid_is_a_fog_volume_in_the_vdb_and_the_usd(density_run):
+    from pxr import Usd, UsdVol
+
+    from mpmfx.io.usd import validate_stage
+    from mpmfx.io.vdb import read_vdb
+    from mpmfx.io.frames import read_arrays
+    *_, results = density_run
+    exp = results[3].entry
+    vdb = exp / "vdb" / "Elastic" / "0003.vdb"
+    grids = read_vdb(vdb, with_values=True)["grids"]
+    fog, surface = grids["density"], grids["surface"]
+    assert fog["class"] == "fog_volume" and fog["background"] == 0.0
+    assert fog["voxel_size"] == surface["voxel_size"] and fog["active_voxel_count"] > 0
+    stored = read_arrays(results[2].entry / "frames" / "0003.npz")
+    leaves = len(stored["Elastic.density_blocks"]) + len(stored["Elastic.inside_ijk"])
+    assert fog["active_voxel_count"] <= leaves * 512  # only the stored leaves and inside tiles
+    assert fog["values"].min() >= 0.0 and fog["values"].max() == pytest.approx(1.0, abs=1e-3)
+    assert 0.05 < fog["values"][(fog["values"] > 0) & (fog["values"] < 1)].mean() < 0.95  # a soft edge
+    stage = Usd.Stage.Open(str(exp / "shot.usda"))
+    volume = UsdVol.Volume(stage.GetPrimAtPath("/World/Elastic/volume"))
+    asset = UsdVol.OpenVDBAsset(stage.GetPrimAtPath(volume.GetFieldPath("density")))
+    assert asset.GetFieldNameAttr().Get() == "density" and asset.GetFieldClassAttr().Get() == "fogVolume"
+    assert Path(asset.GetFilePathAttr().Get(3).resolvedPath).resolve() == vdb.resolve()
+    assert validate_stage(exp / "shot.usda") == []
+
+
+def test_density_off_writes_no_density(first_run):
+    from pxr import Usd, UsdVol
+
+    from mpmfx.io.frames import read_arrays
+    from mpmfx.io.vdb import read_vdb
+    _, _, results = first_run
+    surf, exp = results[2].entry, results[3].entry
+    assert not [k for k in read_arrays(surf / "frames" / "0003.npz") if "density" in k]
+    assert set(read_vdb(exp / "vdb" / "Elastic" / "0003.vdb")["grids"]) == {"surface", "vel"}
+    stage = Usd.Stage.Open(str(exp / "shot.usda"))
+    assert set(UsdVol.Volume(stage.GetPrimAtPath("/World/Elastic/volume")).GetFieldPaths()) == {"surface", "vel"}
