@@ -24,7 +24,7 @@ import time
 
 import numpy as np
 
-from mpmfx.surface.params import Grid, LevelSet, Method, SurfaceMesh, SurfaceParams, SurfaceResult
+from mpmfx.surface.params import Grid, LevelSet, Method, SparseLevelSet, SurfaceMesh, SurfaceParams, SurfaceResult
 
 log = logging.getLogger(__name__)
 
@@ -163,7 +163,13 @@ def _empty_result(params: SurfaceParams, *, with_v: bool) -> SurfaceResult:
     level_set = LevelSet(np.zeros((0, 0, 0), np.float32), np.zeros(3, np.int64), voxel, params.band_voxels * voxel)
     velocity = np.zeros((0, 0, 0, 3), np.float32) if with_v else None
     density = None if params.method is Method.SPHERES else np.zeros((0, 0, 0), np.float32)
-    return SurfaceResult(level_set, SurfaceMesh.empty(), velocity, density)
+    sparse = None
+    if params.grid is Grid.SPARSE and params.method is Method.ZHU_BRIDSON:  # no leaves, as a sparse run gives
+        blocks = np.zeros((0, 8, 8, 8), np.float32)
+        sparse = SparseLevelSet(np.zeros((0, 3), np.int64), blocks, np.zeros((0, 8, 8, 8, 3), np.float32) if with_v else None,
+                                np.zeros((0, 3), np.int64), voxel, params.band_voxels * voxel,
+                                blocks.copy() if params.density else None)
+    return SurfaceResult(level_set, SurfaceMesh.empty(), velocity, density, sparse)
 
 
 def _lap(wp, t0: float) -> float:

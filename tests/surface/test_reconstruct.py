@@ -114,6 +114,8 @@ def test_empty_input_and_single_particle():
     params = SurfaceParams(0.01)
     empty = surface_particles(np.zeros((0, 3), np.float32), None, params, device=DEVICE)
     assert empty.mesh.vertices.shape == (0, 3) and empty.mesh.faces.shape == (0, 3)
+    # an emptied group (every particle left the domain) stores no leaves, like any sparse frame
+    assert empty.sparse.values.shape == (0, 8, 8, 8) and empty.sparse.to_dense().values.size == 0
     one = surface_particles(np.array([[0.1, 0.2, 0.3]], np.float32), np.ones((1, 3)), params, device=DEVICE)
     assert len(one.mesh.faces) > 0
     r = np.linalg.norm(one.mesh.vertices - [0.1, 0.2, 0.3], axis=1)
