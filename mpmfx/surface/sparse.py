@@ -98,11 +98,11 @@ class DeviceSurface:
         """Copy to the host: mesh, sparse leaves (with fog density if params.density) and
         (params.dense_output) dense arrays."""
         import warp as wp
-        from mpmfx.surface import sparse_kernels as S
+        from mpmfx.surface import sparse_mesh_kernels as M
 
         mesh = _download_mesh(self.mesh)
-        sparse = _sparse_output(wp, S, self, params)
-        result = _dense_output(wp, S, self, params)
+        sparse = _sparse_output(wp, M, self, params)
+        result = _dense_output(wp, M, self, params)
         result.mesh, result.sparse = mesh, sparse
         return result
 
@@ -141,6 +141,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     left on the device. A handful of host syncs read sizes (active blocks, vertices, faces,
     flood-fill rounds); everything else stays on the GPU."""
     from mpmfx.surface import sparse_kernels as S
+    from mpmfx.surface import sparse_mesh_kernels as M
 
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
@@ -189,10 +190,10 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     tiles = (grid.background, -grid.background)
     _launch(wp, S.match_tiles, nvox, [bcoord, bmap, values, 1e-3 * grid.voxel])
     timings["smooth"] = _lap(wp, t0)
-    mesh = _extract_mesh(wp, S, bcoord, bmap, values, tiles, vel if with_v else None, grid)
+    mesh = _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel if with_v else None, grid)
     timings["mesh"] = _lap(wp, t0)
     kind = wp.empty(max(nact, 1), dtype=wp.int32)
-    _launch(wp, S.classify_output_blocks, nact, [values, grid.background, kind])
+    _launch(wp, M.classify_output_blocks, nact, [values, grid.background, kind])
     last_stats.clear()
     last_stats.update(timings, active_blocks=nact, fill_rounds=steps)
     log.debug("surface_sparse n=%d blocks=%s active=%d timings=%s", n, grid.nblocks, nact, timings)
@@ -309,7 +310,7 @@ def _smooth(wp, S, bcoord, bmap, phi, iters: int, tiles):
     return phi
 
 
-def _extract_mesh(wp, S, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> tuple | None:
+def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> tuple | None:
     """Marching cubes over active cells: (world, normals, velocities, faces) device arrays of
     exact size, or None for an empty surface."""
     from warp._src.geometry import marching_cubes as mc  # tables only (pinned warp 1.19)
@@ -320,24 +321,24 @@ def _extract_mesh(wp, S, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
     dev = values.device
     ecount = wp.empty(nvox * 3, dtype=wp.int32)
     edge_vert = wp.empty(nvox * 3, dtype=wp.int32)
-    wp.launch(S.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
+    wp.launch(M.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
     eoff = _scan(wp, ecount, inclusive=True)
     tables = [mc._get_mc_case_to_tri_range_table(dev), mc._get_mc_tri_local_inds_table(dev), mc._get_mc_edge_offset_table(dev)]
     fcount = wp.empty(nvox, dtype=wp.int32)
-    wp.launch(S.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
+    wp.launch(M.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
     foff = _scan(wp, fcount, inclusive=True)
     m, k = (int(a[-1:].numpy()[0]) for a in (eoff, foff))  # the two sizes: one sync each
     if m == 0 or k == 0:
         return None
     verts = wp.empty(m, dtype=wp.vec3)
-    wp.launch(S.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
+    wp.launch(M.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
     faces = wp.empty(3 * k, dtype=wp.int32)
-    wp.launch(S.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
+    wp.launch(M.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
     origin = wp.vec3(*grid.origin.astype(np.float32))
     wp.launch(
-        S.sample_vertices,
+        M.sample_vertices,
         m,
         inputs=[bmap, values, *tiles, vel_arg, int(vel is not None), verts, origin, grid.voxel, world, normals, velocities],
     )
@@ -356,21 +357,21 @@ def _download_mesh(mesh: tuple | None) -> SurfaceMesh:
     return SurfaceMesh(world, f.astype(np.int32), normals, velocities)
 
 
-def _sparse_output(wp, S, d: DeviceSurface, params: SurfaceParams) -> SparseLevelSet:
+def _sparse_output(wp, M, d: DeviceSurface, params: SurfaceParams) -> SparseLevelSet:
     """Blocks holding a voxel inside the band; blocks wholly at -background join the inside tiles,
     wholly at +background are dropped (what OpenVDB's pruning would do). params.density adds
     the fog density of the kept blocks."""
     grid, nact = d.grid, d.bcoord.shape[0]
     keep = wp.empty(max(nact, 1), dtype=wp.int32)
-    _launch(wp, S.kind_equals, nact, [d.kind, 2, keep])
+    _launch(wp, M.kind_equals, nact, [d.kind, 2, keep])
     offsets = _scan(wp, keep, inclusive=False)
     m = int(offsets[-1:].numpy()[0] + keep[-1:].numpy()[0]) if nact else 0
     out = wp.empty(max(m, 1) * BS**3, dtype=float)
-    _launch(wp, S.gather_blocks, nact * BS**3, [keep, offsets, d.values, out])
+    _launch(wp, M.gather_blocks, nact * BS**3, [keep, offsets, d.values, out])
     velocity = None
     if d.vel is not None:
         vout = wp.empty(max(m, 1) * BS**3, dtype=wp.vec3)
-        _launch(wp, S.gather_blocks_vec, nact * BS**3, [keep, offsets, d.vel, vout])
+        _launch(wp, M.gather_blocks_vec, nact * BS**3, [keep, offsets, d.vel, vout])
         velocity = vout.numpy()[: m * BS**3].reshape(m, BS, BS, BS, 3)
     kinds = d.kind.numpy()[:nact]
     blocks = d.bcoord.numpy().astype(np.int64).reshape(-1, 3)
@@ -378,8 +379,8 @@ def _sparse_output(wp, S, d: DeviceSurface, params: SurfaceParams) -> SparseLeve
     density = None
     if params.density:
         fog = wp.empty(max(m, 1) * BS**3, dtype=float)
-        _launch(wp, S.gather_blocks, nact * BS**3, [keep, offsets, d.w, fog])
-        _launch(wp, S.scale_clamp01, m * BS**3, [fog, 1.0 / _bulk_weight(d, params)])
+        _launch(wp, M.gather_blocks, nact * BS**3, [keep, offsets, d.w, fog])
+        _launch(wp, M.scale_clamp01, m * BS**3, [fog, 1.0 / _bulk_weight(d, params)])
         density = fog.numpy()[: m * BS**3].reshape(m, BS, BS, BS)
     return SparseLevelSet(
         block_ijk=blocks[kinds == 2] * BS + grid.ijk0,
@@ -414,7 +415,7 @@ def _bulk_weight(d: DeviceSurface, params: SurfaceParams) -> float:
     return per_block / BS**3 * 4.0 * math.pi * kernel_vox**3 * 16.0 / 315.0
 
 
-def _dense_output(wp, S, d: DeviceSurface, params: SurfaceParams) -> SurfaceResult:
+def _dense_output(wp, M, d: DeviceSurface, params: SurfaceParams) -> SurfaceResult:
     """Level set, velocity and density as dense arrays over the active blocks' bounding box."""
     grid, nact, with_v = d.grid, d.bcoord.shape[0], d.vel is not None
     if not params.dense_output or nact == 0:
@@ -427,20 +428,20 @@ def _dense_output(wp, S, d: DeviceSurface, params: SurfaceParams) -> SurfaceResu
     lo = wp.vec3i(*(blo * BS).tolist())
     bt = wp.vec3i(*blo.tolist())
     dense = wp.empty(shape, dtype=float)
-    wp.launch(S.fill_tiles, shape, inputs=[d.bmap, bt, grid.background, -grid.background, dense])
-    wp.launch(S.densify, d.values.shape[0], inputs=[d.bcoord, d.values, lo, dense])
+    wp.launch(M.fill_tiles, shape, inputs=[d.bmap, bt, grid.background, -grid.background, dense])
+    wp.launch(M.densify, d.values.shape[0], inputs=[d.bcoord, d.values, lo, dense])
     radius = params.kernel_radius * params.particle_radius
     kernel_volume = 4.0 * math.pi * radius**3 * 16.0 / 315.0
     # INSIDE blocks were never evaluated: give them the mean number density of occupied blocks
     occupied = float(np.count_nonzero(d.counts.numpy()) * (BS * grid.voxel) ** 3)
     bulk_w = d.n / occupied * kernel_volume
     wd = wp.empty(shape, dtype=float)
-    wp.launch(S.fill_tiles, shape, inputs=[d.bmap, bt, 0.0, bulk_w, wd])
-    wp.launch(S.densify, d.values.shape[0], inputs=[d.bcoord, d.w, lo, wd])
+    wp.launch(M.fill_tiles, shape, inputs=[d.bmap, bt, 0.0, bulk_w, wd])
+    wp.launch(M.densify, d.values.shape[0], inputs=[d.bcoord, d.w, lo, wd])
     velocity = None
     if with_v:
         vd = wp.zeros(shape, dtype=wp.vec3)
-        wp.launch(S.densify_vec, d.values.shape[0], inputs=[d.bcoord, d.vel, lo, vd])
+        wp.launch(M.densify_vec, d.values.shape[0], inputs=[d.bcoord, d.vel, lo, vd])
         velocity = vd.numpy()
     ls = LevelSet(dense.numpy(), grid.ijk0 + blo.astype(np.int64) * BS, grid.voxel, grid.background)
     return SurfaceResult(ls, SurfaceMesh.empty(), velocity, (wd.numpy() / kernel_volume).astype(np.float32))

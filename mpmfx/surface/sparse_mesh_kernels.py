@@ -1,0 +1,224 @@
+"""Warp kernels of the sparse surfacer's output: marching cubes over active blocks, vertex
+attributes, and compaction of the blocks to OpenVDB-style leaves / dense arrays.
+
+A second module (the first holds binning, field, topology and smoothing) so each stays small;
+it shares the block layout and accessors of :mod:`mpmfx.surface.sparse_kernels`.
+"""
+
+import warp as wp
+
+from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, get, slot, voxel_of
+
+
+@wp.kernel
+def mc_vertices(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    offsets: wp.array(dtype=wp.int32),
+    count_only: int,
+    counts: wp.array(dtype=wp.int32),
+    edge_vert: wp.array(dtype=wp.int32),
+    verts: wp.array(dtype=wp.vec3),
+):
+    """One thread per (active voxel, axis): a vertex where phi changes sign along the edge."""
+    t, axis = wp.tid()
+    c = voxel_of(t, bcoord)
+    o = wp.vec3i(0)
+    o[axis] = 1
+    a = phi[t]
+    b = get(bmap, phi, c[0] + o[0], c[1] + o[1], c[2] + o[2], out_v, in_v)
+    e = t * 3 + axis
+    crossing = (a >= 0.0) != (b >= 0.0)
+    if count_only != 0:
+        counts[e] = wp.where(crossing, 1, 0)
+        return
+    if not crossing:
+        edge_vert[e] = -1
+        return
+    f = wp.clamp(a / (a - b), 0.0, 1.0)
+    idx = offsets[e] - 1  # inclusive scan
+    edge_vert[e] = idx
+    p = wp.vec3(float(c[0]), float(c[1]), float(c[2]))
+    p[axis] = p[axis] + f
+    verts[idx] = p
+
+
+@wp.kernel
+def mc_faces(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    edge_vert: wp.array(dtype=wp.int32),
+    tri_range: wp.array(dtype=wp.int32),
+    tri_local: wp.array(dtype=wp.int32),
+    edge_offset: wp.array2d(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    count_only: int,
+    counts: wp.array(dtype=wp.int32),
+    faces: wp.array(dtype=wp.int32),
+):
+    """Triangles of the cell whose lower corner is active voxel t (warp.geometry's tables)."""
+    t = wp.tid()
+    c = voxel_of(t, bcoord)
+    code = int(0)
+    for n in range(8):
+        # corner order of warp.geometry: (0,0,0) (1,0,0) (1,1,0) (0,1,0), then z + 1
+        q = n % 4
+        dx = wp.where(q == 1 or q == 2, 1, 0)
+        dy = wp.where(q >= 2, 1, 0)
+        dz = n // 4
+        if get(bmap, phi, c[0] + dx, c[1] + dy, c[2] + dz, out_v, in_v) >= 0.0:
+            code += 1 << n
+    start = tri_range[code]
+    ntri = (tri_range[code + 1] - start) // 3
+    if count_only != 0:
+        counts[t] = ntri
+        return
+    if ntri == 0:
+        return
+    base = offsets[t] - ntri  # inclusive scan
+    for m in range(ntri):
+        for s in range(3):
+            le = tri_local[start + 3 * m + s]
+            sl = slot(bmap, c[0] + edge_offset[le, 0], c[1] + edge_offset[le, 1], c[2] + edge_offset[le, 2])
+            idx = int(-1)
+            if sl >= 0:
+                idx = edge_vert[sl * 3 + edge_offset[le, 3]]
+            faces[3 * (base + m) + s] = idx
+
+
+@wp.kernel
+def sample_vertices(
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    vel: wp.array(dtype=wp.vec3),
+    with_v: int,
+    verts: wp.array(dtype=wp.vec3),
+    origin: wp.vec3,
+    voxel: float,
+    world: wp.array(dtype=wp.vec3),
+    normals: wp.array(dtype=wp.vec3),
+    velocities: wp.array(dtype=wp.vec3),
+):
+    """World position, outward normal (trilinear gradient) and trilinear velocity per vertex."""
+    t = wp.tid()
+    g = verts[t]
+    c = wp.vec3i(int(wp.floor(g[0])), int(wp.floor(g[1])), int(wp.floor(g[2])))
+    f = g - wp.vec3(float(c[0]), float(c[1]), float(c[2]))
+    grad = wp.vec3(0.0)
+    vv = wp.vec3(0.0)
+    for n in range(8):
+        ox = n & 1
+        oy = (n >> 1) & 1
+        oz = (n >> 2) & 1
+        wx = wp.where(ox == 1, f[0], 1.0 - f[0])
+        wy = wp.where(oy == 1, f[1], 1.0 - f[1])
+        wz = wp.where(oz == 1, f[2], 1.0 - f[2])
+        val = get(bmap, phi, c[0] + ox, c[1] + oy, c[2] + oz, out_v, in_v)
+        sx = wp.where(ox == 1, 1.0, -1.0)
+        sy = wp.where(oy == 1, 1.0, -1.0)
+        sz = wp.where(oz == 1, 1.0, -1.0)
+        grad += val * wp.vec3(sx * wy * wz, sy * wx * wz, sz * wx * wy)
+        if with_v != 0:
+            s = slot(bmap, c[0] + ox, c[1] + oy, c[2] + oz)
+            if s >= 0:
+                vv += (wx * wy * wz) * vel[s]
+    ln = wp.length(grad)
+    normals[t] = wp.where(ln > 0.0, grad / wp.max(ln, 1.0e-20), wp.vec3(0.0, 0.0, 1.0))
+    velocities[t] = vv
+    world[t] = origin + g * voxel
+
+
+@wp.kernel
+def densify(
+    bcoord: wp.array(dtype=wp.vec3i),
+    data: wp.array(dtype=float),
+    lo: wp.vec3i,
+    dense: wp.array3d(dtype=float),
+):
+    """Copy active voxels into a dense array whose [0, 0, 0] is voxel `lo` (pre-filled with tiles)."""
+    t = wp.tid()
+    c = voxel_of(t, bcoord) - lo
+    dense[c[0], c[1], c[2]] = data[t]
+
+
+@wp.kernel
+def densify_vec(bcoord: wp.array(dtype=wp.vec3i), data: wp.array(dtype=wp.vec3), lo: wp.vec3i, dense: wp.array3d(dtype=wp.vec3)):
+    t = wp.tid()
+    c = voxel_of(t, bcoord) - lo
+    dense[c[0], c[1], c[2]] = data[t]
+
+
+@wp.kernel
+def fill_tiles(bmap: wp.array3d(dtype=wp.int32), blo: wp.vec3i, out_v: float, in_v: float, dense: wp.array3d(dtype=float)):
+    """Constant-tile value of every voxel of the dense array (active voxels are overwritten)."""
+    i, j, k = wp.tid()
+    s = bmap[blo[0] + i // BS, blo[1] + j // BS, blo[2] + k // BS]
+    dense[i, j, k] = wp.where(s == TILE_INSIDE, in_v, out_v)
+
+
+@wp.kernel
+def classify_output_blocks(values: wp.array(dtype=float), background: float, kind: wp.array(dtype=wp.int32)):
+    """kind = 0: every voxel +background (drop), 1: every voxel -background (an inside tile), 2: keep."""
+    b = wp.tid()
+    n_out = int(0)
+    n_in = int(0)
+    for q in range(BV):
+        v = values[b * BV + q]
+        if v >= background:
+            n_out += 1
+        elif v <= -background:
+            n_in += 1
+    k = int(2)
+    if n_out == BV:
+        k = 0
+    elif n_in == BV:
+        k = 1
+    kind[b] = k
+
+
+@wp.kernel
+def gather_blocks(
+    keep: wp.array(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    values: wp.array(dtype=float),
+    out: wp.array(dtype=float),
+):
+    """Copy the voxels of kept blocks (keep[b] == 1) to their compacted slots."""
+    t = wp.tid()
+    b = t // BV
+    if keep[b] != 0:
+        out[offsets[b] * BV + t - b * BV] = values[t]
+
+
+@wp.kernel
+def gather_blocks_vec(
+    keep: wp.array(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    values: wp.array(dtype=wp.vec3),
+    out: wp.array(dtype=wp.vec3),
+):
+    t = wp.tid()
+    b = t // BV
+    if keep[b] != 0:
+        out[offsets[b] * BV + t - b * BV] = values[t]
+
+
+@wp.kernel
+def kind_equals(kind: wp.array(dtype=wp.int32), value: int, out: wp.array(dtype=wp.int32)):
+    b = wp.tid()
+    out[b] = wp.where(kind[b] == value, 1, 0)
+
+
+@wp.kernel
+def scale_clamp01(a: wp.array(dtype=float), scale: float):
+    """a = clamp(a * scale, 0, 1): a kernel weight sum over its bulk value -> fog density."""
+    t = wp.tid()
+    a[t] = wp.clamp(a[t] * scale, 0.0, 1.0)
