@@ -1,6 +1,9 @@
 """The peers of `mpmfx bench surface` (splashsurf, Newton): called with the right units, their
 meshes measured with the same columns as ours, and the bench writes their rows (CPU, small)."""
 
+import csv
+
+import numpy as np
 import pytest
 
 from mpmfx.surface import peers
@@ -57,3 +60,33 @@ def test_newton_anisotropic_on_warp_cpu_is_one_shell():
     assert mean_h < 0.12, f"mean vertex error {mean_h:.3f} h"
     assert abs(volume_err) < 0.03, f"volume error {volume_err:+.2%}"
     assert mesh_stats(res.vertices, res.faces)[0] > 0  # outward winding: positive enclosed volume
+
+
+def test_bench_surface_writes_a_splashsurf_row_per_case(tmp_path):
+    pytest.importorskip("pysplashsurf")
+    from mpmfx.cli import main
+
+    code = main(["bench", "surface", "--quick", "--device", "cpu", "--counts", "3000", "--peers", "splashsurf",
+                 "--out", str(tmp_path)])
+    assert code == 0
+    with open(tmp_path / "surface.csv") as f:
+        rows = list(csv.DictReader(f))
+    ours = [r for r in rows if r["method"] != "splashsurf"]
+    theirs = [r for r in rows if r["method"] == "splashsurf"]
+    cases = {(r["shape"], r["sampling"]) for r in ours}
+    assert len(cases) == 6 and {(r["shape"], r["sampling"]) for r in theirs} == cases
+    for mine in ours:  # same particles, so the same particle count and spacing per case
+        peer = next(r for r in theirs if (r["shape"], r["sampling"]) == (mine["shape"], mine["sampling"]))
+        assert (peer["particles"], peer["h"]) == (mine["particles"], mine["h"])
+    for r in theirs:
+        assert np.isfinite(float(r["err_mean_h"])) and int(r["components"]) >= 1 and r["settings"]
+    sphere = next(r for r in theirs if (r["shape"], r["sampling"]) == ("sphere", "lattice"))
+    assert int(sphere["components"]) == 1 and float(sphere["err_mean_h"]) < 0.3
+
+
+def test_bench_surface_rejects_an_unknown_peer(tmp_path, capsys):
+    from mpmfx.cli import main
+
+    assert main(["bench", "surface", "--quick", "--peers", "meshlab", "--out", str(tmp_path)]) == 2
+    assert "splashsurf newton newton-aniso" in capsys.readouterr().err
+    assert not (tmp_path / "surface.csv").exists()
