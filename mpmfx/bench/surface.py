@@ -66,4 +66,6 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
         print(f"plot: {surface_plot(rows, out)}")
     except ImportError as err:
         print(f"plot skipped: {err} (pip install pyvista to draw surface.png; the CSV/JSON are written)")
+    except ValueError as err:  # nothing with a positive speed and error (empty meshes only)
+        print(f"plot skipped: {err}")
     return 0

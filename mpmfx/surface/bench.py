@@ -140,7 +140,7 @@ def measure(
     if not dev.is_cpu and getattr(reconstruct, "ACCEPTS_DEVICE_ARRAYS", False):
         x_in = wp.array(x, dtype=wp.vec3, device=dev)
     times = []
-    for _ in range(1 + repeats if repeats > 1 else 1):
+    for _ in range(repeats + 1 if repeats > 1 else 1):  # + 1: the untimed warm-up
         sparse.last_stats.clear()  # keeps the stage times of the last call only
         t0 = time.perf_counter()
         res = surface_particles(x_in, None, params, device=device)
@@ -155,8 +155,8 @@ def measure(
         grid_txt = "x".join(map(str, res.level_set.values.shape))
     method = params.method.name + ("" if params.grid is Grid.DENSE or not stats else "/sparse")
     row = _row(shape, sampling, x, h, method, grid_txt, seconds, res.mesh.vertices, res.mesh.faces)
-    return {**row, "device": str(dev), "settings": f"r {radius_factor:g}h voxel {params.resolved_voxel_size / h:g}h",
-            "stages": stats}
+    settings = f"r {radius_factor:g}h voxel {params.resolved_voxel_size / h:g}h"
+    return {**row, "device": str(dev), "settings": settings, "stages": stats}
 
 
 def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray, float], *,

@@ -28,13 +28,15 @@ PEERS = ("splashsurf", "newton", "newton-aniso")
 SPLASHSURF_PIP = "pip install pysplashsurf==0.14.1.0"
 NEWTON_PIP = "pip install newton==1.8.0"
 
-# Settings that reproduce validation.md section 6. splashsurf: (kernel, cube) in multiples of r
-# per sampling; at kernel 2r random samples leave voids that become hundreds of interior bubble
-# surfaces and -16 % volume, 3r closes most. Newton: (voxel, kernel_radius) in multiples of h.
-# Both keep kernel_radius 3h, Newton's default at voxel h: at voxel h/2 its default (3 voxels
-# = 1.5h) finds fewer than the 25 neighbours WPCA needs on a lattice, so most kernels stay
-# isotropic (measured on the CPU, lattice sphere 1M: mean 0.17h, against 0.12h at 3h and
-# validation.md's 0.12h; random 1M: 14h and 12k pieces, against 2.1h and 1.3k pieces).
+# Settings that reproduce validation.md section 6.
+# splashsurf: (smoothing length, cube) in multiples of r, per sampling. At smoothing length 2r
+# random samples leave voids that become hundreds of interior bubble surfaces and -16 %
+# volume; 3r restores the volume, but bubbles remain (200k: 1325 pieces at 2r, 395 at 3r).
+# Newton: (voxel, kernel_radius) in multiples of h. Both keep kernel_radius 3h, Newton's
+# default at voxel h: at voxel h/2 its default (3 voxels = 1.5h) finds fewer than the 25
+# neighbours WPCA needs on a lattice, so most kernels stay isotropic (measured on the CPU,
+# lattice sphere 1M: mean 0.17h, against 0.12h at 3h and validation.md's 0.12h; random 1M:
+# 14h and 12k pieces, against 2.1h and 1.3k pieces).
 SPLASHSURF_SETTINGS = {"lattice": (2.0, 1.0), "random": (3.0, 1.0)}
 NEWTON_SETTINGS = {"newton": (1.0, 3.0), "newton-aniso": (0.5, 3.0)}
 
@@ -110,8 +112,9 @@ def run_splashsurf(
     """splashsurf on `x` with particle radius r = 0.5 h.
 
     x: (n, 3) float positions m; h: particle spacing m.
-    kernel: compact support radius of the SPH kernel in multiples of r (splashsurf's
-      `smoothing_length`); cube: marching-cubes voxel edge in multiples of r (`cube_size`).
+    kernel: SPH smoothing length in multiples of r (splashsurf's `smoothing_length`; its
+      kernel's compact support is twice that); cube: marching-cubes voxel edge in multiples
+      of r (`cube_size`).
       pysplashsurf 0.14.1's docstring says these are absolute lengths, but it multiplies them
       by the particle radius: absolute values give one tiny blob per particle.
     threshold: iso value of the colour field (splashsurf's default 0.6).
@@ -133,7 +136,7 @@ def run_splashsurf(
     mesh = rec.mesh
     vertices = np.asarray(mesh.vertices, dtype=np.float32).reshape(-1, 3)
     faces = np.asarray(mesh.triangles, dtype=np.int64).reshape(-1, 3)
-    settings = f"kernel {kernel:g}r cube {cube:g}r iso {threshold:g}"
+    settings = f"smoothing {kernel:g}r cube {cube:g}r iso {threshold:g}"
     return PeerResult("splashsurf", settings, device, seconds, vertices, faces)
 
 

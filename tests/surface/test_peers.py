@@ -29,8 +29,8 @@ def test_splashsurf_on_a_lattice_sphere_is_one_accurate_shell():
     assert res.seconds > 0 and res.device.startswith("cpu x")
 
 
-def test_splashsurf_kernel_3r_closes_most_voids_of_random_samples():
-    # validation.md 6: on random samples kernel 2r leaves hundreds of interior bubbles and
+def test_splashsurf_smoothing_3r_closes_most_voids_of_random_samples():
+    # validation.md 6: on random samples smoothing length 2r leaves hundreds of bubbles and
     # loses ~16 % of the volume; the bench's 3r keeps the volume (bubbles stay: counted)
     pytest.importorskip("pysplashsurf")
     x, h = sample_shape("sphere", 20_000, "random", seed=1)
