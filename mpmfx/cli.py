@@ -60,6 +60,11 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--quick", action="store_true", help="small CPU-sized sweep")
     b.add_argument("--device", choices=("cpu", "cuda"), default=None)
     b.add_argument("--out", default="renders/bench", help="folder for CSV/JSON/PNG")
+    b.add_argument("--peers", nargs="*", default=None, metavar="PEER",
+                   help="surface only: other surfacers on the same particles, any of splashsurf newton "
+                   "newton-aniso; bare --peers runs none (default: all installed; --quick: splashsurf)")
+    b.add_argument("--counts", type=int, nargs="+", default=None, metavar="N",
+                   help="surface only: particle counts (default 100000 with --quick, else 1000000 10000000)")
     return p
 
 
@@ -97,7 +102,8 @@ def _dispatch(args) -> int:
         return run_check(args.asset, grid_n=args.grid_n, origin=origin, size=size, as_json=args.json)
     if args.cmd == "bench":
         from mpmfx.bench import main as bench_main
-        return bench_main(args.what, quick=args.quick, device=args.device, out=args.out)
+        return bench_main(args.what, quick=args.quick, device=args.device, out=args.out, peers=args.peers,
+                          counts=args.counts)
 
     from mpmfx.stages.runner import load_shot
     run = load_shot(args.shot, overrides=args.overrides, cache_root=args.cache,

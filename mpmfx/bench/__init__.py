@@ -6,9 +6,17 @@ Each benchmark prints one table, and writes CSV/JSON (and a PNG plot where it ha
 from __future__ import annotations
 
 import importlib
+import sys
 
 
-def main(what: str, *, quick: bool = False, device: str | None = None, out: str = "renders/bench") -> int:
+def main(what: str, *, quick: bool = False, device: str | None = None, out: str = "renders/bench",
+         peers: list[str] | None = None, counts: list[int] | None = None) -> int:
+    """Run benchmark `what`; `peers` and `counts` are `surface`'s own options (None: its defaults)."""
     module = {"accuracy": "mpmfx.bench.accuracy", "surface": "mpmfx.bench.surface",
               "solver": "mpmfx.bench.solver"}[what]
-    return importlib.import_module(module).main(quick=quick, device=device, out=out)
+    if what != "surface":
+        if peers is not None or counts is not None:
+            print(f"error: --peers / --counts belong to `mpmfx bench surface`, not `{what}`", file=sys.stderr)
+            return 2
+        return importlib.import_module(module).main(quick=quick, device=device, out=out)
+    return importlib.import_module(module).main(quick=quick, device=device, out=out, peers=peers, counts=counts)

@@ -1,16 +1,71 @@
-"""`mpmfx bench surface`: the surfacer on particles sampled in analytic shapes (validation.md 6).
+"""`mpmfx bench surface`: the surfacer and its peers on particles sampled in analytic shapes (validation.md 6).
 
-Thin wrapper over `mpmfx.surface.bench`: --quick runs 100k particles (CPU-sized); the full run
-1M and 10M (GPU). Writes surface.csv/json under --out.
+Thin wrapper over `mpmfx.surface.bench`: --quick runs 100k particles (CPU-sized) with
+splashsurf where it is installed; the full run 1M and 10M (GPU) with every peer that is
+installed (splashsurf on the CPU, Newton isotropic and anisotropic on the GPU), each method
+timed as the median of 3 calls after a warm-up. All methods see the same particles. Prints one
+table; writes surface.csv/json and surface.png (particles per second against mean vertex
+error, log-log; needs pyvista, skipped with a message without it) under --out.
 """
 from __future__ import annotations
 
+import sys
 
-def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench") -> int:
+from collections.abc import Sequence
+
+QUICK_COUNTS = (100_000,)
+FULL_COUNTS = (1_000_000, 10_000_000)
+
+
+def choose_peers(peers: Sequence[str] | None, *, quick: bool) -> list[str]:
+    """The peers to run: `peers` as asked (ValueError naming the fix for an unknown or missing
+    one), or by default splashsurf for --quick and every peer for the full run, each only where
+    its package is installed (the others are named on stdout)."""
+    from mpmfx.surface.peers import PEERS, peer_missing
+
+    if peers is not None:
+        unknown = [p for p in peers if p not in PEERS]
+        if unknown:
+            raise ValueError(f"--peers {' '.join(unknown)}: unknown; use any of {' '.join(PEERS)}")
+        missing = [f"{p} ({peer_missing(p)})" for p in peers if peer_missing(p)]
+        if missing:
+            raise ValueError(f"--peers: not installed: {'; '.join(missing)}")
+        return list(dict.fromkeys(peers))
+    chosen = []
+    for p in ("splashsurf",) if quick else PEERS:
+        why = peer_missing(p)
+        if why:
+            print(f"peer {p} skipped: {why}")
+        else:
+            chosen.append(p)
+    return chosen
+
+
+def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench",
+         peers: Sequence[str] | None = None, counts: Sequence[int] | None = None) -> int:
+    """Run the sweep; 0 on success, 2 on bad --peers / --counts."""
     from mpmfx.bench.report import write_rows
     from mpmfx.surface.bench import HEADER, bench_surface
-    counts = (100_000,) if quick else (1_000_000, 10_000_000)
+
+    try:
+        chosen = choose_peers(peers, quick=quick)
+    except ValueError as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    counts = tuple(counts) if counts else (QUICK_COUNTS if quick else FULL_COUNTS)
+    if min(counts) < 1000:
+        print(f"error: --counts {' '.join(map(str, counts))}: use at least 1000 particles", file=sys.stderr)
+        return 2
     print(HEADER)
-    rows = bench_surface(counts, ("sphere", "torus", "box"), ("lattice", "random"), device)
-    write_rows(rows, out, "surface")
+    rows = bench_surface(counts, ("sphere", "torus", "box"), ("lattice", "random"), device,
+                         peers=chosen, repeats=1 if quick else 3)
+    path = write_rows(rows, out, "surface")
+    print(f"tables: {path} (+ .json)")
+    try:
+        from mpmfx.bench.plot import surface_plot
+        print(f"plot: {surface_plot(rows, out)}")
+    except ImportError as err:
+        print(f"plot skipped: {err} (pip install pyvista to draw surface.png; the CSV/JSON are written)")
+    except ValueError as err:  # nothing with a positive speed and error (empty meshes only)
+        print(f"plot skipped: {err}")
     return 0

@@ -3,8 +3,10 @@
 Error = distance of output vertices to the analytic surface (validation.md section 6), in
 world units and in units of the particle spacing h; volume error of the closed mesh against
 the analytic volume; number of connected mesh pieces (1 = no interior bubbles, no specks).
+The peers (mpmfx.surface.peers: splashsurf, Newton) run on the same particles and get the
+same columns.
 
-    python -m mpmfx.surface.bench --counts 100000 --device cpu
+    python -m mpmfx.surface.bench --counts 100000 --device cpu --peers splashsurf
 """
 
 from __future__ import annotations
@@ -48,11 +50,14 @@ def shape_sdf(shape: str) -> tuple[Callable[[np.ndarray], np.ndarray], float, np
     raise ValueError(f"bench shape {shape!r}: use one of sphere, torus, box")
 
 
-def sample_shape(shape: str, count: int, sampling: str, *, seed: int = 0) -> tuple[np.ndarray, float]:
+def sample_shape(
+    shape: str, count: int, sampling: str, *, seed: int = 0, jitter: float = 0.0
+) -> tuple[np.ndarray, float]:
     """About `count` particles inside `shape`; returns ((n, 3) float32 positions m, spacing h m).
 
-    lattice: cell centres of a cubic lattice of spacing h; random: uniform in the volume
-    (what MPM particles after a simulation resemble more), same count.
+    lattice: cell centres of a cubic lattice of spacing h, each moved by up to +-jitter * h
+    per axis (uniform; validation.md's "jittered lattice" rows match jitter ~0.1); random:
+    uniform in the volume (what MPM particles after a simulation resemble more), same count.
     """
     sdf, volume, half = shape_sdf(shape)
     h = (volume / count) ** (1 / 3)
@@ -65,6 +70,8 @@ def sample_shape(shape: str, count: int, sampling: str, *, seed: int = 0) -> tup
         axes = [np.arange(-hx, hx, h) + h / 2 for hx in half]
         p = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3)
         p = p - (p.max(axis=0) + p.min(axis=0)) / 2  # symmetric about the shape's centre
+        if jitter:
+            p = p + rng.uniform(-jitter * h, jitter * h, size=p.shape)
     elif sampling == "random":
         box_volume = float(np.prod(2 * half))
         p = rng.uniform(-half, half, size=(int(count * box_volume / volume * 1.2) + 64, 3))
@@ -111,16 +118,35 @@ def _row(shape: str, sampling: str, x: np.ndarray, h: float, method: str, grid: 
 
 
 def measure(
-    shape: str, count: int, sampling: str, *, radius_factor: float = 0.5, device: str | None = None, **overrides
+    shape: str, count: int, sampling: str, *, radius_factor: float = 0.5, device: str | None = None,
+    sample: tuple[np.ndarray, float] | None = None, repeats: int = 1, **overrides
 ) -> dict:
-    """Reconstruct one sample and measure it (particle_radius = radius_factor * h)."""
-    x, h = sample_shape(shape, count, sampling)
-    params = SurfaceParams(particle_radius=radius_factor * h, **overrides)
-    t0 = time.perf_counter()
-    res = surface_particles(x, None, params, device=device)
-    seconds = time.perf_counter() - t0
-    from mpmfx.surface import sparse
+    """Reconstruct one sample with our surfacer and measure it (particle_radius = radius_factor * h).
 
+    sample: (x (n, 3) float32 m, h m) from `sample_shape`, to reuse the peers' particles; None
+      samples `shape` here. repeats > 1: one untimed warm-up, then the median of `repeats`.
+    On a CUDA device x is uploaded before the timer, as the peers' particles are, and passed
+    as a device array where reconstruct says it accepts one (ACCEPTS_DEVICE_ARRAYS).
+    """
+    import warp as wp
+
+    from mpmfx.surface import reconstruct, sparse
+
+    x, h = sample if sample is not None else sample_shape(shape, count, sampling)
+    params = SurfaceParams(particle_radius=radius_factor * h, **overrides)
+    wp.init()
+    dev = wp.get_device(device)
+    x_in = x
+    if not dev.is_cpu and getattr(reconstruct, "ACCEPTS_DEVICE_ARRAYS", False):
+        x_in = wp.array(x, dtype=wp.vec3, device=dev)
+    times = []
+    for _ in range(repeats + 1 if repeats > 1 else 1):  # + 1: the untimed warm-up
+        sparse.last_stats.clear()  # keeps the stage times of the last call only
+        t0 = time.perf_counter()
+        res = surface_particles(x_in, None, params, device=device)
+        wp.synchronize_device(dev)
+        times.append(time.perf_counter() - t0)
+    seconds = float(np.median(times[1:] if repeats > 1 else times))
     stats = dict(sparse.last_stats) if params.grid is Grid.SPARSE else {}
     sparse.last_stats.clear()
     if res.sparse is not None and res.level_set.values.size == 0:
@@ -129,34 +155,19 @@ def measure(
         grid_txt = "x".join(map(str, res.level_set.values.shape))
     method = params.method.name + ("" if params.grid is Grid.DENSE or not stats else "/sparse")
     row = _row(shape, sampling, x, h, method, grid_txt, seconds, res.mesh.vertices, res.mesh.faces)
-    return {**row, "stages": stats}
+    settings = f"r {radius_factor:g}h voxel {params.resolved_voxel_size / h:g}h"
+    return {**row, "device": str(dev), "settings": settings, "stages": stats}
 
 
-def measure_splashsurf(shape: str, count: int, sampling: str, *, kernel: float = 2.0, cube: float = 0.5) -> dict | None:
-    """The same measurement with pysplashsurf (CPU), or None when it is not installed.
+def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray, float], *,
+                 device: str | None = None, repeats: int = 3) -> dict:
+    """Peer `name` (mpmfx.surface.peers.PEERS) on `sample` = (x (n, 3) m, h m); one row like ours."""
+    from mpmfx.surface.peers import run_peer
 
-    UNVERIFIED: with pysplashsurf 0.14.1 this call returned one blob per particle (the mesh
-    had as many pieces as particles), so its parameter mapping is still wrong; do not
-    quote its rows until that is fixed.
-    """
-    try:
-        import pysplashsurf
-    except ImportError:
-        return None
-    x, h = sample_shape(shape, count, sampling)
-    r = 0.5 * h
-    t0 = time.perf_counter()
-    mesh = pysplashsurf.reconstruct_surface(
-        x.astype(np.float32),
-        particle_radius=r,
-        rest_density=1000.0,
-        smoothing_length=kernel * r,  # splashsurf takes absolute lengths
-        cube_size=cube * r,
-        iso_surface_threshold=0.6,
-    ).mesh
-    seconds = time.perf_counter() - t0
-    return _row(shape, sampling, x, h, f"splashsurf {kernel}/{cube}", "-", seconds,
-                np.asarray(mesh.vertices, np.float64), np.asarray(mesh.triangles, np.int64))
+    x, h = sample
+    res = run_peer(name, x, h, sampling, device=device, repeats=repeats)
+    row = _row(shape, sampling, x, h, res.name, "-", res.seconds, res.vertices, res.faces)
+    return {**row, "device": res.device, "settings": res.settings, "stages": {}}
 
 
 def bench_surface(
@@ -166,52 +177,64 @@ def bench_surface(
     device: str | None = None,
     *,
     methods: Sequence[Method] = (Method.ZHU_BRIDSON,),
-    splashsurf: bool = False,
+    peers: Sequence[str] = (),
+    repeats: int = 1,
     echo: bool = True,
     grids: Sequence[Grid] = (Grid.SPARSE,),
     dense_output: bool = False,
     stages: bool = False,
 ) -> list[dict]:
-    """Measure every (count, shape, sampling, method, grid); print a table when `echo`. One row each.
+    """Measure every (count, shape, sampling) with each (method, grid) of ours and each peer
+    (mpmfx.surface.peers.PEERS), all on the same particles; print a table when `echo`.
 
+    repeats > 1: every method gets one untimed warm-up, then the median of `repeats` calls.
     Sparse runs return only the sparse level set unless `dense_output` (dense arrays cost
-    O(bounding box) to fill and copy to the host).
+    O(bounding box) to fill and copy to the host). A peer that fails at run time (out of
+    memory, say) is reported and left out; the others go on.
     """
     for grid in grids:  # compile
         surface_particles(sample_shape("sphere", 500, "lattice")[0], None, SurfaceParams(0.01, grid=grid), device=device)
-    rows = []
+    rows: list[dict] = []
+
+    def emit(row: dict, count: int) -> None:
+        row["count"] = count  # the requested count: lattices hold about that many
+        rows.append(row)
+        if echo:
+            print(format_row(row), flush=True)
+            if stages and row["stages"]:
+                print("  stages (cumulative s):", row["stages"], flush=True)
+
     for count in counts:
         for shape in shapes:
             for sampling in samplings:
+                sample = sample_shape(shape, count, sampling)
                 for method in methods:
                     for grid in grids:
-                        dense_out = grid is Grid.DENSE or dense_output
-                        rows.append(
-                            measure(shape, count, sampling, device=device, method=method, grid=grid, dense_output=dense_out)
-                        )
-                        if echo:
-                            print(format_row(rows[-1]), flush=True)
-                            if stages and rows[-1]["stages"]:
-                                print("  stages (cumulative s):", rows[-1]["stages"], flush=True)
-                peer = measure_splashsurf(shape, count, sampling) if splashsurf else None
-                if peer is not None:
-                    rows.append(peer)
-                    if echo:
-                        print(format_row(peer), flush=True)
+                        emit(measure(shape, count, sampling, device=device, sample=sample, repeats=repeats,
+                                     method=method, grid=grid, dense_output=grid is Grid.DENSE or dense_output),
+                             count)
+                for name in peers:
+                    try:
+                        emit(measure_peer(name, shape, sampling, sample, device=device, repeats=repeats), count)
+                    except (RuntimeError, MemoryError, ValueError) as exc:
+                        print(f"{shape} {sampling} {len(sample[0])}: peer {name} failed, no row: {exc}", flush=True)
     return rows
 
 
 HEADER = (
     f"{'shape':7} {'sampling':8} {'n':>8} {'method':18} {'grid':>13} {'time s':>7} {'Mp/s':>6} "
-    f"{'mean/h':>7} {'p99/h':>6} {'max/h':>6} {'mean m':>9} {'max m':>9} {'vol err':>8} {'pieces':>6}"
+    f"{'mean/h':>7} {'p99/h':>6} {'max/h':>6} {'mean m':>9} {'max m':>9} {'vol err':>8} {'pieces':>6} "
+    f"{'device':>7}  settings"
 )
 
 
 def format_row(r: dict) -> str:
+    """One line of the printed table (columns of HEADER)."""
     return (
         f"{r['shape']:7} {r['sampling']:8} {r['particles']:8d} {r['method']:18} {r['grid']:>13} "
         f"{r['seconds']:7.3f} {r['particles_per_s'] / 1e6:6.2f} {r['err_mean_h']:7.3f} {r['err_p99_h']:6.3f} "
-        f"{r['err_max_h']:6.2f} {r['err_mean']:9.2e} {r['err_max']:9.2e} {r['volume_err']:+8.2%} {r['components']:6d}"
+        f"{r['err_max_h']:6.2f} {r['err_mean']:9.2e} {r['err_max']:9.2e} {r['volume_err']:+8.2%} {r['components']:6d} "
+        f"{r.get('device', ''):>7}  {r.get('settings', '')}"
     )
 
 
@@ -225,7 +248,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--stages", action="store_true", help="print the sparse path's cumulative stage times")
     ap.add_argument("--dense-output", action="store_true", help="sparse runs also return dense arrays")
     ap.add_argument("--device", default=None)
-    ap.add_argument("--splashsurf", action="store_true", help="also run pysplashsurf (unverified settings)")
+    ap.add_argument("--peers", nargs="*", default=[], help="also run these on the same particles: "
+                    "splashsurf, newton, newton-aniso")
+    ap.add_argument("--repeats", type=int, default=1, help="> 1: warm-up, then the median of this many")
     args = ap.parse_args(argv)
     print(HEADER)
     bench_surface(
@@ -234,7 +259,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         args.samplings,
         args.device,
         methods=[Method[m] for m in args.methods],
-        splashsurf=args.splashsurf,
+        peers=args.peers,
+        repeats=args.repeats,
         grids=[Grid[g] for g in args.grids],
         stages=args.stages,
         dense_output=args.dense_output,
