@@ -119,12 +119,14 @@ def _row(shape: str, sampling: str, x: np.ndarray, h: float, method: str, grid: 
 
 def measure(
     shape: str, count: int, sampling: str, *, radius_factor: float = 0.5, device: str | None = None,
-    sample: tuple[np.ndarray, float] | None = None, repeats: int = 1, **overrides
+    sample: tuple[np.ndarray, float] | None = None, repeats: int = 1, label: str = "", voxel_factor: float | None = None,
+    **overrides
 ) -> dict:
     """Reconstruct one sample with our surfacer and measure it (particle_radius = radius_factor * h).
 
     sample: (x (n, 3) float32 m, h m) from `sample_shape`, to reuse the peers' particles; None
       samples `shape` here. repeats > 1: one untimed warm-up, then the median of `repeats`.
+    label: names the row "mpmfx <label>"; voxel_factor: voxel_size = factor * particle radius.
     On a CUDA device x is uploaded before the timer, as the peers' particles are, and passed
     as a device array where reconstruct says it accepts one (ACCEPTS_DEVICE_ARRAYS).
     """
@@ -133,20 +135,26 @@ def measure(
     from mpmfx.surface import reconstruct, sparse
 
     x, h = sample if sample is not None else sample_shape(shape, count, sampling)
+    if voxel_factor is not None:
+        overrides["voxel_size"] = voxel_factor * radius_factor * h
     params = SurfaceParams(particle_radius=radius_factor * h, **overrides)
     wp.init()
     dev = wp.get_device(device)
     x_in = x
     if not dev.is_cpu and getattr(reconstruct, "ACCEPTS_DEVICE_ARRAYS", False):
         x_in = wp.array(x, dtype=wp.vec3, device=dev)
-    times = []
+    times, on_device = [], []
     for _ in range(repeats + 1 if repeats > 1 else 1):  # + 1: the untimed warm-up
         sparse.last_stats.clear()  # keeps the stage times of the last call only
         t0 = time.perf_counter()
         res = surface_particles(x_in, None, params, device=device)
         wp.synchronize_device(dev)
         times.append(time.perf_counter() - t0)
-    seconds = float(np.median(times[1:] if repeats > 1 else times))
+        on_device.append(sparse.last_stats.get("device", times[-1]))
+    keep = slice(1, None) if repeats > 1 else slice(None)
+    # end to end = particles on the device -> level set and mesh on the device (as the peers'
+    # times are taken); copying the result to the host is reported apart (seconds_host)
+    seconds, seconds_host = float(np.median(on_device[keep])), float(np.median(times[keep]))
     stats = dict(sparse.last_stats) if params.grid is Grid.SPARSE else {}
     sparse.last_stats.clear()
     if res.sparse is not None and res.level_set.values.size == 0:
@@ -154,9 +162,11 @@ def measure(
     else:
         grid_txt = "x".join(map(str, res.level_set.values.shape))
     method = params.method.name + ("" if params.grid is Grid.DENSE or not stats else "/sparse")
+    if label:
+        method = f"mpmfx {label}"
     row = _row(shape, sampling, x, h, method, grid_txt, seconds, res.mesh.vertices, res.mesh.faces)
-    settings = f"r {radius_factor:g}h voxel {params.resolved_voxel_size / h:g}h"
-    return {**row, "device": str(dev), "settings": settings, "stages": stats}
+    settings = f"r {radius_factor:g}h voxel {params.resolved_voxel_size / h:g}h smooth {params.smooth_iters}"
+    return {**row, "seconds_host": seconds_host, "device": str(dev), "settings": settings, "stages": stats}
 
 
 def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray, float], *,
@@ -168,6 +178,15 @@ def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray,
     res = run_peer(name, x, h, sampling, device=device, repeats=repeats)
     row = _row(shape, sampling, x, h, res.name, "-", res.seconds, res.vertices, res.faces)
     return {**row, "device": res.device, "settings": res.settings, "stages": {}}
+
+
+OURS = {
+    # voxel = r = h / 2 (Newton's anisotropic voxel) and one blur pass: the speed setting
+    "fast": {"voxel_factor": 1.0, "smooth_iters": 1},
+    # SurfaceParams' defaults: voxel r / 2, two blur passes (4x the leaves, 8x the voxels)
+    "fine": {},
+}
+"""Our settings in the benchmark: label -> SurfaceParams overrides (voxel_factor x particle radius)."""
 
 
 def bench_surface(
@@ -210,9 +229,11 @@ def bench_surface(
                 sample = sample_shape(shape, count, sampling)
                 for method in methods:
                     for grid in grids:
-                        emit(measure(shape, count, sampling, device=device, sample=sample, repeats=repeats,
-                                     method=method, grid=grid, dense_output=grid is Grid.DENSE or dense_output),
-                             count)
+                        ours = OURS if (method, grid) == (Method.ZHU_BRIDSON, Grid.SPARSE) else {"": {}}
+                        for label, setting in ours.items():
+                            emit(measure(shape, count, sampling, device=device, sample=sample, repeats=repeats,
+                                         label=label, method=method, grid=grid,
+                                         dense_output=grid is Grid.DENSE or dense_output, **setting), count)
                 for name in peers:
                     try:
                         emit(measure_peer(name, shape, sampling, sample, device=device, repeats=repeats), count)
@@ -222,17 +243,22 @@ def bench_surface(
 
 
 HEADER = (
-    f"{'shape':7} {'sampling':8} {'n':>8} {'method':18} {'grid':>13} {'time s':>7} {'Mp/s':>6} "
+    f"{'shape':7} {'sampling':8} {'n':>8} {'method':18} {'grid':>13} {'time s':>7} {'+host':>6} {'Mp/s':>6} "
     f"{'mean/h':>7} {'p99/h':>6} {'max/h':>6} {'mean m':>9} {'max m':>9} {'vol err':>8} {'pieces':>6} "
     f"{'device':>7}  settings"
 )
+
+
+def _host(r: dict) -> str:
+    """Seconds including the copy of the result to the host (ours only), or '-'."""
+    return f"{r['seconds_host']:6.3f}" if "seconds_host" in r else "-"
 
 
 def format_row(r: dict) -> str:
     """One line of the printed table (columns of HEADER)."""
     return (
         f"{r['shape']:7} {r['sampling']:8} {r['particles']:8d} {r['method']:18} {r['grid']:>13} "
-        f"{r['seconds']:7.3f} {r['particles_per_s'] / 1e6:6.2f} {r['err_mean_h']:7.3f} {r['err_p99_h']:6.3f} "
+        f"{r['seconds']:7.3f} {_host(r):>6} {r['particles_per_s'] / 1e6:6.2f} {r['err_mean_h']:7.3f} {r['err_p99_h']:6.3f} "
         f"{r['err_max_h']:6.2f} {r['err_mean']:9.2e} {r['err_max']:9.2e} {r['volume_err']:+8.2%} {r['components']:6d} "
         f"{r.get('device', ''):>7}  {r.get('settings', '')}"
     )
