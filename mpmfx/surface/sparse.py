@@ -180,15 +180,18 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     _launch(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, 1.0, grid.wide, dist])
     tiles = (grid.wide, -grid.wide)
     phi = _smooth(wp, S, bcoord, bmap, dist, params.smooth_iters, tiles)
-    if params.smooth_iters > 0:
-        # blurring closes thin outside tunnels (new bubbles) and cuts thin inside necks (specks)
-        steps += _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH_SMOOTHED)
+    # marching cubes needs no crossing on a tile face; giving voxels next to a tile its sign can
+    # seal an outside pocket whose only way out ran along an inside tile (a bubble, seen on
+    # random samples), so it comes before the last topology pass, not after. That pass also
+    # catches what blurring did: closed thin outside tunnels (bubbles), cut inside necks (specks).
+    _launch(wp, S.match_tiles, nvox, [bcoord, bmap, phi, 1e-3])
+    seed = SEED_DEPTH_SMOOTHED if params.smooth_iters > 0 else SEED_DEPTH * grid.r_vox
+    steps += _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth=seed)
     if params.min_feature_particles > 0 and nvox:
         _remove_small(wp, S, bcoord, bmap, phi, g, params.min_feature_particles, tiles)
-    values = wp.empty_like(phi)
+    values = wp.empty_like(phi)  # renormalising keeps every sign: the topology stands
     _launch(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, grid.voxel, grid.background, values])
     tiles = (grid.background, -grid.background)
-    _launch(wp, S.match_tiles, nvox, [bcoord, bmap, values, 1e-3 * grid.voxel])
     timings["smooth"] = _lap(wp, t0)
     mesh = _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel if with_v else None, grid)
     timings["mesh"] = _lap(wp, t0)

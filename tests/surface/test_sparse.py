@@ -119,3 +119,11 @@ def test_sub_voxel_motion_does_not_pop():
         errs.append(np.abs(sdf(res.mesh.vertices.astype(np.float64) - offset)).mean() / h)
     assert max(vols) - min(vols) < 0.001, vols  # measured 4e-5
     assert max(errs) - min(errs) < 0.005, errs  # measured 5e-4 h
+
+
+def test_no_bubble_sealed_along_an_inside_tile():
+    # regression (10M random torus on the GPU: 4 pieces): giving voxels next to an inside tile
+    # its sign after the last flood fill sealed a pocket whose way out ran along that tile
+    x, h = sample_shape("torus", 300_000, "random", seed=3)
+    res = surface(x, h, voxel_size=0.5 * h, smooth_iters=1, dense_output=False)
+    assert mesh_stats(res.mesh.vertices, res.mesh.faces)[1] == 1
