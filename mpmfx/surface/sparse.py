@@ -10,8 +10,13 @@
    voxels not connected to a particle or an INSIDE block are specks of the noisy field (->
    outside). Flood fill by line sweeps along block rows (8 voxels of progress per launch),
    which settles in a few rounds because the band is thin;
-4. dilate, renormalise, smooth, topology again, renormalise to world units (as the dense path);
+4. dilate, renormalise, smooth, give voxels next to a tile the tile's sign, topology again,
+   renormalise to world units (as the dense path);
 5. marching cubes over active cells (warp.geometry's tables), normals and velocities.
+
+Everything runs on the Warp device (`surface_on_device`, a few host syncs for sizes); the host
+copy (`DeviceSurface.download`) is separate, so a caller or the benchmark can leave it out.
+On one H100, 10M particles at voxel = r, one blur: 39-66 ms on the device (README).
 """
 
 from __future__ import annotations
