@@ -35,6 +35,8 @@ class SurfaceParams:
     particle_radius: radius r of one particle; the pipeline passes ~0.5-0.6 x particle spacing.
     radius_scale: artist multiplier on r (grows / shrinks the surface; the kernel support stays).
     voxel_size: level-set voxel edge; None -> 0.5 * particle_radius (independent of the sim dx).
+        voxel_size = particle_radius with smooth_iters = 1 (the benchmark's "fast") is 2.5-5x
+        faster at the same error on lattices and lower error on random samples (README).
     smooth_iters: passes of a [1 2 1]/4 separable blur over the raw field (each ~1 voxel).
     dilate: offset of the surface before smoothing, outward (+) or inward (-).
     min_feature_particles: connected blobs holding fewer particles than this are removed.
