@@ -17,7 +17,6 @@ def errors(res, x, h, shape="sphere"):
 
 
 def test_splashsurf_on_a_lattice_sphere_is_one_accurate_shell():
-    pytest.importorskip("pysplashsurf")
     x, h = sample_shape("sphere", 20_000, "lattice")
     res = peers.run_splashsurf(x, h, kernel=2.0, cube=1.0, repeats=1)
     mean_h, volume_err, pieces = errors(res, x, h)
@@ -32,7 +31,6 @@ def test_splashsurf_on_a_lattice_sphere_is_one_accurate_shell():
 def test_splashsurf_smoothing_3r_closes_most_voids_of_random_samples():
     # validation.md 6: on random samples smoothing length 2r leaves hundreds of bubbles and
     # loses ~16 % of the volume; the bench's 3r keeps the volume (bubbles stay: counted)
-    pytest.importorskip("pysplashsurf")
     x, h = sample_shape("sphere", 20_000, "random", seed=1)
     _, vol2, pieces2 = errors(peers.run_splashsurf(x, h, kernel=2.0, cube=1.0, repeats=1), x, h)
     _, vol3, pieces3 = errors(peers.run_splashsurf(x, h, kernel=3.0, cube=1.0, repeats=1), x, h)
@@ -41,7 +39,6 @@ def test_splashsurf_smoothing_3r_closes_most_voids_of_random_samples():
 
 
 def test_splashsurf_refuses_a_second_thread_count(monkeypatch):
-    pytest.importorskip("pysplashsurf")
     monkeypatch.setattr(peers, "_rayon_threads", 2)  # as if an earlier call had started 2 threads
     x, h = sample_shape("sphere", 2000, "lattice")
     with pytest.raises(ValueError, match="RAYON_NUM_THREADS=1"):
@@ -49,7 +46,6 @@ def test_splashsurf_refuses_a_second_thread_count(monkeypatch):
 
 
 def test_newton_anisotropic_on_warp_cpu_is_one_shell():
-    pytest.importorskip("newton")
     x, h = sample_shape("sphere", 5000, "lattice")
     res = peers.run_peer("newton-aniso", x, h, "lattice", device="cpu", repeats=1)
     mean_h, volume_err, pieces = errors(res, x, h)
@@ -63,7 +59,6 @@ def test_newton_anisotropic_on_warp_cpu_is_one_shell():
 
 
 def test_bench_surface_writes_a_splashsurf_row_per_case(tmp_path):
-    pytest.importorskip("pysplashsurf")
     from mpmfx.cli import main
 
     code = main(["bench", "surface", "--quick", "--device", "cpu", "--counts", "3000", "--peers", "splashsurf",
