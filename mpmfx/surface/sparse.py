@@ -84,9 +84,9 @@ class DeviceSurface:
     Active blocks: bcoord (m,) vec3i block coordinates, bmap (block grid) -> active index or
     tile code, values (m * 512,) float32 world-unit level set, vel (m * 512,) vec3 or None,
     w (m * 512,) kernel weight sums, counts (block grid) particles per block. Mesh: world (v,)
-    vec3 positions, normals, velocities, faces (3 k,) int32 (device arrays of exact size).
-    keep (m,) 1 where an active block holds a band voxel, kind (m,) 0 all-outside / 1
-    all-inside / 2 band (see classify_output_blocks)."""
+    vec3 positions, normals, velocities, faces (3 k,) int32 (device arrays of exact size), or
+    None for an empty surface. kind (m,) int32: 0 all-outside, 1 all-inside, 2 holds the band
+    (classify_output_blocks)."""
 
     grid: SparseGrid
     n: int
