@@ -75,6 +75,9 @@ def test_bench_surface_writes_a_splashsurf_row_per_case(tmp_path):
         assert (peer["particles"], peer["h"]) == (mine["particles"], mine["h"])
     for r in theirs:
         assert np.isfinite(float(r["err_mean_h"])) and int(r["components"]) >= 1 and r["settings"]
+    # ours: timed until the result is on the device; the copy to the host is reported apart
+    assert {r["method"] for r in ours} == {"mpmfx fast", "mpmfx fine"}
+    assert all(0 < float(r["seconds"]) <= float(r["seconds_host"]) for r in ours)
     sphere = next(r for r in theirs if (r["shape"], r["sampling"]) == ("sphere", "lattice"))
     assert int(sphere["components"]) == 1 and float(sphere["err_mean_h"]) < 0.3
 
