@@ -14,9 +14,8 @@ def main(what: str, *, quick: bool = False, device: str | None = None, out: str 
     """Run benchmark `what`; `peers` and `counts` are `surface`'s own options (None: its defaults)."""
     module = {"accuracy": "mpmfx.bench.accuracy", "surface": "mpmfx.bench.surface",
               "solver": "mpmfx.bench.solver"}[what]
-    if what != "surface":
-        if peers is not None or counts is not None:
-            print(f"error: --peers / --counts belong to `mpmfx bench surface`, not `{what}`", file=sys.stderr)
-            return 2
-        return importlib.import_module(module).main(quick=quick, device=device, out=out)
-    return importlib.import_module(module).main(quick=quick, device=device, out=out, peers=peers, counts=counts)
+    own = {"peers": peers, "counts": counts} if what == "surface" else {}
+    if not own and (peers is not None or counts is not None):
+        print(f"error: --peers / --counts belong to `mpmfx bench surface`, not `{what}`", file=sys.stderr)
+        return 2
+    return importlib.import_module(module).main(quick=quick, device=device, out=out, **own)

@@ -28,6 +28,12 @@ class Grid(enum.Enum):
     Falls back to DENSE for Method.SPHERES."""
 
 
+def kernel_volume(radius: float) -> float:
+    """Integral of the Zhu-Bridson kernel (1 - s^2)^3 over its ball of `radius` (radius^3 units):
+    a kernel weight sum divided by it is a number density."""
+    return 4.0 * math.pi * radius**3 * 16.0 / 315.0
+
+
 @dataclass(frozen=True)
 class SurfaceParams:
     """Settings of :func:`mpmfx.surface.surface_particles`. Lengths are world units (m).

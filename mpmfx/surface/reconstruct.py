@@ -24,7 +24,8 @@ import time
 
 import numpy as np
 
-from mpmfx.surface.params import Grid, LevelSet, Method, SparseLevelSet, SurfaceMesh, SurfaceParams, SurfaceResult
+from mpmfx.surface.params import (Grid, LevelSet, Method, SparseLevelSet, SurfaceMesh, SurfaceParams, SurfaceResult,
+                                  kernel_volume)
 
 log = logging.getLogger(__name__)
 
@@ -271,6 +272,4 @@ def _extract_mesh(wp, K, values, vel, grid: _Grid) -> SurfaceMesh:
 
 def _density(w, params: SurfaceParams) -> np.ndarray:
     """Number density (particles / m^3) = sum of kernel weights / integral of the kernel."""
-    radius = params.kernel_radius * params.particle_radius
-    kernel_volume = 4.0 * math.pi * radius**3 * 16.0 / 315.0  # integral of (1 - s^2)^3 over the ball
-    return (w.numpy() / kernel_volume).astype(np.float32)
+    return (w.numpy() / kernel_volume(params.kernel_radius * params.particle_radius)).astype(np.float32)

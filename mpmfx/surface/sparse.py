@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mpmfx.surface.params import LevelSet, SparseLevelSet, SurfaceMesh, SurfaceParams, SurfaceResult
+from mpmfx.surface.params import LevelSet, SparseLevelSet, SurfaceMesh, SurfaceParams, SurfaceResult, kernel_volume
 
 log = logging.getLogger(__name__)
 
@@ -420,7 +420,7 @@ def _bulk_weight(d: DeviceSurface, params: SurfaceParams) -> float:
         full = np.moveaxis(eroded, 0, axis)
     per_block = float(counts[full].mean()) if full.any() else d.n / max(int(occupied.sum()), 1)
     kernel_vox = params.kernel_radius * params.particle_radius / d.grid.voxel
-    return per_block / BS**3 * 4.0 * math.pi * kernel_vox**3 * 16.0 / 315.0
+    return per_block / BS**3 * kernel_volume(kernel_vox)
 
 
 def _dense_output(wp, M, d: DeviceSurface, params: SurfaceParams) -> SurfaceResult:
@@ -438,11 +438,10 @@ def _dense_output(wp, M, d: DeviceSurface, params: SurfaceParams) -> SurfaceResu
     dense = wp.empty(shape, dtype=float)
     wp.launch(M.fill_tiles, shape, inputs=[d.bmap, bt, grid.background, -grid.background, dense])
     wp.launch(M.densify, d.values.shape[0], inputs=[d.bcoord, d.values, lo, dense])
-    radius = params.kernel_radius * params.particle_radius
-    kernel_volume = 4.0 * math.pi * radius**3 * 16.0 / 315.0
+    volume = kernel_volume(params.kernel_radius * params.particle_radius)
     # INSIDE blocks were never evaluated: give them the mean number density of occupied blocks
     occupied = float(np.count_nonzero(d.counts.numpy()) * (BS * grid.voxel) ** 3)
-    bulk_w = d.n / occupied * kernel_volume
+    bulk_w = d.n / occupied * volume
     wd = wp.empty(shape, dtype=float)
     wp.launch(M.fill_tiles, shape, inputs=[d.bmap, bt, 0.0, bulk_w, wd])
     wp.launch(M.densify, d.values.shape[0], inputs=[d.bcoord, d.w, lo, wd])
@@ -452,4 +451,4 @@ def _dense_output(wp, M, d: DeviceSurface, params: SurfaceParams) -> SurfaceResu
         wp.launch(M.densify_vec, d.values.shape[0], inputs=[d.bcoord, d.vel, lo, vd])
         velocity = vd.numpy()
     ls = LevelSet(dense.numpy(), grid.ijk0 + blo.astype(np.int64) * BS, grid.voxel, grid.background)
-    return SurfaceResult(ls, SurfaceMesh.empty(), velocity, (wd.numpy() / kernel_volume).astype(np.float32))
+    return SurfaceResult(ls, SurfaceMesh.empty(), velocity, (wd.numpy() / volume).astype(np.float32))
