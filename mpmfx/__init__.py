@@ -9,6 +9,9 @@ __version__ = "0.1.0"
 
 
 def load_shot(path, **kwargs):
-    """Load and validate a shot file -> `mpmfx.stages.runner.ShotRun` (see its docstring)."""
+    """Load and validate a shot file -> `mpmfx.stages.runner.ShotRun` (see its docstring).
+
+    The same schema and defaults as `mpmfx run`: a field the file leaves unset takes the
+    schema's default, and the solver's defaults are `mpmfx.mpm.SolverConfig`'s own."""
     from mpmfx.stages.runner import load_shot as _load
     return _load(path, **kwargs)

@@ -9,6 +9,7 @@ Errors name the file, the key and the fix: `ShotError("shot.toml: [solver].cfl: 
 """
 from __future__ import annotations
 
+import dataclasses
 import difflib
 import enum
 import tomllib
@@ -17,8 +18,10 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
+from mpmfx.mpm.config import STANDARD_GRAVITY, SolverConfig, SolverConfigError
+
 Vec3 = tuple[float, float, float]
-STAGES = ("voxelise", "simulate", "surface", "export", "render")
+_SOLVER = SolverConfig()  # the solver's defaults: the only ones (its docstring has the ranges)
 
 
 class ShotError(ValueError):
@@ -39,7 +42,7 @@ class ShotInfo(_Section):
 class Domain(_Section):
     origin: Vec3 = Field((-1.0, 0.0, -1.0), description="World position (m) of the domain's min corner.")
     size: float = Field(2.0, gt=0, description="Edge of the cubic domain (m).")
-    grid_n: int = Field(64, ge=8, le=1024, description="Grid cells per axis; dx = size / grid_n (m).")
+    grid_n: int = Field(64, description="Grid cells per axis (8-4096, checked by the solver); dx = size / grid_n (m).")
 
 
 class SceneObject(_Section):
@@ -99,21 +102,30 @@ class ColliderCfg(_Section):
 
 
 class Solver(_Section):
-    cfl: float = Field(0.4, gt=0, le=1.0, description="CFL number: dt = cfl * dx / (c_max + |v|_max).")
-    gravity: Vec3 = Field((0.0, -9.81, 0.0), description="Gravity (m/s^2, world); the solver sees it / domain.size.")
-    damping: float = Field(0.0, ge=0, description="Velocity decay rate (1/s): v *= 1 - damping*dt (trap 5).")
-    drag: float = Field(0.0, ge=0, description="PIC blend as a rate (1/s), never a per-substep fraction.")
-    time_scale: float = Field(1.0, gt=0, description="Playback speed: simulated seconds per shot second (trap 1).")
-    walls: WallName | list[WallName] = Field("separate", description="Domain walls: one type, or six for "
-                                             "-x,+x,-y,+y,-z,+z.")
-    wall_friction: float = Field(0.3, ge=0, description="Coulomb friction at the walls.")
-    dt_max: float = Field(1e-2, gt=0, description="Largest substep (s).")
-    dt_min: float = Field(1e-7, gt=0, description="Substep floor (s): below it the run stops with advice.")
-    deterministic: bool = Field(True, description="Fixed-point P2G: bit-identical replays (guide 10.1).")
-    multi_field: bool = Field(False, description="One velocity field per object so bodies don't fuse.")
-    contact_friction: float = Field(0.2, ge=0, description="Coulomb friction between objects (multi_field).")
-    out_of_domain: Literal["clamp", "remove"] = Field("clamp", description="Particles reaching the domain "
-                                                      "edge: clamped in, or removed and counted in the QA.")
+    """The solver's knobs in world units. Defaults and ranges are `mpmfx.mpm.SolverConfig`'s
+    (checked when the shot loads: `Shot.solver_config()`), so the CLI and the Python API agree."""
+
+    cfl: float = Field(_SOLVER.cfl, description="CFL number: dt = cfl * dx / (c_max + |v|_max), in (0, 1].")
+    gravity: Vec3 = Field((0.0, -STANDARD_GRAVITY, 0.0), description="Gravity (m/s^2, world); the solver sees "
+                          "it / domain.size.")
+    damping: float = Field(_SOLVER.damping, description="Velocity decay rate (1/s): v *= 1 - damping*dt (trap 5).")
+    drag: float = Field(_SOLVER.drag, description="PIC blend as a rate (1/s), never a per-substep fraction.")
+    time_scale: float = Field(_SOLVER.time_scale, description="Playback speed: simulated seconds per shot "
+                              "second (trap 1).")
+    walls: WallName | list[WallName] = Field(_SOLVER.walls[0].value, description="Domain walls: one type, or "
+                                             "six for -x,+x,-y,+y,-z,+z.")
+    wall_friction: float = Field(_SOLVER.wall_friction, description="Coulomb friction at the walls.")
+    dt_max: float = Field(_SOLVER.dt_max, description="Largest substep (s).")
+    dt_min: float = Field(_SOLVER.dt_min, description="Substep floor (s): below it the run stops with advice.")
+    deterministic: bool = Field(_SOLVER.deterministic, description="Fixed-point P2G: bit-identical replays "
+                                "(guide 10.1).")
+    multi_field: bool = Field(_SOLVER.multi_field, description="One velocity field per object so bodies "
+                              "don't fuse.")
+    contact_friction: float = Field(_SOLVER.contact_friction, description="Coulomb friction between objects "
+                                    "(multi_field).")
+    out_of_domain: Literal["clamp", "remove"] = Field(_SOLVER.out_of_domain.value, description="Particles "
+                                                      "reaching the domain edge: clamped in, or removed and "
+                                                      "counted in the QA.")
     checkpoint_every: int = Field(5, ge=1, description="Frames between full-state checkpoints (resume points).")
 
     @field_validator("walls")
@@ -176,6 +188,30 @@ class Shot(_Section):
 
     def resolve(self, p: Path) -> Path:
         return p if p.is_absolute() else (self.base_dir / p).resolve()
+
+    def solver_config(self) -> SolverConfig:
+        """The solver's config in domain units: every `[solver]` knob that SolverConfig has, by
+        name, plus grid_n and gravity / domain.size (guide section 2). Raises SolverConfigError."""
+        s = self.solver
+        knobs = {f.name: getattr(s, f.name) for f in dataclasses.fields(SolverConfig) if f.name in Solver.model_fields}
+        knobs |= {"grid_n": self.domain.grid_n, "gravity": tuple(g / self.domain.size for g in s.gravity),
+                  "walls": (s.walls,) * 6 if isinstance(s.walls, str) else tuple(s.walls)}
+        return SolverConfig(**knobs)
+
+    @property
+    def particle_spacing(self) -> float:
+        """Mean particle spacing h (m): dx / ppc^(1/3)."""
+        return self.domain.size / self.domain.grid_n / self.voxelise.ppc ** (1 / 3)
+
+    def surface_groups(self) -> list[str]:
+        """Per object, the surface group it belongs to: its material preset name, its own
+        name, or 'all' (`surface.group`)."""
+        g = self.surface.group
+        if g is SurfaceGroup.OBJECT:
+            return [o.name for o in self.objects]
+        if g is SurfaceGroup.MATERIAL:
+            return [o.material for o in self.objects]
+        return ["all" for _ in self.objects]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -278,12 +314,15 @@ def _check_semantics(shot: Shot, source: str) -> None:
     if shot.shot.frame_end <= shot.shot.frame_start:
         problems.append(f"{source}: shot.frame_end ({shot.shot.frame_end}) must be after shot.frame_start "
                         f"({shot.shot.frame_start})")
-    if shot.solver.dt_min >= shot.solver.dt_max:
-        problems.append(f"{source}: solver.dt_min ({shot.solver.dt_min}) must be below solver.dt_max "
-                        f"({shot.solver.dt_max})")
-    if shot.solver.dt_max * shot.shot.fps * 0.999 > 1.0 / shot.solver.time_scale:
-        problems.append(f"{source}: solver.dt_max ({shot.solver.dt_max} s) is longer than one frame "
-                        f"(1/{shot.shot.fps} s): lower solver.dt_max")
+    try:
+        shot.solver_config()
+    except SolverConfigError as exc:
+        key = "domain.grid_n" if exc.field == "grid_n" else f"solver.{exc.field}"
+        problems.append(f"{source}: {key}: {exc.what}")
+    else:
+        if shot.solver.dt_max * shot.shot.fps * 0.999 > 1.0 / shot.solver.time_scale:
+            problems.append(f"{source}: solver.dt_max ({shot.solver.dt_max} s) is longer than one frame "
+                            f"(1/{shot.shot.fps} s): lower solver.dt_max")
     names = [o.name for o in shot.objects] + [c.name for c in shot.colliders]
     for dup in sorted({n for n in names if names.count(n) > 1}):
         problems.append(f"{source}: name '{dup}' is used twice in objects/colliders: names must be unique")

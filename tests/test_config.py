@@ -33,7 +33,7 @@ def test_unknown_key_names_file_key_and_suggestion(tmp_path):
 
 
 def test_wrong_type_and_range(tiny_shot):
-    with pytest.raises(ShotError, match=r"solver.cfl.*less than or equal to 1.*CFL number"):
+    with pytest.raises(ShotError, match=r"solver.cfl: 3.0 must be in \(0, 1\]"):
         load_shot_config(tiny_shot, ["solver.cfl=3.0"])
     with pytest.raises(ShotError, match=r"domain.grid_n"):
         load_shot_config(tiny_shot, ["domain.grid_n=lots"])
@@ -70,10 +70,30 @@ def test_set_overrides_any_field(tiny_shot):
 def test_impossible_time_step(tiny_shot):
     with pytest.raises(ShotError, match="dt_max .* longer than one frame"):
         load_shot_config(tiny_shot, ["solver.dt_max=0.5"])
-    with pytest.raises(ShotError, match="dt_min .* must be below"):
+    with pytest.raises(ShotError, match="solver.dt_min: .* not above dt_max"):
         load_shot_config(tiny_shot, ["solver.dt_min=0.001", "solver.dt_max=0.0001"])
 
 
 def test_frame_range(tiny_shot):
     with pytest.raises(ShotError, match="frame_end"):
         load_shot_config(tiny_shot, ["shot.frame_end=0"])
+
+
+def test_a_shot_and_the_python_api_share_the_solver_defaults(tiny_shot):
+    """One set of defaults: fields a shot leaves unset are SolverConfig's own."""
+    import dataclasses
+
+    from mpmfx.mpm.config import STANDARD_GRAVITY, SolverConfig
+    shot = load_shot_config(tiny_shot)  # sets cfl, damping, walls; leaves the rest unset
+    cfg, default = shot.solver_config(), SolverConfig()
+    for f in dataclasses.fields(SolverConfig):
+        if f.name not in {"grid_n", "gravity", "cfl", "damping", "walls"}:
+            assert getattr(cfg, f.name) == getattr(default, f.name), f.name
+    assert cfg.gravity == (0.0, -STANDARD_GRAVITY / shot.domain.size, 0.0) == default.gravity  # a 1 m domain
+
+
+def test_solver_ranges_are_checked_once_and_named_as_shot_keys(tiny_shot):
+    for override, key in (("solver.cfl=1.5", "solver.cfl"), ("solver.damping=-1.0", "solver.damping"),
+                          ("solver.dt_min=0.5", "solver.dt_min"), ("domain.grid_n=4", "domain.grid_n")):
+        with pytest.raises(ShotError, match=f"tiny.toml: {key}: "):
+            load_shot_config(tiny_shot, [override])

@@ -9,15 +9,23 @@ input and output here is in domain units and seconds (see the reference guide §
         report = solver.advance(state, f / fps, (f + 1) / fps)   # StepReport
         frame = solver.state_to_numpy(state)                      # x, v, F / J, Jp, ...
     ckpt = solver.checkpoint(state, t)                            # exact resume: restore(ckpt)
+
+Names load lazily (PEP 562): `mpmfx.mpm.config` and `mpmfx.mpm.materials` are plain Python,
+so the shot schema reads the solver's defaults from them without starting Warp.
 """
+import importlib
 
-from .colliders import Collider, ColliderKind
-from .config import OutOfDomain, SolverConfig, WallType
-from .materials import PRESETS, Material, Mode, preset
-from .solver import Particles, SimulationError, Solver, StepReport
-from .state import State
+_WHERE = {
+    "Collider": "colliders", "ColliderKind": "colliders",
+    "OutOfDomain": "config", "SolverConfig": "config", "WallType": "config",
+    "PRESETS": "materials", "Material": "materials", "Mode": "materials", "preset": "materials",
+    "Particles": "solver", "SimulationError": "solver", "Solver": "solver", "StepReport": "solver",
+    "State": "state",
+}
+__all__ = list(_WHERE)
 
-__all__ = [
-    "Mode", "Material", "PRESETS", "preset", "SolverConfig", "WallType", "OutOfDomain",
-    "Collider", "ColliderKind", "Particles", "Solver", "State", "StepReport", "SimulationError",
-]
+
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module 'mpmfx.mpm' has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{_WHERE[name]}"), name)

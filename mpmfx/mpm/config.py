@@ -6,7 +6,17 @@ import enum
 import math
 from dataclasses import dataclass
 
-__all__ = ["WallType", "OutOfDomain", "SolverConfig"]
+__all__ = ["WallType", "OutOfDomain", "SolverConfig", "SolverConfigError", "STANDARD_GRAVITY"]
+
+STANDARD_GRAVITY = 9.81  # m/s^2; in domain units it is this over the domain's edge in metres
+
+
+class SolverConfigError(ValueError):
+    """A SolverConfig field out of range; `field` names it so a shot file can name its key."""
+
+    def __init__(self, field: str, what: str):
+        super().__init__(f"SolverConfig.{field}: {what}")
+        self.field, self.what = field, what
 
 
 class WallType(enum.Enum):
@@ -28,11 +38,16 @@ class OutOfDomain(enum.Enum):
 class SolverConfig:
     """Solver parameters. Everything is in domain units (box [0,1]^3) and seconds.
 
+    These defaults are the product's only solver defaults: the shot schema
+    (`mpmfx.config.Solver`) takes its defaults from here, so the Python API and a shot file
+    that leaves a field unset run the same physics (gravity: a 1 m domain's, see below).
+
     Attributes:
         grid_n: cells per axis; dx = 1 / grid_n. Sets feature size, interaction range and
             the time-step ceiling (guide §9.1): changing it changes the material.
         cfl: CFL number; dt = cfl * dx / (c_max + |v|_max) (validation.md §5: 0.3-0.5).
-        gravity: (3,) domain/s^2. A balance knob (mound vs pancake), not a speed knob
+        gravity: (3,) domain/s^2; the default is standard gravity for a 1 m domain (a shot
+            gives m/s^2 and the stage divides by the domain's size). A balance knob (mound vs pancake), not a speed knob
             (guide §9.2 trap 1).
         damping: 1/s velocity decay rate, applied per substep as v *= 1 - damping * dt
             (trap 5), so its effect per second does not depend on dt.
@@ -60,19 +75,19 @@ class SolverConfig:
 
     grid_n: int = 64
     cfl: float = 0.4
-    gravity: tuple[float, float, float] = (0.0, -4.9, 0.0)
+    gravity: tuple[float, float, float] = (0.0, -STANDARD_GRAVITY, 0.0)
     damping: float = 0.0
     drag: float = 0.0
     time_scale: float = 1.0
     walls: tuple[WallType, ...] = (WallType.SEPARATE,) * 6
-    wall_friction: float = 0.0
+    wall_friction: float = 0.3
     boundary_cells: int = 3
     dt_max: float = 1e-2
     dt_min: float = 1e-7
     max_substeps_per_frame: int = 20000
-    deterministic: bool = False
+    deterministic: bool = True
     multi_field: bool = False
-    contact_friction: float = 0.0
+    contact_friction: float = 0.2
     out_of_domain: OutOfDomain | str = OutOfDomain.CLAMP
 
     def __post_init__(self) -> None:
@@ -80,25 +95,28 @@ class SolverConfig:
         try:
             set_("out_of_domain", OutOfDomain(self.out_of_domain))
         except ValueError:
-            raise ValueError(
-                f"SolverConfig.out_of_domain = {self.out_of_domain!r}; use "
+            raise SolverConfigError(
+                "out_of_domain", f"{self.out_of_domain!r}: use "
                 f"{' or '.join(repr(o.value) for o in OutOfDomain)}"
             ) from None
         walls = tuple(self.walls)
         if len(walls) != 6:
-            raise ValueError(
-                f"SolverConfig.walls has {len(walls)} entries; give 6 (-x, +x, -y, +y, -z, +z)"
+            raise SolverConfigError(
+                "walls", f"{len(walls)} entries; give 6 (-x, +x, -y, +y, -z, +z)"
             )
         try:
             set_("walls", tuple(WallType(w) for w in walls))
         except ValueError as err:
-            raise ValueError(
-                f"SolverConfig.walls: {err}; use {', '.join(w.value for w in WallType)}"
+            raise SolverConfigError(
+                "walls", f"{err}; use {', '.join(w.value for w in WallType)}"
             ) from None
         gravity = tuple(float(g) for g in self.gravity)
         if len(gravity) != 3 or not all(math.isfinite(g) for g in gravity):
-            raise ValueError(f"SolverConfig.gravity = {self.gravity!r}; give 3 finite numbers")
+            raise SolverConfigError("gravity", f"{self.gravity!r}: give 3 finite numbers")
         set_("gravity", gravity)
+        for name in ("cfl", "damping", "drag", "time_scale", "wall_friction", "contact_friction", "dt_max", "dt_min"):
+            if not math.isfinite(getattr(self, name)):
+                raise SolverConfigError(name, f"{getattr(self, name)!r}: give a finite number")
         checks = [
             ("grid_n", 8 <= self.grid_n <= 4096, "must be in [8, 4096]"),
             ("cfl", 0 < self.cfl <= 1.0, "must be in (0, 1]: above 1 a particle outruns the grid "
@@ -110,12 +128,12 @@ class SolverConfig:
             ("contact_friction", self.contact_friction >= 0, "must be >= 0"),
             ("boundary_cells", 2 <= self.boundary_cells < self.grid_n // 2,
              "must be >= 2 and < grid_n / 2"),
-            ("dt_min", 0 < self.dt_min <= self.dt_max, "needs 0 < dt_min <= dt_max"),
+            ("dt_min", 0 < self.dt_min <= self.dt_max, f"must be > 0 and not above dt_max ({self.dt_max})"),
             ("max_substeps_per_frame", self.max_substeps_per_frame >= 1, "must be >= 1"),
         ]
         for name, ok, what in checks:
             if not ok:
-                raise ValueError(f"SolverConfig.{name} = {getattr(self, name)!r} {what}")
+                raise SolverConfigError(name, f"{getattr(self, name)!r} {what}")
 
     @property
     def dx(self) -> float:

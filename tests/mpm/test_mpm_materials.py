@@ -64,7 +64,7 @@ def test_lame_parameters_and_wave_speed():
 def test_solver_config_validation():
     cfg = SolverConfig(walls=["sticky"] * 6, out_of_domain="remove")
     assert cfg.walls == (WallType.STICKY,) * 6 and cfg.out_of_domain.value == "remove"
-    with pytest.raises(ValueError, match="walls has 4 entries"):
+    with pytest.raises(ValueError, match="walls: 4 entries"):
         SolverConfig(walls=(WallType.SLIP,) * 4)
     with pytest.raises(ValueError, match="out_of_domain"):
         SolverConfig(out_of_domain="wrap")
