@@ -8,7 +8,8 @@ Layout (DESIGN.md, "The cache")::
         checkpoints/       full solver state every K frames (exact resume)
 
 A stage key is the sha256 of canonical JSON of {stage, stage format version, the stage's own
-parameters, upstream keys, input file hashes}. A frame file exists only when it is complete
+parameters, upstream keys, input file hashes and the hash of the code modules the stage
+declares (`code_hash`)}. A frame file exists only when it is complete
 (temp name + os.replace), so a killed run leaves complete frames or none; the manifest is written
 only when a run finishes, so an entry without one is "partial" and resumes.
 """
@@ -40,14 +41,21 @@ def file_hash(path: str | Path) -> str:
     return h.hexdigest()
 
 
-def code_hash(package: str, *files: str | Path) -> str:
-    """sha256 over a package's .py sources and `files` (the stage module itself): a cache made
-    by other code is stale."""
-    import importlib.util
-    folder = Path(importlib.util.find_spec(package).origin).parent
+def code_hash(modules: list[str] | tuple[str, ...]) -> str:
+    """sha256 over the sources of exactly `modules`: dotted names inside mpmfx, each a module
+    (`mpmfx.surface.params`) or a package (`mpmfx.mpm`: every .py under it). A stage declares
+    the modules its output depends on, so a cache made by other code is stale and an edit
+    elsewhere (a benchmark, the CLI) invalidates nothing. Nothing is imported."""
+    package = Path(__file__).parent
     h = hashlib.sha256()
-    for p in [*sorted(folder.rglob("*.py")), *map(Path, files)]:
-        h.update(p.name.encode() + b"\0" + p.read_bytes())
+    for name in sorted(set(modules)):
+        top, *rel = name.split(".")
+        path = package.joinpath(*rel)
+        if top != package.name or not (path.is_dir() or path.with_suffix(".py").is_file()):
+            raise ValueError(f"code_hash: {name!r} is no module or package of {package.name}")
+        files = sorted(path.rglob("*.py")) if path.is_dir() else [path.with_suffix(".py")]
+        for p in files:
+            h.update(p.relative_to(package).as_posix().encode() + b"\0" + p.read_bytes())
     return h.hexdigest()
 
 

@@ -1,4 +1,4 @@
-"""Export measurements (run by hand, not collected by pytest): `python tests/io/measure_export.py DIR`.
+"""Export measurements (run by hand): `python scripts/measure_export.py DIR`.
 
 Prints: seconds and bytes per particle for one 1,000,000-particle USD frame; finalize time and
 root-stage open time for a 240-frame shot; seconds for one 128^3 VDB level set + vel frame.

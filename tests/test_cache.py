@@ -30,7 +30,51 @@ def test_entry_complete_only_with_manifest(tmp_path):
     assert e.complete([1]) and not e.complete([1, 2])
 
 
-def test_code_hash_tracks_the_package_sources():
+def test_code_hash_tracks_the_named_sources():
     from mpmfx.cache import code_hash
-    assert code_hash("mpmfx.mpm") == code_hash("mpmfx.mpm")  # stable
-    assert code_hash("mpmfx.mpm") != code_hash("mpmfx.surface")
+    assert code_hash(["mpmfx.mpm"]) == code_hash(("mpmfx.mpm",))  # stable
+    assert code_hash(["mpmfx.mpm"]) != code_hash(["mpmfx.surface"])
+    assert code_hash(["mpmfx.surface.params"]) != code_hash(["mpmfx.surface"])  # a module is not its package
+    with pytest.raises(ValueError, match="mpmfx.surface.parms"):
+        code_hash(["mpmfx.surface.parms"])  # a typo in a stage's CODE fails loudly, never hashes nothing
+
+
+_KEYS = """
+import json, sys
+import mpmfx
+print(json.dumps({k: e.key for k, e in mpmfx.load_shot(sys.argv[1]).entries().items()}))
+"""
+
+
+def test_keys_hash_exactly_the_code_each_stage_declares(tmp_path):
+    """A benchmark edit invalidates no cache entry; an edit to code that export uses does."""
+    import json
+    import os
+    import shutil
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from tests.conftest import write_tiny_shot
+
+    repo = Path(__file__).resolve().parents[1]
+    copy = tmp_path / "src"
+    shutil.copytree(repo / "mpmfx", copy / "mpmfx", ignore=shutil.ignore_patterns("__pycache__"))
+    shot = write_tiny_shot(tmp_path)
+
+    def keys() -> dict[str, str]:
+        env = {**os.environ, "PYTHONPATH": str(copy)}
+        out = subprocess.run([sys.executable, "-c", _KEYS, str(shot)], env=env, cwd=tmp_path,
+                             capture_output=True, text=True, check=True).stdout
+        return json.loads(out)
+
+    before = keys()
+    for bench_file in (copy / "mpmfx" / "bench").glob("*.py"):
+        bench_file.write_text(bench_file.read_text() + "\n# edited\n")
+    (copy / "mpmfx" / "cli.py").write_text((copy / "mpmfx" / "cli.py").read_text() + "\n# edited\n")
+    assert keys() == before
+    params = copy / "mpmfx" / "surface" / "params.py"
+    params.write_text(params.read_text() + "\n# edited\n")
+    after = keys()
+    assert after["voxelise"] == before["voxelise"] and after["simulate"] == before["simulate"]
+    assert after["surface"] != before["surface"] and after["export"] != before["export"]

@@ -1,4 +1,4 @@
-"""Speed of voxelise + thickness check on a large sphere: ``python -m mpmfx.geometry.bench``."""
+"""Speed of voxelise + thickness check on a large sphere: ``mpmfx bench voxelise``."""
 
 from __future__ import annotations
 
@@ -30,5 +30,12 @@ def bench_voxelise(n_tris: int = 100_000, grid_n: int = 256, *, ppc: int = 8) ->
             "verdict": report.verdict.name}
 
 
-if __name__ == "__main__":  # pragma: no cover
-    print(bench_voxelise())
+def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench") -> int:
+    """`mpmfx bench voxelise`: one row (CPU work: `device` is not used); --quick: 10k triangles, grid 64."""
+    import json
+    from pathlib import Path
+    row = bench_voxelise(10_000, 64) if quick else bench_voxelise()
+    print("  ".join(f"{k}={v}" for k, v in row.items()))
+    Path(out).mkdir(parents=True, exist_ok=True)
+    (Path(out) / "voxelise.json").write_text(json.dumps(row, indent=2))
+    return 0

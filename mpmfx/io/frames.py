@@ -1,13 +1,16 @@
-"""Per-frame array files: a versioned `.npz` of named arrays, written atomically.
+"""Per-frame array files: a versioned `.npz` of named arrays, written atomically, and the
+typed records that stages exchange through them (SeedParticles, ParticleFrame, SurfaceFrame).
 
-Used for particle frames (simulate), surfaces (surface) and checkpoints. The output is
-byte-for-byte deterministic for the same arrays, which the cache tests rely on.
+Stages read and write each other's outputs only through these records, never through a
+sibling stage. The output is byte-for-byte deterministic for the same arrays, which the cache
+tests rely on.
 """
 from __future__ import annotations
 
 import io
 import zipfile
 from collections.abc import Collection
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -45,3 +48,109 @@ def read_arrays(path: str | Path) -> dict[str, np.ndarray]:
         raise ValueError(f"{path}: frame format {fmt}, this mpmfx reads {FRAME_FORMAT}: "
                          f"re-run the stage (mpmfx run SHOT --force STAGE)")
     return out
+
+
+# ---------------------------------------------------------------------------------------------
+# Typed records: the only code that knows how a stage's frame file is laid out.
+
+
+@dataclass
+class SeedParticles:
+    """The voxelise stage's particles, world units: x (n,3) float64 m, v (n,3) float64 m/s,
+    volume (n,) float64 m^3, body (n,) int32 (index into shot.objects)."""
+
+    x: np.ndarray
+    v: np.ndarray
+    volume: np.ndarray
+    body: np.ndarray
+
+    FILE = "particles.npz"
+
+    def write(self, folder: str | Path) -> Path:
+        return write_arrays(Path(folder) / self.FILE, dict(vars(self)))
+
+    @classmethod
+    def read(cls, folder: str | Path) -> SeedParticles:
+        return cls(**read_arrays(Path(folder) / cls.FILE))
+
+
+@dataclass
+class ParticleFrame:
+    """One simulated frame, world units: x, v (n,3) float32 m, m/s; id, material, body (n,)
+    int32 (id: the particle's index at frame_start; material: index into the simulate stage's
+    materials; body: index into shot.objects); Jp (snow/sand plastic volume ratio) and J (water
+    volume ratio) (n,) float32 where a material has them, else None."""
+
+    x: np.ndarray
+    v: np.ndarray
+    id: np.ndarray
+    material: np.ndarray
+    body: np.ndarray
+    Jp: np.ndarray | None = None
+    J: np.ndarray | None = None
+
+    EXT = "npz"  # frames/NNNN.npz in the simulate stage's entry
+
+    def write(self, path: str | Path) -> Path:
+        return write_arrays(path, {k: a for k, a in vars(self).items() if a is not None})
+
+    @classmethod
+    def read(cls, path: str | Path) -> ParticleFrame:
+        return cls(**read_arrays(path))
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        return {k: a for k, a in vars(self).items() if a is not None}
+
+
+@dataclass
+class GroupSurface:
+    """One surface group's mesh and sparse level set, world units.
+
+    vertices, normals (m,3) float32 m / unit; velocities (m,3) float32 m/s; faces (k,3) int32;
+    block_ijk (b,3) int64 leaf origins in voxels; blocks (b,8,8,8) float32 signed distance (m);
+    inside_ijk (c,3) int64 leaves wholly inside; voxel_size, background (m); vel_blocks
+    (b,8,8,8,3) float16 m/s; density_blocks (b,8,8,8) float16 fog density 0..1 (or None)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    velocities: np.ndarray
+    block_ijk: np.ndarray
+    blocks: np.ndarray
+    inside_ijk: np.ndarray
+    voxel_size: float
+    background: float
+    vel_blocks: np.ndarray | None = None
+    density_blocks: np.ndarray | None = None
+
+    def level_set(self):
+        """The leaves as `mpmfx.surface.SparseLevelSet` (to_dense / velocity_dense / density_dense)."""
+        from mpmfx.surface.params import SparseLevelSet
+        return SparseLevelSet(block_ijk=self.block_ijk, values=self.blocks, velocity=self.vel_blocks,
+                              inside_ijk=self.inside_ijk, voxel_size=float(self.voxel_size),
+                              background=float(self.background), density=self.density_blocks)
+
+
+@dataclass
+class SurfaceFrame:
+    """One frame of the surface stage: {group name: GroupSurface}, in the stage's group order."""
+
+    groups: dict[str, GroupSurface]
+
+    EXT = "npz"  # frames/NNNN.npz in the surface stage's entry
+    # the level set is mostly +-background, the fog mostly exact 0 and 1: both deflate ~2.5x;
+    # vertices and velocities are noisy floats that barely shrink
+    _DEFLATE = ("blocks", "density_blocks")
+
+    def write(self, path: str | Path) -> Path:
+        out: dict[str, np.ndarray] = {"groups": np.asarray(list(self.groups))}
+        for g, s in self.groups.items():
+            out |= {f"{g}.{k}": (np.float64(a) if k in ("voxel_size", "background") else a)
+                    for k, a in vars(s).items() if a is not None}
+        return write_arrays(path, out, compress=[f"{g}.{k}" for g in self.groups for k in self._DEFLATE])
+
+    @classmethod
+    def read(cls, path: str | Path) -> SurfaceFrame:
+        data = read_arrays(path)
+        return cls({str(g): GroupSurface(**{k.split(".", 1)[1]: a for k, a in data.items() if k.startswith(f"{g}.")})
+                    for g in data["groups"]})

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-__all__ = ["ColliderKind", "Collider", "ColliderParams", "collider_velocity"]
+__all__ = ["ColliderKind", "Collider", "ColliderParams", "collider_velocity", "pose_matrix"]
 
 
 class ColliderKind(enum.IntEnum):
@@ -102,6 +102,19 @@ class Collider:
         a = (t - ts[i]) / (ts[i + 1] - ts[i])
         pos = (1 - a) * self.translations[i] + a * self.translations[i + 1]
         return pos.astype(np.float64), _slerp(self.rotations[i], self.rotations[i + 1], a)
+
+
+def pose_matrix(times, translations, rotations, t: float) -> np.ndarray:
+    """(4,4) rigid transform at shot time t (s) of keyframes as `Collider` takes them: the
+    solver's own interpolation (linear translation, slerp rotation), for USD and renders."""
+    p, (x, y, z, w) = Collider(kind=ColliderKind.PLANE, times=times, translations=translations,
+                               rotations=rotations).pose(t)
+    m = np.eye(4)
+    m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                 [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                 [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    m[:3, 3] = p
+    return m
 
 
 def _slerp(q0, q1, a):

@@ -43,6 +43,7 @@ class Stage(Protocol):
     VERSION: int
     PER_FRAME: bool          # output is one file per frame (else one result for the shot)
     FRAME_EXT: str
+    CODE: tuple[str, ...]    # the modules its output depends on: the key hashes exactly these
 
     def params(self, shot: Shot) -> dict: ...               # the stage's own parameters (key inputs)
     def inputs(self, shot: Shot) -> dict[str, str]: ...     # input files: name -> sha256

@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from mpmfx.cache import code_hash
 from mpmfx.config import Shot
+from mpmfx.io.frames import ParticleFrame, SurfaceFrame
 from mpmfx.stages.base import Context
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "export", 1, True, "usdc"
+CODE = ("mpmfx.stages.export", "mpmfx.io", "mpmfx.surface.params", "mpmfx.render.camera",
+        "mpmfx.geometry.colliders", "mpmfx.geometry.mesh", "mpmfx.mpm.colliders")
 
 
 def params(shot: Shot) -> dict:
@@ -22,23 +24,21 @@ def params(shot: Shot) -> dict:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {"code": code_hash("mpmfx.io", __file__)}
+    return {}
 
 
 def run(ctx: Context) -> dict:
-    from mpmfx.stages import colliders, simulate
-    from mpmfx.stages.surface import load_frame_groups, particle_spacing
-
     shot, entry = ctx.shot, ctx.entry
     writer = _writer(shot, entry)
-    spacing = particle_spacing(shot)
     todo = [f for f in ctx.frames if not entry.frame_path(f, FRAME_EXT).exists()]
     for f in ctx.progress(todo, total=len(todo), desc="export"):
-        groups = load_frame_groups(ctx.upstream["surface"], f)
+        groups = SurfaceFrame.read(ctx.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
         volumes = _write_vdbs(shot, entry, f, groups) if shot.export.vdb else {}
-        points = _points(shot, simulate.load_frame(ctx.upstream["simulate"], f), spacing) if shot.export.points else {}
+        points = {}
+        if shot.export.points:
+            points = _points(shot, ParticleFrame.read(ctx.upstream["simulate"].frame_path(f, ParticleFrame.EXT)))
         writer.write_frame(f, points=points, meshes=_meshes(groups), volumes=volumes,
-                           colliders=colliders.usd_samples(shot, f))
+                           colliders=_colliders(shot, f))
     done = entry.done_frames(FRAME_EXT)
     root = writer.finalize(done, camera=_camera(shot))
     return {"usd": str(root)}
@@ -50,32 +50,45 @@ def _writer(shot: Shot, entry):
                          end_frame=shot.shot.frame_end, up_axis="Y", meters_per_unit=1.0)
 
 
-def _points(shot: Shot, p: dict, spacing: float) -> dict:
+def _points(shot: Shot, p: ParticleFrame) -> dict:
     from mpmfx.io.usd import PointsSample
     out = {}
     for body, obj in enumerate(shot.objects):
-        sel = p["body"] == body
-        primvars = {"material": p["material"][sel], "body": p["body"][sel]}
-        if "Jp" in p:
-            primvars["Jp"] = p["Jp"][sel]
+        sel = p.body == body
+        primvars = {"material": p.material[sel], "body": p.body[sel]}
+        if p.Jp is not None:
+            primvars["Jp"] = p.Jp[sel]
         out[obj.name] = PointsSample(
-            positions=p["x"][sel], velocities=p["v"][sel], widths=float(spacing),
-            ids=p["id"][sel].astype(np.int64), primvars=primvars)
+            positions=p.x[sel], velocities=p.v[sel], widths=float(shot.particle_spacing),
+            ids=p.id[sel].astype(np.int64), primvars=primvars)
     return out
 
 
 def _meshes(groups: dict) -> dict:
     from mpmfx.io.usd import MeshSample
-    return {g: MeshSample(points=d["vertices"], face_vertex_indices=d["faces"], normals=d["normals"],
-                                       velocities=d["velocities"]) for g, d in groups.items()}
+    return {g: MeshSample(points=d.vertices, face_vertex_indices=d.faces, normals=d.normals,
+                          velocities=d.velocities) for g, d in groups.items()}
+
+
+def _colliders(shot: Shot, frame: int) -> list:
+    """Each collider's mesh (local frame, m) and its pose at this frame, for USD."""
+    from mpmfx.geometry.colliders import collider_mesh, keyframes
+    from mpmfx.io.usd import ColliderSample
+    from mpmfx.mpm.colliders import pose_matrix
+    t = (frame - shot.shot.frame_start) / shot.shot.fps
+    out = []
+    for col in shot.colliders:
+        m = collider_mesh(col, resolve=shot.resolve, plane_size=2 * shot.domain.size)
+        out.append(ColliderSample(name=col.name, points=np.asarray(m.vertices, np.float32),
+                                  faces=np.asarray(m.faces, np.int32), xform=pose_matrix(*keyframes(col), t)))
+    return out
 
 
 def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
     from mpmfx.io.vdb import VdbGrid, write_vdb
-    from mpmfx.stages.surface import level_set
     volumes = {}
     for g, d in groups.items():
-        sparse = level_set(d)
+        sparse = d.level_set()
         ls = sparse.to_dense()
         if ls.values.size == 0:
             continue

@@ -8,11 +8,13 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-from mpmfx.cache import code_hash
 from mpmfx.config import Shot
+from mpmfx.io.frames import ParticleFrame, SurfaceFrame
 from mpmfx.stages.base import Context
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "render", 1, True, "png"
+CODE = ("mpmfx.stages.render", "mpmfx.render", "mpmfx.io.frames", "mpmfx.geometry.colliders",
+        "mpmfx.geometry.mesh", "mpmfx.mpm.colliders")
 
 
 def params(shot: Shot) -> dict:
@@ -23,32 +25,30 @@ def params(shot: Shot) -> dict:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {"code": code_hash("mpmfx.render", __file__)}
+    return {}
 
 
 def run(ctx: Context) -> dict:
     from mpmfx.render.camera import default_camera
     from mpmfx.render.frames import FrameRenderer, colour_for, contact_sheet, write_movie
-    from mpmfx.stages import simulate
-    from mpmfx.stages.surface import group_names, load_frame_groups, particle_spacing
 
     shot, entry = ctx.shot, ctx.entry
     r = shot.render
     todo = [f for f in ctx.frames if not entry.frame_path(f, FRAME_EXT).exists()]
     renderer = FrameRenderer(size=(r.width, r.height), camera=default_camera(shot),
                              domain=(shot.domain.origin, shot.domain.size), title=shot.shot.name)
-    material_of = {g: o.material for g, o in zip(group_names(shot), shot.objects)}
+    material_of = {g: o.material for g, o in zip(shot.surface_groups(), shot.objects)}
     try:
         for f in ctx.progress(todo, total=len(todo), desc="render"):
             label = f"frame {f}  t={(f - shot.shot.frame_start) / shot.shot.fps:.2f}s"
             if r.mode == "particles":
-                p = simulate.load_frame(ctx.upstream["simulate"], f)
-                pts = {o.name: (p["x"][p["body"] == i], colour_for(o.material, i)) for i, o in enumerate(shot.objects)}
-                px = r.height * particle_spacing(shot) / shot.domain.size * 1.5
+                p = ParticleFrame.read(ctx.upstream["simulate"].frame_path(f, ParticleFrame.EXT))
+                pts = {o.name: (p.x[p.body == i], colour_for(o.material, i)) for i, o in enumerate(shot.objects)}
+                px = r.height * shot.particle_spacing / shot.domain.size * 1.5
                 renderer.particles(pts, px, entry.frame_path(f, FRAME_EXT), label=label)
             else:
-                groups = load_frame_groups(ctx.upstream["surface"], f)
-                meshes = {g: (d["vertices"], d["faces"], colour_for(material_of.get(g, g), i))
+                groups = SurfaceFrame.read(ctx.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
+                meshes = {g: (d.vertices, d.faces, colour_for(material_of.get(g, g), i))
                           for i, (g, d) in enumerate(groups.items())}
                 meshes |= _collider_meshes(shot, f)
                 renderer.surfaces(meshes, entry.frame_path(f, FRAME_EXT), label=label)
@@ -65,12 +65,13 @@ def run(ctx: Context) -> dict:
 
 def _collider_meshes(shot: Shot, frame: int) -> dict:
     """Each collider posed at this frame's time, in a neutral grey, so the audience sees what hits."""
-    from mpmfx.stages.colliders import collider_mesh, transform_at
+    from mpmfx.geometry.colliders import collider_mesh, keyframes
+    from mpmfx.mpm.colliders import pose_matrix
     t = (frame - shot.shot.frame_start) / shot.shot.fps
     out = {}
     for col in shot.colliders:
-        m = collider_mesh(shot, col)
-        xf = transform_at(col, t)
+        m = collider_mesh(col, resolve=shot.resolve, plane_size=2 * shot.domain.size)
+        xf = pose_matrix(*keyframes(col), t)
         out[f"collider_{col.name}"] = (m.vertices @ xf[:3, :3].T + xf[:3, 3], m.faces, "#9aa0a8")
     return out
 

@@ -5,18 +5,21 @@
 """
 from __future__ import annotations
 
-import importlib
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from mpmfx.cache import Cache, Entry, default_root
-from mpmfx.config import STAGES, Shot, ShotError, load_shot_config
+from mpmfx.cache import Cache, Entry, code_hash, default_root
+from mpmfx.config import Shot, ShotError, load_shot_config
+from mpmfx.stages import STAGES, export, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage
+
+MODULES: dict[str, Stage] = {m.NAME: m for m in (voxelise, simulate, surface, export, render)}
+assert tuple(MODULES) == STAGES, "mpmfx.stages.STAGES and the runner's modules disagree"
 
 
 def stage_module(name: str) -> Stage:
-    return importlib.import_module(f"mpmfx.stages.{name}")  # type: ignore[return-value]
+    return MODULES[name]
 
 
 @dataclass
@@ -53,7 +56,8 @@ class ShotRun:
         upstream: dict[str, str] = {}
         for name in STAGES:
             mod = stage_module(name)
-            entry = self.cache.entry(name, mod.VERSION, mod.params(self.shot), dict(upstream), mod.inputs(self.shot))
+            inputs = {"code": code_hash(mod.CODE), **mod.inputs(self.shot)}
+            entry = self.cache.entry(name, mod.VERSION, mod.params(self.shot), dict(upstream), inputs)
             out[name] = entry
             upstream = {name: entry.key}
         return out

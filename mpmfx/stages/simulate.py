@@ -5,6 +5,7 @@ World units stop here: particles enter the solver in the normalised domain [0,1]
 frames are written back in world units. Frames: `frames/NNNN.npz` with x, v (n,3) float32
 (m, m/s), id, material, body (n,) int32 and Jp, J (n,) float32; `checkpoints/NNNN.npz` hold the
 full solver state every `solver.checkpoint_every` frames so a killed run resumes exactly.
+Frame files are `mpmfx.io.frames.ParticleFrame` records.
 """
 from __future__ import annotations
 
@@ -13,21 +14,24 @@ from pathlib import Path
 
 import numpy as np
 
-from mpmfx.cache import code_hash, write_json
-from mpmfx.config import Shot, ShotError
-from mpmfx.io.frames import read_arrays, write_arrays
-from mpmfx.stages import colliders as collider_build
+from mpmfx.cache import file_hash, write_json
+from mpmfx.config import ColliderShape, Shot, ShotError
+from mpmfx.io.frames import ParticleFrame, SeedParticles, read_arrays, write_arrays
 from mpmfx.stages.base import Context, StageError, quiet_warp
 
-NAME, VERSION, PER_FRAME, FRAME_EXT = "simulate", 1, True, "npz"
+NAME, VERSION, PER_FRAME, FRAME_EXT = "simulate", 1, True, ParticleFrame.EXT
+CODE = ("mpmfx.stages.simulate", "mpmfx.mpm", "mpmfx.geometry.colliders", "mpmfx.geometry.mesh",
+        "mpmfx.geometry.voxelise", "mpmfx.geometry.inside", "mpmfx.io.frames")
 KEEP_CHECKPOINTS = 2
 
 
 def params(shot: Shot) -> dict:
     # frame_end is left out on purpose: a longer shot continues from the cached frames.
+    # The solver's resolved config, not the [solver] section: a changed default re-runs simulate.
     mats, object_material = materials(shot)
-    return {"domain": shot.domain.model_dump(mode="json"),
-            "solver": shot.solver.model_dump(mode="json", exclude={"checkpoint_every"}),
+    cfg = {k: [w.value for w in v] if k == "walls" else getattr(v, "value", v)
+           for k, v in vars(shot.solver_config()).items()}
+    return {"domain": shot.domain.model_dump(mode="json"), "solver": cfg,
             "materials": [m.__dict__ | {"mode": int(m.mode)} for m in mats],
             "object_material": object_material,
             "colliders": [c.model_dump(mode="json") for c in shot.colliders],
@@ -35,7 +39,8 @@ def params(shot: Shot) -> dict:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {"code": code_hash("mpmfx.mpm", __file__), **collider_build.inputs(shot)}
+    return {f"collider:{c.name}": file_hash(shot.resolve(c.mesh)) for c in shot.colliders
+            if c.shape is ColliderShape.MESH and c.mesh is not None}
 
 
 def materials(shot: Shot) -> tuple[list, list[int]]:
@@ -53,35 +58,47 @@ def materials(shot: Shot) -> tuple[list, list[int]]:
     return mats, index
 
 
-def solver_config(shot: Shot):
-    from mpmfx.mpm import SolverConfig, WallType
-    s, L = shot.solver, shot.domain.size
-    walls = [s.walls] * 6 if isinstance(s.walls, str) else s.walls
-    return SolverConfig(grid_n=shot.domain.grid_n, cfl=s.cfl, gravity=tuple(g / L for g in s.gravity),
-                        damping=s.damping, drag=s.drag, time_scale=s.time_scale,
-                        walls=tuple(WallType(w) for w in walls), wall_friction=s.wall_friction,
-                        dt_max=s.dt_max, dt_min=s.dt_min, deterministic=s.deterministic,
-                        multi_field=s.multi_field, contact_friction=s.contact_friction,
-                        out_of_domain=s.out_of_domain)
+def colliders(shot: Shot) -> list:
+    """The shot's colliders as `mpmfx.mpm.Collider`s in domain units (positions / domain.size,
+    about domain.origin); keyframe times stay on the shot clock, as the solver expects."""
+    from mpmfx.geometry.colliders import collider_mesh, keyframes, mesh_sdf
+    from mpmfx.mpm import Collider, ColliderKind
+    origin, L = np.asarray(shot.domain.origin, float), shot.domain.size
+    out = []
+    for col in shot.colliders:
+        t, tr, rot = keyframes(col)
+        common = dict(friction=col.friction, times=t, translations=((tr - origin) / L).astype(np.float32),
+                      rotations=rot.astype(np.float32))
+        if col.shape is ColliderShape.PLANE:
+            out.append(Collider(kind=ColliderKind.PLANE, normal=tuple(col.normal), **common))
+        elif col.shape is ColliderShape.BOX:
+            out.append(Collider(kind=ColliderKind.BOX, half_extents=tuple(h / L for h in col.half_extents), **common))
+        elif col.shape is ColliderShape.SPHERE:
+            out.append(Collider(kind=ColliderKind.SPHERE, radius=col.radius / L, **common))
+        else:
+            mesh = collider_mesh(col, resolve=shot.resolve, plane_size=2 * L)
+            sdf, sdf_origin, voxel = mesh_sdf(mesh, dx=L / shot.domain.grid_n)
+            out.append(Collider(kind=ColliderKind.SDF, sdf=(sdf / L).astype(np.float32),
+                                sdf_origin=tuple(sdf_origin / L), sdf_voxel=voxel / L, **common))
+    return out
 
 
 def run(ctx: Context) -> dict:
     from mpmfx.mpm import Particles, SimulationError, Solver
-    from mpmfx.stages import voxelise
 
     quiet_warp(ctx.device)
     shot, entry = ctx.shot, ctx.entry
     origin, size = np.asarray(shot.domain.origin), shot.domain.size
     mats, obj_mat = materials(shot)
-    solver = Solver(mats, solver_config(shot), colliders=collider_build.build(shot), device=ctx.device)
+    solver = Solver(mats, shot.solver_config(), colliders=colliders(shot), device=ctx.device)
     start, fps = shot.shot.frame_start, shot.shot.fps
     last = max(ctx.frames)
     ckpt = _latest_checkpoint(entry.root / "checkpoints", entry.done_frames(FRAME_EXT))
     if ckpt is None:
-        p = voxelise.load(ctx.upstream["voxelise"])
-        body = p["body"].astype(np.int32)
-        parts = Particles(x=((p["x"] - origin) / size).astype(np.float32), v=(p["v"] / size).astype(np.float32),
-                          volume=(p["volume"] / size**3).astype(np.float32),
+        p = SeedParticles.read(ctx.upstream["voxelise"].root)
+        body = p.body.astype(np.int32)
+        parts = Particles(x=((p.x - origin) / size).astype(np.float32), v=(p.v / size).astype(np.float32),
+                          volume=(p.volume / size**3).astype(np.float32),
                           material=np.asarray(obj_mat, np.int32)[body], body=body)
         state, frame = solver.init_state(parts), start
         _write_frame(ctx, solver, state, frame, origin, size)
@@ -106,17 +123,14 @@ def run(ctx: Context) -> dict:
 def _write_frame(ctx, solver, state, frame: int, origin, size: float) -> None:
     s = solver.state_to_numpy(state)
     alive = s.get("alive", np.ones(len(s["x"]), bool)).astype(bool)
-    out = {"x": (s["x"][alive] * size + origin).astype(np.float32),
-           "v": (s["v"][alive] * size).astype(np.float32),
-           "id": np.flatnonzero(alive).astype(np.int32),
-           "material": s["material"][alive].astype(np.int32), "body": s["body"][alive].astype(np.int32)}
-    for k in ("Jp", "J"):
-        if k in s:
-            out[k] = s[k][alive].astype(np.float32)
-    if not all(np.isfinite(a).all() for a in out.values()):
+    out = ParticleFrame(x=(s["x"][alive] * size + origin).astype(np.float32),
+                        v=(s["v"][alive] * size).astype(np.float32), id=np.flatnonzero(alive).astype(np.int32),
+                        material=s["material"][alive].astype(np.int32), body=s["body"][alive].astype(np.int32),
+                        **{k: s[k][alive].astype(np.float32) for k in ("Jp", "J") if k in s})
+    if not all(np.isfinite(a).all() for a in out.arrays().values()):
         raise StageError(f"frame {frame}: the solver returned non-finite values; nothing was cached. "
                          f"Lower solver.cfl or the stiffest material's youngs_modulus / bulk_modulus")
-    write_arrays(ctx.entry.frame_path(frame, FRAME_EXT), out)
+    out.write(ctx.entry.frame_path(frame, FRAME_EXT))
 
 
 def _qa(report, size: float) -> dict:
@@ -142,6 +156,3 @@ def _latest_checkpoint(folder: Path, done: list[int]) -> int | None:
     ok = [f for f in frames if f in set(done)]
     return ok[-1] if ok else None
 
-
-def load_frame(entry, frame: int) -> dict[str, np.ndarray]:
-    return read_arrays(entry.frame_path(frame, FRAME_EXT))

@@ -1,7 +1,6 @@
 """Stage 1: meshes become material points; the five-cell thickness rule is checked first.
 
-Output (world units): `particles.npz` with x (n,3) float64 m, v (n,3) float64 m/s, volume (n,)
-m^3, body (n,) int32 (index into shot.objects); `thickness.json`, one heatmap PNG and one
+Output (world units): `particles.npz`, an `mpmfx.io.frames.SeedParticles` record; `thickness.json`, one heatmap PNG and one
 `sdf_<object>.npz` per object.
 """
 from __future__ import annotations
@@ -10,12 +9,14 @@ import warnings
 
 import numpy as np
 
-from mpmfx.cache import code_hash, file_hash, write_json
+from mpmfx.cache import file_hash, write_json
 from mpmfx.config import Shot, Thickness
-from mpmfx.io.frames import read_arrays, write_arrays
+from mpmfx.io.frames import SeedParticles, write_arrays
 from mpmfx.stages.base import Context, StageError
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "voxelise", 1, False, "npz"
+CODE = ("mpmfx.stages.voxelise", "mpmfx.geometry.mesh", "mpmfx.geometry.inside", "mpmfx.geometry.voxelise",
+        "mpmfx.geometry.thickness", "mpmfx.render.thickness", "mpmfx.mpm.materials", "mpmfx.io.frames")
 
 
 def params(shot: Shot) -> dict:
@@ -36,7 +37,7 @@ def _fluid(shot: Shot) -> list[bool]:
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {"code": code_hash("mpmfx.geometry", __file__), **{o.name: file_hash(shot.resolve(o.mesh)) for o in shot.objects}}
+    return {o.name: file_hash(shot.resolve(o.mesh)) for o in shot.objects}
 
 
 def run(ctx: Context) -> dict:
@@ -75,8 +76,8 @@ def run(ctx: Context) -> dict:
         write_arrays(ctx.entry.root / f"sdf_{obj.name}.npz",
                      {"sdf": vox.sdf, "origin": np.asarray(vox.sdf_origin), "voxel": np.float64(vox.sdf_voxel)})
     write_json(ctx.entry.root / "thickness.json", reports)
-    write_arrays(ctx.entry.root / "particles.npz", {"x": np.concatenate(xs), "v": np.concatenate(vs),
-                                                    "volume": np.concatenate(vols), "body": np.concatenate(bodies)})
+    SeedParticles(x=np.concatenate(xs), v=np.concatenate(vs), volume=np.concatenate(vols),
+                  body=np.concatenate(bodies)).write(ctx.entry.root)
     n = sum(len(x) for x in xs)
     return {"particles": n, "thickness": {k: r.get("verdict", "skipped") for k, r in reports.items()}}
 
@@ -103,7 +104,4 @@ def _thickness(ctx, obj, mesh, check_thickness, Verdict):
         ctx.warn(msg)
     return report
 
-
-def load(entry) -> dict[str, np.ndarray]:
-    return read_arrays(entry.root / "particles.npz")
 
