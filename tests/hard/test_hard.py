@@ -92,7 +92,7 @@ def test_cfl_sweep_standing_wave(cfl):
 def test_cfl_twice_the_limit_is_refused_with_the_knob():
     # At cfl = 2 every substep stays finite and moves < 1 cell, yet energy grows 1.47x per period:
     # no per-substep guard can see it, so the solver refuses the setting up front.
-    with pytest.raises(ValueError, match=r"SolverConfig.cfl = 2.0 must be in \(0, 1\]"):
+    with pytest.raises(ValueError, match=r"SolverConfig.cfl: 2.0 must be in \(0, 1\]"):
         SolverConfig(grid_n=16, cfl=2.0)
     print("HARD cfl_sweep cfl=2.0: refused up front (ValueError naming cfl and 0.3-0.5)")
 
