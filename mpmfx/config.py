@@ -143,7 +143,7 @@ class SurfaceGroup(str, enum.Enum):
 
 
 class Surface(_Section):
-    radius_scale: float = Field(1.0, gt=0, description="Multiplier on the particle radius (half the spacing).")
+    radius_scale: float = Field(1.0, gt=0, description="Multiplier on the particle radius (0.6 x the spacing: mpmfx.surface.PARTICLE_RADIUS_PER_SPACING).")
     voxel_size: float | None = Field(None, gt=0, description="Level-set voxel (m); default half the particle spacing.")
     smooth_iters: int = Field(2, ge=0, le=50, description="Level-set smoothing passes.")
     dilate: float = Field(0.0, description="Offset (m): + dilates, - erodes.")
