@@ -85,6 +85,7 @@ def simulate(engine, materials, config, x, spacing, *, dt, t_end, observe_times=
     run.wall_s = time.perf_counter() - t0
     run.final = np.asarray(out["x"], float)
     run.volume = np.asarray(out["volume"], float)
+    run.extra["max_speed"] = float(np.linalg.norm(np.asarray(out["v"], float), axis=1).max())
     return run
 
 
@@ -145,17 +146,18 @@ def dam_break(*, grid_n=32, width=0.2, t_star=(1.0, 1.5, 2.0, 2.5, 3.0), engine=
     return run
 
 
-def _quasi2d_block(dx, length, height, ppa, ppz=None):
-    """Particles filling [3dx, 3dx+length] x [3dx, 3dx+height] x (the channel depth between
-    the z wall bands), ppa per cell in x, y and ppz (default ppa) in z. Returns (x, spacing,
-    depth); volume per particle = spacing^3 with the z spacing folded into the depth."""
-    lo = 3 * dx
+def _quasi2d_block(dx, length, height, ppa, ppz=None, bc=3):
+    """Particles filling [b, b+length] x [b, b+height] x (the channel depth between the z
+    wall bands), b = bc dx the wall band's edge, ppa per cell in x, y and ppz (default ppa)
+    in z. Returns (x, spacing, depth); volume per particle = spacing^3 with the z spacing
+    folded into the depth."""
+    lo = bc * dx
     n = int(round(1.0 / dx))
-    depth = (n - 6) * dx
+    depth = (n - 2 * bc) * dx
     ppz = ppz or ppa
     sp = dx / ppa
     xy = lattice([lo, lo, 0.5], [lo + length, lo + height, 0.5 + sp], sp)[:, :2]
-    zs = lo + (np.arange((n - 6) * ppz) + 0.5) * dx / ppz
+    zs = lo + (np.arange((n - 2 * bc) * ppz) + 0.5) * dx / ppz
     x = np.concatenate([np.column_stack([xy, np.full(len(xy), z)]) for z in zs]).astype(np.float32)
     # rest volume per particle: (dx/ppa)^2 (dx/ppz); encode as spacing^3 with the same total
     spacing = (sp * sp * dx / ppz) ** (1.0 / 3.0)
@@ -186,11 +188,12 @@ GRANULAR_LAWS = {
 
 def column_collapse(*, a=1.0, grid_n=32, engine="warp", friction_angle=38.0, fit=None, ppa=2, ppz=None,
                     floor="sticky", wall_friction=0.0, t_scale=5.0, cfl=0.4, axisymmetric=False,
-                    length=None, device=None, material=None) -> Run:
+                    length=None, device=None, material=None, config=None) -> Run:
     """Granular column of aspect ratio a = H0 / L0 released against the back wall (quasi-2D,
     Lube et al. 2005) or a quarter cylinder in the corner (axisymmetric, Lube et al. 2004;
     the x and z walls are frictionless symmetry planes). Runs t_scale * sqrt(H0 / g) after
-    release. L0 is chosen so the published runout fits the domain with margin.
+    release. L0 is chosen so the published runout fits the domain with margin. config: extra
+    SolverConfig fields (e.g. boundary_cells) for diagnostics.
     extra: L0, H0, runout (L_inf - L0) / L0, height H_inf / L0, and the law's values."""
     from mpmfx.mpm import SolverConfig, preset
     over = {"friction_angle": friction_angle}
@@ -198,27 +201,29 @@ def column_collapse(*, a=1.0, grid_n=32, engine="warp", friction_angle=38.0, fit
         over["friction_fit"] = fit
     mat = material or preset("Granular", **over)
     cfg = SolverConfig(grid_n=grid_n, gravity=(0.0, -G, 0.0), walls=channel_walls(floor),
-                       wall_friction=wall_friction, cfl=cfl)
+                       wall_friction=wall_friction, cfl=cfl, **(config or {}))
     dx = cfg.dx
     source = "lube2004" if axisymmetric else "lube2005"
     law_run, law_h = runout_law(a, source)
-    usable = 1.0 - 7 * dx
+    usable = 1.0 - (2 * cfg.boundary_cells + 1) * dx
     L0 = length or min(usable / (1.6 * (1.0 + law_run)), 0.9 * usable / a)
     H0 = a * L0
-    x0 = cfg.boundary_cells * dx
+    x0 = cfg.boundary_cells * dx  # the channel's back wall and floor
     if axisymmetric:
         sp = dx / ppa
         x = lattice([x0, x0, x0], [x0 + L0, x0 + H0, x0 + L0], sp,
                     inside=lambda p: np.hypot(p[:, 0] - x0, p[:, 2] - x0) <= L0)
         spacing, depth = sp, None
     else:
-        x, spacing, depth = _quasi2d_block(dx, L0, H0, ppa, ppz)
+        x, spacing, depth = _quasi2d_block(dx, L0, H0, ppa, ppz, cfg.boundary_cells)
     vmax = math.sqrt(2 * G * H0)
     dt = cfg.cfl * dx / (mat.wave_speed() + vmax)
     run = simulate(engine, [mat], cfg, x, spacing, dt=dt, t_end=t_scale * math.sqrt(H0 / G), device=device)
     kw = {"radial": True, "origin": (x0, x0)} if axisymmetric else {"origin": (x0,)}
     tip, height = tip_and_height(run.final, run.volume, dx, depth, **kw)
-    run.extra = {"a": a, "L0": L0, "H0": H0, "dt": dt, "cells_across": L0 / dx,
+    if axisymmetric:  # the annuli near the axis hold too few particles to give a thickness
+        height = float(np.quantile(run.final[:, 1] - x0, 0.999)) + 0.5 * spacing
+    run.extra = {**run.extra, "a": a, "L0": L0, "H0": H0, "dt": dt, "cells_across": L0 / dx,
                  "runout": (tip - L0) / L0, "runout_q": (front_quantile(run.final, origin=x0) - L0) / L0, "height": height / L0, "law_runout": law_run, "law_height": law_h,
                  "source": source, "friction_angle": mat.friction_angle,
                  "fit": getattr(mat, "friction_fit", "compression")}

@@ -41,10 +41,10 @@ class LabSweep:
     ppz: int = 1
 
 
-QUICK = LabSweep()
+QUICK = LabSweep(axi_grids=(16,))
 FULL = LabSweep(dam_grids=(32, 64, 128), dam_width=0.2, dam_t_star=(0.8, 1.2, 1.6, 2.0, 2.4, 2.8),
                 sand_grids=(32, 64, 128), aspects=(0.5, 1.0, 2.0, 4.0, 8.0),
-                axi_grids=(32, 64, 96), axi_aspects=(0.5, 1.0, 2.0, 4.0))
+                axi_grids=(32, 64, 128), axi_aspects=(0.5, 1.0, 2.0, 4.0))
 
 
 def read_csv(name: str) -> list[dict]:
@@ -92,6 +92,8 @@ def water_rows(sweep: LabSweep, device) -> tuple[list[dict], list]:
             r = ex.dam_break(grid_n=n, width=sweep.dam_width, t_star=sweep.dam_t_star, ppz=sweep.ppz,
                              device=device, **kw)
             runs.append((walls, r))
+            print(f"  dam_break {walls} grid {n}: Z {r.extra['Z'][-1]:.3f} at T {r.extra['T'][-1]:.2f}, "
+                  f"{r.particles} particles, {r.wall_s:.1f} s", flush=True)
             for name, ref in refs.items():
                 rows.append({"case": f"dam_break {walls}", "reference": name, "grid_n": n,
                              "cells_across": r.extra["cells_across"], "error": front_error(r.extra["T"], r.extra["Z"], ref),
@@ -110,6 +112,9 @@ def sand_rows(sweep: LabSweep, device) -> tuple[list[dict], list]:
                                    axisymmetric=axi, device=device)
             e = r.extra
             runs.append(r)
+            print(f"  collapse {'axi' if axi else '2d'} {fit} a={a:g} grid {n}: runout {e['runout']:.3f} "
+                  f"(law {e['law_runout']:.3f}) height {e['height']:.3f} (law {e['law_height']:.3f}), "
+                  f"{e['cells_across']:.1f} cells, {r.particles} particles, {r.wall_s:.1f} s", flush=True)
             geom = "axisymmetric" if axi else "quasi2d"
             base = {"case": f"collapse {geom} {fit}", "reference": e["source"], "grid_n": n, "a": a,
                     "cells_across": e["cells_across"], "friction_angle": sweep.friction_angle,
@@ -146,13 +151,17 @@ def trend(rows: list[dict]) -> list[dict]:
 
 
 def run_lab(sweep: LabSweep, device=None) -> tuple[list[dict], dict]:
-    """All experiment rows and the runs (for the plot)."""
+    """All experiment rows and the plotted series (JSON-able: experiments_series.json)."""
     w_rows, w_runs = water_rows(sweep, device)
     s_rows, s_runs = sand_rows(sweep, device)
-    return w_rows + s_rows + snow_rows(device), {"water": w_runs, "sand": s_runs}
+    series = {"water": [{"label": f"{walls} grid {r.grid_n}", "T": list(r.extra["T"]), "Z": list(r.extra["Z"])}
+                        for walls, r in w_runs],
+              "sand": [{"geom": "axi" if r.extra["source"] == "lube2004" else "2d", "fit": r.extra["fit"],
+                        "grid_n": r.grid_n, "a": r.extra["a"], "runout": r.extra["runout"]} for r in s_runs]}
+    return w_rows + s_rows + snow_rows(device), series
 
 
-def lab_plot(runs: dict, out, *, name: str = "experiments") -> list[Path]:
+def lab_plot(series: dict, out, *, name: str = "experiments") -> list[Path]:
     """Two PNGs: surge front Z(T) against the experiments, and runout against a with the laws."""
     from mpmfx.render import import_pyvista
     from mpmfx.bench.plot import COLORS
@@ -164,9 +173,8 @@ def lab_plot(runs: dict, out, *, name: str = "experiments") -> list[Path]:
     chart.title = "dam break: surge front (points: experiments)"
     for i, (key, (T, Z)) in enumerate(water_references().items()):
         chart.scatter(T, Z, color=COLORS[i], size=9, style="o", label=key)
-    for j, (walls, r) in enumerate(runs["water"]):
-        chart.line(np.array(r.extra["T"]), np.array(r.extra["Z"]), color=COLORS[(3 + j) % len(COLORS)], width=2,
-                   label=f"{walls} grid {r.grid_n}")
+    for j, w in enumerate(series["water"]):
+        chart.line(np.array(w["T"]), np.array(w["Z"]), color=COLORS[(3 + j) % len(COLORS)], width=2, label=w["label"])
     paths.append(_shot(pv, chart, out / f"{name}_water.png"))
     chart = pv.Chart2D(x_label="a = H0 / L0", y_label="(L - L0) / L0")
     chart.title = "granular collapse runout (lines: published laws)"
@@ -174,11 +182,10 @@ def lab_plot(runs: dict, out, *, name: str = "experiments") -> list[Path]:
     for i, src in enumerate(("lube2005", "lajeunesse2005", "lube2004")):
         chart.line(a, np.array([ex.runout_law(v, src)[0] for v in a]), color=COLORS[i], width=2, label=src)
     groups = {}
-    for r in runs["sand"]:
-        geom = "axi" if r.extra["source"] == "lube2004" else "2d"
-        groups.setdefault((geom, r.extra["fit"], r.grid_n), []).append(r)
+    for r in series["sand"]:
+        groups.setdefault((r["geom"], r["fit"], r["grid_n"]), []).append(r)
     for k, ((geom, fit, n), rs) in enumerate(sorted(groups.items())):
-        chart.scatter(np.array([r.extra["a"] for r in rs]), np.array([r.extra["runout"] for r in rs]),
+        chart.scatter(np.array([r["a"] for r in rs]), np.array([r["runout"] for r in rs]),
                       color=COLORS[(3 + k) % len(COLORS)], size=8, style="s" if fit == "plane_strain" else "d",
                       label=f"{geom} {fit} grid {n}")
     paths.append(_shot(pv, chart, out / f"{name}_sand.png"))
