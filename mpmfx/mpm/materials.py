@@ -106,6 +106,10 @@ class Material:
                 f"Material.mode: {self.mode!r} is not a mode; use one of "
                 f"{', '.join(m.name for m in Mode)}"
             ) from None
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.type in ("float", "bool") and not isinstance(value, (int, float)):
+                raise ValueError(f"Material.{f.name} = {value!r}: give a {f.type}")
         checks = [
             ("youngs_modulus", self.youngs_modulus > 0, "must be > 0"),
             ("poisson_ratio", 0.0 <= self.poisson_ratio < 0.5, "must be in [0, 0.5)"),
