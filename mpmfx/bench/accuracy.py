@@ -135,13 +135,8 @@ def experiments(*, quick: bool, device, out) -> list[dict]:
     return rows
 
 
-def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench",
-         only: str | None = None) -> int:
-    """only: "experiments" runs the experiments section alone (None: both sections)."""
+def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench") -> int:
     from mpmfx.bench.report import print_table, write_rows
-    if only == "experiments":
-        rows = experiments(quick=quick, device=device, out=out)
-        return 0 if all(np.isfinite(r["error"]) for r in rows) else 1
     sweep = QUICK if quick else FULL
     rows, orders = run_sweep(sweep, device)
     print_table(rows, COLUMNS)
