@@ -51,8 +51,9 @@ class SceneObject(_Section):
     prim_path: str | None = Field(None, description="USD files only: the prim whose meshes are taken.")
     material: str = Field("Elastic", description="Preset name from the guide's section 8 (Soft, Mushy, Goopy, Wet, "
                           "Slush, Elastic, Granular, CohesiveGranular, Water, Tracer).")
-    overrides: dict[str, float | bool] = Field(default_factory=dict,
-                                               description="Material fields to change, e.g. {youngs_modulus = 3000}.")
+    overrides: dict[str, float | bool | str] = Field(
+        default_factory=dict, description="Material fields to change, e.g. {youngs_modulus = 3000} or "
+        "{friction_fit = \"plane_strain\"}.")
     translate: Vec3 = Field((0.0, 0.0, 0.0), description="Translation (m), applied after rotate and scale.")
     rotate: Vec3 = Field((0.0, 0.0, 0.0), description="XYZ Euler rotation (degrees).")
     scale: float = Field(1.0, gt=0, description="Uniform scale of the mesh file's units to metres.")
