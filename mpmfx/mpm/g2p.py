@@ -22,13 +22,9 @@ from .constitutive import (
     snow_return_map,
     uninvert,
 )
+from .slots import Count, Stat
 from .state import SceneFlags
 
-# stats[] (float32) and counts[] (int32) slots, read by the stepper in solver.py
-STAT_MAX_SPEED, STAT_MAX_HARDENING, STAT_WATER_J_MIN, STAT_J_MIN, STAT_J_MAX = range(5)
-# COUNT_INVERTED: particle-substeps whose trial F was inverted and got mirrored (not a rejection)
-COUNT_NONFINITE, COUNT_TOO_FAR, COUNT_LOST, COUNT_GRID_NONFINITE, COUNT_INVERTED, COUNT_PER_MATERIAL = range(6)
-N_STATS = 5
 
 
 @wp.struct
@@ -128,7 +124,7 @@ def keep_in_domain(gp: G2PParams, x: wp.vec3, counts: wp.array(dtype=wp.int32)):
     if inside:
         return x, 1
     if gp.remove != 0:
-        wp.atomic_add(counts, COUNT_LOST, 1)
+        wp.atomic_add(counts, Count.LOST, 1)
         return x, 0
     return wp.vec3(wp.clamp(x[0], gp.lo, gp.hi), wp.clamp(x[1], gp.lo, gp.hi), wp.clamp(x[2], gp.lo, gp.hi)), 1
 
@@ -198,11 +194,11 @@ def make_g2p(flags: SceneFlags):
                     j_now = wp.determinant(F_new)
                     if j_trial <= 0.0:
                         # mirrored back out; the J stats keep the inversion so QA sees it
-                        wp.atomic_add(counts, COUNT_INVERTED, 1)
+                        wp.atomic_add(counts, Count.INVERTED, 1)
                         j_now = j_trial
                     finite = wp.isfinite(F_new) and wp.isfinite(jp_new)
                     if mat.mode == MODE_SNOW:
-                        wp.atomic_max(stats, STAT_MAX_HARDENING, hardening_factor(mat, jp_new))
+                        wp.atomic_max(stats, Stat.MAX_HARDENING, hardening_factor(mat, jp_new))
             if wp.static(has_water):
                 if mat.mode == MODE_WATER:
                     # water keeps only its volume ratio: J^{n+1} = det(I + dt C) J^n
@@ -215,21 +211,21 @@ def make_g2p(flags: SceneFlags):
                         # or it lands fluffy and stress-free until squeezed back to J = 1
                         J_new = wp.min(J_new, 1.0)
                     j_now = J_new
-                    wp.atomic_min(stats, STAT_WATER_J_MIN, J_new)
+                    wp.atomic_min(stats, Stat.WATER_J_MIN, J_new)
             x_new = x_new + gp.dt * v_new
             speed = wp.length(v_new)
             finite = finite and wp.isfinite(x_new) and wp.isfinite(C_new) and wp.isfinite(j_now)
             if not finite:
-                wp.atomic_add(counts, COUNT_NONFINITE, 1)
-                wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
+                wp.atomic_add(counts, Count.NONFINITE, 1)
+                wp.atomic_add(counts, Count.PER_MATERIAL + mid, 1)
                 return  # the substep is rejected; nothing of it is committed
             if gp.dt * speed > 1.0 / gp.inv_dx:
                 # more than a cell in one substep: the stencil never saw where it lands
-                wp.atomic_add(counts, COUNT_TOO_FAR, 1)
-                wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
-            wp.atomic_max(stats, STAT_MAX_SPEED, speed)
-            wp.atomic_min(stats, STAT_J_MIN, j_now)
-            wp.atomic_max(stats, STAT_J_MAX, j_now)
+                wp.atomic_add(counts, Count.TOO_FAR, 1)
+                wp.atomic_add(counts, Count.PER_MATERIAL + mid, 1)
+            wp.atomic_max(stats, Stat.MAX_SPEED, speed)
+            wp.atomic_min(stats, Stat.J_MIN, j_now)
+            wp.atomic_max(stats, Stat.J_MAX, j_now)
             x_new, alive_new = keep_in_domain(gp, x_new, counts)
         # each output written once (G2P is memory bound)
         x_out[p] = x_new

@@ -16,14 +16,8 @@ from __future__ import annotations
 import warp as wp
 
 from .colliders import ColliderParams, apply_collider
+from .slots import Count, WallCode
 
-WALL_STICKY = wp.constant(0)
-WALL_SLIP = wp.constant(1)
-WALL_SEPARATE = wp.constant(2)
-WALL_CODES = {"sticky": 0, "slip": 1, "separate": 2}
-
-# counts[] slots shared with G2P (see solver.py)
-COUNT_GRID_NONFINITE = wp.constant(3)
 
 
 @wp.struct
@@ -60,10 +54,10 @@ class GridParams:
 def apply_wall(v: wp.vec3, n_out: wp.vec3, wall: int, mu: float) -> wp.vec3:
     """Wall boundary on one face. n_out: outward face normal. Coulomb friction removes
     mu * |vn| of tangential speed, where vn is the normal speed stopped by the wall."""
-    if wall == WALL_STICKY:
+    if wall == WallCode.STICKY:
         return wp.vec3(0.0)
     vn = wp.dot(v, n_out)  # > 0: moving into the wall
-    if wall == WALL_SEPARATE and vn <= 0.0:
+    if wall == WallCode.SEPARATE and vn <= 0.0:
         return v
     vt = v - vn * n_out
     if vn > 0.0:
@@ -171,6 +165,6 @@ def grid_update(
                 v = apply_collider(colliders[c], sdf, xn, v, 0.5 * gp.dx)
             v = apply_walls(v, wp.vec3i(i, j, k), gp)
             if not wp.isfinite(v):
-                wp.atomic_add(counts, COUNT_GRID_NONFINITE, 1)
+                wp.atomic_add(counts, Count.GRID_NONFINITE, 1)
                 v = wp.vec3(0.0)  # the substep is rejected anyway; keep G2P finite
         grid_v[fi, j, k] = v

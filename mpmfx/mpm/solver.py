@@ -20,16 +20,16 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
-from . import g2p as g2p_mod
 from .clear_grid import clear_grid
 from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
 from .constitutive import MaterialParams, pack_material
 from .energy import make_energy
 from .g2p import G2PParams, make_g2p
-from .grid_update import WALL_CODES, GridParams, grid_update
+from .grid_update import GridParams, grid_update
 from .materials import Material, Mode
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
+from .slots import REJECTING, Count, Stat
 from .state import ParticleBuffers, SceneFlags, State, StepperClock
 
 __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
@@ -124,11 +124,10 @@ class Solver:
             self._materials_dev = wp.array([pack_material(m) for m in self.materials], dtype=MaterialParams)
             self._sdf = wp.array(concat_sdfs(self.colliders), dtype=float)
             self._colliders_dev = wp.empty(max(1, len(self.colliders)), dtype=ColliderParams)
-            self._stats = wp.zeros(g2p_mod.N_STATS, dtype=float)
+            self._stats = wp.zeros(len(Stat), dtype=float)
             self._energy_sum = wp.zeros(1, dtype=wp.float64)
-            self._counts = wp.zeros(g2p_mod.COUNT_PER_MATERIAL + len(self.materials), dtype=wp.int32)
-            init = np.array([0.0, 0.0, 1e30, 1e30, -1e30], dtype=np.float32)
-            self._stats_init = wp.array(init, dtype=float)
+            self._counts = wp.zeros(Count.size(len(self.materials)), dtype=wp.int32)
+            self._stats_init = wp.array(np.array(Stat.initial(), np.float32), dtype=float)
         self._q_mass = 1.0
         self._q_mom = 1.0
         self._last_bad = None  # counts of the last rejected substep, for error messages
@@ -287,7 +286,7 @@ class Solver:
         gp.dt, gp.dx = float(dt), cfg.dx
         gp.gravity = wp.vec3(*cfg.gravity)
         gp.damping_factor = max(0.0, 1.0 - cfg.damping * dt)  # v *= 1 - damping*dt (trap 5)
-        codes = [WALL_CODES[w.value] for w in cfg.walls]
+        codes = [w.code for w in cfg.walls]
         gp.walls_lo = wp.vec3i(codes[0], codes[2], codes[4])
         gp.walls_hi = wp.vec3i(codes[1], codes[3], codes[5])
         gp.wall_friction = cfg.wall_friction
@@ -341,7 +340,7 @@ class Solver:
             self._substep(state, dt, ts0, ts1)
             stats = self._stats.numpy()
             counts = self._counts.numpy()
-            if counts[: g2p_mod.COUNT_LOST].sum() + counts[g2p_mod.COUNT_GRID_NONFINITE] > 0:
+            if counts[list(REJECTING)].sum() > 0:
                 rejected += 1
                 state.clock.dt_scale *= 0.5  # redo at half dt (Ziran)
                 self._last_bad = counts  # for the error message if dt runs out
@@ -353,30 +352,30 @@ class Solver:
             clock.substeps += 1
             clock.last_dt = dt
             clock.dt_scale = min(1.0, clock.dt_scale * 1.25)
-            clock.max_speed = float(stats[g2p_mod.STAT_MAX_SPEED])
+            clock.max_speed = float(stats[Stat.MAX_SPEED])
             if self.flags.snow:
-                clock.max_hardening = max(1.0, float(stats[g2p_mod.STAT_MAX_HARDENING]))
+                clock.max_hardening = max(1.0, float(stats[Stat.MAX_HARDENING]))
             if self.flags.water:
-                clock.water_j_min = min(1.0, float(stats[g2p_mod.STAT_WATER_J_MIN]))
+                clock.water_j_min = min(1.0, float(stats[Stat.WATER_J_MIN]))
             dts.append(dt)
             c = self.wave_speed(clock) + clock.max_speed
             cfl_used = max(cfl_used, dt * c / cfg.dx)
             vmax = max(vmax, clock.max_speed)
-            if stats[g2p_mod.STAT_J_MIN] <= stats[g2p_mod.STAT_J_MAX]:
-                jmin = min(jmin, float(stats[g2p_mod.STAT_J_MIN]))
-                jmax = max(jmax, float(stats[g2p_mod.STAT_J_MAX]))
-            lost += int(counts[g2p_mod.COUNT_LOST])
-            inverted += int(counts[g2p_mod.COUNT_INVERTED])
+            if stats[Stat.J_MIN] <= stats[Stat.J_MAX]:
+                jmin = min(jmin, float(stats[Stat.J_MIN]))
+                jmax = max(jmax, float(stats[Stat.J_MAX]))
+            lost += int(counts[Count.LOST])
+            inverted += int(counts[Count.INVERTED])
         report = self._report(state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0)
         report.inverted = inverted
         return report
 
     def _raise_too_small(self, state: State, t: float, dt: float) -> None:
         bad = getattr(self, "_last_bad", None)
-        per_mat = [] if bad is None else bad[g2p_mod.COUNT_PER_MATERIAL:]
+        per_mat = [] if bad is None else bad[Count.PER_MATERIAL:]
         names = [self._describe_material(i) for i, k in enumerate(per_mat) if k > 0] or [
             self._describe_material(i) for i in range(len(self.materials))]
-        n_bad = 0 if bad is None else int(bad[g2p_mod.COUNT_NONFINITE] + bad[g2p_mod.COUNT_TOO_FAR])
+        n_bad = 0 if bad is None else int(bad[Count.NONFINITE] + bad[Count.TOO_FAR])
         what = (f"the last rejected substep had {n_bad} particle(s) non-finite or moving more than "
                 f"one cell" if bad is not None else "no substep was rejected; the CFL step is this small")
         raise SimulationError(
