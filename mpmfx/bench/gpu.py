@@ -28,7 +28,7 @@ MATERIALS = ("Water", "Mushy", "Granular", "Elastic")
 MIXED = MATERIALS  # the mixed scene's four columns
 SUBSTEPS = 50  # CFL substeps per timed advance() interval
 REGION_LO, REGION_SIZE = (0.2, 0.1, 0.2), (0.6, 0.4, 0.6)
-COLS = ["impl", "scene", "grid_n", "particles", "det", "substeps", "G_per_s", "ms_substep", "ms_clear",
+COLS = ["impl", "path", "scene", "grid_n", "particles", "det", "substeps", "G_per_s", "ms_substep", "ms_clear",
         "ms_p2g", "ms_grid", "ms_g2p", "ms_host", "B_per_particle", "grid_MB", "GBs", "copy_GBs",
         "x_taichi", "device"]
 
@@ -128,13 +128,17 @@ def _phase_split(solver, state, t: float, span: float) -> tuple[dict, float]:
     return {f"ms_{p}": v / k for p, v in ms.items()}, t + span
 
 
-def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: float, *, substeps: int = SUBSTEPS) -> dict:
+def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: float, *, substeps: int = SUBSTEPS,
+             path: str = "device") -> dict:
+    """One scene through advance(). path: "device" (the default stepper), "device-nograph"
+    (same, CUDA graphs off) or "host" (the reference loop: statistics read every substep)."""
     import warp as wp
 
     from mpmfx.mpm import Solver, SolverConfig
     mats, parts, colliders = scene(name, grid_n)
     cfg = SolverConfig(grid_n=grid_n, deterministic=deterministic)
-    solver = Solver(mats, cfg, colliders=colliders, device=device)
+    solver = Solver(mats, cfg, colliders=colliders, device=device, stepper="host" if path == "host" else "device")
+    solver._device_advance.graphs = path != "device-nograph"
     state = solver.init_state(parts)
     c = max(m.wave_speed() for m in mats)
     span = substeps * cfg.cfl * cfg.dx / c  # ~substeps CFL substeps at rest
@@ -148,7 +152,7 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     part, grid, moved = traffic(solver, state)
     k = report.substeps + report.rejected_substeps
     ms = 1e3 * wall / k
-    row = {"impl": "mpmfx", "scene": name, "grid_n": grid_n, "particles": state.n, "det": int(deterministic),
+    row = {"impl": "mpmfx", "path": path if not colliders else "host (colliders)", "scene": name, "grid_n": grid_n, "particles": state.n, "det": int(deterministic),
            "substeps": report.substeps, "rejected": report.rejected_substeps, "dt_mean": span / max(1, report.substeps),
            "G_per_s": state.n * report.substeps / wall / 1e9, "ms_substep": ms, **phases,
            "B_per_particle": part / state.n, "grid_MB": grid / 2**20, "moved_MB": moved / 2**20,
@@ -157,6 +161,17 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     if phases:
         row["ms_host"] = ms - sum(phases.values())
     return row
+
+
+def safe_case(*args, **kw) -> dict:
+    """run_case, or a row naming the error (one failing case must not lose the whole run)."""
+    try:
+        return run_case(*args, **kw)
+    except Exception as err:  # noqa: BLE001 (reported in the row and the table)
+        import traceback
+        traceback.print_exc()
+        return {"impl": "mpmfx", "path": kw.get("path", "device"), "scene": args[0], "grid_n": args[1],
+                "det": int(args[2]), "error": repr(err)[:200], "finite": False}
 
 
 def _device_name(device) -> str:
@@ -198,16 +213,23 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
     for g in sizes:
         for name in MATERIALS:
             for det in (False, True):
-                rows.append(run_case(name, g, det, device, copy_gbs, substeps=k))
+                rows.append(safe_case(name, g, det, device, copy_gbs, substeps=k))
                 print_table(rows[-1:], COLS)
     for det in (False, True):
-        rows.append(run_case("Mixed", mixed, det, device, copy_gbs, substeps=k))
+        rows.append(safe_case("Mixed", mixed, det, device, copy_gbs, substeps=k))
+    # the levers, back to back in this run: the reference host loop, and no CUDA graphs
+    for g in sizes:
+        for name, path in (("Mushy", "host"), ("Water", "host"), ("Mushy", "device-nograph")):
+            if name in MATERIALS:
+                rows.append(safe_case(name, g, False, device, copy_gbs, substeps=k, path=path))
+                print_table(rows[-1:], COLS)
     if not quick and os.environ.get("MPMFX_BENCH_PEER", "1") != "0":
         cases = [[r["grid_n"], "water" if r["scene"] == "Water" else "snow", r["dt_mean"], r["substeps"]]
-                 for r in rows if r["scene"] in ("Water", "Mushy") and not r["det"]]
+                 for r in rows if r["scene"] in ("Water", "Mushy") and not r["det"] and r["path"] == "device"]
         for t in taichi_rows(cases):
             t.update(scene="Water" if t["material"] == "water" else "Mushy", device=rows[0]["device"])
             ours = [r for r in rows if r["scene"] == t["scene"] and r["grid_n"] == t["grid_n"] and r["impl"] == "mpmfx"]
+            t["path"] = "mpm3d step loop"
             for r in ours:
                 if t.get("G_per_s"):
                     r["x_taichi"] = r["G_per_s"] / t["G_per_s"]
@@ -218,7 +240,7 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
         print("plot:", throughput_plot(rows, out))
     except ImportError as err:
         print(f"plot skipped ({err}); draw it from {out}/gpu.csv with `python -m mpmfx.bench.gpu_plot {out}`")
-    print(f"\nmpmfx bench gpu: {rows[0]['device']}; G_per_s = 1e9 particle-substeps/s through Solver.advance()")
+    print(f"\nmpmfx bench gpu: {rows[0].get('device')}; G_per_s = 1e9 particle-substeps/s through Solver.advance()")
     print_table(rows, COLS)
     return 0 if all(r.get("finite", True) for r in rows) else 1
 

@@ -24,6 +24,7 @@ from .constitutive import (
 )
 from .slots import Count, Stat
 from .state import SceneFlags
+from .stepper import SubstepDev
 
 
 
@@ -145,13 +146,13 @@ def recover_volume(gp: G2PParams, mat: MaterialParams, grid_m: wp.array3d(dtype=
 
 
 @functools.lru_cache(maxsize=None)
-def make_g2p(flags: SceneFlags):
-    """G2P kernel specialised for the scene's materials (see p2g.make_p2g)."""
+def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
+    """G2P kernel specialised for the scene's materials (see p2g.make_p2g, also for device_clock)."""
     has_solid = flags.solid
     has_water = flags.water
     recovery = flags.volume_recovery
 
-    @wp.kernel(enable_backward=False, module=flags.key)
+    @wp.kernel(enable_backward=False, module=flags.key + ("_dev" if device_clock else ""))
     def g2p(
         gp: G2PParams,
         grid_v: wp.array3d(dtype=wp.vec3),
@@ -168,8 +169,15 @@ def make_g2p(flags: SceneFlags):
         alive_out: wp.array(dtype=wp.int32),
         stats: wp.array(dtype=float),
         counts: wp.array(dtype=wp.int32),
+        sub: wp.array(dtype=SubstepDev),
     ):
         p = wp.tid()
+        if wp.static(device_clock):
+            s = sub[0]
+            if s.active == 0:
+                return
+            gp.dt = s.dt
+            gp.affine_keep = s.affine_keep
         F_new = wp.mat33(0.0)
         if wp.static(has_solid):
             F_new = F[p]

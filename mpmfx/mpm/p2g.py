@@ -40,6 +40,7 @@ from .constitutive import (
     tait_pressure,
 )
 from .state import SceneFlags
+from .stepper import SubstepDev
 
 FIXED_POINT_BITS = 32  # see module docstring
 
@@ -64,14 +65,16 @@ def to_fixed(value: float, quantum_inv: float) -> wp.int64:
 
 
 @functools.lru_cache(maxsize=None)
-def make_p2g(flags: SceneFlags):
+def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
     """P2G kernel specialised for the scene's materials (wp.static drops unused branches,
-    so a water-only scene compiles no SVD). One kernel per scene flags, shared by solvers."""
+    so a water-only scene compiles no SVD). One kernel per scene flags, shared by solvers.
+    device_clock: read dt from `sub` (the device stepper, stepper.py) and do nothing when
+    the substep is inactive; otherwise `sub` is unused (the reference path)."""
     has_solid = flags.solid
     has_water = flags.water
     multi = flags.multi_field
 
-    @wp.kernel(enable_backward=False, module=flags.key)
+    @wp.kernel(enable_backward=False, module=flags.key + ("_dev" if device_clock else ""))
     def p2g(
         pp: P2GParams,
         x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
@@ -86,8 +89,13 @@ def make_p2g(flags: SceneFlags):
         grid_mv: wp.array3d(dtype=wp.vec3),
         grid_normal: wp.array3d(dtype=wp.vec3),
         grid_fixed: wp.array4d(dtype=wp.int64),
+        sub: wp.array(dtype=SubstepDev),
     ):
         p = wp.tid()
+        if wp.static(device_clock):
+            if sub[0].active == 0:
+                return
+            pp.dt = sub[0].dt
         m = mass[p]
         if alive[p] == 0 or m == 0.0:
             return  # tracers and removed particles add nothing

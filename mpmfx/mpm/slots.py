@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import enum
 
-__all__ = ["Stat", "Count", "REJECTING", "WallCode"]
+__all__ = ["Stat", "Count", "REJECTING", "WallCode", "Clock", "Status"]
 
 
 class Stat(enum.IntEnum):
@@ -54,3 +54,42 @@ class WallCode(enum.IntEnum):
     STICKY = 0
     SLIP = 1
     SEPARATE = 2
+
+
+class Clock(enum.IntEnum):
+    """float64 slots of the device stepper's clock (`stepper.py`): the host's `advance` loop
+    variables, kept on the device so a chunk of substeps runs without a host round trip."""
+
+    DONE = 0  # simulated seconds done in this advance
+    TOTAL = 1  # simulated seconds this advance must cover
+    DT_SCALE = 2  # StepperClock fields, same meaning
+    MAX_SPEED = 3
+    MAX_HARDENING = 4
+    WATER_J_MIN = 5
+    LAST_DT = 6
+    SUBSTEPS = 7
+    N_SUB = 8  # accepted substeps in this advance
+    N_REJ = 9  # rejected substeps in this advance
+    DT_MIN = 10  # report: smallest / largest accepted dt
+    DT_MAX = 11
+    VMAX = 12
+    CFL_USED = 13
+    J_MIN = 14
+    J_MAX = 15
+    LOST = 16
+    INVERTED = 17
+    STATUS = 18  # a Status
+    DT = 19  # dt of the substep in flight
+    LAST = 20  # 1 when the substep in flight lands on the end of the advance
+    DT_CFL = 21  # the CFL dt of the last substep begun (for error messages)
+    HAS_BAD = 22  # 1 once a substep of this advance was rejected (last_bad holds its counts)
+
+
+class Status(enum.IntEnum):
+    """Clock.STATUS: why the device stepper stopped (RUNNING: it did not)."""
+
+    RUNNING = 0
+    FINISHED = 1  # landed on the end of the advance
+    DT_TOO_SMALL = 2  # the CFL dt fell below dt_min: the host raises
+    TOO_MANY = 3  # max_substeps_per_frame reached: the host raises
+    REJECTED = 4  # a substep was rejected: the chunk stops, the host starts the next one

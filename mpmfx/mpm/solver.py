@@ -26,9 +26,11 @@ from .config import OutOfDomain, SolverConfig
 from .constitutive import MaterialParams, pack_material
 from .energy import make_energy
 from .g2p import G2PParams, make_g2p
-from .grid_update import GridParams, grid_update
+from .grid_update import GridParams, make_grid_update
 from .materials import Material, Mode
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
+from .chunked import DeviceAdvance
+from .stepper import SubstepDev, report_sums
 from .slots import REJECTING, Count, Stat
 from .state import ParticleBuffers, SceneFlags, State, StepperClock
 
@@ -99,10 +101,13 @@ class Solver:
 
     materials: the material table; particles index into it. config: solver knobs.
     colliders: kinematic Colliders. device: Warp device ("cpu", "cuda:0"; None = default).
+    stepper: "device" runs `advance` in chunks of substeps decided on the device (stepper.py;
+    scenes with colliders use the host loop), "host" the reference loop that reads the
+    statistics back after every substep; both give the same substeps and results.
     """
 
     def __init__(self, materials: Sequence[Material], config: SolverConfig, *,
-                 colliders: Sequence[Collider] = (), device: str | None = None):
+                 colliders: Sequence[Collider] = (), device: str | None = None, stepper: str = "device"):
         self.materials = tuple(materials)
         if not self.materials:
             raise ValueError("Solver: materials is empty; give at least one Material")
@@ -115,8 +120,12 @@ class Solver:
         self.flags = SceneFlags.of(self.materials, multi_field=config.multi_field)
         # specialised kernels for this scene: all three land in one Warp module per flags,
         # built before the first launch so the module compiles once
-        self._p2g = make_p2g(self.flags)
-        self._g2p = make_g2p(self.flags)
+        # [device_clock]: the reference kernels, and the device stepper's (stepper.py)
+        self._kernels = {dc: (make_p2g(self.flags, device_clock=dc), make_g2p(self.flags, device_clock=dc),
+                              make_grid_update(device_clock=dc)) for dc in (False, True)}
+        if stepper not in ("device", "host"):
+            raise ValueError(f"Solver: stepper={stepper!r}; use 'device' (default) or 'host' (the reference loop)")
+        self.stepper = stepper
         self._energy = make_energy(self.flags)
         self._n_fields = 0
         self._allocate_grid(1)
@@ -128,9 +137,11 @@ class Solver:
             self._energy_sum = wp.zeros(1, dtype=wp.float64)
             self._counts = wp.zeros(Count.size(len(self.materials)), dtype=wp.int32)
             self._stats_init = wp.array(np.array(Stat.initial(), np.float32), dtype=float)
+            self._sub = wp.zeros(1, dtype=SubstepDev)
         self._q_mass = 1.0
         self._q_mom = 1.0
         self._last_bad = None  # counts of the last rejected substep, for error messages
+        self._device_advance = DeviceAdvance(self)
 
     # ------------------------------------------------------------------ setup
     def _allocate_grid(self, n_fields: int) -> None:
@@ -245,29 +256,36 @@ class Solver:
 
     def _substep(self, state: State, dt: float, t0: float, t1: float) -> None:
         """clear grid -> P2G -> grid update -> G2P, writing state.nxt (state.cur intact)."""
-        cfg, cur, nxt = self.config, state.cur, state.nxt
-        inv_dx = float(cfg.grid_n)
         wp.copy(self._stats, self._stats_init)
         self._counts.zero_()
+        if self.colliders:
+            self._colliders_dev.assign(pack_colliders(self.colliders, t0, t1, dt))
+        self._phases(state, state.cur, state.nxt, dt, device_clock=False)
+
+    def _phases(self, state: State, cur: ParticleBuffers, nxt: ParticleBuffers, dt: float, *,
+                device_clock: bool) -> None:
+        """Launch the four phases reading `cur`, writing `nxt`. device_clock: the kernels take
+        dt (and the dt-dependent factors) from self._sub instead of `dt` (stepper.py)."""
+        cfg = self.config
+        inv_dx = float(cfg.grid_n)
+        nn = cfg.grid_n + 1
+        p2g, g2p, grid = self._kernels[device_clock]
         # 1 · clear
         clear_grid(self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
                    deterministic=cfg.deterministic, multi_field=self.flags.multi_field)
         # 2 · P2G
         pp = P2GParams()
-        pp.inv_dx, pp.dt, pp.nodes = inv_dx, float(dt), cfg.grid_n + 1
+        pp.inv_dx, pp.dt, pp.nodes = inv_dx, float(dt), nn
         pp.deterministic = int(cfg.deterministic)
         pp.q_mass_inv, pp.q_mom_inv = 1.0 / self._q_mass, 1.0 / self._q_mom
-        wp.launch(self._p2g, dim=state.n, device=self.device, inputs=[
+        wp.launch(p2g, dim=state.n, device=self.device, inputs=[
             pp, cur.x, cur.v, cur.C, cur.F, cur.J, cur.Jp, cur.alive, state.mass, state.volume,
             state.material, state.field_id, self._materials_dev,
-            self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed])
+            self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed, self._sub])
         # 3 · grid update
-        if self.colliders:
-            self._colliders_dev.assign(pack_colliders(self.colliders, t0, t1, dt))
-        nn = cfg.grid_n + 1
-        wp.launch(grid_update, dim=(nn, nn, nn), device=self.device, inputs=[
+        wp.launch(grid, dim=(nn, nn, nn), device=self.device, inputs=[
             self._grid_params(dt, state.n_fields), self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
-            self._colliders_dev, self._sdf, self._grid_v, self._counts])
+            self._colliders_dev, self._sdf, self._grid_v, self._counts, self._sub])
         # 4 · G2P
         gp = G2PParams()
         gp.dt, gp.inv_dx = float(dt), inv_dx
@@ -276,9 +294,9 @@ class Solver:
         gp.remove = int(cfg.out_of_domain == OutOfDomain.REMOVE)
         gp.nodes = nn
         gp.deterministic, gp.q_mass = int(cfg.deterministic), self._q_mass
-        wp.launch(self._g2p, dim=state.n, device=self.device, inputs=[
-            gp, self._grid_v, self._grid_m, self._grid_fixed, self._materials_dev, state.material, state.field_id, *cur.arrays(), *nxt.arrays(),
-            self._stats, self._counts])
+        wp.launch(g2p, dim=state.n, device=self.device, inputs=[
+            gp, self._grid_v, self._grid_m, self._grid_fixed, self._materials_dev, state.material, state.field_id,
+            *cur.arrays(), *nxt.arrays(), self._stats, self._counts, self._sub])
 
     def _grid_params(self, dt: float, n_fields: int) -> GridParams:
         cfg = self.config
@@ -315,9 +333,21 @@ class Solver:
         """Advance from shot time t0 to t1 (s), i.e. (t1 - t0) * time_scale simulated
         seconds, in adaptive substeps landing exactly on t1. Raises SimulationError when
         a substep would need dt < dt_min or the frame needs > max_substeps_per_frame."""
-        cfg = self.config
         if not t1 >= t0:
             raise ValueError(f"Solver.advance: t1 = {t1} must be >= t0 = {t0}")
+        if self.stepper == "device" and not self.colliders:
+            return self._device_advance.run(state, t0, t1)
+        return self._advance_host(state, t0, t1)
+
+    def _too_many(self, state: State, t: float, t1: float, substeps: int, dt_cfl: float) -> SimulationError:
+        return SimulationError(
+            f"t={t:.4f}s: {substeps} substeps did not reach t1={t1:.4f}s "
+            f"(dt ~ {dt_cfl:.3g}s, c_max {self.wave_speed(state.clock):.3g} domain/s). Raise "
+            f"SolverConfig.max_substeps_per_frame, or lower youngs_modulus / bulk_modulus / grid_n")
+
+    def _advance_host(self, state: State, t0: float, t1: float) -> StepReport:
+        """The reference stepper: statistics read back after every substep."""
+        cfg = self.config
         wall0 = time.perf_counter()
         self._last_bad = None
         total = (t1 - t0) * cfg.time_scale
@@ -329,10 +359,7 @@ class Solver:
             if dt_cfl < cfg.dt_min:
                 self._raise_too_small(state, t0 + done / cfg.time_scale, dt_cfl)
             if substeps >= cfg.max_substeps_per_frame:
-                raise SimulationError(
-                    f"t={t0 + done / cfg.time_scale:.4f}s: {substeps} substeps did not reach t1={t1:.4f}s "
-                    f"(dt ~ {dt_cfl:.3g}s, c_max {self.wave_speed(state.clock):.3g} domain/s). Raise "
-                    f"SolverConfig.max_substeps_per_frame, or lower youngs_modulus / bulk_modulus / grid_n")
+                raise self._too_many(state, t0 + done / cfg.time_scale, t1, substeps, dt_cfl)
             last = remaining <= dt_cfl * (1.0 + 1e-6)
             dt = remaining if last else (0.5 * remaining if remaining < 2.0 * dt_cfl else dt_cfl)
             ts0 = t0 + done / cfg.time_scale
@@ -392,15 +419,12 @@ class Solver:
         return f"material {i} ({m.mode.name}, youngs_modulus={m.youngs_modulus:g})"
 
     def _report(self, state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0) -> StepReport:
-        v = state.cur.v.numpy().astype(np.float64)
-        alive = state.cur.alive.numpy() > 0
-        m = state.mass.numpy().astype(np.float64) * alive
+        mass, momentum, kinetic = report_sums(state, self.device)  # on the device: no particle copy
         return StepReport(
             substeps=substeps, rejected_substeps=rejected,
             dt_min=min(dts) if dts else 0.0, dt_max=max(dts) if dts else 0.0,
-            max_speed=vmax, cfl_used=cfl_used, particles_lost=lost, mass=float(m.sum()),
-            momentum=(m[:, None] * v).sum(axis=0),
-            kinetic_energy=float(0.5 * (m * (v * v).sum(axis=1)).sum()),
+            max_speed=vmax, cfl_used=cfl_used, particles_lost=lost, mass=mass,
+            momentum=momentum, kinetic_energy=kinetic,
             elastic_energy=self.elastic_energy(state),
             j_min=jmin if dts else 1.0, j_max=jmax if dts else 1.0,
             wall_time_s=time.perf_counter() - wall0)
