@@ -89,11 +89,13 @@ class DeviceAdvance:
         ck.last_dt, ck.substeps = float(c[Clock.LAST_DT]), int(c[Clock.SUBSTEPS])
 
     def _chunk_length(self, c: np.ndarray, dt_guess: float) -> int:
-        """Substeps to launch next: enough to finish at the last dt, as a power of two <= 32."""
+        """Substeps to launch next: the largest chunk length that the rest of the advance
+        fills at the last dt (so no substep is launched only to do nothing, and the few
+        lengths each have one graph captured once), at least 1."""
         remaining = c[Clock.TOTAL] - c[Clock.DONE]
         dt = c[Clock.DT_CFL] if c[Clock.DT_CFL] > 0 else dt_guess
-        want = math.ceil(remaining / dt) + 1 if dt > 0 else CHUNKS[-1]
-        return next((k for k in CHUNKS if k >= want), CHUNKS[-1])
+        want = math.ceil(remaining / dt) if dt > 0 else CHUNKS[-1]
+        return max((k for k in CHUNKS if k <= want), default=CHUNKS[0])
 
     def run(self, state, t0: float, t1: float):
         s, cfg = self.s, self.s.config
