@@ -101,10 +101,16 @@ def traffic(solver, state) -> tuple[int, int, int]:
     cur = state.cur.arrays()
     const = [state.mass, state.volume, state.material, state.body, state.field_id]
     part = _bytes(cur) + _bytes(state.nxt.arrays()) + _bytes(const)
+    da = solver._device_advance
+    binned = solver.stepper == "device" and not solver.colliders and da.binned and da._binner is not None
+    if binned:  # the binned P2G's scratch, and what it moves: payload out and in, 4 sort passes
+        part += da._binner.nbytes()
     grid_arrays = [solver._grid_m, solver._grid_mv, solver._grid_fixed, solver._grid_v, solver._grid_normal]
     grid = _bytes(grid_arrays)
     acc = _bytes([solver._grid_fixed] if solver.config.deterministic else [solver._grid_m, solver._grid_mv])
     moved = (_bytes(cur) + _bytes(const) - state.body.capacity) + 2 * _bytes(cur) + 3 * acc + 2 * solver._grid_v.capacity
+    if binned:
+        moved += 2 * 64 * state.n + 4 * 2 * 16 * state.n + 20 * state.n
     return part, grid, moved
 
 
@@ -134,7 +140,8 @@ def _phase_split(solver, state, t: float, span: float) -> tuple[dict, float]:
 def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: float, *, substeps: int = SUBSTEPS,
              path: str = "device") -> dict:
     """One scene through advance(). path: "device" (the default stepper), "device-nograph"
-    (same, CUDA graphs off) or "host" (the reference loop: statistics read every substep)."""
+    (same, CUDA graphs off), "device-unbinned" (same, the reference P2G instead of the
+    binned one) or "host" (the reference loop and kernels: statistics read every substep)."""
     import warp as wp
 
     from mpmfx.mpm import Solver, SolverConfig
@@ -142,6 +149,7 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     cfg = SolverConfig(grid_n=grid_n, deterministic=deterministic)
     solver = Solver(mats, cfg, colliders=colliders, device=device, stepper="host" if path == "host" else "device")
     solver._device_advance.graphs = path != "device-nograph"
+    solver._device_advance.binned &= path != "device-unbinned"
     state = solver.init_state(parts)
     c = max(m.wave_speed() for m in mats)
     span = substeps * cfg.cfl * cfg.dx / c  # ~substeps CFL substeps at rest
@@ -221,10 +229,12 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
     for det in (False, True):
         rows.append(safe_case("Mixed", mixed, det, device, copy_gbs, substeps=k))
     # the levers, back to back in this run: the reference host loop, and no CUDA graphs
+    levers = (("Mushy", "host", False), ("Water", "host", False), ("Mushy", "device-nograph", False),
+              ("Mushy", "device-unbinned", False), ("Mushy", "device-unbinned", True), ("Mushy", "host", True))
     for g in sizes:
-        for name, path in (("Mushy", "host"), ("Water", "host"), ("Mushy", "device-nograph")):
+        for name, path, det in levers:
             if name in MATERIALS:
-                rows.append(safe_case(name, g, False, device, copy_gbs, substeps=k, path=path))
+                rows.append(safe_case(name, g, det, device, copy_gbs, substeps=k, path=path))
                 print_table(rows[-1:], COLS)
     if not quick and os.environ.get("MPMFX_BENCH_PEER", "1") != "0":
         cases = [[r["grid_n"], "water" if r["scene"] == "Water" else "snow", r["dt_mean"], r["substeps"]]

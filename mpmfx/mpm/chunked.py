@@ -14,6 +14,7 @@ import time
 import numpy as np
 import warp as wp
 
+from .p2g_binned import BinnedP2G
 from .slots import Clock, Count, Status
 from .stepper import CHUNKS, StepperParams, make_clock_kernels, wave_table, WaveParams
 
@@ -38,6 +39,8 @@ class DeviceAdvance:
         self.sp = sp
         self.begin, self.end = make_clock_kernels(solver.flags.snow, solver.flags.water)
         self.graphs = True  # capture chunks in CUDA graphs (off: launch each kernel; for measuring)
+        self.binned = not solver.flags.multi_field  # binned P2G (p2g_binned.py); off: the reference P2G
+        self._binner = None
         self._graphs: dict = {}
         self._graph_state = None  # the State the cached graphs point into (kept alive with them)
 
@@ -48,7 +51,8 @@ class DeviceAdvance:
         for i in range(k):
             wp.launch(self.begin, dim=1, device=dev, inputs=[self.sp, self.waves, self.clk, s._sub, s._stats,
                                                                s._stats_init, s._counts])
-            s._phases(state, bufs[i % 2], bufs[1 - i % 2], 0.0, device_clock=True)
+            s._phases(state, bufs[i % 2], bufs[1 - i % 2], 0.0, device_clock=True,
+                      binned=self._binner if self.binned else None)
             wp.launch(self.end, dim=1, device=dev, inputs=[self.sp, self.waves, self.clk, s._sub, s._stats,
                                                              s._counts, self.last_bad])
 
@@ -60,7 +64,7 @@ class DeviceAdvance:
         if self._graph_state is not state:
             self._graphs.clear()
             self._graph_state = state
-        key = (k, id(state.cur), self.s._grid_v.ptr, state.n_fields, self.s._q_mass)
+        key = (k, id(state.cur), self.s._grid_v.ptr, state.n_fields, self.s._q_mass, self.binned, id(self._binner))
         graph = self._graphs.get(key)
         if graph is None:
             with wp.ScopedCapture(device=self.s.device) as cap:
@@ -101,6 +105,8 @@ class DeviceAdvance:
         s, cfg = self.s, self.s.config
         wall0 = time.perf_counter()
         s._last_bad = None
+        if self.binned and (self._binner is None or self._binner.n != state.n):
+            self._binner = BinnedP2G(s.flags, state.n, s.device)  # before any capture: it allocates
         self._upload(state, (t1 - t0) * cfg.time_scale)
         c = self.clk.numpy()
         while int(c[Clock.STATUS]) in (Status.RUNNING, Status.REJECTED):

@@ -263,9 +263,10 @@ class Solver:
         self._phases(state, state.cur, state.nxt, dt, device_clock=False)
 
     def _phases(self, state: State, cur: ParticleBuffers, nxt: ParticleBuffers, dt: float, *,
-                device_clock: bool) -> None:
+                device_clock: bool, binned=None) -> None:
         """Launch the four phases reading `cur`, writing `nxt`. device_clock: the kernels take
-        dt (and the dt-dependent factors) from self._sub instead of `dt` (stepper.py)."""
+        dt (and the dt-dependent factors) from self._sub instead of `dt` (stepper.py);
+        binned: a p2g_binned.BinnedP2G to scatter with (device clock only), else the reference P2G."""
         cfg = self.config
         inv_dx = float(cfg.grid_n)
         nn = cfg.grid_n + 1
@@ -278,10 +279,13 @@ class Solver:
         pp.inv_dx, pp.dt, pp.nodes = inv_dx, float(dt), nn
         pp.deterministic = int(cfg.deterministic)
         pp.q_mass_inv, pp.q_mom_inv = 1.0 / self._q_mass, 1.0 / self._q_mom
-        wp.launch(p2g, dim=state.n, device=self.device, inputs=[
-            pp, cur.x, cur.v, cur.C, cur.F, cur.J, cur.Jp, cur.alive, state.mass, state.volume,
-            state.material, state.field_id, self._materials_dev,
-            self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed, self._sub])
+        if binned is not None:
+            binned.launch(pp, state, cur, self._materials_dev, self._grid_m, self._grid_mv, self._grid_fixed, self._sub)
+        else:
+            wp.launch(p2g, dim=state.n, device=self.device, inputs=[
+                pp, cur.x, cur.v, cur.C, cur.F, cur.J, cur.Jp, cur.alive, state.mass, state.volume,
+                state.material, state.field_id, self._materials_dev,
+                self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed, self._sub])
         # 3 · grid update
         wp.launch(grid, dim=(nn, nn, nn), device=self.device, inputs=[
             self._grid_params(dt, state.n_fields), self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
