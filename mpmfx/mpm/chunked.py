@@ -39,7 +39,9 @@ class DeviceAdvance:
         self.sp = sp
         self.begin, self.end = make_clock_kernels(solver.flags.snow, solver.flags.water)
         self.graphs = True  # capture chunks in CUDA graphs (off: launch each kernel; for measuring)
-        self.binned = not solver.flags.multi_field  # binned P2G (p2g_binned.py); off: the reference P2G
+        # binned P2G (p2g_binned.py) where it was measured faster: deterministic mode (1.4-1.5x
+        # at 2.4M-19M particles, H100); in fast mode it was not faster, so the reference P2G
+        self.binned = cfg.deterministic and not solver.flags.multi_field
         self._binner = None
         self._graphs: dict = {}
         self._graph_state = None  # the State the cached graphs point into (kept alive with them)
