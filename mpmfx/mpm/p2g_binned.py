@@ -5,8 +5,8 @@ global atomics; at 8 particles per cell those atomics are most of a substep. Her
 
     1. key = the particle's base node (the corner of its 3x3x3 stencil, with its field);
     2. particles sorted by key (radix sort of (key, index), every substep: they move);
-    3. per particle, in sorted order: its mass, momentum and MLS affine term (the same
-       `particle_affine` as the reference) go to a payload array, and the starts of runs of
+    3. per particle, in sorted order: its mass, momentum, MLS affine term (the same
+       `particle_affine` as the reference) and stencil offset fx go to a payload array, and the starts of runs of
        equal keys are found (a scan);
     4. one thread per run (the ~8 particles sharing a stencil) sums their contributions to
        each of the 27 nodes and adds the sum with one atomic per node and channel.
@@ -99,7 +99,13 @@ def make_binned(flags: SceneFlags):
         paff[s] = particle_affine(pp, materials[material[p]], F, J, Jp, C, volume, p, m)
         pmv[s] = m * v[p]
         pm[s] = m
-        px[s] = x[p]
+        # fx as the reference computes it (same expressions, so the same rounding and, on
+        # CUDA, the same multiply-add contraction)
+        xg = x[p] * pp.inv_dx
+        bi = int(wp.floor(xg[0] - 0.5))
+        bj = int(wp.floor(xg[1] - 0.5))
+        bk = int(wp.floor(xg[2] - 0.5))
+        px[s] = xg - wp.vec3(float(bi), float(bj), float(bk))
 
     @wp.kernel(enable_backward=False, module=flags.key + "_bin")
     def scatter(pp: P2GParams, keys: wp.array(dtype=wp.int32), start: wp.array(dtype=wp.int32),
@@ -117,7 +123,6 @@ def make_binned(flags: SceneFlags):
         bk = key % nn
         bj = (key // nn) % nn
         bf = key // (nn * nn)  # field * nodes + bi
-        base = wp.vec3(float(bf % nn), float(bj), float(bk))
         inv_dx = pp.inv_dx
         dx = 1.0 / inv_dx
         for i in range(3):
@@ -132,7 +137,7 @@ def make_binned(flags: SceneFlags):
                     q3 = wp.int64(0)
                     for s in range(s0, s1):
                         # the reference's numbers, particle by particle (p2g.py)
-                        fx = px[s] * inv_dx - base
+                        fx = px[s]
                         W = bspline_weights(fx)
                         w = W[i, 0] * W[j, 1] * W[k, 2]
                         m = pm[s]
