@@ -1,5 +1,6 @@
 """Plot of `mpmfx bench gpu`: throughput against particle count, one line per implementation
-and scene (fast mode), log-log, drawn with matplotlib (ImportError where it is missing).
+and scene (fast mode, the default path), log-log, drawn with matplotlib (ImportError where
+it is missing).
 
     python -m mpmfx.bench.gpu_plot renders/bench      # redraw from renders/bench/gpu.csv
 """
@@ -18,8 +19,10 @@ def throughput_plot(rows: list[dict], out: str | Path, *, name: str = "gpu") -> 
     fig, ax = plt.subplots(figsize=(9, 6), dpi=110)
     lines: dict[tuple, list] = {}
     for r in rows:
-        if not r.get("G_per_s") or str(r.get("det", "0")) not in ("0", "False") or r.get("scene") == "Mixed":
+        if not r.get("G_per_s") or str(r.get("det") or "0") not in ("0", "False") or r.get("scene") == "Mixed":
             continue
+        if r["impl"] == "mpmfx" and r.get("path", "device") != "device":
+            continue  # the lever rows (reference loop, no graphs, ...) are in the table, not the plot
         lines.setdefault((r["impl"], r["scene"]), []).append((int(r["particles"]), float(r["G_per_s"])))
     for (impl, sc), pts in sorted(lines.items()):
         pts.sort()
