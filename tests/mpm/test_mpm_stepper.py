@@ -1,7 +1,7 @@
 """The device stepper (chunks of substeps decided on the device, stepper.py / chunked.py, with
 the binned P2G of p2g_binned.py) against the reference host loop and reference P2G, over a
-few hundred substeps: deterministic mode bit for bit (the same substeps, rejections and
-particles); fast mode sums each node's float contributions in another order, so there the
+few hundred substeps on the CPU: deterministic mode bit for bit (the same substeps,
+rejections and particles; on CUDA the binned P2G differs in the last bits, see its module); fast mode sums each node's float contributions in another order, so there the
 same substeps and positions within 1e-4 domain units (1/600 of a cell), velocities within
 1e-3 domain/s."""
 
