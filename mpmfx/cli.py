@@ -56,7 +56,7 @@ def _parser() -> argparse.ArgumentParser:
     k.add_argument("--json", action="store_true", help="JSON for pipelines")
 
     b = sub.add_parser("bench", help="speed and accuracy benchmarks (run them on the GPU)")
-    b.add_argument("what", choices=("accuracy", "surface", "solver", "voxelise"), help="which benchmark")
+    b.add_argument("what", choices=("accuracy", "gpu", "surface", "solver", "voxelise"), help="which benchmark")
     b.add_argument("--quick", action="store_true", help="small CPU-sized sweep")
     b.add_argument("--device", choices=("cpu", "cuda"), default=None)
     b.add_argument("--out", default="renders/bench", help="folder for CSV/JSON/PNG")

@@ -18,7 +18,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
-from mpmfx.mpm.config import STANDARD_GRAVITY, SolverConfig, SolverConfigError
+from mpmfx.mpm.config import STANDARD_GRAVITY, SolverConfig, SolverConfigError, WallType
 
 Vec3 = tuple[float, float, float]
 _SOLVER = SolverConfig()  # the solver's defaults: the only ones (its docstring has the ranges)
@@ -73,7 +73,7 @@ class Voxelise(_Section):
     thickness: Thickness = Field(Thickness.WARN, description="What a failed five-cell thickness check does.")
 
 
-WallName = Literal["sticky", "slip", "separate"]
+WallName = Literal[tuple(w.value for w in WallType)]  # the names mpm.config.WallType declares
 
 
 class ColliderShape(str, enum.Enum):
