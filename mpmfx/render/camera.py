@@ -1,13 +1,24 @@
-"""The shot camera: the config's, or a 3/4 view that frames the domain."""
+"""The shot camera and the ground: the config's camera, or a 3/4 view; the solver's floor."""
 from __future__ import annotations
 
 import numpy as np
 
+# The default view: from front-right-above (a direction from the scene towards the camera).
+VIEW_DIRECTION = (0.8, 0.42, 1.25)
+
 
 def default_camera(shot) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """(position, look_at) in metres. Default: from front-right-above, 1.4 domain sizes away."""
+    """(position, look_at) in metres. Default: along VIEW_DIRECTION, 1.4 domain sizes away."""
     o, L = np.asarray(shot.domain.origin), shot.domain.size
     centre = o + np.array([0.5, 0.27, 0.5]) * L
     look = shot.render.camera_look_at or tuple(centre)
-    pos = shot.render.camera_position or tuple(centre + np.array([0.8, 0.42, 1.25]) * L)
+    pos = shot.render.camera_position or tuple(centre + np.array(VIEW_DIRECTION) * L)
     return tuple(float(x) for x in pos), tuple(float(x) for x in look)
+
+
+def solver_floor(shot) -> float:
+    """World height (m) where the solver's floor stops material: the -y wall acts on the grid
+    nodes of its band (`SolverConfig.boundary_cells` cells), so resting material sits on top of
+    the band, not on the domain's min corner. Renders draw the ground here."""
+    band = shot.solver_config().boundary_cells
+    return float(shot.domain.origin[1] + band * shot.domain.size / shot.domain.grid_n)
