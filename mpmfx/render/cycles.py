@@ -16,10 +16,10 @@ from pathlib import Path
 import mpmfx
 from mpmfx.render.cycles_job import FRAME_LINE
 
-BPY_PIN = "bpy==4.5.15"  # the version the looks and the importer options were written for
-INSTALL_HINT = (f"render.engine = \"cycles\" needs Blender as a Python module ({BPY_PIN}, Python 3.11): "
-                f"run `bash setup.sh` or `pip install {BPY_PIN}`, or render the fast preview with "
-                f"--set render.engine=preview")
+
+INSTALL_HINT = ("render.engine = \"cycles\" needs Blender as a Python module (bpy 4.5, Python 3.11; "
+                "pinned in pyproject.toml): run `bash setup.sh`, or `pip install -e '.[render]'`, or render "
+                "the fast preview with --set render.engine=preview")
 
 
 class CyclesError(RuntimeError):
