@@ -176,7 +176,8 @@ class Render(_Section):
     height: int = Field(540, ge=16, le=8192, description="Picture height (pixels).")
     samples: int = Field(16, ge=1, le=65536, description="cycles: path-tracing samples per pixel.")
     denoise: bool = Field(True, description="cycles: OpenImageDenoise on the finished frame.")
-    motion_blur: bool = Field(True, description="cycles: blur along the exported velocities (half-frame shutter).")
+    shutter: float = Field(0.5, ge=0, le=1, description="cycles: motion blur along the exported velocities, "
+                           "shutter open this fraction of a frame (0.5: a 180-degree shutter; 0: no blur).")
     frame_step: int = Field(1, ge=1, description="Render every n-th frame; the frames between hold the last "
                             "rendered one, so the movie keeps the shot's timing.")
     looks: dict[str, str] = Field(default_factory=dict, description="cycles: look per preset, object or surface "

@@ -40,6 +40,7 @@ def make_material(name: str, look: str) -> bpy.types.Material:
     out = tree.nodes["Material Output"]
     for key, value in spec["bsdf"].items():
         bsdf.inputs[key].default_value = (*value, 1.0) if key == "Base Color" else value
+    bsdf.subsurface_method = "BURLEY"  # about half the time of random walk on the CPU, same read at this scale
     if spec.get("grain") or spec.get("bump"):
         size = (spec.get("bump") or (0.002, 0, 0))[0]
         coords = tree.nodes.new("ShaderNodeTexCoord")

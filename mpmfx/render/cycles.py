@@ -40,7 +40,7 @@ def blender_version() -> str | None:
 
 
 def write_job(path: Path, *, usd: Path, frames: list[int], outputs: list[Path], blend: Path | None,
-              width: int, height: int, samples: int, denoise: bool, motion_blur: bool, fps: float,
+              width: int, height: int, samples: int, denoise: bool, shutter: float, fps: float,
               mode: str, looks: dict[str, str], floor_y: float, domain_origin, domain_size: float,
               camera: dict | None, view_direction, sun_elevation: float, sun_rotation: float) -> Path:
     """Write the JSON job the child reads. Units: metres and degrees, in the USD stage's frame
@@ -49,7 +49,7 @@ def write_job(path: Path, *, usd: Path, frames: list[int], outputs: list[Path], 
     -view_direction; outputs: one PNG path per frame; blend: where the lit scene is saved."""
     job = {"usd": str(usd), "frames": [int(f) for f in frames], "outputs": [str(p) for p in outputs],
            "blend": str(blend) if blend else None, "width": width, "height": height, "samples": samples,
-           "denoise": denoise, "motion_blur": motion_blur, "fps": fps, "mode": mode, "looks": looks,
+           "denoise": denoise, "shutter": shutter, "fps": fps, "mode": mode, "looks": looks,
            "floor_y": floor_y, "domain_origin": list(domain_origin), "domain_size": domain_size,
            "camera": camera, "view_direction": list(view_direction), "sun_elevation": sun_elevation,
            "sun_rotation": sun_rotation}

@@ -121,8 +121,8 @@ def set_render(job: dict) -> None:
     r.resolution_x, r.resolution_y, r.resolution_percentage = int(job["width"]), int(job["height"]), 100
     r.fps, r.fps_base = round(job["fps"]), round(job["fps"]) / job["fps"]
     # Meshes carry `velocity` per vertex (the USD export's velocities): Cycles blurs them along it.
-    r.use_motion_blur = bool(job["motion_blur"])
-    r.motion_blur_shutter = 0.5
+    r.use_motion_blur = job["shutter"] > 0
+    r.motion_blur_shutter = max(job["shutter"], 1e-3)
     r.use_persistent_data = True  # shaders and the unchanged scene stay compiled between frames
     r.image_settings.file_format, r.image_settings.color_mode = "PNG", "RGB"
     scene.view_settings.view_transform = "AgX"

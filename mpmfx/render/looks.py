@@ -37,10 +37,10 @@ LOOKS: dict[str, dict] = {
                        "Transmission Weight": 0.15, "IOR": 1.31},
               "bump": (0.006, 0.15, 0.002), "absorb": None, "grain": None},
     # Rough and granular: grain-sized noise in colour and bump (no gloss).
-    "sand": {"bsdf": {"Base Color": (0.80, 0.64, 0.42), "Roughness": 0.95, "Specular IOR Level": 0.2},
-             "bump": (0.0015, 0.6, 0.0015), "absorb": None, "grain": (0.55, 0.41, 0.26)},
-    "wet_sand": {"bsdf": {"Base Color": (0.52, 0.39, 0.25), "Roughness": 0.55, "Specular IOR Level": 0.45},
-                 "bump": (0.002, 0.5, 0.0015), "absorb": None, "grain": (0.36, 0.26, 0.16)},
+    "sand": {"bsdf": {"Base Color": (0.60, 0.42, 0.21), "Roughness": 0.95, "Specular IOR Level": 0.2},
+             "bump": (0.0015, 0.6, 0.0015), "absorb": None, "grain": (0.40, 0.27, 0.13)},
+    "wet_sand": {"bsdf": {"Base Color": (0.40, 0.28, 0.15), "Roughness": 0.55, "Specular IOR Level": 0.45},
+                 "bump": (0.002, 0.5, 0.0015), "absorb": None, "grain": (0.28, 0.19, 0.10)},
     "mud": {"bsdf": {"Base Color": (0.22, 0.15, 0.09), "Roughness": 0.3, "Coat Weight": 0.4,
                      "Coat Roughness": 0.15},
             "bump": (0.01, 0.3, 0.003), "absorb": None, "grain": (0.16, 0.11, 0.07)},
@@ -54,8 +54,9 @@ LOOKS: dict[str, dict] = {
     # Scene props: colliders and the ground.
     "collider": {"bsdf": {"Base Color": (0.32, 0.34, 0.37), "Roughness": 0.35, "Metallic": 0.6},
                  "bump": None, "absorb": None, "grain": None},
-    "ground": {"bsdf": {"Base Color": (0.40, 0.39, 0.37), "Roughness": 0.85},
-               "bump": (0.05, 0.05, 0.002), "absorb": None, "grain": (0.34, 0.33, 0.31)},
+    # A dark, slightly warm stone floor: snow, water and jelly all read against it.
+    "ground": {"bsdf": {"Base Color": (0.11, 0.105, 0.10), "Roughness": 0.6},
+               "bump": (0.03, 0.08, 0.002), "absorb": None, "grain": (0.075, 0.07, 0.065)},
 }
 
 

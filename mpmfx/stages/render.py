@@ -57,7 +57,7 @@ def run(ctx: Context) -> dict:
         extras.append(write_movie(pngs, entry.root / f"{shot.shot.name}.mp4", fps=shot.shot.fps))
     shown = [entry.frame_path(f, FRAME_EXT) for f in entry.done_frames(FRAME_EXT) if (f - start) % step == 0]
     if shown:
-        extras.append(contact_sheet(shown, entry.root / "contact.png"))
+        extras.append(contact_sheet(shown, entry.root / "contact.png", scale=2 if shot.render.width > 640 else 1))
     out = publish(shot, pngs, [p for p in extras if p is not None and p.exists()])
     return {"published": str(out)}
 
@@ -80,7 +80,7 @@ def _cycles(ctx: Context, frames: list[int]):
         cam = {"position": pos, "look_at": look}
     job = write_job(entry.root / "cycles_job.json", usd=usd, frames=frames, blend=blend,
                     outputs=[entry.frame_path(f, FRAME_EXT) for f in frames], width=r.width, height=r.height,
-                    samples=r.samples, denoise=r.denoise, motion_blur=r.motion_blur, fps=shot.shot.fps,
+                    samples=r.samples, denoise=r.denoise, shutter=r.shutter, fps=shot.shot.fps,
                     mode=r.mode, looks=looks, floor_y=solver_floor(shot), domain_origin=shot.domain.origin,
                     domain_size=shot.domain.size, camera=cam, view_direction=VIEW_DIRECTION,
                     sun_elevation=r.sun_elevation, sun_rotation=r.sun_rotation)
