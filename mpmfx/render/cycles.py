@@ -57,8 +57,9 @@ def write_job(path: Path, *, usd: Path, frames: list[int], outputs: list[Path], 
     return path
 
 
-def run_job(job_path: Path, *, log: Path) -> Iterator[tuple[int, float]]:
-    """Run the Blender child on `job_path`; yield (frame, seconds) as each frame lands.
+def run_job(job_path: Path, *, log: Path) -> Iterator[tuple[int, float, float]]:
+    """Run the Blender child on `job_path`; yield (frame, wall s, CPU s of all its threads) as
+    each frame lands.
 
     The child's full output goes to `log`; a failure raises CyclesError with its last lines."""
     if not bpy_available():
@@ -73,8 +74,8 @@ def run_job(job_path: Path, *, log: Path) -> Iterator[tuple[int, float]]:
             for line in proc.stdout:
                 out.write(line)
                 if line.startswith(FRAME_LINE):
-                    _, frame, seconds = line.split()
-                    yield int(frame), float(seconds)
+                    _, frame, wall, cpu = line.split()
+                    yield int(frame), float(wall), float(cpu)
         finally:
             if proc.poll() is None:  # the consumer stopped early (Ctrl-C): do not leave Blender running
                 proc.kill()

@@ -8,7 +8,7 @@ one that imports bpy, and it never imports pxr: the render stage writes a small 
 
 The stage is opened with Blender's own USD importer (`bpy.ops.wm.usd_import`), so every
 render also proves that the USD works in a DCC. Per frame, stdout gets one line
-`MPMFX_FRAME <frame> <seconds>` after the PNG is in place (the parent turns those into a
+`MPMFX_FRAME <frame> <wall s> <cpu s, all threads>` after the PNG is in place (the parent turns those into a
 progress bar); anything else on stdout/stderr is Blender's own chatter.
 """
 from __future__ import annotations
@@ -145,7 +145,10 @@ def build_scene(job: dict) -> None:
     cam = job.get("camera")
     if cam is None:
         shown = [o for _, o in imported["points" if job["mode"] == "particles" else "meshes"]]
-        bounds = scene_bounds(shown + [o for _, o in imported["colliders"]], job["frames"])
+        # the stage's whole frame range, not the frames asked for: a resumed or partial render
+        # keeps the camera of the full one
+        bounds = scene_bounds(shown + [o for _, o in imported["colliders"]],
+                              list(range(scene.frame_start, scene.frame_end + 1)))
         if bounds is None:  # nothing visible anywhere: frame the domain
             bounds = (dom_lo, [o + dom_size for o in dom_lo])
         lo, hi = bounds
@@ -161,14 +164,14 @@ def render_frames(job: dict) -> None:
     import bpy
     scene = bpy.context.scene
     for frame, path in zip(job["frames"], job["outputs"]):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         scene.frame_set(frame)
         path = Path(path)
         tmp = path.with_name(f".{path.stem}.tmp.png")
         scene.render.filepath = str(tmp)
         bpy.ops.render.render(write_still=True)
         os.replace(tmp, path)
-        print(f"{FRAME_LINE} {frame} {time.perf_counter() - t0:.3f}", flush=True)
+        print(f"{FRAME_LINE} {frame} {time.perf_counter() - t0:.3f} {time.process_time() - c0:.3f}", flush=True)
 
 
 def main(argv: list[str]) -> int:

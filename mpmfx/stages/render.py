@@ -44,9 +44,10 @@ def run(ctx: Context) -> dict:
     step, start = shot.render.frame_step, shot.shot.frame_start
     source = {f: start + (f - start) // step * step for f in todo}  # the frame each one shows
     render = sorted({s for s in source.values() if not entry.frame_path(s, FRAME_EXT).exists()})
-    extras = []
+    extras, timing = [], {}
     if shot.render.engine is RenderEngine.CYCLES:
-        extras.append(_cycles(ctx, render))
+        blend, timing = _cycles(ctx, render)
+        extras.append(blend)
     else:
         _preview(ctx, render)
     for f, s in source.items():
@@ -59,18 +60,19 @@ def run(ctx: Context) -> dict:
     if shown:
         extras.append(contact_sheet(shown, entry.root / "contact.png", scale=2 if shot.render.width > 640 else 1))
     out = publish(shot, pngs, [p for p in extras if p is not None and p.exists()])
-    return {"published": str(out)}
+    return {"published": str(out), **timing}
 
 
-def _cycles(ctx: Context, frames: list[int]):
-    """Cycles through Blender's own process; returns the saved .blend."""
+def _cycles(ctx: Context, frames: list[int]) -> tuple[Path, dict]:
+    """Cycles through Blender's own process; returns the saved .blend and the seconds per frame
+    (wall, and CPU of all render threads: wall / CPU shows how much of the machine it had)."""
     from mpmfx.render.camera import VIEW_DIRECTION, default_camera, solver_floor
     from mpmfx.render.cycles import CyclesError, run_job, write_job
     from mpmfx.render.looks import look_for
     shot, entry, r = ctx.shot, ctx.entry, ctx.shot.render
     blend = entry.root / f"{shot.shot.name}.blend"
     if not frames:
-        return blend
+        return blend, {}
     usd = ctx.upstream["export"].root / "shot.usda"
     looks = {g: look_for([g, o.name, o.material], r.looks) for g, o in zip(shot.surface_groups(), shot.objects)}
     looks |= {o.name: look_for([o.name, o.material], r.looks) for o in shot.objects}
@@ -85,12 +87,13 @@ def _cycles(ctx: Context, frames: list[int]):
                     domain_size=shot.domain.size, camera=cam, view_direction=VIEW_DIRECTION,
                     sun_elevation=r.sun_elevation, sun_rotation=r.sun_rotation)
     entry.frames_dir.mkdir(parents=True, exist_ok=True)
+    times = {}
     try:
-        for _ in ctx.progress(run_job(job, log=entry.root / "cycles.log"), total=len(frames), desc="render"):
-            pass
+        for f, wall, cpu in ctx.progress(run_job(job, log=entry.root / "cycles.log"), total=len(frames), desc="render"):
+            times[f] = [wall, cpu]
     except CyclesError as exc:
         raise StageError(f"render (cycles): {exc}") from None
-    return blend
+    return blend, {"cycles_seconds": times}
 
 
 def _preview(ctx: Context, frames: list[int]) -> None:
