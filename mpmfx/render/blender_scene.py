@@ -96,6 +96,30 @@ def add_ground(floor_y: float, centre, *, size: float) -> bpy.types.Object:
     return obj
 
 
+def add_basin(lo, hi, *, height: float, thickness: float) -> bpy.types.Object:
+    """Four stone walls of `height` m standing on the floor just outside the box [lo, hi] (stage
+    metres), where the solver's side walls hold a pool: the water meets a wall, not thin air."""
+    import bmesh
+    bm = bmesh.new()
+    x0, y0, z0 = lo
+    x1, _, z1 = hi
+    t = thickness
+    for a, b in (((x0 - t, z0 - t), (x1 + t, z0)), ((x0 - t, z1), (x1 + t, z1 + t)),
+                 ((x0 - t, z0), (x0, z1)), ((x1, z0), (x1 + t, z1))):
+        centre = to_blender(((a[0] + b[0]) / 2, y0 + height / 2, (a[1] + b[1]) / 2))
+        size = Vector((b[0] - a[0], b[1] - a[1], height))  # Blender axes: x, y (= -stage z), z up
+        geom = bmesh.ops.create_cube(bm, size=1.0)["verts"]
+        bmesh.ops.scale(bm, vec=size, verts=geom)
+        bmesh.ops.translate(bm, vec=centre, verts=geom)
+    mesh = bpy.data.meshes.new("basin")
+    bm.to_mesh(mesh)
+    bm.free()
+    obj = bpy.data.objects.new("basin", mesh)
+    bpy.context.scene.collection.objects.link(obj)
+    assign(obj, make_material("basin", "ground"))
+    return obj
+
+
 def add_sky(*, sun_elevation: float, sun_rotation: float, strength: float = 0.25,
             sun_strength: float = 3.5) -> None:
     """Blender's Nishita sky for the background and fill light, plus a sun lamp along the sky's

@@ -16,9 +16,15 @@ def default_camera(shot) -> tuple[tuple[float, ...], tuple[float, ...]]:
     return tuple(float(x) for x in pos), tuple(float(x) for x in look)
 
 
+def solver_box(shot) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """(lo, hi) world corners (m) of the box the solver's walls hold material in: each wall acts
+    on the grid nodes of its band (`SolverConfig.boundary_cells` cells), so material stops at
+    the band's inner edge, not at the domain's faces."""
+    inset = shot.solver_config().boundary_cells * shot.domain.size / shot.domain.grid_n
+    o = shot.domain.origin
+    return (tuple(float(c + inset) for c in o), tuple(float(c + shot.domain.size - inset) for c in o))
+
+
 def solver_floor(shot) -> float:
-    """World height (m) where the solver's floor stops material: the -y wall acts on the grid
-    nodes of its band (`SolverConfig.boundary_cells` cells), so resting material sits on top of
-    the band, not on the domain's min corner. Renders draw the ground here."""
-    band = shot.solver_config().boundary_cells
-    return float(shot.domain.origin[1] + band * shot.domain.size / shot.domain.grid_n)
+    """World height (m) of the solver's floor: renders draw the ground here."""
+    return solver_box(shot)[0][1]

@@ -141,6 +141,8 @@ def build_scene(job: dict) -> None:
     dom_lo, dom_size = job["domain_origin"], job["domain_size"]
     centre = [o + dom_size / 2 for o in dom_lo]
     bs.add_ground(job["floor_y"], centre, size=40.0 * dom_size)
+    if job.get("basin") and job.get("walls"):
+        bs.add_basin(*job["walls"], height=job["basin"], thickness=0.04 * dom_size)
     bs.add_sky(sun_elevation=job["sun_elevation"], sun_rotation=job["sun_rotation"])
     cam = job.get("camera")
     if cam is None:

@@ -66,7 +66,7 @@ def run(ctx: Context) -> dict:
 def _cycles(ctx: Context, frames: list[int]) -> tuple[Path, dict]:
     """Cycles through Blender's own process; returns the saved .blend and the seconds per frame
     (wall, and CPU of all render threads: wall / CPU shows how much of the machine it had)."""
-    from mpmfx.render.camera import VIEW_DIRECTION, default_camera, solver_floor
+    from mpmfx.render.camera import VIEW_DIRECTION, default_camera, solver_box, solver_floor
     from mpmfx.render.cycles import CyclesError, run_job, write_job
     from mpmfx.render.looks import look_for
     shot, entry, r = ctx.shot, ctx.entry, ctx.shot.render
@@ -85,7 +85,8 @@ def _cycles(ctx: Context, frames: list[int]) -> tuple[Path, dict]:
                     samples=r.samples, denoise=r.denoise, shutter=r.shutter, fps=shot.shot.fps,
                     mode=r.mode, looks=looks, floor_y=solver_floor(shot), domain_origin=shot.domain.origin,
                     domain_size=shot.domain.size, camera=cam, view_direction=VIEW_DIRECTION,
-                    sun_elevation=r.sun_elevation, sun_rotation=r.sun_rotation)
+                    sun_elevation=r.sun_elevation, sun_rotation=r.sun_rotation, walls=solver_box(shot),
+                    basin=r.basin)
     entry.frames_dir.mkdir(parents=True, exist_ok=True)
     times = {}
     try:
