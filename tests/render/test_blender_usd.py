@@ -129,3 +129,17 @@ def test_cycles_render_stage_draws_the_looks(exported):
     rgb = imageio.imread(entry / "frames" / "0003.png")[..., :3].astype(int)
     jelly = (rgb[..., 0] > rgb[..., 1] + 40) & (rgb[..., 0] > rgb[..., 2] + 30)
     assert 0.01 < jelly.mean() < 0.6, "the jelly cube should be in the picture, red, and not fill it"
+
+
+def test_material_lands_on_the_drawn_ground(exported):
+    """The renders' ground is the solver's floor (the top of its wall band), where material stops."""
+    from mpmfx.config import load_shot_config
+    from mpmfx.io.frames import ParticleFrame
+    from mpmfx.render.camera import solver_floor
+    _, shot_path, entries = exported
+    shot = load_shot_config(shot_path)
+    floor, dx = solver_floor(shot), shot.domain.size / shot.domain.grid_n
+    assert floor == pytest.approx(shot.domain.origin[1] + 3 * dx)
+    lowest = [ParticleFrame.read(p).x[:, 1].min() for p in sorted((entries["simulate"] / "frames").glob("*.npz"))]
+    assert min(lowest) > floor - 0.25 * dx  # never sinks into the ground
+    assert lowest[-1] < floor + dx  # and the pool has landed on it by the last frame
