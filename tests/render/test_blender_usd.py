@@ -141,5 +141,17 @@ def test_material_lands_on_the_drawn_ground(exported):
     floor, dx = solver_floor(shot), shot.domain.size / shot.domain.grid_n
     assert floor == pytest.approx(shot.domain.origin[1] + 3 * dx)
     lowest = [ParticleFrame.read(p).x[:, 1].min() for p in sorted((entries["simulate"] / "frames").glob("*.npz"))]
-    assert min(lowest) > floor - 0.25 * dx  # never sinks into the ground
+    assert min(lowest) > floor - 0.5 * dx  # an impact presses in less than half a cell, never through
     assert lowest[-1] < floor + dx  # and the pool has landed on it by the last frame
+
+
+def test_preview_engine_and_engine_switch_rerender_only(exported, tmp_path, monkeypatch):
+    """render.engine = preview (PyVista) renders the same frames; switching engines re-runs only render."""
+    _, shot, _ = exported
+    monkeypatch.chdir(tmp_path)
+    cache = exported[0] / "cache"
+    results = mpmfx.load_shot(shot, cache_root=cache, quiet=True, overrides=["render.engine=preview"]).run()
+    assert {r.stage: r.state for r in results} == {"voxelise": "cached", "simulate": "cached", "surface": "cached",
+                                                   "export": "cached", "render": "ran"}
+    pngs = sorted((tmp_path / "renders" / "tiny").glob("[0-9]*.png"))
+    assert len(pngs) == 4 and all(p.stat().st_size > 1000 for p in pngs)
