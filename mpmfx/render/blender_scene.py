@@ -144,7 +144,8 @@ def add_sky(*, sun_elevation: float, sun_rotation: float, strength: float = 0.25
     lamp.angle = math.radians(3.0)  # a slightly soft sun: softer contact shadows
     sun = bpy.data.objects.new("sun", lamp)
     scene.collection.objects.link(sun)
-    # Nishita's sun sits at azimuth sun_rotation from +Y toward -X... the lamp shines from there.
+    # The lamp comes from elevation / rotation (rotation about the up axis, from +Y towards -X);
+    # the sky takes the same two angles for its gradient (its own sun disc is off).
     el, rot = math.radians(sun_elevation), math.radians(sun_rotation)
     towards_sun = Vector((-math.sin(rot) * math.cos(el), math.cos(rot) * math.cos(el), math.sin(el)))
     sun.rotation_euler = towards_sun.to_track_quat("Z", "Y").to_euler()
