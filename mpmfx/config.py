@@ -161,13 +161,46 @@ class Export(_Section):
     points: bool = Field(True, description="Include particles as UsdGeomPoints.")
 
 
+class RenderEngine(str, enum.Enum):
+    CYCLES = "cycles"
+    PREVIEW = "preview"
+
+
 class Render(_Section):
-    width: int = Field(960, ge=16, le=8192)
-    height: int = Field(540, ge=16, le=8192)
+    """How frames are drawn. `cycles`: Blender's path tracer on the exported USD stage (lit,
+    shaded, per-material looks; Blender runs in its own process); `preview`: a fast PyVista
+    viewport capture of the surfaces."""
+
+    engine: RenderEngine = Field(RenderEngine.CYCLES, description="cycles (Blender, the look) or preview "
+                                 "(PyVista, seconds a frame).")
+    width: int = Field(960, ge=16, le=8192, description="Picture width (pixels).")
+    height: int = Field(540, ge=16, le=8192, description="Picture height (pixels).")
+    samples: int = Field(16, ge=1, le=65536, description="cycles: path-tracing samples per pixel.")
+    denoise: bool = Field(True, description="cycles: OpenImageDenoise on the finished frame.")
+    shutter: float = Field(0.5, ge=0, le=1, description="cycles: motion blur along the exported velocities, "
+                           "shutter open this fraction of a frame (0.5: a 180-degree shutter; 0: no blur).")
+    frame_step: int = Field(1, ge=1, description="Render every n-th frame; the frames between hold the last "
+                            "rendered one, so the movie keeps the shot's timing.")
+    looks: dict[str, str] = Field(default_factory=dict, description="cycles: look per preset, object or surface "
+                                  "group, e.g. {Goopy = \"mud\"} (looks: mpmfx/render/looks.py).")
+    basin: float | None = Field(None, gt=0, description="cycles: height (m) of a stone basin drawn along the "
+                                "solver's side walls, for a pool that the walls hold; default none.")
+    sun_elevation: float = Field(35.0, ge=0, le=90, description="cycles: sun height above the horizon (degrees).")
+    sun_rotation: float = Field(150.0, description="cycles: sun direction about the up axis (degrees).")
     mode: Literal["surface", "particles"] = Field("surface", description="particles: the guide's debug look (9.4).")
-    camera_position: Vec3 | None = Field(None, description="Camera position (m); default a 3/4 view of the domain.")
+    camera_position: Vec3 | None = Field(None, description="Camera position (m); default: cycles frames what "
+                                         "was simulated, preview a 3/4 view of the domain.")
     camera_look_at: Vec3 | None = Field(None, description="Camera target (m); default the domain centre.")
     movie: bool = Field(True, description="Also write an mp4 of the frames.")
+
+    @field_validator("looks")
+    @classmethod
+    def _known_looks(cls, v):
+        from mpmfx.render.looks import LOOKS
+        bad = {k: look for k, look in v.items() if look not in LOOKS}
+        if bad:
+            raise ValueError(f"unknown look(s) {bad}: use one of {', '.join(LOOKS)}")
+        return v
 
 
 class Shot(_Section):
