@@ -29,6 +29,23 @@ from typing import Any, Iterator
 MANIFEST_SCHEMA = 1
 
 
+class PathError(ValueError):
+    """A path the project would write or delete lies outside its root (exit code 2)."""
+
+
+def child(root: str | Path, *parts: str, what: str = "shot.name") -> Path:
+    """`root / parts...`, refused unless it resolves strictly inside `root`: a shot named `..`
+    or `.` must never turn the cache or renders root itself (or its parent) into a target."""
+    root = Path(root)
+    path = root.joinpath(*parts)
+    base = root.resolve()
+    real = path.resolve()
+    if any(p in ("", ".", "..") or "/" in p or os.sep in p for p in parts) or base not in real.parents:
+        raise PathError(f"{what} {'/'.join(parts)!r}: resolves to {real}, outside {base}; "
+                        f"use letters, digits, '_', '-' and '.', not starting with '.'")
+    return path
+
+
 def canonical_json(obj: Any) -> str:
     return json.dumps(obj, sort_keys=True, separators=(",", ":"), default=str)
 
@@ -145,7 +162,7 @@ class Cache:
 
     def __init__(self, root: str | Path, shot: str):
         self.root = Path(root)
-        self.shot_dir = self.root / shot
+        self.shot_dir = child(self.root, shot)
 
     def entry(self, stage: str, version: int, params: dict, upstream: dict[str, str],
               inputs: dict[str, str]) -> Entry:
@@ -156,13 +173,6 @@ class Cache:
     def entries(self, stage: str) -> list[Path]:
         d = self.shot_dir / stage
         return sorted(d.glob(f"{stage}-*")) if d.is_dir() else []
-
-    def clean(self, stage: str | None = None) -> list[Path]:
-        targets = [self.shot_dir / stage] if stage else [self.shot_dir]
-        removed = [t for t in targets if t.exists()]
-        for t in removed:
-            shutil.rmtree(t)
-        return removed
 
 
 def default_root() -> Path:

@@ -45,8 +45,11 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--frames", type=_frames, default=None, metavar="A:B")
     s = shot_cmd("status", "each stage: cached, partial, stale or missing, and why")
     s.add_argument("--qa", action="store_true", help="per-frame observables of the simulation")
-    c = shot_cmd("clean", "delete cached results")
-    c.add_argument("--stage", choices=STAGES, default=None, help="only this stage (default: the whole shot)")
+    c = shot_cmd("clean", "delete this variant's cached results (listed with sizes first)")
+    c.add_argument("--stage", choices=STAGES, default=None, help="only this stage (default: every stage)")
+    c.add_argument("--all-variants", action="store_true", help="every variant's entries, not only this one's")
+    c.add_argument("--dry-run", action="store_true", help="list what would be deleted, delete nothing")
+    c.add_argument("-y", "--yes", action="store_true", help="delete a simulation without asking")
 
     k = sub.add_parser("check", help="five-cell thickness check of an asset (exit 0 pass/warn, 1 fail, 2 bad input)")
     k.add_argument("asset", help="mesh file (obj, ply, stl, glb, gltf, usd)")
@@ -76,9 +79,10 @@ def main(argv: list[str] | None = None) -> int:
         print("interrupted: complete frames are cached; run again to resume", file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - every error becomes a message and an exit code
+        from mpmfx.cache import PathError
         from mpmfx.config import ShotError
         from mpmfx.stages.base import StageError
-        if isinstance(exc, ShotError):
+        if isinstance(exc, (ShotError, PathError)):
             print(f"error: {exc}", file=sys.stderr)
             return 2
         if isinstance(exc, StageError):
@@ -128,9 +132,9 @@ def _dispatch(args) -> int:
             return print_qa(run)
         return 0
     if args.cmd == "clean":
-        removed = run.cache.clean(args.stage)
-        print("removed: " + (", ".join(str(p) for p in removed) if removed else "nothing cached"))
-        return 0
+        from mpmfx.maintain import clean_targets, delete
+        targets = clean_targets(run, stage=args.stage, all_variants=args.all_variants)
+        return delete(targets, root=run.cache.root, dry_run=args.dry_run, yes=args.yes)
     raise AssertionError(args.cmd)
 
 

@@ -33,7 +33,8 @@ class _Section(BaseModel):
 
 
 class ShotInfo(_Section):
-    name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$", description="Shot name; names the cache and renders/<name>/.")
+    name: str = Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$", description="Shot name; names the cache and "
+                      "renders/<name>/ (letters, digits, _ - ., not starting with '.').")
     frame_start: int = Field(1, ge=0, description="First frame number (frame_start is the initial state, t = 0).")
     frame_end: int = Field(48, ge=0, description="Last frame number, inclusive.")
     fps: float = Field(24.0, gt=0, le=1000, description="Frames per second; one frame is 1/fps seconds.")

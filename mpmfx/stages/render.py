@@ -78,7 +78,8 @@ def _collider_meshes(shot: Shot, frame: int) -> dict:
 
 def publish(shot: Shot, pngs: list[Path], extras: list[Path]) -> Path:
     """Copy the frames, the movie and the contact sheet to renders/<shot>/ (in the working directory)."""
-    out = Path("renders") / shot.shot.name
+    from mpmfx.cache import child
+    out = child("renders", shot.shot.name)
     out.mkdir(parents=True, exist_ok=True)
     for p in pngs:
         shutil.copyfile(p, out / p.name)

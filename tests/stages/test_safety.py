@@ -1,0 +1,69 @@
+"""Issue 18: nothing lost. Paths stay inside their roots, clean removes exactly what it lists,
+one run per shot at a time, and a failing writer leaves nothing under a final name."""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+import mpmfx
+from mpmfx.cli import main
+from tests.conftest import write_tiny_shot
+
+
+@pytest.mark.parametrize("name", [".", "..", ".hidden"])
+def test_shot_names_that_are_paths_are_refused(tmp_path, monkeypatch, capsys, name):
+    work = tmp_path / "work"
+    work.mkdir()
+    keep = work / "precious.txt"
+    keep.write_text("do not delete")
+    shot = write_tiny_shot(tmp_path)
+    monkeypatch.chdir(work)
+    for cmd in (["run", "--until", "voxelise"], ["clean", "--yes"]):
+        code = main([cmd[0], str(shot), "--set", f"shot.name={name}", *cmd[1:], "--cache", str(work / "cache")])
+        assert code == 2
+        assert "shot.name" in capsys.readouterr().err
+    assert keep.read_text() == "do not delete" and sorted(p.name for p in work.iterdir()) == ["precious.txt"]
+
+
+def test_cache_refuses_paths_outside_its_root(tmp_path):
+    from mpmfx.cache import Cache, PathError
+    with pytest.raises(PathError):
+        Cache(tmp_path / "cache", "..")
+    with pytest.raises(PathError):
+        Cache(tmp_path / "cache", ".")
+
+
+@pytest.fixture
+def two_variants(tmp_path):
+    """The tiny shot (3 frames) up to surface, plain and with a surface override."""
+    shot = write_tiny_shot(tmp_path, frame_end=3)
+    cache = tmp_path / "cache"
+    plain = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
+    plain.run(until="surface")
+    variant = mpmfx.load_shot(shot, overrides=["surface.radius_scale=1.3"], cache_root=cache, quiet=True)
+    variant.run(until="surface")
+    return shot, cache, plain, variant
+
+
+def test_clean_removes_exactly_the_variants_entries(two_variants, capsys):
+    shot, cache, plain, variant = two_variants
+    args = [str(shot), "--cache", str(cache), "--set", "surface.radius_scale=1.3"]
+    assert main(["clean", *args, "--stage", "surface", "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert variant.entries()["surface"].root.name in out and "B" in out  # listed, with a size
+    assert variant.entries()["surface"].root.is_dir()  # a dry run deletes nothing
+    assert main(["clean", *args, "--stage", "surface"]) == 0
+    assert not variant.entries()["surface"].root.exists()
+    assert plain.entries()["surface"].root.is_dir() and plain.entries()["simulate"].complete()
+
+
+def test_clean_asks_before_deleting_a_simulation(two_variants, capsys, monkeypatch):
+    shot, cache, plain, _ = two_variants
+    sim = plain.entries()["simulate"].root
+    monkeypatch.setattr("sys.stdin", open(os.devnull))  # no one to answer
+    assert main(["clean", str(shot), "--cache", str(cache)]) == 2
+    assert "--yes" in capsys.readouterr().err and sim.is_dir()
+    assert main(["clean", str(shot), "--cache", str(cache), "--yes"]) == 0
+    assert not sim.exists() and not plain.entries()["surface"].root.exists()
