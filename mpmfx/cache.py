@@ -16,9 +16,13 @@ only when a run finishes, so an entry without one is "partial" and resumes.
 from __future__ import annotations
 
 import contextlib
+import datetime
+import fcntl
 import hashlib
 import json
 import os
+import socket
+import sys
 import shutil
 import time
 import uuid
@@ -27,6 +31,10 @@ from pathlib import Path
 from typing import Any, Iterator
 
 MANIFEST_SCHEMA = 1
+
+
+class BusyError(RuntimeError):
+    """Another run holds the shot's lock (exit code 1); the message names it."""
 
 
 class PathError(ValueError):
@@ -137,16 +145,43 @@ class Entry:
         return sorted(int(p.stem) for p in self.frames_dir.glob(f"[0-9]*.{ext}"))
 
     def complete(self, frames: list[int] | None = None) -> bool:
-        """True when a manifest exists and covers `frames` (all of its own frames if None)."""
+        """True when a manifest exists, covers `frames` (all of its own frames if None) and every
+        file it lists is still there with its size (a lost or truncated file makes it partial)."""
         man = self.manifest()
         if man is None or man.get("schema") != MANIFEST_SCHEMA:
             return False
-        return frames is None or set(frames) <= set(man.get("frames", []))
+        if frames is not None and not set(frames) <= set(man.get("frames", [])):
+            return False
+        return not self.damaged(man)
+
+    def damaged(self, man: dict | None = None) -> list[str]:
+        """Files the manifest lists that are missing or changed size since it was written."""
+        man = man or self.manifest() or {}
+        bad = []
+        for rel, size in man.get("files", {}).items():
+            try:
+                if (self.root / rel).stat().st_size != size:
+                    bad.append(rel)
+            except OSError:
+                bad.append(rel)
+        return bad
+
+    def files(self) -> dict[str, int]:
+        """Every output file of the entry -> bytes (not the manifest, temp files, checkpoints, QA)."""
+        out = {}
+        for p in sorted(self.root.rglob("*")):
+            rel = p.relative_to(self.root)
+            if p.is_file() and not p.name.startswith(".") and rel.parts[0] not in ("checkpoints", "qa") \
+                    and p != self.manifest_path:
+                out[rel.as_posix()] = p.stat().st_size
+        return out
 
     def write_manifest(self, *, frames: list[int], timings: dict, qa: dict | None = None, extra: dict | None = None):
+        files = self.files()
         write_json(self.manifest_path, {
             "schema": MANIFEST_SCHEMA, "stage": self.stage, "key": self.key, "key_inputs": self.key_inputs,
-            "frames": sorted(frames), "timings": timings, "qa": qa or {}, "written": time.time(), **(extra or {}),
+            "frames": sorted(frames), "timings": timings, "qa": qa or {}, "written": time.time(),
+            "files": files, "bytes": sum(files.values()), **(extra or {}),
         })
 
     def invalidate(self) -> None:
@@ -170,9 +205,50 @@ class Cache:
         key_inputs = {"version": version, "params": params, "upstream": upstream, "inputs": inputs}
         return Entry(self.shot_dir / stage / f"{stage}-{key[:12]}", stage, key, key_inputs)
 
+    @contextlib.contextmanager
+    def lock(self) -> Iterator[None]:
+        """Hold `<shot>/.lock` (an flock, so a killed holder never leaves it stuck) while a run
+        or a clean touches the shot; a second one stops at once naming the holder (host, pid,
+        command). Held by the orchestrating process only: workers it starts write freely."""
+        self.shot_dir.mkdir(parents=True, exist_ok=True)
+        path = self.shot_dir / ".lock"
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise BusyError(f"another run is using {self.shot_dir}: {_holder(os.pread(fd, 4096, 0))}; "
+                                f"wait for it to finish, or stop it first (a killed run keeps its complete "
+                                f"frames and the next run resumes)") from None
+            info = {"host": socket.gethostname(), "pid": os.getpid(), "argv": sys.argv,
+                    "since": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")}
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, json.dumps(info).encode(), 0)
+            yield
+        finally:
+            os.close(fd)  # releases the flock
+
+    def remove_orphans(self) -> list[Path]:
+        """Delete temp files that a killed run left (`.<name>.<pid>-<uuid>.tmp*`). Call only
+        while holding `lock()`: then no writer of this shot is alive to own them."""
+        if not self.shot_dir.is_dir():
+            return []
+        orphans = [p for p in self.shot_dir.rglob(".*.tmp*") if p.is_file()]
+        for p in orphans:
+            p.unlink(missing_ok=True)
+        return orphans
+
     def entries(self, stage: str) -> list[Path]:
         d = self.shot_dir / stage
         return sorted(d.glob(f"{stage}-*")) if d.is_dir() else []
+
+
+def _holder(raw: bytes) -> str:
+    try:
+        h = json.loads(raw.decode())
+        return f"pid {h['pid']} on {h['host']} since {h['since']} ({' '.join(h['argv'])})"
+    except (ValueError, KeyError, TypeError):
+        return "a process that has not written its name yet"
 
 
 def default_root() -> Path:

@@ -79,13 +79,13 @@ def main(argv: list[str] | None = None) -> int:
         print("interrupted: complete frames are cached; run again to resume", file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - every error becomes a message and an exit code
-        from mpmfx.cache import PathError
+        from mpmfx.cache import BusyError, PathError
         from mpmfx.config import ShotError
         from mpmfx.stages.base import StageError
         if isinstance(exc, (ShotError, PathError)):
             print(f"error: {exc}", file=sys.stderr)
             return 2
-        if isinstance(exc, StageError):
+        if isinstance(exc, (StageError, BusyError)):
             print(f"error: {exc}", file=sys.stderr)
             return 1
         raise
@@ -133,8 +133,9 @@ def _dispatch(args) -> int:
         return 0
     if args.cmd == "clean":
         from mpmfx.maintain import clean_targets, delete
-        targets = clean_targets(run, stage=args.stage, all_variants=args.all_variants)
-        return delete(targets, root=run.cache.root, dry_run=args.dry_run, yes=args.yes)
+        with run.cache.lock():
+            targets = clean_targets(run, stage=args.stage, all_variants=args.all_variants)
+            return delete(targets, root=run.cache.root, dry_run=args.dry_run, yes=args.yes)
     raise AssertionError(args.cmd)
 
 

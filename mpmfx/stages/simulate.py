@@ -93,7 +93,7 @@ def run(ctx: Context) -> dict:
     solver = Solver(mats, shot.solver_config(), colliders=colliders(shot), device=ctx.device)
     start, fps = shot.shot.frame_start, shot.shot.fps
     last = max(ctx.frames)
-    ckpt = _latest_checkpoint(entry.root / "checkpoints", entry.done_frames(FRAME_EXT))
+    ckpt = _latest_checkpoint(entry.root / "checkpoints", entry.done_frames(FRAME_EXT), start)
     if ckpt is None:
         p = SeedParticles.read(ctx.upstream["voxelise"].root)
         body = p.body.astype(np.int32)
@@ -148,11 +148,14 @@ def _checkpoint(folder: Path, solver, state, frame: int, t: float) -> None:
         old.unlink()
 
 
-def _latest_checkpoint(folder: Path, done: list[int]) -> int | None:
-    """The newest checkpoint whose frame file also exists (a frame is written before its checkpoint)."""
-    if not folder.is_dir():
+def _latest_checkpoint(folder: Path, done: list[int], start: int) -> int | None:
+    """The newest checkpoint up to which every frame file exists (a frame is written before its
+    checkpoint; a frame lost later must be redone, so resume before it)."""
+    have, f = set(done), start
+    if not folder.is_dir() or start not in have:
         return None
-    frames = sorted(int(p.stem) for p in folder.glob("[0-9]*.npz"))
-    ok = [f for f in frames if f in set(done)]
+    while f + 1 in have:
+        f += 1  # start..f: the unbroken run of frames from the first
+    ok = [c for c in sorted(int(p.stem) for p in folder.glob("[0-9]*.npz")) if c <= f]
     return ok[-1] if ok else None
 

@@ -67,3 +67,52 @@ def test_clean_asks_before_deleting_a_simulation(two_variants, capsys, monkeypat
     assert "--yes" in capsys.readouterr().err and sim.is_dir()
     assert main(["clean", str(shot), "--cache", str(cache), "--yes"]) == 0
     assert not sim.exists() and not plain.entries()["surface"].root.exists()
+
+
+SLOW = """
+import sys, time
+import mpmfx.stages.simulate as sim
+_write = sim._write_frame
+def slow(*a, **k):
+    _write(*a, **k)
+    time.sleep(0.5)   # keep the run busy while the test tries a second one
+sim._write_frame = slow
+from mpmfx.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_a_second_run_on_a_busy_shot_stops_and_names_the_first(tmp_path, capsys):
+    import subprocess
+    import sys
+    import time
+    shot = write_tiny_shot(tmp_path, frame_end=8)
+    cache = tmp_path / "cache"
+    proc = subprocess.Popen([sys.executable, "-c", SLOW, "run", str(shot), "--until", "simulate", "--cache",
+                             str(cache), "-q"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    run = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
+    frames = run.entries()["simulate"].frames_dir
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list(frames.glob("[0-9]*.npz"))) < 2 and proc.poll() is None:
+        time.sleep(0.05)
+    assert proc.poll() is None, "the first run must still be going"
+    code = main(["run", str(shot), "--until", "simulate", "--force", "simulate", "--cache", str(cache), "-q"])
+    err = capsys.readouterr().err
+    assert code == 1 and f"pid {proc.pid}" in err and "another run" in err
+    assert main(["clean", str(shot), "--cache", str(cache), "--yes"]) == 1
+    assert proc.wait(timeout=120) == 0, proc.stderr.read()
+    entry = run.entries()["simulate"]
+    assert entry.complete(list(range(1, 9))) and entry.done_frames("npz") == list(range(1, 9))
+
+
+def test_a_lost_frame_is_redone_not_trusted(tmp_path):
+    """A frame deleted from a complete entry: the entry is partial, and a run makes it whole again."""
+    shot = write_tiny_shot(tmp_path, frame_end=4)
+    run = mpmfx.load_shot(shot, cache_root=tmp_path / "c", quiet=True)
+    run.run(until="simulate")
+    sim = run.entries()["simulate"]
+    before = sim.frame_path(2, "npz").read_bytes()
+    sim.frame_path(2, "npz").unlink()
+    assert {s.stage: s.state for s in run.status()}["simulate"] == "partial"
+    assert {r.stage: r.state for r in run.run(until="simulate")}["simulate"] == "resumed"
+    assert sim.frame_path(2, "npz").read_bytes() == before and sim.complete(list(range(1, 5)))
