@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import datetime
+import errno
 import fcntl
 import hashlib
 import json
@@ -28,7 +29,7 @@ import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 MANIFEST_SCHEMA = 1
 
@@ -90,21 +91,41 @@ def stage_key(stage: str, version: int, params: dict, upstream: dict[str, str], 
     return hashlib.sha256(canonical_json(payload).encode()).hexdigest()
 
 
+class WriteError(OSError):
+    """A writer returned without error but left an incomplete or unreadable file (a full disk:
+    some C++ writers, pyopenvdb's among them, report nothing)."""
+
+
 @contextlib.contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
+def atomic_path(path: str | Path, *, verify: Callable[[Path], object] | None = None) -> Iterator[Path]:
     """Yield a fresh temp path beside `path` with the same suffix (writers such as USD pick the
     format from it); rename it over `path` on success, delete it on failure, so `path` is
-    complete or untouched. The writer creates the temp file itself, so it gets the usual
-    (umask) permissions that a farm user reading the cache needs."""
+    complete or untouched. Before the rename the temp file must exist, be non-empty and pass
+    `verify(tmp)` (which raises or returns False for a bad file): else WriteError.
+    The writer creates the temp file itself, so it gets the usual (umask) permissions that a
+    farm user reading the cache needs."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp_path = path.with_name(f".{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
     try:
         yield tmp_path
+        _verify(tmp_path, path, verify)
         os.replace(tmp_path, path)
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+def _verify(tmp: Path, path: Path, verify: Callable[[Path], object] | None) -> None:
+    try:
+        ok = tmp.stat().st_size > 0 and (verify is None or verify(tmp) is not False)
+    except Exception as exc:  # noqa: BLE001 - any failure to read it back means a bad file
+        ok, why = False, f" ({type(exc).__name__}: {exc})"
+    else:
+        why = ""
+    if not ok:
+        raise WriteError(errno.EIO, f"the written file is incomplete or unreadable{why}; is the disk full? "
+                         f"free space (or point --cache / $MPMFX_CACHE at a larger disk) and run again", str(path))
 
 
 def write_json(path: str | Path, data: Any) -> None:

@@ -88,7 +88,23 @@ def main(argv: list[str] | None = None) -> int:
         if isinstance(exc, (StageError, BusyError)):
             print(f"error: {exc}", file=sys.stderr)
             return 1
+        if isinstance(exc, OSError) and exc.filename:
+            print(f"error: {_os_message(exc)}", file=sys.stderr)
+            return 1
         raise
+
+
+def _os_message(exc: OSError) -> str:
+    """A file system error as the path and what to do (no traceback)."""
+    import errno
+    keep = "complete frames are kept: run again to resume"
+    if exc.errno == errno.ENOSPC:
+        return (f"no space left on the device writing {exc.filename}: free space, or point --cache "
+                f"(or $MPMFX_CACHE) at a larger disk; {keep}")
+    if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        return (f"permission denied writing {exc.filename}: make it writable for this user, or point "
+                f"--cache (or $MPMFX_CACHE) at a folder you own; {keep}")
+    return f"{exc.filename}: {exc.strerror}; {keep}"
 
 
 def _dispatch(args) -> int:

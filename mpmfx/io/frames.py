@@ -30,7 +30,11 @@ def write_arrays(path: str | Path, arrays: dict[str, np.ndarray], *,
     """
     path = Path(path)
     squeeze = set(arrays) if compress is True else set(compress or ())
-    with atomic_path(path) as tmp, zipfile.ZipFile(tmp, "w") as zf:
+    def readable(tmp: Path) -> bool:  # the central directory is written last: a cut file has none
+        with zipfile.ZipFile(tmp) as zf:
+            return len(zf.namelist()) == len(arrays) + 1
+
+    with atomic_path(path, verify=readable) as tmp, zipfile.ZipFile(tmp, "w") as zf:
         for name, value in {"_format": np.int32(FRAME_FORMAT), **arrays}.items():
             buf = io.BytesIO()
             np.lib.format.write_array(buf, np.asanyarray(value), allow_pickle=False)

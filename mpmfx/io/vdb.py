@@ -171,7 +171,10 @@ def write_vdb(path: str | Path, grids: Sequence[VdbGrid], *, metadata: dict[str,
     file_metadata = _check_metadata(metadata, path)
     vdb = import_pyopenvdb()
     vdb_grids = [_build_grid(vdb, g, values) for g, values in checked]
-    with atomic_path(path) as tmp:
+    def readable(tmp: Path) -> bool:  # pyopenvdb reports no error when a write fails: read it back
+        return sorted(g.name for g in vdb.readAllGridMetadata(str(tmp))) == sorted(names)
+
+    with atomic_path(path, verify=readable) as tmp:
         vdb.write(str(tmp), grids=vdb_grids, metadata=file_metadata)
     return path
 

@@ -121,6 +121,8 @@ class ShotRun:
                 continue
             for rel in entry.damaged():  # lost or truncated since the manifest: redo, never trust
                 (entry.root / rel).unlink(missing_ok=True)
+                if mod.PER_FRAME and Path(rel).stem.isdigit():  # e.g. vdb/g/0003.vdb: redo frame 3
+                    entry.frame_path(int(Path(rel).stem), mod.FRAME_EXT).unlink(missing_ok=True)
             state = "resumed" if entry.root.exists() else "ran"
             up = {s: entries[s] for s in STAGES[: STAGES.index(name)]}
             ctx = Context(self.shot, entry, up, wanted if wanted is not None else [], self.device, self.quiet)

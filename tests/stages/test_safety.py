@@ -116,3 +116,70 @@ def test_a_lost_frame_is_redone_not_trusted(tmp_path):
     assert {s.stage: s.state for s in run.status()}["simulate"] == "partial"
     assert {r.stage: r.state for r in run.run(until="simulate")}["simulate"] == "resumed"
     assert sim.frame_path(2, "npz").read_bytes() == before and sim.complete(list(range(1, 5)))
+
+
+def _truncating_vdb(monkeypatch):
+    """pyopenvdb as on a full disk: the write 'succeeds' and leaves half a file."""
+    import mpmfx.io.vdb as vdb_io
+    real = vdb_io.import_pyopenvdb()
+
+    class Full:
+        def __getattr__(self, name):
+            return getattr(real, name)
+
+        @staticmethod
+        def write(path, **kw):
+            real.write(path, **kw)
+            with open(path, "r+b") as f:
+                f.truncate(os.path.getsize(path) // 2)
+
+    monkeypatch.setattr(vdb_io, "import_pyopenvdb", lambda: Full())
+
+
+def test_a_failing_vdb_writer_leaves_nothing_under_a_final_name(tmp_path, monkeypatch, capsys):
+    from mpmfx.io.vdb import read_vdb
+    shot = write_tiny_shot(tmp_path, frame_end=3)
+    cache = tmp_path / "c"
+    _truncating_vdb(monkeypatch)
+    assert main(["run", str(shot), "--until", "export", "--cache", str(cache), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert ".vdb" in err and "disk" in err and "Traceback" not in err
+    run = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
+    export = run.entries()["export"]
+    assert not list(export.root.rglob("*.vdb")) and not export.done_frames("usdc")  # no half-made frame
+    monkeypatch.undo()
+    assert main(["run", str(shot), "--until", "export", "--cache", str(cache), "-q"]) == 0
+    vdbs = sorted(export.root.rglob("[0-9]*.vdb"))
+    assert len(vdbs) == 3 and all(read_vdb(p)["grids"] for p in vdbs)
+    with open(vdbs[1], "r+b") as f:  # damaged after the fact: no longer trusted as cached
+        f.truncate(100)
+    assert {s.stage: s.state for s in run.status()}["export"] == "partial"
+    assert {r.stage: r.state for r in run.run(until="export")}["export"] == "resumed"
+    assert read_vdb(vdbs[1])["grids"]
+
+
+@pytest.mark.parametrize("errno_, words", [(28, "free space"), (13, "permission")])
+def test_disk_full_and_permission_errors_name_the_path_and_the_fix(tmp_path, monkeypatch, capsys, errno_, words):
+    import mpmfx.io.frames as frames
+    shot = write_tiny_shot(tmp_path, frame_end=3)
+    real = frames.write_arrays
+
+    def failing(path, arrays, **kw):
+        if "frames" in str(path):
+            raise OSError(errno_, os.strerror(errno_), str(path))
+        return real(path, arrays, **kw)
+
+    monkeypatch.setattr(frames, "write_arrays", failing)
+    assert main(["run", str(shot), "--until", "simulate", "--cache", str(tmp_path / "c"), "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "0001.npz" in err and words in err.lower() and "Traceback" not in err
+
+
+def test_temp_files_of_a_killed_run_are_removed_by_the_next(tmp_path):
+    shot = write_tiny_shot(tmp_path, frame_end=2)
+    run = mpmfx.load_shot(shot, cache_root=tmp_path / "c", quiet=True)
+    orphan = run.entries()["simulate"].frames_dir / ".0002.4242-deadbeef.tmp.npz"
+    orphan.parent.mkdir(parents=True)
+    orphan.write_bytes(b"half a frame")
+    run.run(until="voxelise")
+    assert not orphan.exists()
