@@ -41,6 +41,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--frames", type=_frames, default=None, metavar="A:B", help="only these frames (inclusive)")
     r.add_argument("--device", choices=("cpu", "cuda"), default=None, help="Warp device (default: cuda if present)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    r.add_argument("--strict", action="store_true", help="exit 1 when the QA flags a frame (CI, farms)")
     e = shot_cmd("export", "run export alone from the cached upstream stages")
     e.add_argument("--frames", type=_frames, default=None, metavar="A:B")
     s = shot_cmd("status", "each stage: cached, partial, stale or missing, and why")
@@ -130,8 +131,13 @@ def _dispatch(args) -> int:
                     device=getattr(args, "device", None), quiet=getattr(args, "quiet", False))
     if args.cmd == "run":
         results = run.run(until=args.until, force=args.force, frames=args.frames)
-        _print_table(["stage", "result", "wall s", "frames"],
-                     [[r.stage, r.state, f"{r.seconds:.1f}", str(r.frames)] for r in results])
+        _print_table(["stage", "result", "wall s", "frames", "qa"],
+                     [[r.stage, r.state, f"{r.seconds:.1f}", str(r.frames),
+                       f"{r.flagged} frame{'s' * (r.flagged != 1)} flagged" if r.flagged else ""] for r in results])
+        flagged = sum(r.flagged for r in results)
+        if flagged and args.strict:
+            print(f"error: --strict: the QA flags {flagged} frame(s) (see above)", file=sys.stderr)
+            return 1
         return 0
     if args.cmd == "export":
         results = run.run(until="export", frames=args.frames)

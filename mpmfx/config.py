@@ -187,6 +187,8 @@ class Shot(_Section):
     render: Render = Render()
     # Not part of the schema's TOML: where the file lives (relative paths resolve from here).
     base_dir: Path = Field(Path("."), exclude=True)
+    source: Path | None = Field(None, exclude=True)                # the shot file, for messages
+    overrides: tuple[str, ...] = Field((), exclude=True)           # the --set values it was loaded with
 
     @property
     def frames(self) -> range:
@@ -315,7 +317,8 @@ def load_shot_config(path: str | Path, overrides: list[str] = ()) -> Shot:
         key, value = parse_override(text)
         apply_override(data, key, value, source=str(path))
     try:
-        shot = Shot.model_validate({**data, "base_dir": path.resolve().parent})
+        shot = Shot.model_validate({**data, "base_dir": path.resolve().parent, "source": path,
+                                    "overrides": tuple(overrides)})
     except ValidationError as exc:
         by_key: dict[str, str] = {}
         for e in exc.errors():  # a union (float | bool) reports each member: its first error per key

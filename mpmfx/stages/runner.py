@@ -29,6 +29,7 @@ class StageResult:
     seconds: float
     frames: int
     entry: Path
+    flagged: int = 0    # frames the QA flags (simulate only)
 
 
 @dataclass
@@ -105,7 +106,14 @@ class ShotRun:
                                 f"{self.shot.shot.frame_start}..{self.shot.shot.frame_end}")
         with self.cache.lock():
             self.cache.remove_orphans()
-            return self._run_locked(until, force, frames)
+            results = self._run_locked(until, force, frames)
+        for r in results:
+            if r.stage == "simulate":  # cached or not: bad physics is said every time
+                from mpmfx.stages.qa import shot_flags, warn_flags
+                bad = shot_flags(self.shot, (self.entries()["simulate"].manifest() or {}).get("qa", {}))
+                warn_flags(bad, str(self.shot.source or "SHOT"))
+                r.flagged = len(bad)
+        return results
 
     def _run_locked(self, until: str, force, frames: list[int] | None) -> list[StageResult]:
         entries = self.entries()
