@@ -132,6 +132,8 @@ class Solver(_Section):
     out_of_domain: Literal["clamp", "remove"] = Field(_SOLVER.out_of_domain.value, description="Particles "
                                                       "reaching the domain edge: clamped in, or removed and "
                                                       "counted in the QA.")
+    max_substeps_per_frame: Int = Field(_SOLVER.max_substeps_per_frame, description="A frame needing more "
+                                        "substeps stops the run with advice (a runaway guard).")
     checkpoint_every: Int = Field(5, ge=1, description="Frames between full-state checkpoints (resume points).")
 
     @field_validator("walls")

@@ -40,7 +40,14 @@ _SYMPTOM = "Everything explodes / NaNs"  # the guide §9.3 row the errors point 
 
 
 class SimulationError(RuntimeError):
-    """The solver cannot continue without a knob change; the message says which."""
+    """The solver cannot continue without a knob change; the message says which. `field`: the
+    SolverConfig knob whose limit was hit ("dt_min", "max_substeps_per_frame") or None;
+    `needed`: what would have passed it (the substep dt in s, or the substeps the frame needs),
+    so a caller can phrase the advice in its own keys."""
+
+    def __init__(self, message: str, *, field: str | None = None, needed: float | None = None):
+        super().__init__(message)
+        self.field, self.needed = field, needed
 
 
 @dataclass
@@ -333,7 +340,8 @@ class Solver:
                 raise SimulationError(
                     f"t={t0 + done / cfg.time_scale:.4f}s: {substeps} substeps did not reach t1={t1:.4f}s "
                     f"(dt ~ {dt_cfl:.3g}s, c_max {self.wave_speed(state.clock):.3g} domain/s). Raise "
-                    f"SolverConfig.max_substeps_per_frame, or lower youngs_modulus / bulk_modulus / grid_n")
+                    f"SolverConfig.max_substeps_per_frame, or lower youngs_modulus / bulk_modulus / grid_n",
+                    field="max_substeps_per_frame", needed=substeps + math.ceil(remaining / dt_cfl))
             last = remaining <= dt_cfl * (1.0 + 1e-6)
             dt = remaining if last else (0.5 * remaining if remaining < 2.0 * dt_cfl else dt_cfl)
             ts0 = t0 + done / cfg.time_scale
@@ -383,8 +391,9 @@ class Solver:
             f"t={t:.4f}s: the substep fell to dt={dt:.3g}s < dt_min={self.config.dt_min:g}s "
             f"({state.n} particles, max speed {state.clock.max_speed:.3g} domain/s, c_max "
             f"{self.wave_speed(state.clock):.3g} domain/s); {what}, in {', '.join(names)} "
-            f"('{_SYMPTOM}', guide §9.3). Lower youngs_modulus / bulk_modulus, raise damping, or "
-            f"lower SolverConfig.cfl (<= 0.5); or lower SolverConfig.dt_min if this dt is intended")
+            f"('{_SYMPTOM}', guide §9.3). Lower youngs_modulus / bulk_modulus or raise damping; "
+            f"or lower SolverConfig.dt_min if this dt is intended (a lower cfl only shrinks dt further)",
+            field="dt_min", needed=dt)
 
     def _describe_material(self, i: int) -> str:
         m = self.materials[i]

@@ -109,7 +109,7 @@ def run(ctx: Context) -> dict:
         try:
             report = solver.advance(state, (f - 1 - start) / fps, (f - start) / fps)
         except SimulationError as exc:
-            raise StageError(f"frame {f}: {exc}") from None
+            raise StageError(f"frame {f}: {_advice(shot, exc)}") from None
         _write_frame(ctx, solver, state, f, origin, size)
         write_json(entry.root / "qa" / f"{f:04d}.json", _qa(report, size))
         if (f - start) % shot.solver.checkpoint_every == 0 or f == last:
@@ -118,6 +118,23 @@ def run(ctx: Context) -> dict:
     n = solver.state_to_numpy(state)["x"].shape[0]
     return {"qa": qa, "particles": int(n), "device": str(solver.device),
             "materials": [m.mode.name for m in mats]}
+
+
+def _advice(shot: Shot, exc) -> str:
+    """The solver's diagnosis with its advice in shot keys, each a `--set` that helps here
+    (the solver's own text names SolverConfig fields, which a shot file cannot set)."""
+    what = str(exc).split(". Lower", 1)[0].split(". Raise", 1)[0]
+    stiff = " or ".join(f"objects[{i}].overrides.youngs_modulus" for i in range(len(shot.objects)))
+    if exc.field == "dt_min":
+        dt = float(f"{exc.needed / 10:.0e}")  # a decade of room: the step keeps shrinking as things speed up
+        return (f"{what}. If this material is meant to be this stiff, --set solver.dt_min={dt:g} (not a "
+                f"smaller solver.cfl: it would only shrink the step further); else soften it ({stiff}) or raise "
+                f"solver.damping")
+    if exc.field == "max_substeps_per_frame":
+        n = 2 * int(exc.needed)
+        return (f"{what}. --set solver.max_substeps_per_frame={n} (about {int(exc.needed)} are needed), "
+                f"or soften the stiffest material ({stiff}) or lower domain.grid_n")
+    return str(exc)
 
 
 def _write_frame(ctx, solver, state, frame: int, origin, size: float) -> None:

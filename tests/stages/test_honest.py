@@ -42,3 +42,21 @@ def test_bad_physics_warns_at_run_time_and_strict_fails(bad_physics, capsys):
     # cached now: the warning stands, and --strict turns it into a failure
     assert main(["run", str(shot), "--until", "simulate", "--cache", str(cache), "-q", "--strict"]) == 1
     assert "frame 3" in capsys.readouterr().err
+
+
+def _advice(err: str) -> list[str]:
+    """The `--set KEY=VALUE` suggestions in an error message."""
+    import re
+    return re.findall(r"--set (\S+=[^\s;,)]+)", err)
+
+
+@pytest.mark.parametrize("setting", ["solver.dt_min=0.005", "solver.max_substeps_per_frame=3"])
+def test_advice_names_shot_keys_and_following_it_helps(tmp_path, capsys, setting):
+    shot = write_tiny_shot(tmp_path, frame_end=2)
+    args = ["run", str(shot), "--until", "simulate", "--cache", str(tmp_path / "c"), "-q", "--set", setting]
+    assert main(args) == 1
+    err = capsys.readouterr().err
+    assert "SolverConfig" not in err and "lower solver.cfl" not in err.lower()
+    advice = _advice(err)
+    assert advice and advice[0].split("=")[0] == setting.split("=")[0], err
+    assert main([*args, "--set", advice[0]]) == 0, capsys.readouterr().err
