@@ -48,7 +48,7 @@ def child(root: str | Path, *parts: str, what: str = "shot.name") -> Path:
     root = Path(root)
     path = root.joinpath(*parts)
     base = root.resolve()
-    real = path.resolve()
+    real = base.joinpath(*parts)  # the last part is not followed: it may be a link we replace
     if any(p in ("", ".", "..") or "/" in p or os.sep in p for p in parts) or base not in real.parents:
         raise PathError(f"{what} {'/'.join(parts)!r}: resolves to {real}, outside {base}; "
                         f"use letters, digits, '_', '-' and '.', not starting with '.'")

@@ -134,6 +134,7 @@ def _dispatch(args) -> int:
         _print_table(["stage", "result", "wall s", "frames", "qa"],
                      [[r.stage, r.state, f"{r.seconds:.1f}", str(r.frames),
                        f"{r.flagged} frame{'s' * (r.flagged != 1)} flagged" if r.flagged else ""] for r in results])
+        _print_outputs(run, results)
         flagged = sum(r.flagged for r in results)
         if flagged and args.strict:
             print(f"error: --strict: the QA flags {flagged} frame(s) (see above)", file=sys.stderr)
@@ -144,7 +145,7 @@ def _dispatch(args) -> int:
         missing = [r.stage for r in results[:-1] if r.state != "cached"]
         if missing:
             print(f"note: export needed upstream stages first and ran them: {', '.join(missing)}", file=sys.stderr)
-        print(f"USD: {results[-1].entry / 'shot.usda'}")
+        _print_outputs(run, results)
         return 0
     if args.cmd == "status":
         rows = [[s.stage, s.state, s.why, os.path.relpath(s.entry)] for s in run.status()]
@@ -159,6 +160,19 @@ def _dispatch(args) -> int:
             targets = clean_targets(run, stage=args.stage, all_variants=args.all_variants)
             return delete(targets, root=run.cache.root, dry_run=args.dry_run, yes=args.yes)
     raise AssertionError(args.cmd)
+
+
+def _print_outputs(run, results) -> None:
+    """Where every output of this run is: the stable published paths, then the cache entries."""
+    entries = {r.stage: r.entry for r in results}
+    print()
+    if "usd" in run.published:
+        print(f"USD + VDB  {run.published['usd']}  (-> {os.path.relpath(entries['export'])})")
+    if "renders" in run.published:
+        print(f"renders    {run.published['renders']}/  (-> {os.path.relpath(entries['render'])})")
+    for stage in ("simulate", "surface"):
+        if stage in entries:
+            print(f"{stage:<9}  {os.path.relpath(entries[stage])}/frames/")
 
 
 def _print_table(header: list[str], rows: list[list[str]]) -> None:

@@ -1,12 +1,10 @@
 """Stage 5: PNG frames and an mp4 of the surfaces (or the particle debug look).
 
-Output in the cache entry: `frames/NNNN.png` and `<shot>.mp4`; both are then published to
-`renders/<shot>/`, the folder artists look in.
+Output in the cache entry: `frames/NNNN.png`, `<shot>.mp4` and `contact.png`; the runner then
+publishes them to `renders/<shot>/`, the folder artists look in (`mpmfx.publish`), after every
+run, cached or not. Each frame's burned-in label names the --set overrides of its variant.
 """
 from __future__ import annotations
-
-import shutil
-from pathlib import Path
 
 from mpmfx.config import Shot
 from mpmfx.io.frames import ParticleFrame, SurfaceFrame
@@ -21,7 +19,12 @@ def params(shot: Shot) -> dict:
     from mpmfx.render.camera import default_camera
     return {"render": shot.render.model_dump(mode="json"), "camera": default_camera(shot),
             "domain": shot.domain.model_dump(mode="json"), "materials": [o.material for o in shot.objects],
-            "colliders": [c.model_dump(mode="json") for c in shot.colliders]}
+            "colliders": [c.model_dump(mode="json") for c in shot.colliders], "title": title(shot)}
+
+
+def title(shot: Shot) -> str:
+    """The label burned into every frame: the shot and the overrides that made this variant."""
+    return "  ".join([shot.shot.name, *(f"--set {o}" for o in shot.overrides)])
 
 
 def inputs(shot: Shot) -> dict[str, str]:
@@ -36,7 +39,7 @@ def run(ctx: Context) -> dict:
     r = shot.render
     todo = [f for f in ctx.frames if not entry.frame_path(f, FRAME_EXT).exists()]
     renderer = FrameRenderer(size=(r.width, r.height), camera=default_camera(shot),
-                             domain=(shot.domain.origin, shot.domain.size), title=shot.shot.name)
+                             domain=(shot.domain.origin, shot.domain.size), title=title(shot))
     material_of = {g: o.material for g, o in zip(shot.surface_groups(), shot.objects)}
     try:
         for f in ctx.progress(todo, total=len(todo), desc="render"):
@@ -59,8 +62,7 @@ def run(ctx: Context) -> dict:
     if r.movie and len(pngs) > 1:
         movie = write_movie(pngs, entry.root / f"{shot.shot.name}.mp4", fps=shot.shot.fps)
     sheet = contact_sheet(pngs, entry.root / "contact.png") if pngs else None
-    out = publish(shot, pngs, [p for p in (movie, sheet) if p is not None])
-    return {"published": str(out)}
+    return {"movie": str(movie) if movie else None, "contact_sheet": str(sheet) if sheet else None}
 
 
 def _collider_meshes(shot: Shot, frame: int) -> dict:
@@ -75,14 +77,3 @@ def _collider_meshes(shot: Shot, frame: int) -> dict:
         out[f"collider_{col.name}"] = (m.vertices @ xf[:3, :3].T + xf[:3, 3], m.faces, "#9aa0a8")
     return out
 
-
-def publish(shot: Shot, pngs: list[Path], extras: list[Path]) -> Path:
-    """Copy the frames, the movie and the contact sheet to renders/<shot>/ (in the working directory)."""
-    from mpmfx.cache import child
-    out = child("renders", shot.shot.name)
-    out.mkdir(parents=True, exist_ok=True)
-    for p in pngs:
-        shutil.copyfile(p, out / p.name)
-    for p in extras:
-        shutil.copyfile(p, out / p.name)
-    return out

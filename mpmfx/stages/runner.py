@@ -49,6 +49,7 @@ class ShotRun:
         self.cache = Cache(cache_root or default_root(), shot.shot.name)
         self.device = device
         self.quiet = quiet
+        self.published: dict[str, Path] = {}  # what the last run() published: "usd", "renders"
 
     # -- keys ------------------------------------------------------------------------------
     def entries(self) -> dict[str, Entry]:
@@ -107,6 +108,7 @@ class ShotRun:
         with self.cache.lock():
             self.cache.remove_orphans()
             results = self._run_locked(until, force, frames)
+            self.published = self._publish(results)
         for r in results:
             if r.stage == "simulate":  # cached or not: bad physics is said every time
                 from mpmfx.stages.qa import shot_flags, warn_flags
@@ -114,6 +116,17 @@ class ShotRun:
                 warn_flags(bad, str(self.shot.source or "SHOT"))
                 r.flagged = len(bad)
         return results
+
+    def _publish(self, results: list[StageResult]) -> dict[str, Path]:
+        """Every run that reaches export / render publishes them at stable paths (`mpmfx.publish`)."""
+        from mpmfx.publish import publish_renders, publish_stage
+        entries, out = self.entries(), {}
+        done = {r.stage for r in results}
+        if "export" in done:
+            out["usd"] = publish_stage(self.shot, entries["export"])
+        if "render" in done:
+            out["renders"] = publish_renders(self.shot, entries["render"])
+        return out
 
     def _run_locked(self, until: str, force, frames: list[int] | None) -> list[StageResult]:
         entries = self.entries()

@@ -2,6 +2,8 @@
 shot keys and helps, published outputs are the current variant's."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 
 import mpmfx
@@ -60,3 +62,53 @@ def test_advice_names_shot_keys_and_following_it_helps(tmp_path, capsys, setting
     advice = _advice(err)
     assert advice and advice[0].split("=")[0] == setting.split("=")[0], err
     assert main([*args, "--set", advice[0]]) == 0, capsys.readouterr().err
+
+
+def test_publishing_follows_every_run_and_the_label_names_the_overrides(tmp_path, monkeypatch):
+    import json
+
+    import mpmfx.render.frames as frames
+    titles = []
+    real = frames.FrameRenderer
+
+    def spy(**kw):
+        titles.append(kw.get("title", ""))
+        return real(**kw)
+
+    monkeypatch.setattr(frames, "FrameRenderer", spy)
+    monkeypatch.chdir(tmp_path)
+    shot = write_tiny_shot(tmp_path, frame_end=3)
+    cache = tmp_path / "c"
+    out = tmp_path / "renders" / "tiny"
+    plain = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
+    plain.run()
+    first = {p.name: p.read_bytes() for p in out.glob("[0-9]*.png")}
+    variant = ["surface.radius_scale=1.3"]
+    mpmfx.load_shot(shot, overrides=variant, cache_root=cache, quiet=True).run()
+    assert json.loads((out / "published.json").read_text())["overrides"] == variant
+    assert "surface.radius_scale=1.3" in titles[-1] and "radius_scale" not in titles[0]
+    results = plain.run()  # all cached: the plain version is published again
+    assert {r.state for r in results} == {"cached"}
+    assert json.loads((out / "published.json").read_text())["overrides"] == []
+    assert {p.name: p.read_bytes() for p in out.glob("[0-9]*.png")} == first
+
+
+def test_usd_and_vdb_are_published_at_a_stable_path(tmp_path, monkeypatch, capsys):
+    from pxr import Usd, UsdGeom, UsdVol
+    monkeypatch.chdir(tmp_path)
+    shot = write_tiny_shot(tmp_path, frame_end=3)
+    args = ["run", str(shot), "--until", "export", "--cache", str(tmp_path / "c"), "-q"]
+    stable = tmp_path / "published" / "tiny" / "shot.usda"
+    assert main(args) == 0
+    assert "published/tiny/shot.usda" in capsys.readouterr().out  # the closing table says where
+    plain = mpmfx.load_shot(shot, cache_root=tmp_path / "c").entries()["export"].root.resolve()
+    assert main([*args, "--set", "surface.radius_scale=1.5"]) == 0
+    variant = mpmfx.load_shot(shot, overrides=["surface.radius_scale=1.5"], cache_root=tmp_path / "c")
+    assert stable.parent.resolve() == variant.entries()["export"].root.resolve() != plain
+    stage = Usd.Stage.Open(str(stable))  # a DCC opens the stable path: frames and VDBs resolve through it
+    pts = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Elastic/mesh")).GetPointsAttr().Get(3)
+    vol = UsdVol.Volume(stage.GetPrimAtPath("/World/Elastic/volume"))
+    asset = UsdVol.OpenVDBAsset(stage.GetPrimAtPath(vol.GetFieldPath("surface")))
+    assert len(pts) > 0 and Path(asset.GetFilePathAttr().Get(3).resolvedPath).is_file()
+    assert main(args) == 0  # the plain shot again: all cached, and published again
+    assert stable.parent.resolve() == plain
