@@ -25,6 +25,8 @@ def _frames(text: str) -> list[int]:
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="mpmfx", description="Meshes to simulated, surfaced and rendered MPM "
                                 "snow, sand, mud, water and jelly.")
+    from mpmfx import __version__
+    p.add_argument("--version", action="version", version=f"mpmfx {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
 
     def shot_cmd(name, help_):
@@ -123,6 +125,8 @@ def _dispatch(args) -> int:
         return run_check(args.asset, grid_n=args.grid_n, origin=origin, size=size, as_json=args.json)
     if args.cmd == "bench":
         from mpmfx.bench import main as bench_main
+        from mpmfx.stages.base import quiet_warp
+        quiet_warp()  # stdout carries the benchmark's tables only, never Warp's banner
         return bench_main(args.what, quick=args.quick, device=args.device, out=args.out, peers=args.peers,
                           counts=args.counts)
 

@@ -72,12 +72,20 @@ def print_qa(run) -> int:
         return 1
     qa = {int(k): v for k, v in man["qa"].items()}
     bad = shot_flags(run.shot, qa)
-    cols = ["mass", "kinetic_energy", "elastic_energy", "j_min", "j_max", "max_speed", "substeps",
-            "rejected_substeps", "cfl_used"]
-    print("frame  " + "  ".join(f"{c[:12]:>12}" for c in cols) + "  flags")
+    widths = [max(len(c), len(u), 10) for c, u in QA_COLUMNS.items()]
+    print("frame  " + "  ".join(f"{c:>{w}}" for c, w in zip(QA_COLUMNS, widths)) + "  flags")
+    print("       " + "  ".join(f"{u:>{w}}" for u, w in zip(QA_COLUMNS.values(), widths)))
     for f in sorted(qa):
-        vals = [qa[f].get(c) for c in cols]
-        cells = [f"{v:12.4g}" if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                 else f"{str(v):>12}" for v in vals]
+        vals = [qa[f].get(c) for c in QA_COLUMNS]
+        cells = [f"{v:{w}.4g}" if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+                 else f"{'-' if v is None else str(v):>{w}}" for v, w in zip(vals, widths)]
         print(f"{f:5d}  " + "  ".join(cells) + "  " + "; ".join(bad.get(f, [])))
+    print(f"frame {min(qa)} is the initial state (no step). Mass and energies are in the solver's domain units "
+          f"(the presets' units: density x domain^3, x domain^2/s^2), comparable frame to frame.")
     return 0
+
+
+# what `status --qa` prints, with units: "domain" = the solver's normalised domain (guide section 2)
+QA_COLUMNS = {"mass": "domain", "kinetic_energy": "domain", "elastic_energy": "domain", "j_min": "1",
+              "j_max": "1", "max_speed": "m/s", "substeps": "count", "rejected_substeps": "count",
+              "cfl_used": "1 (cap 1)"}

@@ -4,7 +4,9 @@ World units stop here: particles enter the solver in the normalised domain [0,1]
 (x_dom = (x - origin) / size, v_dom = v / size, gravity_dom = g / size; guide section 2) and
 frames are written back in world units. Frames: `frames/NNNN.npz` with x, v (n,3) float32
 (m, m/s), id, material, body (n,) int32 and Jp, J (n,) float32; `checkpoints/NNNN.npz` hold the
-full solver state every `solver.checkpoint_every` frames so a killed run resumes exactly.
+full solver state every `solver.checkpoint_every` frames (default every frame; the last
+KEEP_CHECKPOINTS are kept), written just before the frame file, so a killed run resumes
+exactly from its last complete frame.
 Frame files are `mpmfx.io.frames.ParticleFrame` records.
 """
 from __future__ import annotations
@@ -101,19 +103,25 @@ def run(ctx: Context) -> dict:
                           volume=(p.volume / size**3).astype(np.float32),
                           material=np.asarray(obj_mat, np.int32)[body], body=body)
         state, frame = solver.init_state(parts), start
+        qa0 = _qa(solver.advance(state, 0.0, 0.0), size)  # a zero-length advance: the initial observables
+        qa0["max_speed"] = float(np.linalg.norm(p.v, axis=1).max())  # m/s; no substep measured it
+        write_json(entry.root / "qa" / f"{start:04d}.json", qa0)
         _write_frame(ctx, solver, state, frame, origin, size)
     else:
         frame = ckpt
         state, _ = solver.restore(read_arrays(entry.root / "checkpoints" / f"{ckpt:04d}.npz"))
+        if not entry.frame_path(frame, FRAME_EXT).exists():  # killed between checkpoint and frame
+            _write_frame(ctx, solver, state, frame, origin, size)
     for f in ctx.progress(range(frame + 1, last + 1), total=last - frame, desc="simulate"):
         try:
             report = solver.advance(state, (f - 1 - start) / fps, (f - start) / fps)
         except SimulationError as exc:
             raise StageError(f"frame {f}: {_advice(shot, exc)}") from None
-        _write_frame(ctx, solver, state, f, origin, size)
+        # QA and checkpoint before the frame file: a complete frame always has its resume point
         write_json(entry.root / "qa" / f"{f:04d}.json", _qa(report, size))
         if (f - start) % shot.solver.checkpoint_every == 0 or f == last:
             _checkpoint(entry.root / "checkpoints", solver, state, f, (f - start) / fps)
+        _write_frame(ctx, solver, state, f, origin, size)
     qa = {int(p.stem): json.loads(p.read_text()) for p in sorted((entry.root / "qa").glob("*.json"))}
     n = solver.state_to_numpy(state)["x"].shape[0]
     return {"qa": qa, "particles": int(n), "device": str(solver.device),
@@ -166,13 +174,14 @@ def _checkpoint(folder: Path, solver, state, frame: int, t: float) -> None:
 
 
 def _latest_checkpoint(folder: Path, done: list[int], start: int) -> int | None:
-    """The newest checkpoint up to which every frame file exists (a frame is written before its
-    checkpoint; a frame lost later must be redone, so resume before it)."""
-    have, f = set(done), start
-    if not folder.is_dir() or start not in have:
+    """The newest checkpoint c with every frame file before it present (c's own frame may be
+    missing: a checkpoint is written just before its frame, and resuming writes it; a frame lost
+    later must be redone, so resume before it)."""
+    have, f = set(done), start - 1
+    if not folder.is_dir():
         return None
     while f + 1 in have:
         f += 1  # start..f: the unbroken run of frames from the first
-    ok = [c for c in sorted(int(p.stem) for p in folder.glob("[0-9]*.npz")) if c <= f]
+    ok = [c for c in sorted(int(p.stem) for p in folder.glob("[0-9]*.npz")) if start < c <= f + 1]
     return ok[-1] if ok else None
 

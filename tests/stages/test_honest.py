@@ -112,3 +112,39 @@ def test_usd_and_vdb_are_published_at_a_stable_path(tmp_path, monkeypatch, capsy
     assert len(pts) > 0 and Path(asset.GetFilePathAttr().Get(3).resolvedPath).is_file()
     assert main(args) == 0  # the plain shot again: all cached, and published again
     assert stable.parent.resolve() == plain
+
+
+def test_status_qa_has_units_whole_headers_and_the_first_frame(tmp_path, capsys):
+    shot = write_tiny_shot(tmp_path, frame_end=3)
+    args = [str(shot), "--cache", str(tmp_path / "c")]
+    assert main(["run", *args, "--until", "simulate", "-q"]) == 0
+    capsys.readouterr()
+    assert main(["status", *args, "--qa"]) == 0
+    out = capsys.readouterr().out
+    assert "kinetic_energy" in out and "rejected_substeps" in out and "m/s" in out
+    rows = [line.split()[0] for line in out.splitlines() if line.strip()[:1].isdigit()]
+    assert rows == ["1", "2", "3"]
+
+
+def test_version_and_no_warp_banner_on_stdout():
+    import subprocess
+    import sys
+    out = subprocess.run([sys.executable, "-m", "mpmfx.cli", "--version"], capture_output=True, text=True)
+    assert out.returncode == 0 and out.stdout.strip() == f"mpmfx {mpmfx.__version__}"
+    code = ("import sys, mpmfx.bench as b, mpmfx.cli as c\n"
+            "b.main = lambda *a, **k: (__import__('warp').init(), 0)[1]\n"
+            "sys.exit(c.main(['bench', 'solver', '--quick']))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0 and "Warp" not in out.stdout
+
+
+def test_a_nan_mesh_vertex_is_bad_input_exit_2(tmp_path, capsys):
+    shot = write_tiny_shot(tmp_path)
+    lines = (tmp_path / "cube.obj").read_text().splitlines()
+    first_v = next(i for i, line in enumerate(lines) if line.startswith("v "))
+    lines[first_v] = "v nan 0.125 0.125"
+    (tmp_path / "cube.obj").write_text("\n".join(lines) + "\n")
+    assert main(["check", str(tmp_path / "cube.obj")]) == 2
+    assert "NaN" in capsys.readouterr().err
+    assert main(["run", str(shot), "--until", "voxelise", "--cache", str(tmp_path / "c"), "-q"]) == 2
+    assert "NaN" in capsys.readouterr().err

@@ -183,3 +183,31 @@ def test_temp_files_of_a_killed_run_are_removed_by_the_next(tmp_path):
     orphan.write_bytes(b"half a frame")
     run.run(until="voxelise")
     assert not orphan.exists()
+
+
+def test_a_killed_simulation_resumes_from_its_last_complete_frame(tmp_path):
+    """The README's promise, with the default checkpoints: killed after frame 3 (of 8, before the
+    first checkpoint of the old every-5 default), the next run keeps frames 1-3 as they are."""
+    import signal
+    import subprocess
+    import sys
+    import time
+    shot = write_tiny_shot(tmp_path, frame_end=8)
+    shot.write_text(shot.read_text().replace("checkpoint_every = 2\n", ""))  # the default
+    ref = mpmfx.load_shot(shot, cache_root=tmp_path / "ref", quiet=True).run(until="simulate")[1].entry
+    cache = tmp_path / "killed"
+    proc = subprocess.Popen([sys.executable, "-c", SLOW, "run", str(shot), "--until", "simulate", "--cache",
+                             str(cache), "-q"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    run = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
+    frames = run.entries()["simulate"].frames_dir
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list(frames.glob("[0-9]*.npz"))) < 3:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    kept = {p.name: p.stat().st_ino for p in frames.glob("[0-9]*.npz")}
+    assert 3 <= len(kept) < 8
+    assert {r.stage: r.state for r in run.run(until="simulate")}["simulate"] == "resumed"
+    assert {n: (frames / n).stat().st_ino for n in kept} == kept  # not one complete frame redone
+    assert [p.read_bytes() for p in sorted(frames.glob("*.npz"))] == \
+        [p.read_bytes() for p in sorted((ref / "frames").glob("*.npz"))]
