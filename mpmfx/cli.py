@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 from mpmfx.stages import STAGES
 
@@ -53,6 +54,14 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--all-variants", action="store_true", help="every variant's entries, not only this one's")
     c.add_argument("--dry-run", action="store_true", help="list what would be deleted, delete nothing")
     c.add_argument("-y", "--yes", action="store_true", help="delete a simulation without asking")
+
+    m = sub.add_parser("cache", help="cache housekeeping")
+    m.add_argument("action", choices=("prune",), help="prune: delete old variants (listed with sizes first)")
+    m.add_argument("--keep", type=int, default=2, metavar="N", help="newest variants kept per shot and stage "
+                   "(entries a published output uses are always kept)")
+    m.add_argument("--cache", default=None, help="cache root (default $MPMFX_CACHE or ./cache)")
+    m.add_argument("--dry-run", action="store_true", help="list what would be deleted, delete nothing")
+    m.add_argument("-y", "--yes", action="store_true", help="delete simulations without asking")
 
     k = sub.add_parser("check", help="five-cell thickness check of an asset (exit 0 pass/warn, 1 fail, 2 bad input)")
     k.add_argument("asset", help="mesh file (obj, ply, stl, glb, gltf, usd)")
@@ -130,6 +139,9 @@ def _dispatch(args) -> int:
         return bench_main(args.what, quick=args.quick, device=args.device, out=args.out, peers=args.peers,
                           counts=args.counts)
 
+    if args.cmd == "cache":
+        return _prune(args)
+
     from mpmfx.stages.runner import load_shot
     run = load_shot(args.shot, overrides=args.overrides, cache_root=args.cache,
                     device=getattr(args, "device", None), quiet=getattr(args, "quiet", False))
@@ -152,8 +164,14 @@ def _dispatch(args) -> int:
         _print_outputs(run, results)
         return 0
     if args.cmd == "status":
-        rows = [[s.stage, s.state, s.why, os.path.relpath(s.entry)] for s in run.status()]
-        _print_table(["stage", "state", "why", "entry"], rows)
+        from mpmfx.maintain import human, tree_size
+        rows = [[s.stage, s.state, s.why, human(tree_size(s.entry)) if s.entry.exists() else "",
+                 os.path.relpath(s.entry)] for s in run.status()]
+        _print_table(["stage", "state", "why", "disk", "entry"], rows)
+        shot_dir = run.cache.shot_dir
+        if shot_dir.is_dir():
+            print(f"\nall variants of this shot: {human(tree_size(shot_dir))} in {os.path.relpath(shot_dir)} "
+                  f"(`mpmfx clean SHOT --all-variants` or `mpmfx cache prune` to free it)")
         if args.qa:
             from mpmfx.stages.qa import print_qa
             return print_qa(run)
@@ -164,6 +182,27 @@ def _dispatch(args) -> int:
             targets = clean_targets(run, stage=args.stage, all_variants=args.all_variants)
             return delete(targets, root=run.cache.root, dry_run=args.dry_run, yes=args.yes)
     raise AssertionError(args.cmd)
+
+
+def _prune(args) -> int:
+    """`mpmfx cache prune`: every shot of the cache root, each under its lock."""
+    import contextlib
+
+    from mpmfx.cache import Cache, default_root
+    from mpmfx.maintain import delete, prune_targets
+    from mpmfx.publish import published_entries
+    root = Path(args.cache) if args.cache else default_root()
+    if args.keep < 1:
+        print("error: --keep must be at least 1 (clean SHOT --all-variants deletes everything)", file=sys.stderr)
+        return 2
+    if not root.is_dir():
+        print(f"nothing to prune: no cache at {root}")
+        return 0
+    with contextlib.ExitStack() as locks:
+        for shot_dir in sorted(p for p in root.iterdir() if p.is_dir()):
+            locks.enter_context(Cache(root, shot_dir.name).lock())
+        targets = prune_targets(root, keep=args.keep, in_use=published_entries())
+        return delete(targets, root=root, dry_run=args.dry_run, yes=args.yes)
 
 
 def _print_outputs(run, results) -> None:

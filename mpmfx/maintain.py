@@ -64,3 +64,33 @@ def delete(targets: list[Path], *, root: Path, dry_run: bool, yes: bool, verb: s
         child(root, *t.relative_to(root).parts, what="cache entry")  # never outside the root
         shutil.rmtree(t)
     return 0
+
+
+def prune_targets(root: Path, *, keep: int, in_use: set[Path]) -> list[Path]:
+    """Per shot and stage, every entry but the `keep` newest (by manifest time, else folder time)
+    and those `in_use` (resolved paths; with the entries they were made from, so re-running a
+    published variant costs nothing)."""
+    import json
+    protected = set()
+    todo = list(in_use)
+    while todo:  # a used entry's upstream entries are used too
+        entry = todo.pop()
+        if entry in protected or not entry.is_dir():
+            continue
+        protected.add(entry)
+        try:
+            upstream = json.loads((entry / "manifest.json").read_text())["key_inputs"]["upstream"]
+        except (OSError, ValueError, KeyError):
+            continue
+        for stage, key in upstream.items():
+            todo.append((entry.parent.parent / stage / f"{stage}-{key[:12]}").resolve())
+    out = []
+    for stage_dir in sorted(p for p in root.glob("*/*") if p.is_dir() and p.name in STAGES):
+        entries = sorted(stage_dir.glob(f"{stage_dir.name}-*"), key=_written, reverse=True)
+        out += [e for e in entries[keep:] if e.resolve() not in protected]
+    return out
+
+
+def _written(entry: Path) -> float:
+    man = entry / "manifest.json"
+    return (man if man.exists() else entry).stat().st_mtime

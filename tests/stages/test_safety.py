@@ -211,3 +211,30 @@ def test_a_killed_simulation_resumes_from_its_last_complete_frame(tmp_path):
     assert {n: (frames / n).stat().st_ino for n in kept} == kept  # not one complete frame redone
     assert [p.read_bytes() for p in sorted(frames.glob("*.npz"))] == \
         [p.read_bytes() for p in sorted((ref / "frames").glob("*.npz"))]
+
+
+def test_status_reports_sizes_and_prune_keeps_the_newest_and_the_published(tmp_path, monkeypatch, capsys):
+    import time
+    monkeypatch.chdir(tmp_path)
+    shot = write_tiny_shot(tmp_path, frame_end=2)
+    cache = tmp_path / "c"
+    surfaces = []
+    for scale in ("1.1", "1.2", "1.3"):
+        run = mpmfx.load_shot(shot, overrides=[f"surface.radius_scale={scale}"], cache_root=cache, quiet=True)
+        run.run(until="export")
+        surfaces.append(run.entries()["surface"].root)
+        time.sleep(0.05)  # distinct manifest times
+    published_variant = mpmfx.load_shot(shot, overrides=["surface.radius_scale=1.1"], cache_root=cache, quiet=True)
+    published_variant.run(until="export")  # cached, and now the published one: the oldest surface in use
+    capsys.readouterr()
+    assert main(["status", str(shot), "--cache", str(cache)]) == 0
+    out = capsys.readouterr().out
+    assert " kB" in out or " MB" in out
+    assert main(["cache", "prune", "--keep", "1", "--cache", str(cache), "--dry-run"]) == 0
+    assert all(s.is_dir() for s in surfaces)
+    assert main(["cache", "prune", "--keep", "1", "--cache", str(cache), "--yes"]) == 0
+    assert surfaces[0].is_dir()      # the published export uses it (through its upstream key)
+    assert not surfaces[1].exists()  # neither newest nor published
+    assert surfaces[2].is_dir()      # the newest
+    assert published_variant.entries()["simulate"].complete()  # one simulate variant: kept
+    assert (tmp_path / "published" / "tiny" / "shot.usda").is_file()
