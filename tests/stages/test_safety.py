@@ -238,3 +238,32 @@ def test_status_reports_sizes_and_prune_keeps_the_newest_and_the_published(tmp_p
     assert surfaces[2].is_dir()      # the newest
     assert published_variant.entries()["simulate"].complete()  # one simulate variant: kept
     assert (tmp_path / "published" / "tiny" / "shot.usda").is_file()
+
+
+def test_frames_are_stored_compactly_and_byte_deterministic(tmp_path):
+    """Issue 18's measured choices: deflate what shrinks (ints, leaves, faces, vertices)."""
+    import zipfile
+
+    import numpy as np
+
+    from mpmfx.io.frames import GroupSurface, ParticleFrame, SurfaceFrame
+    n = 4000
+    rng = np.random.default_rng(1)
+    p = ParticleFrame(x=rng.random((n, 3), np.float32), v=rng.random((n, 3), np.float32),
+                      id=np.arange(n, dtype=np.int32), material=np.zeros(n, np.int32), body=np.zeros(n, np.int32),
+                      Jp=np.ones(n, np.float32))
+    p.write(tmp_path / "a.npz")
+    p.write(tmp_path / "b.npz")
+    assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
+    with zipfile.ZipFile(tmp_path / "a.npz") as z:
+        stored = {i.filename: i.compress_size / i.file_size for i in z.infolist() if i.file_size > 1000}
+    assert stored["id.npy"] < 0.5 and stored["body.npy"] < 0.1 and stored["Jp.npy"] < 0.1
+    g = GroupSurface(vertices=rng.random((900, 3)).astype(np.float32), faces=np.arange(2700, dtype=np.int32).reshape(-1, 3),
+                     normals=rng.random((900, 3)).astype(np.float32), velocities=rng.random((900, 3)).astype(np.float32),
+                     block_ijk=np.zeros((4, 3), np.int64), blocks=np.full((4, 8, 8, 8), 0.1, np.float32),
+                     inside_ijk=np.zeros((0, 3), np.int64), voxel_size=0.01, background=0.03,
+                     vel_blocks=np.zeros((4, 8, 8, 8, 3), np.float16))
+    SurfaceFrame({"g": g}).write(tmp_path / "s.npz")
+    with zipfile.ZipFile(tmp_path / "s.npz") as z:
+        stored = {i.filename: i.compress_size / i.file_size for i in z.infolist() if i.file_size > 1000}
+    assert stored["g.vel_blocks.npy"] < 0.1 and stored["g.faces.npy"] < 0.5
