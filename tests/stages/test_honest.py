@@ -25,12 +25,13 @@ def bad_physics(tmp_path, monkeypatch):
 
     def qa(report, size):
         d = real(report, size)
-        if d["substeps"] and sim_frame[0] == 3:
-            d |= {"j_min": -0.06, "cfl_used": 1.6}
-        sim_frame[0] += 1
+        if d["substeps"]:  # not the initial state's zero-length advance
+            sim_frame[0] += 1
+            if sim_frame[0] == 3:
+                d |= {"j_min": -0.06, "cfl_used": 1.6}
         return d
 
-    sim_frame = [2]
+    sim_frame = [1]
     monkeypatch.setattr(sim, "_qa", qa)
     return write_tiny_shot(tmp_path, frame_end=4), tmp_path / "c"
 
