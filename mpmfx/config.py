@@ -57,8 +57,9 @@ class SceneObject(_Section):
     prim_path: str | None = Field(None, description="USD files only: the prim whose meshes are taken.")
     material: str = Field("Elastic", description="Preset name from the guide's section 8 (Soft, Mushy, Goopy, Wet, "
                           "Slush, Elastic, Granular, CohesiveGranular, Water, Tracer).")
-    overrides: dict[str, Real | Bool] = Field(default_factory=dict,
-                                               description="Material fields to change, e.g. {youngs_modulus = 3000}.")
+    overrides: dict[str, Real | Bool | str] = Field(
+        default_factory=dict, description="Material fields to change, e.g. {youngs_modulus = 3000} or "
+        "{friction_fit = \"plane_strain\"}.")
     translate: Vec3 = Field((0.0, 0.0, 0.0), description="Translation (m), applied after rotate and scale.")
     rotate: Vec3 = Field((0.0, 0.0, 0.0), description="XYZ Euler rotation (degrees).")
     scale: Real = Field(1.0, gt=0, description="Uniform scale of the mesh file's units to metres.")
@@ -152,7 +153,7 @@ class SurfaceGroup(str, enum.Enum):
 
 
 class Surface(_Section):
-    radius_scale: Real = Field(1.0, gt=0, description="Multiplier on the particle radius (half the spacing).")
+    radius_scale: Real = Field(1.0, gt=0, description="Multiplier on the particle radius (0.6 x the spacing: mpmfx.surface.PARTICLE_RADIUS_PER_SPACING).")
     voxel_size: Real | None = Field(None, gt=0, description="Level-set voxel (m); default half the particle spacing.")
     smooth_iters: Int = Field(2, ge=0, le=50, description="Level-set smoothing passes.")
     dilate: Real = Field(0.0, description="Offset (m): + dilates, - erodes.")

@@ -1,23 +1,23 @@
 """Per-kernel GPU profile of the sparse surfacer (development aid): one bench row per case
-(`mpmfx.surface.bench.measure`: device-resident, median of 3), then the top kernels of one
-more call.
+(`mpmfx.bench.surface_cases.measure`: device-resident, median of 3), then the top kernels of
+one more call.
 
-    python3 scripts/surface_profile.py --count 10000000 --configs 1.0:1 0.5:2
-configs are VOXEL_FACTOR:SMOOTH_ITERS with voxel = factor * particle radius (r = h / 2).
+    python3 scripts/surface_profile.py --count 10000000 --configs 0.6:1 0.5:2
+configs are VOXEL_H:SMOOTH_ITERS with voxel = VOXEL_H * particle spacing h, at the shipped
+particle radius (mpmfx.surface.PARTICLE_RADIUS_PER_SPACING * h).
 """
 import argparse
 
 import warp as wp
 
-from mpmfx.surface.bench import format_row, measure, sample_shape
-from mpmfx.surface.params import SurfaceParams
-from mpmfx.surface.reconstruct import surface_particles
+from mpmfx.bench.surface_cases import format_row, measure, sample_shape
+from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_particles
 
 ap = argparse.ArgumentParser()
 ap.add_argument("--count", type=int, default=10_000_000)
 ap.add_argument("--shapes", nargs="+", default=["sphere"])
 ap.add_argument("--samplings", nargs="+", default=["lattice", "random"])
-ap.add_argument("--configs", nargs="+", default=["1.0:1", "0.5:2"])
+ap.add_argument("--configs", nargs="+", default=["0.6:1", "0.5:2"])
 ap.add_argument("--device", default="cuda")
 args = ap.parse_args()
 wp.config.quiet = True
@@ -27,13 +27,13 @@ for shape in args.shapes:
         x, h = sample = sample_shape(shape, args.count, sampling)
         xd = wp.array(x, dtype=wp.vec3, device=args.device)
         for cfg in args.configs:
-            vf, iters = float(cfg.split(":")[0]), int(cfg.split(":")[1])
+            vh, iters = float(cfg.split(":")[0]), int(cfg.split(":")[1])
             row = measure(shape, args.count, sampling, device=args.device, sample=sample, repeats=3, label=cfg,
-                          voxel_factor=vf, smooth_iters=iters, dense_output=False)
+                          voxel_h=vh, smooth_iters=iters, dense_output=False)
             print(format_row(row), row["stages"], flush=True)
             wp.timing_begin(cuda_filter=wp.TIMING_ALL)
-            surface_particles(xd, None, SurfaceParams(0.5 * h, voxel_size=vf * 0.5 * h, smooth_iters=iters,
-                                                      dense_output=False))
+            surface_particles(xd, None, SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=vh * h,
+                                                      smooth_iters=iters, dense_output=False))
             agg = {}
             for r in wp.timing_end():
                 a = agg.setdefault(r.name.split("(")[0][:50], [0, 0.0])

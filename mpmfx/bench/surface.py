@@ -1,6 +1,6 @@
 """`mpmfx bench surface`: the surfacer and its peers on particles sampled in analytic shapes (validation.md 6).
 
-Thin wrapper over `mpmfx.surface.bench`: --quick runs 100k particles (CPU-sized) with
+Thin wrapper over `mpmfx.bench.surface_cases`: --quick runs 100k particles (CPU-sized) with
 splashsurf where it is installed; the full run 1M and 10M (GPU) with every peer that is
 installed (splashsurf on the CPU, Newton isotropic and anisotropic on the GPU), each method
 timed as the median of 3 calls after a warm-up. All methods see the same particles. Prints one
@@ -21,7 +21,7 @@ def choose_peers(peers: Sequence[str] | None, *, quick: bool) -> list[str]:
     """The peers to run: `peers` as asked (ValueError naming the fix for an unknown or missing
     one), or by default splashsurf for --quick and every peer for the full run, each only where
     its package is installed (the others are named on stdout)."""
-    from mpmfx.surface.peers import PEERS, peer_missing
+    from mpmfx.bench.surface_peers import PEERS, peer_missing
 
     if peers is not None:
         unknown = [p for p in peers if p not in PEERS]
@@ -45,7 +45,7 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
          peers: Sequence[str] | None = None, counts: Sequence[int] | None = None) -> int:
     """Run the sweep; 0 on success, 2 on bad --peers / --counts."""
     from mpmfx.bench.report import write_rows
-    from mpmfx.surface.bench import HEADER, bench_surface
+    from mpmfx.bench.surface_cases import HEADER, bench_surface
 
     try:
         chosen = choose_peers(peers, quick=quick)

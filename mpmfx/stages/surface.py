@@ -28,12 +28,12 @@ def inputs(shot: Shot) -> dict[str, str]:
 
 
 def surface_params(shot: Shot):
-    from mpmfx.surface import SurfaceParams
+    from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams
     s = shot.surface
     h = shot.particle_spacing
     # Default voxel: half the particle spacing, fine enough for a smooth render and ~10x cheaper
     # than the surfacer's own default (a quarter of the radius).
-    return SurfaceParams(particle_radius=0.6 * h, radius_scale=s.radius_scale,
+    return SurfaceParams(particle_radius=PARTICLE_RADIUS_PER_SPACING * h, radius_scale=s.radius_scale,
                          voxel_size=s.voxel_size or 0.5 * h, dense_output=False, smooth_iters=s.smooth_iters, dilate=s.dilate,
                          min_feature_particles=s.min_feature_particles, density=s.density)
 

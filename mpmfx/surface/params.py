@@ -2,30 +2,17 @@
 
 from __future__ import annotations
 
-import enum
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 
-class Method(enum.Enum):
-    """How particles become an implicit field before the level set is extracted."""
-
-    SPHERES = "spheres"
-    """Union of spheres of radius r: blobby; closes a cubic lattice of spacing h only for r > 0.87 h."""
-    ZHU_BRIDSON = "zhu_bridson"
-    """phi = |x - xbar(x)| - r with xbar a kernel-weighted particle average (Zhu & Bridson 2005)."""
-
-
-class Grid(enum.Enum):
-    """Where the field is evaluated."""
-
-    DENSE = "dense"
-    """Every voxel of the particles' bounding box (scatter from particles); simple, O(volume)."""
-    SPARSE = "sparse"
-    """Blocks of 8^3 voxels near the surface only (gather from particles); O(surface area).
-    Falls back to DENSE for Method.SPHERES."""
+PARTICLE_RADIUS_PER_SPACING = 0.6
+"""Particle radius r of the surfacer in units of the particle spacing h, as the surface stage,
+the benchmark and the peers use it (one place). 0.6 h rather than half the spacing: the
+shipped setting since the first shots; with kernel_radius 3.7 it keeps thin one-layer parts
+closed (the README's surfacing table is measured at this radius)."""
 
 
 def kernel_volume(radius: float) -> float:
@@ -38,7 +25,8 @@ def kernel_volume(radius: float) -> float:
 class SurfaceParams:
     """Settings of :func:`mpmfx.surface.surface_particles`. Lengths are world units (m).
 
-    particle_radius: radius r of one particle; the pipeline passes ~0.5-0.6 x particle spacing.
+    particle_radius: radius r of one particle; the pipeline passes PARTICLE_RADIUS_PER_SPACING
+        (0.6) x the particle spacing.
     radius_scale: artist multiplier on r (grows / shrinks the surface; the kernel support stays).
     voxel_size: level-set voxel edge; None -> 0.5 * particle_radius (independent of the sim dx).
         voxel_size = particle_radius with smooth_iters = 1 (the benchmark's "fast") is 2.5-5x
@@ -46,17 +34,15 @@ class SurfaceParams:
     smooth_iters: passes of a [1 2 1]/4 separable blur over the raw field (each ~1 voxel).
     dilate: offset of the surface before smoothing, outward (+) or inward (-).
     min_feature_particles: connected blobs holding fewer particles than this are removed.
-    method: see :class:`Method`.
     band_voxels: narrow-band half width in voxels; the level set is clipped to +-band*voxel.
     kernel_radius: Zhu-Bridson kernel support R in units of particle_radius. With the
         (1 - s^2)^3 kernel the weighted centroid of a half-space ball sits 0.246 R deep, so
         R = 4.06 r puts the zero level on a flat boundary of a continuum; on discrete layers
         3.7 measured best (box faces within 0.02 h, sphere volume +0.3 %, r = 0.5 h).
-    grid: see :class:`Grid`.
-    dense_output: with Grid.SPARSE, also return the level set (and velocity, density) as dense
+    dense_output: also return the level set (and velocity, density) as dense
         arrays over the band's bounding box; False returns only `SurfaceResult.sparse` (the
         dense arrays are then empty) -- what to use at millions of particles.
-    density: with Grid.SPARSE, also return `SparseLevelSet.density`, a fog density (0..1,
+    density: also return `SparseLevelSet.density`, a fog density (0..1,
         dimensionless: kernel weight sum over its bulk value) on the stored leaves, for granular /
         volume looks; False (the default) costs nothing.
     """
@@ -67,10 +53,8 @@ class SurfaceParams:
     smooth_iters: int = 2
     dilate: float = 0.0
     min_feature_particles: int = 0
-    method: Method = Method.ZHU_BRIDSON
     band_voxels: int = 3
     kernel_radius: float = 3.7
-    grid: Grid = Grid.SPARSE
     dense_output: bool = True
     density: bool = False
 
@@ -90,19 +74,12 @@ class SurfaceParams:
             raise bad("dilate", f"got {self.dilate!r}; give a finite length")
         if self.min_feature_particles < 0:
             raise bad("min_feature_particles", f"got {self.min_feature_particles}; give 0 (off) or more")
-        if not isinstance(self.method, Method):
-            raise bad("method", f"got {self.method!r}; use one of {[m.name for m in Method]}")
-        if not isinstance(self.grid, Grid):
-            raise bad("grid", f"got {self.grid!r}; use one of {[g.name for g in Grid]}")
         if self.band_voxels < 1:
             raise bad("band_voxels", f"got {self.band_voxels}; give at least 1 voxel")
         if not (math.isfinite(self.kernel_radius) and self.kernel_radius >= 1.0):
             raise bad("kernel_radius", f"got {self.kernel_radius!r}; give >= 1 (x particle_radius), 3.7 by default")
         if not isinstance(self.density, bool):
             raise bad("density", f"got {self.density!r}; give True or False")
-        if self.density and (self.grid is not Grid.SPARSE or self.method is not Method.ZHU_BRIDSON):
-            raise bad("density", "the fog density comes from the sparse Zhu-Bridson surfacer; "
-                                 "use grid=Grid.SPARSE and method=Method.ZHU_BRIDSON, or density=False")
 
     @property
     def resolved_voxel_size(self) -> float:
@@ -225,7 +202,11 @@ class SurfaceResult:
 
     velocity: (a, b, c, 3) float32 world/s on the level-set grid (kernel-weighted particle
         velocity, 0 where no particle reaches), or None when no velocities were given.
-    density: (a, b, c) float32 particles per m^3 (kernel estimate), or None (SPHERES method).
+    density: (a, b, c) float32 particles per m^3 (kernel estimate).
+    sparse: the level set as 8^3 leaves (what the pipeline stores).
+    stats: how the call went, for benchmarks and logs: cumulative seconds after each stage
+        ("blocks", "field", "topology", "smooth", "mesh"), "device" (all device work) and
+        "download" (the copy to the host), "active_blocks", "fill_rounds" (flood-fill sweeps).
     """
 
     level_set: LevelSet
@@ -233,4 +214,4 @@ class SurfaceResult:
     velocity: np.ndarray | None
     density: np.ndarray | None
     sparse: SparseLevelSet | None = None
-    """Set by Grid.SPARSE."""
+    stats: dict = field(default_factory=dict)

@@ -11,11 +11,13 @@
    outside). Flood fill by line sweeps along block rows (8 voxels of progress per launch),
    which settles in a few rounds because the band is thin;
 4. dilate, renormalise, smooth, give voxels next to a tile the tile's sign, topology again,
-   renormalise to world units (as the dense path);
-5. marching cubes over active cells (warp.geometry's tables), normals and velocities.
+   renormalise to world units;
+5. marching cubes over active cells (Warp's tables, copied in :mod:`mpmfx.surface.mc_tables`),
+   normals and velocities.
 
 Everything runs on the Warp device (`surface_on_device`, a few host syncs for sizes); the host
-copy (`DeviceSurface.download`) is separate, so a caller or the benchmark can leave it out.
+copy (`DeviceSurface.download`) is separate, so a caller or the benchmark can leave it out;
+`SurfaceResult.stats` / `DeviceSurface.stats` say how long each stage took.
 On one H100, 10M particles at voxel = r, one blur: 39-66 ms on the device (README).
 """
 
@@ -35,12 +37,9 @@ log = logging.getLogger(__name__)
 BS = 8
 MAX_BLOCKS = 1 << 28  # block-grid cells (int32 each): 2^28 blocks = 2^37 voxels of bounding box
 MAX_SWEEP_ROUNDS = 1024
+MAX_BLOCK_SWEEP_ROUNDS = 256  # block-grid flood fill (a full line per launch: settles in a few rounds)
 SEED_DEPTH = 0.5  # x particle radius: how deep a particle's voxel must be to seed a genuine inside component
 SEED_DEPTH_SMOOTHED = 0.25  # voxels, the same after smoothing (a lone particle's blob is ~1 voxel deep then)
-
-last_stats: dict = {}
-"""Cumulative seconds after each stage, active blocks, flood-fill sweep rounds of the latest call (for the bench)."""
-
 
 class SparseGrid:
     """Block grid aligned to multiples of 8 voxels (OpenVDB leaf alignment), with empty margins.
@@ -86,7 +85,8 @@ class DeviceSurface:
     w (m * 512,) kernel weight sums, counts (block grid) particles per block. Mesh: world (v,)
     vec3 positions, normals, velocities, faces (3 k,) int32 (device arrays of exact size), or
     None for an empty surface. kind (m,) int32: 0 all-outside, 1 all-inside, 2 holds the band
-    (classify_output_blocks)."""
+    (classify_output_blocks). stats: cumulative seconds after each stage, active blocks and
+    flood-fill rounds (see SurfaceResult.stats)."""
 
     grid: SparseGrid
     n: int
@@ -98,6 +98,7 @@ class DeviceSurface:
     vel: object
     kind: object
     mesh: tuple | None
+    stats: dict
 
     def download(self, params: SurfaceParams) -> SurfaceResult:
         """Copy to the host: mesh, sparse leaves (with fog density if params.density) and
@@ -108,7 +109,7 @@ class DeviceSurface:
         mesh = _download_mesh(self.mesh)
         sparse = _sparse_output(wp, M, self, params)
         result = _dense_output(wp, M, self, params)
-        result.mesh, result.sparse = mesh, sparse
+        result.mesh, result.sparse, result.stats = mesh, sparse, dict(self.stats)
         return result
 
 
@@ -123,9 +124,9 @@ def surface_sparse(wp, x, v, params: SurfaceParams) -> SurfaceResult:
         v = wp.array(np.ascontiguousarray(v, dtype=np.float32), dtype=wp.vec3)
     t0 = time.perf_counter()
     dev = surface_on_device(wp, x, v, params)
-    last_stats["device"] = _lap(wp, t0)
+    dev.stats["device"] = _lap(wp, t0)
     result = dev.download(params)
-    last_stats["download"] = round(time.perf_counter() - t0 - last_stats["device"], 4)
+    result.stats["download"] = round(time.perf_counter() - t0 - dev.stats["device"], 4)
     return result
 
 
@@ -202,10 +203,9 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     timings["mesh"] = _lap(wp, t0)
     kind = wp.empty(max(nact, 1), dtype=wp.int32)
     _launch(wp, M.classify_output_blocks, nact, [values, grid.background, kind])
-    last_stats.clear()
-    last_stats.update(timings, active_blocks=nact, fill_rounds=steps)
     log.debug("surface_sparse n=%d blocks=%s active=%d timings=%s", n, grid.nblocks, nact, timings)
-    return DeviceSurface(grid, n, bcoord, bmap, counts, values, w, vel if with_v else None, kind[:nact], mesh)
+    stats = {**timings, "active_blocks": nact, "fill_rounds": steps}
+    return DeviceSurface(grid, n, bcoord, bmap, counts, values, w, vel if with_v else None, kind[:nact], mesh, stats)
 
 
 def _lap(wp, t0: float) -> float:
@@ -238,16 +238,13 @@ def _bin_particles(wp, S, g, grid: SparseGrid):
 
 def _classify(wp, S, g, counts, grid: SparseGrid):
     """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates)."""
-    from mpmfx.surface import kernels as K
-    from mpmfx.surface.reconstruct import _sweep_until_stable
-
     near = wp.zeros(grid.nblocks, dtype=wp.int32)
     wp.launch(S.mark_near_blocks, g.shape[0], inputs=[g, grid.reach_vox, near])
     state = wp.empty(grid.nblocks, dtype=wp.int32)
     wp.launch(S.classify_blocks, grid.nblocks, inputs=[counts, near, grid.dense_reach, grid.dense_min, state])
     labels = wp.empty(grid.nblocks, dtype=wp.int32)
     wp.launch(S.outside_block_labels, grid.nblocks, inputs=[state, labels])
-    _sweep_until_stable(wp, K, labels)
+    _sweep_block_labels(wp, S, labels)
     flags = wp.empty(math.prod(grid.nblocks), dtype=wp.int32)
     wp.launch(S.active_flags, grid.nblocks, inputs=[state, flags])
     offsets = _scan(wp, flags, inclusive=False)
@@ -256,6 +253,23 @@ def _classify(wp, S, g, counts, grid: SparseGrid):
     bcoord = wp.empty(max(nact, 1), dtype=wp.vec3i)
     wp.launch(S.compact_blocks, grid.nblocks, inputs=[state, labels, offsets, bmap, bcoord])
     return bmap, bcoord[:nact]
+
+
+def _sweep_block_labels(wp, S, labels) -> int:
+    """Run +-x, +-y, +-z label sweeps over the block grid until no label changes; returns the
+    rounds used."""
+    changed = wp.zeros(1, dtype=wp.int32)
+    n = labels.shape
+    for rounds in range(1, MAX_BLOCK_SWEEP_ROUNDS + 1):
+        changed.zero_()
+        for axis in range(3):
+            others = tuple(n[a] for a in range(3) if a != axis)
+            for rev in (0, 1):
+                wp.launch(S.sweep_block_labels, others, inputs=[labels, axis, rev, changed])
+        if int(changed.numpy()[0]) == 0:
+            return rounds
+    log.warning("block label sweeps did not settle in %d rounds; some voids may remain", MAX_BLOCK_SWEEP_ROUNDS)
+    return MAX_BLOCK_SWEEP_ROUNDS
 
 
 def _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, *, seed_depth: float) -> int:
@@ -321,7 +335,7 @@ def _smooth(wp, S, bcoord, bmap, phi, iters: int, tiles):
 def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> tuple | None:
     """Marching cubes over active cells: (world, normals, velocities, faces) device arrays of
     exact size, or None for an empty surface."""
-    from warp._src.geometry import marching_cubes as mc  # tables only (pinned warp 1.19)
+    from mpmfx.surface.mc_tables import device_tables
 
     nvox = values.shape[0]
     if nvox == 0:
@@ -331,7 +345,7 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
     edge_vert = wp.empty(nvox * 3, dtype=wp.int32)
     wp.launch(M.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
     eoff = _scan(wp, ecount, inclusive=True)
-    tables = [mc._get_mc_case_to_tri_range_table(dev), mc._get_mc_tri_local_inds_table(dev), mc._get_mc_edge_offset_table(dev)]
+    tables = list(device_tables(wp, dev))
     fcount = wp.empty(nvox, dtype=wp.int32)
     wp.launch(M.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
     foff = _scan(wp, fcount, inclusive=True)

@@ -166,6 +166,39 @@ def outside_block_labels(state: wp.array3d(dtype=wp.int32), labels: wp.array3d(d
 
 
 @wp.kernel
+def sweep_block_labels(labels: wp.array3d(dtype=wp.int32), axis: int, reverse: int, changed: wp.array(dtype=wp.int32)):
+    """Carry the minimum label along one line of the block grid through labelled blocks.
+
+    Launched over the two other axes; six sweeps (+-x, +-y, +-z) repeated until nothing
+    changes label every 6-connected component with its smallest seed (flood fill).
+    """
+    a, b = wp.tid()
+    n = labels.shape[axis]
+    carry = int(LABEL_BIG)
+    count = int(0)
+    for t in range(n):
+        s = t
+        if reverse != 0:
+            s = n - 1 - t
+        c = wp.vec3i(s, a, b)
+        if axis == 1:
+            c = wp.vec3i(a, s, b)
+        elif axis == 2:
+            c = wp.vec3i(a, b, s)
+        lab = labels[c[0], c[1], c[2]]
+        if lab == LABEL_NONE:
+            carry = LABEL_BIG
+        else:
+            if carry < lab:
+                labels[c[0], c[1], c[2]] = carry
+                count += 1
+            else:
+                carry = lab
+    if count > 0:
+        wp.atomic_add(changed, 0, count)
+
+
+@wp.kernel
 def compact_blocks(
     state: wp.array3d(dtype=wp.int32),
     labels: wp.array3d(dtype=wp.int32),
@@ -212,8 +245,9 @@ def gather_zhu_bridson(
 ):
     """Zhu-Bridson phi at one active voxel, gathered from particles of nearby blocks.
 
-    phi = -(x - xbar) . n - r with n = -grad w / |grad w| (the projected variant of the dense
-    surfacer; the analytic kernel gradient replaces its finite difference of w).
+    phi = -(x - xbar) . n - r with n = -grad w / |grad w| (analytic kernel gradient). Projecting
+    on the normal matters on irregular samples: xbar jitters sideways as much as along the
+    normal, and |x - xbar| would turn that sideways jitter into an outward bias.
     """
     t = wp.tid()
     c = voxel_of(t, bcoord)
@@ -387,7 +421,11 @@ def renormalise(
     clip: float,
     out: wp.array(dtype=float),
 ):
-    """out = clip(phi / |grad phi| * scale, +-clip) (see kernels.renormalise)."""
+    """out = clip(phi / |grad phi| * scale, +-clip): a signed distance near the zero level.
+
+    The raw field keeps its sign (so its zero level) but its slope is not 1 (Zhu-Bridson is
+    ~0.7 at the surface and 0 deep inside); dividing by the central-difference gradient
+    restores distances in the band, clipping handles the flat interior."""
     t = wp.tid()
     c = voxel_of(t, bcoord)
     i = c[0]

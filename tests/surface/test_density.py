@@ -4,7 +4,8 @@ one half on its surface, 0 outside; off by default, and it leaves the level set 
 import numpy as np
 import pytest
 
-from mpmfx.surface import Grid, SurfaceParams, surface_particles
+from mpmfx.surface import SurfaceParams, surface_particles
+from tests.surface.dense_reference import surface_dense
 
 pytest.importorskip("warp")
 
@@ -53,4 +54,4 @@ def test_density_is_off_by_default_and_changes_nothing_else(blob):
 
 def test_density_needs_the_sparse_zhu_bridson_surfacer():
     with pytest.raises(ValueError, match="SurfaceParams.density"):
-        SurfaceParams(0.01, grid=Grid.DENSE, density=True)
+        surface_dense(lattice_cube(4), None, SurfaceParams(0.01, density=True), device="cpu")

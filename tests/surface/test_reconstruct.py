@@ -7,18 +7,23 @@ are h / 2 (coarser than the default r / 2) to keep grids under 96^3 here.
 import numpy as np
 import pytest
 
-from mpmfx.surface import LevelSet, Method, SurfaceParams, surface_particles
-from mpmfx.surface.bench import mesh_stats, sample_shape, shape_sdf
+from mpmfx.bench.surface_cases import mesh_stats, sample_shape, shape_sdf
+from mpmfx.surface import LevelSet, SurfaceParams, surface_particles
+from tests.surface.dense_reference import surface_dense
 
 pytest.importorskip("warp")
 
 DEVICE = "cpu"
 
 
-def run(shape: str, count: int, sampling: str, **overrides):
+def run(shape: str, count: int, sampling: str, *, spheres: bool = False, **overrides):
     x, h = sample_shape(shape, count, sampling)
     kw = {"voxel_size": 0.5 * h} | overrides
-    res = surface_particles(x, None, SurfaceParams(particle_radius=0.5 * h, **kw), device=DEVICE)
+    params = SurfaceParams(particle_radius=0.5 * h, **kw)
+    if spheres:  # the union of spheres: the dense reference's alternative field
+        res = surface_dense(x, None, params, spheres=True, device=DEVICE)
+    else:
+        res = surface_particles(x, None, params, device=DEVICE)
     sdf, volume, _ = shape_sdf(shape)
     err = np.abs(sdf(res.mesh.vertices.astype(np.float64))) / h
     mesh_volume, pieces = mesh_stats(res.mesh.vertices, res.mesh.faces)
@@ -124,7 +129,7 @@ def test_empty_input_and_single_particle():
 
 def test_spheres_method_gives_one_closed_piece():
     # spheres of radius r close a cubic lattice only when r > sqrt(3)/2 h: 1.8 * 0.5 h = 0.9 h
-    res, err, vol_err, pieces, _, _ = run("sphere", 3000, "lattice", method=Method.SPHERES, radius_scale=1.8)
+    res, err, vol_err, pieces, _, _ = run("sphere", 3000, "lattice", spheres=True, radius_scale=1.8)
     assert pieces == 1
     assert err.mean() < 0.6  # union of spheres: bumpy by design
 

@@ -1,11 +1,12 @@
-"""The sparse (8^3-block) surfacer: agrees with the dense one, no bubbles on random samples,
+"""The sparse (8^3-block) surfacer: agrees with the dense reference, no bubbles on random samples,
 keeps separate bodies, and its sparse output is the same level set as the dense output (CPU)."""
 
 import numpy as np
 import pytest
 
-from mpmfx.surface import Grid, SurfaceParams, surface_particles
-from mpmfx.surface.bench import mesh_stats, sample_shape, shape_sdf
+from mpmfx.bench.surface_cases import mesh_stats, sample_shape, shape_sdf
+from mpmfx.surface import SurfaceParams, surface_particles
+from tests.surface.dense_reference import surface_dense
 
 pytest.importorskip("warp")
 
@@ -19,7 +20,7 @@ def surface(x, h, **kw):
 def test_sparse_matches_dense_on_a_lattice_sphere():
     x, h = sample_shape("sphere", 4000, "lattice")
     sparse = surface(x, h, voxel_size=0.5 * h)
-    dense = surface(x, h, voxel_size=0.5 * h, grid=Grid.DENSE)
+    dense = surface_dense(x, None, SurfaceParams(particle_radius=0.5 * h, voxel_size=0.5 * h), device=DEVICE)
     sdf, _, _ = shape_sdf("sphere")
     err_s = np.abs(sdf(sparse.mesh.vertices.astype(np.float64))) / h
     err_d = np.abs(sdf(dense.mesh.vertices.astype(np.float64))) / h

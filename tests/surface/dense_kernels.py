@@ -1,4 +1,5 @@
-"""Warp kernels of the surfacer: one module, so Warp compiles it once per device.
+"""Warp kernels of the dense reference surfacer (tests/surface/dense_reference.py): one module,
+so Warp compiles it once per device.
 
 Grid convention: node (i, j, k) of every 3-D array sits at world origin + (i, j, k) * voxel;
 "grid coordinates" g = (x - origin) / voxel are in voxel units.

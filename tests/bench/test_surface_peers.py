@@ -6,8 +6,8 @@ import csv
 import numpy as np
 import pytest
 
-from mpmfx.surface import peers
-from mpmfx.surface.bench import _row, mesh_stats, sample_shape
+from mpmfx.bench import surface_peers as peers
+from mpmfx.bench.surface_cases import _row, mesh_stats, sample_shape
 
 
 def errors(res, x, h, shape="sphere"):

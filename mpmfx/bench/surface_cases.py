@@ -3,10 +3,11 @@
 Error = distance of output vertices to the analytic surface (validation.md section 6), in
 world units and in units of the particle spacing h; volume error of the closed mesh against
 the analytic volume; number of connected mesh pieces (1 = no interior bubbles, no specks).
-The peers (mpmfx.surface.peers: splashsurf, Newton) run on the same particles and get the
-same columns.
+The peers (mpmfx.bench.surface_peers: splashsurf, Newton) run on the same particles and get
+the same columns. Our surfacer runs at the shipped particle radius
+(mpmfx.surface.PARTICLE_RADIUS_PER_SPACING x h).
 
-    python -m mpmfx.surface.bench --counts 100000 --device cpu --peers splashsurf
+    python -m mpmfx.bench.surface_cases --counts 100000 --device cpu --peers splashsurf
 """
 
 from __future__ import annotations
@@ -18,8 +19,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from mpmfx.surface.params import Grid, Method, SurfaceParams
-from mpmfx.surface.reconstruct import surface_particles
+from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_particles
 
 SPHERE_RADIUS = 0.3
 TORUS_RADII = (0.3, 0.12)  # major, minor; axis z
@@ -118,61 +118,56 @@ def _row(shape: str, sampling: str, x: np.ndarray, h: float, method: str, grid: 
 
 
 def measure(
-    shape: str, count: int, sampling: str, *, radius_factor: float = 0.5, device: str | None = None,
-    sample: tuple[np.ndarray, float] | None = None, repeats: int = 1, label: str = "", voxel_factor: float | None = None,
-    **overrides
+    shape: str, count: int, sampling: str, *, radius_factor: float = PARTICLE_RADIUS_PER_SPACING,
+    device: str | None = None, sample: tuple[np.ndarray, float] | None = None, repeats: int = 1, label: str = "",
+    voxel_h: float | None = None, **overrides
 ) -> dict:
     """Reconstruct one sample with our surfacer and measure it (particle_radius = radius_factor * h).
 
     sample: (x (n, 3) float32 m, h m) from `sample_shape`, to reuse the peers' particles; None
       samples `shape` here. repeats > 1: one untimed warm-up, then the median of `repeats`.
-    label: names the row "mpmfx <label>"; voxel_factor: voxel_size = factor * particle radius.
+    label: names the row "mpmfx <label>"; voxel_h: voxel_size = voxel_h * h (None: SurfaceParams'
+    default); overrides: other SurfaceParams fields.
     On a CUDA device x is uploaded before the timer, as the peers' particles are, and passed
-    as a device array where reconstruct says it accepts one (ACCEPTS_DEVICE_ARRAYS).
+    as a device array. "seconds" is the device work (SurfaceResult.stats["device"]),
+    "seconds_host" the whole call including the copy of the result to the host.
     """
     import warp as wp
 
-    from mpmfx.surface import reconstruct, sparse
-
     x, h = sample if sample is not None else sample_shape(shape, count, sampling)
-    if voxel_factor is not None:
-        overrides["voxel_size"] = voxel_factor * radius_factor * h
+    if voxel_h is not None:
+        overrides["voxel_size"] = voxel_h * h
     params = SurfaceParams(particle_radius=radius_factor * h, **overrides)
     wp.init()
     dev = wp.get_device(device)
-    x_in = x
-    if not dev.is_cpu and getattr(reconstruct, "ACCEPTS_DEVICE_ARRAYS", False):
-        x_in = wp.array(x, dtype=wp.vec3, device=dev)
+    x_in = x if dev.is_cpu else wp.array(x, dtype=wp.vec3, device=dev)
     times, on_device = [], []
     for _ in range(repeats + 1 if repeats > 1 else 1):  # + 1: the untimed warm-up
-        sparse.last_stats.clear()  # keeps the stage times of the last call only
         t0 = time.perf_counter()
         res = surface_particles(x_in, None, params, device=device)
         wp.synchronize_device(dev)
         times.append(time.perf_counter() - t0)
-        on_device.append(sparse.last_stats.get("device", times[-1]))
+        on_device.append(res.stats.get("device", times[-1]))
     keep = slice(1, None) if repeats > 1 else slice(None)
     # end to end = particles on the device -> level set and mesh on the device (as the peers'
     # times are taken); copying the result to the host is reported apart (seconds_host)
     seconds, seconds_host = float(np.median(on_device[keep])), float(np.median(times[keep]))
-    stats = dict(sparse.last_stats) if params.grid is Grid.SPARSE else {}
-    sparse.last_stats.clear()
-    if res.sparse is not None and res.level_set.values.size == 0:
+    if res.level_set.values.size == 0:
         grid_txt = f"{len(res.sparse.block_ijk)}blk"
     else:
         grid_txt = "x".join(map(str, res.level_set.values.shape))
-    method = params.method.name + ("" if params.grid is Grid.DENSE or not stats else "/sparse")
-    if label:
-        method = f"mpmfx {label}"
+    method = f"mpmfx {label}" if label else "mpmfx"
     row = _row(shape, sampling, x, h, method, grid_txt, seconds, res.mesh.vertices, res.mesh.faces)
     settings = f"r {radius_factor:g}h voxel {params.resolved_voxel_size / h:g}h smooth {params.smooth_iters}"
-    return {**row, "seconds_host": seconds_host, "device": str(dev), "settings": settings, "stages": stats}
+    if params.min_feature_particles:
+        settings += f" specks<{params.min_feature_particles}"
+    return {**row, "seconds_host": seconds_host, "device": str(dev), "settings": settings, "stages": res.stats}
 
 
 def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray, float], *,
                  device: str | None = None, repeats: int = 3) -> dict:
-    """Peer `name` (mpmfx.surface.peers.PEERS) on `sample` = (x (n, 3) m, h m); one row like ours."""
-    from mpmfx.surface.peers import run_peer
+    """Peer `name` (mpmfx.bench.surface_peers.PEERS) on `sample` = (x (n, 3) m, h m); one row like ours."""
+    from mpmfx.bench.surface_peers import run_peer
 
     x, h = sample
     res = run_peer(name, x, h, sampling, device=device, repeats=repeats)
@@ -181,12 +176,13 @@ def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray,
 
 
 OURS = {
-    # voxel = r = h / 2 (Newton's anisotropic voxel) and one blur pass: the speed setting
-    "fast": {"voxel_factor": 1.0, "smooth_iters": 1},
-    # SurfaceParams' defaults: voxel r / 2, two blur passes (4x the leaves, 8x the voxels)
-    "fine": {},
+    # voxel = r (0.6 h) and one blur pass: the speed setting
+    "fast": {"voxel_h": PARTICLE_RADIUS_PER_SPACING, "smooth_iters": 1},
+    # what shots run with (the surface stage's defaults: mpmfx/stages/surface.py, config.Surface):
+    # voxel h / 2, two blur passes, blobs of fewer than 8 particles removed
+    "fine": {"voxel_h": 0.5, "smooth_iters": 2, "min_feature_particles": 8},
 }
-"""Our settings in the benchmark: label -> SurfaceParams overrides (voxel_factor x particle radius)."""
+"""Our settings in the benchmark: label -> `measure` keywords (voxel_h x particle spacing h)."""
 
 
 def bench_surface(
@@ -195,24 +191,21 @@ def bench_surface(
     samplings: Sequence[str] = ("lattice", "random"),
     device: str | None = None,
     *,
-    methods: Sequence[Method] = (Method.ZHU_BRIDSON,),
     peers: Sequence[str] = (),
     repeats: int = 1,
     echo: bool = True,
-    grids: Sequence[Grid] = (Grid.SPARSE,),
     dense_output: bool = False,
     stages: bool = False,
 ) -> list[dict]:
-    """Measure every (count, shape, sampling) with each (method, grid) of ours and each peer
-    (mpmfx.surface.peers.PEERS), all on the same particles; print a table when `echo`.
+    """Measure every (count, shape, sampling) with each of our settings (OURS) and each peer
+    (mpmfx.bench.surface_peers.PEERS), all on the same particles; print a table when `echo`.
 
     repeats > 1: every method gets one untimed warm-up, then the median of `repeats` calls.
     Sparse runs return only the sparse level set unless `dense_output` (dense arrays cost
     O(bounding box) to fill and copy to the host). A peer that fails at run time (out of
     memory, say) is reported and left out; the others go on.
     """
-    for grid in grids:  # compile
-        surface_particles(sample_shape("sphere", 500, "lattice")[0], None, SurfaceParams(0.01, grid=grid), device=device)
+    surface_particles(sample_shape("sphere", 500, "lattice")[0], None, SurfaceParams(0.01), device=device)  # compile
     rows: list[dict] = []
 
     def emit(row: dict, count: int) -> None:
@@ -227,13 +220,9 @@ def bench_surface(
         for shape in shapes:
             for sampling in samplings:
                 sample = sample_shape(shape, count, sampling)
-                for method in methods:
-                    for grid in grids:
-                        ours = OURS if (method, grid) == (Method.ZHU_BRIDSON, Grid.SPARSE) else {"": {}}
-                        for label, setting in ours.items():
-                            emit(measure(shape, count, sampling, device=device, sample=sample, repeats=repeats,
-                                         label=label, method=method, grid=grid,
-                                         dense_output=grid is Grid.DENSE or dense_output, **setting), count)
+                for label, setting in OURS.items():
+                    emit(measure(shape, count, sampling, device=device, sample=sample, repeats=repeats,
+                                 label=label, dense_output=dense_output, **setting), count)
                 for name in peers:
                     try:
                         emit(measure_peer(name, shape, sampling, sample, device=device, repeats=repeats), count)
@@ -269,10 +258,8 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--counts", type=int, nargs="+", default=[100_000])
     ap.add_argument("--shapes", nargs="+", default=["sphere", "torus", "box"])
     ap.add_argument("--samplings", nargs="+", default=["lattice", "random"])
-    ap.add_argument("--methods", nargs="+", default=["ZHU_BRIDSON"], choices=[m.name for m in Method])
-    ap.add_argument("--grids", nargs="+", default=["SPARSE"], choices=[g.name for g in Grid])
-    ap.add_argument("--stages", action="store_true", help="print the sparse path's cumulative stage times")
-    ap.add_argument("--dense-output", action="store_true", help="sparse runs also return dense arrays")
+    ap.add_argument("--stages", action="store_true", help="print our cumulative stage times")
+    ap.add_argument("--dense-output", action="store_true", help="also return dense arrays (slower)")
     ap.add_argument("--device", default=None)
     ap.add_argument("--peers", nargs="*", default=[], help="also run these on the same particles: "
                     "splashsurf, newton, newton-aniso")
@@ -284,10 +271,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         args.shapes,
         args.samplings,
         args.device,
-        methods=[Method[m] for m in args.methods],
         peers=args.peers,
         repeats=args.repeats,
-        grids=[Grid[g] for g in args.grids],
         stages=args.stages,
         dense_output=args.dense_output,
     )

@@ -6,7 +6,11 @@
 
 Each runner takes (n, 3) positions in metres and the particle spacing h (m), runs one warm-up
 call (compilation, allocator and thread-pool start-up), then returns the median wall time of
-`repeats` calls with the last call's mesh. Particle radius is this project's r = 0.5 h.
+`repeats` calls with the last call's mesh. Their particle radius is half the spacing, h / 2
+(PEER_RADIUS_PER_SPACING): their models read it as the particle's size (splashsurf's rest
+volume, Newton's splat volume (2 r)^3 = h^3), and their settings below were tuned at it. Ours
+(mpmfx.surface.PARTICLE_RADIUS_PER_SPACING, 0.6 h) is an offset of our level set, another
+quantity; giving the peers 0.6 h would only inflate their densities.
 
 numpy only at import; pysplashsurf, newton and warp are imported inside the runners and a
 missing one raises ImportError that says what to pip install.
@@ -21,6 +25,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+PEER_RADIUS_PER_SPACING = 0.5
+"""The peers' particle radius in units of the spacing h (see the module docstring)."""
 
 PEERS = ("splashsurf", "newton", "newton-aniso")
 """Peer names the bench accepts (`--peers`)."""
@@ -109,7 +116,7 @@ def run_splashsurf(
     x: np.ndarray, h: float, *, kernel: float = 2.0, cube: float = 1.0, threshold: float = 0.6,
     threads: int | None = None, repeats: int = 3,
 ) -> PeerResult:
-    """splashsurf on `x` with particle radius r = 0.5 h.
+    """splashsurf on `x` with particle radius r = PEER_RADIUS_PER_SPACING * h.
 
     x: (n, 3) float positions m; h: particle spacing m.
     kernel: SPH smoothing length in multiples of r (splashsurf's `smoothing_length`; its
@@ -124,7 +131,7 @@ def run_splashsurf(
     ss = _import_splashsurf()
     device = _splashsurf_threads(threads)
     pts = np.ascontiguousarray(x, dtype=np.float32)
-    r = 0.5 * h
+    r = PEER_RADIUS_PER_SPACING * h
 
     def call():
         return ss.reconstruct_surface(
@@ -153,7 +160,7 @@ def run_newton(
     x: np.ndarray, h: float, *, anisotropic: bool, voxel: float, device: str | None = "cuda",
     kernel_radius: float | None = None, threshold: float = 0.25, repeats: int = 3,
 ) -> PeerResult:
-    """Newton's ParticleSurface on `x` with particle radius r = 0.5 h.
+    """Newton's ParticleSurface on `x` with particle radius r = PEER_RADIUS_PER_SPACING * h.
 
     x: (n, 3) float positions m; h: particle spacing m.
     voxel: voxel edge in multiples of h. kernel_radius: neighbour-search radius in multiples
@@ -174,7 +181,7 @@ def run_newton(
     except RuntimeError as exc:  # "cuda" on a machine without a CUDA driver
         raise RuntimeError(f"Newton peer: Warp cannot use device {device!r} here ({exc}); try --device cpu") from exc
     pos = wp.array(np.ascontiguousarray(x, dtype=np.float32), dtype=wp.vec3, device=dev)
-    radii = wp.full(pos.shape[0], 0.5 * h, dtype=wp.float32, device=dev)
+    radii = wp.full(pos.shape[0], PEER_RADIUS_PER_SPACING * h, dtype=wp.float32, device=dev)
     surf = ParticleSurface(
         voxel * h, anisotropic=anisotropic, threshold=threshold, device=dev,
         kernel_radius=None if kernel_radius is None else kernel_radius * h,
