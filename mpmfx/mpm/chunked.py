@@ -126,7 +126,8 @@ class DeviceAdvance:
             s._last_bad = self.last_bad.numpy() if c[Clock.HAS_BAD] else None
             s._raise_too_small(state, t, float(c[Clock.DT_CFL]))
         if int(c[Clock.STATUS]) == Status.TOO_MANY:
-            raise s._too_many(state, t, t1, int(c[Clock.N_SUB]), float(c[Clock.DT_CFL]))
+            raise s._too_many(state, t, t1, int(c[Clock.N_SUB]), float(c[Clock.DT_CFL]),
+                              float(c[Clock.TOTAL] - c[Clock.DONE]))
         n = int(c[Clock.N_SUB])
         dts = [float(c[Clock.DT_MIN]), float(c[Clock.DT_MAX])] if n else []
         report = s._report(state, n, int(c[Clock.N_REJ]), dts, float(c[Clock.VMAX]), float(c[Clock.CFL_USED]),

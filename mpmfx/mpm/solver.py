@@ -42,7 +42,14 @@ _SYMPTOM = "Everything explodes / NaNs"  # the guide §9.3 row the errors point 
 
 
 class SimulationError(RuntimeError):
-    """The solver cannot continue without a knob change; the message says which."""
+    """The solver cannot continue without a knob change; the message says which. `field`: the
+    SolverConfig knob whose limit was hit ("dt_min", "max_substeps_per_frame") or None;
+    `needed`: what would have passed it (the substep dt in s, or the substeps the frame needs),
+    so a caller can phrase the advice in its own keys."""
+
+    def __init__(self, message: str, *, field: str | None = None, needed: float | None = None):
+        super().__init__(message)
+        self.field, self.needed = field, needed
 
 
 @dataclass
@@ -343,11 +350,14 @@ class Solver:
             return self._device_advance.run(state, t0, t1)
         return self._advance_host(state, t0, t1)
 
-    def _too_many(self, state: State, t: float, t1: float, substeps: int, dt_cfl: float) -> SimulationError:
+    def _too_many(self, state: State, t: float, t1: float, substeps: int, dt_cfl: float,
+                  remaining: float) -> SimulationError:
+        """`remaining`: simulated seconds still to go (sets `needed`, the substeps that would do)."""
         return SimulationError(
             f"t={t:.4f}s: {substeps} substeps did not reach t1={t1:.4f}s "
             f"(dt ~ {dt_cfl:.3g}s, c_max {self.wave_speed(state.clock):.3g} domain/s). Raise "
-            f"SolverConfig.max_substeps_per_frame, or lower youngs_modulus / bulk_modulus / grid_n")
+            f"SolverConfig.max_substeps_per_frame, or lower youngs_modulus / bulk_modulus / grid_n",
+            field="max_substeps_per_frame", needed=substeps + math.ceil(remaining / dt_cfl))
 
     def _advance_host(self, state: State, t0: float, t1: float) -> StepReport:
         """The reference stepper: statistics read back after every substep."""
@@ -363,7 +373,7 @@ class Solver:
             if dt_cfl < cfg.dt_min:
                 self._raise_too_small(state, t0 + done / cfg.time_scale, dt_cfl)
             if substeps >= cfg.max_substeps_per_frame:
-                raise self._too_many(state, t0 + done / cfg.time_scale, t1, substeps, dt_cfl)
+                raise self._too_many(state, t0 + done / cfg.time_scale, t1, substeps, dt_cfl, total - done)
             last = remaining <= dt_cfl * (1.0 + 1e-6)
             dt = remaining if last else (0.5 * remaining if remaining < 2.0 * dt_cfl else dt_cfl)
             ts0 = t0 + done / cfg.time_scale
@@ -413,8 +423,9 @@ class Solver:
             f"t={t:.4f}s: the substep fell to dt={dt:.3g}s < dt_min={self.config.dt_min:g}s "
             f"({state.n} particles, max speed {state.clock.max_speed:.3g} domain/s, c_max "
             f"{self.wave_speed(state.clock):.3g} domain/s); {what}, in {', '.join(names)} "
-            f"('{_SYMPTOM}', guide §9.3). Lower youngs_modulus / bulk_modulus, raise damping, or "
-            f"lower SolverConfig.cfl (<= 0.5); or lower SolverConfig.dt_min if this dt is intended")
+            f"('{_SYMPTOM}', guide §9.3). Lower youngs_modulus / bulk_modulus or raise damping; "
+            f"or lower SolverConfig.dt_min if this dt is intended (a lower cfl only shrinks dt further)",
+            field="dt_min", needed=dt)
 
     def _describe_material(self, i: int) -> str:
         m = self.materials[i]

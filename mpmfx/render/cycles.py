@@ -43,18 +43,19 @@ def write_job(path: Path, *, usd: Path, frames: list[int], outputs: list[Path], 
               width: int, height: int, samples: int, denoise: bool, shutter: float, fps: float,
               mode: str, looks: dict[str, str], floor_y: float, domain_origin, domain_size: float,
               camera: dict | None, view_direction, sun_elevation: float, sun_rotation: float,
-              walls: tuple | None = None, basin: float | None = None) -> Path:
+              walls: tuple | None = None, basin: float | None = None, label: str = "") -> Path:
     """Write the JSON job the child reads. Units: metres and degrees, in the USD stage's frame
     (Y up). looks: USD prim name (surface group or object) -> `mpmfx.render.looks.LOOKS` key;
     camera: {"position", "look_at"} or None to frame the simulated bounds, seen along
     -view_direction; outputs: one PNG path per frame; blend: where the lit scene is saved;
-    walls: (lo, hi) of the box the solver's walls hold, basin: height of the basin drawn there."""
+    walls: (lo, hi) of the box the solver's walls hold, basin: height of the basin drawn there;
+    label: text burned into every frame (empty: none)."""
     job = {"usd": str(usd), "frames": [int(f) for f in frames], "outputs": [str(p) for p in outputs],
            "blend": str(blend) if blend else None, "width": width, "height": height, "samples": samples,
            "denoise": denoise, "shutter": shutter, "fps": fps, "mode": mode, "looks": looks,
            "floor_y": floor_y, "domain_origin": list(domain_origin), "domain_size": domain_size,
            "camera": camera, "view_direction": list(view_direction), "sun_elevation": sun_elevation,
-           "sun_rotation": sun_rotation, "walls": walls, "basin": basin}
+           "sun_rotation": sun_rotation, "walls": walls, "basin": basin, "label": label}
     path.write_text(json.dumps(job, indent=1))
     return path
 

@@ -127,6 +127,11 @@ def set_render(job: dict) -> None:
     r.image_settings.file_format, r.image_settings.color_mode = "PNG", "RGB"
     scene.view_settings.view_transform = "AgX"
     scene.view_settings.look = "AgX - Medium High Contrast"
+    if job.get("label"):  # a variant (--set) says which one it is, burned into every frame
+        for flag in [a for a in dir(r) if a.startswith("use_stamp_")]:
+            setattr(r, flag, False)
+        r.use_stamp = r.use_stamp_frame = r.use_stamp_note = True
+        r.stamp_note_text = job["label"]
 
 
 def build_scene(job: dict) -> None:

@@ -4,7 +4,8 @@
 process (`mpmfx.render.cycles`), and the lit scene is saved as `<shot>.blend`; `"preview"`:
 PyVista viewport captures of the surface frames.
 Output in the cache entry: `frames/NNNN.png`, `<shot>.mp4`, `contact.png` (and `<shot>.blend`);
-all are then published to `renders/<shot>/`, the folder artists look in.
+the runner then publishes them to `renders/<shot>/`, the folder artists look in (`mpmfx.publish`),
+after every run, cached or not. Each frame's label names the --set overrides of its variant.
 """
 from __future__ import annotations
 
@@ -25,11 +26,17 @@ def params(shot: Shot) -> dict:
     from mpmfx.render.camera import default_camera, solver_floor
     out = {"render": shot.render.model_dump(mode="json"), "camera": default_camera(shot),
            "domain": shot.domain.model_dump(mode="json"), "materials": [o.material for o in shot.objects],
-           "colliders": [c.model_dump(mode="json") for c in shot.colliders], "floor": solver_floor(shot)}
+           "colliders": [c.model_dump(mode="json") for c in shot.colliders], "floor": solver_floor(shot),
+           "title": title(shot)}
     if shot.render.engine is RenderEngine.CYCLES:
         from mpmfx.render.cycles import blender_version
         out["blender"] = blender_version()  # another Blender may shade differently
     return out
+
+
+def title(shot: Shot) -> str:
+    """The label burned into every frame: the shot and the overrides that made this variant."""
+    return "  ".join([shot.shot.name, *(f"--set {o}" for o in shot.overrides)])
 
 
 def inputs(shot: Shot) -> dict[str, str]:
@@ -59,8 +66,7 @@ def run(ctx: Context) -> dict:
     shown = [entry.frame_path(f, FRAME_EXT) for f in entry.done_frames(FRAME_EXT) if (f - start) % step == 0]
     if shown:
         extras.append(contact_sheet(shown, entry.root / "contact.png", scale=2 if shot.render.width > 640 else 1))
-    out = publish(shot, pngs, [p for p in extras if p is not None and p.exists()])
-    return {"published": str(out), **timing}
+    return {"outputs": [str(p) for p in extras if p is not None and p.exists()], **timing}
 
 
 def _cycles(ctx: Context, frames: list[int]) -> tuple[Path, dict]:
@@ -86,7 +92,7 @@ def _cycles(ctx: Context, frames: list[int]) -> tuple[Path, dict]:
                     mode=r.mode, looks=looks, floor_y=solver_floor(shot), domain_origin=shot.domain.origin,
                     domain_size=shot.domain.size, camera=cam, view_direction=VIEW_DIRECTION,
                     sun_elevation=r.sun_elevation, sun_rotation=r.sun_rotation, walls=solver_box(shot),
-                    basin=r.basin)
+                    basin=r.basin, label=title(shot) if shot.overrides else "")
     entry.frames_dir.mkdir(parents=True, exist_ok=True)
     times = {}
     try:
@@ -103,7 +109,7 @@ def _preview(ctx: Context, frames: list[int]) -> None:
     from mpmfx.render.frames import FrameRenderer, colour_for
     shot, entry, r = ctx.shot, ctx.entry, ctx.shot.render
     renderer = FrameRenderer(size=(r.width, r.height), camera=default_camera(shot), floor=solver_floor(shot),
-                             domain=(shot.domain.origin, shot.domain.size), title=shot.shot.name)
+                             domain=(shot.domain.origin, shot.domain.size), title=title(shot))
     material_of = {g: o.material for g, o in zip(shot.surface_groups(), shot.objects)}
     try:
         for f in ctx.progress(frames, total=len(frames), desc="render"):
@@ -146,13 +152,3 @@ def _collider_meshes(shot: Shot, frame: int) -> dict:
         out[f"collider_{col.name}"] = (m.vertices @ xf[:3, :3].T + xf[:3, 3], m.faces, "#9aa0a8")
     return out
 
-
-def publish(shot: Shot, pngs: list[Path], extras: list[Path]) -> Path:
-    """Copy the frames, the movie and the contact sheet to renders/<shot>/ (in the working directory)."""
-    out = Path("renders") / shot.shot.name
-    out.mkdir(parents=True, exist_ok=True)
-    for p in pngs:
-        shutil.copyfile(p, out / p.name)
-    for p in extras:
-        shutil.copyfile(p, out / p.name)
-    return out
