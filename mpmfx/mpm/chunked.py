@@ -116,7 +116,7 @@ class DeviceAdvance:
                 c[Clock.STATUS] = Status.RUNNING
                 self.clk.assign(c)
             before = c[Clock.N_SUB]
-            self._chunk(state, self._chunk_length(c, state.clock.last_dt))
+            self._chunk(state, self._chunk_length(c, s._cfl_dt(state.clock)))  # first chunk: the host's CFL dt
             c = self.clk.numpy()
             if int(c[Clock.N_SUB] - before) % 2:
                 state.swap()
