@@ -5,6 +5,8 @@
 """
 from __future__ import annotations
 
+import contextlib
+import socket
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,6 +15,7 @@ from mpmfx.cache import Cache, Entry, code_hash, default_root
 from mpmfx.config import Shot, ShotError, load_shot_config
 from mpmfx.stages import STAGES, export, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage
+from mpmfx.stages.parallel import Frames, sweep_temps
 
 MODULES: dict[str, Stage] = {m.NAME: m for m in (voxelise, simulate, surface, export, render)}
 assert tuple(MODULES) == STAGES, "mpmfx.stages.STAGES and the runner's modules disagree"
@@ -43,11 +46,16 @@ class ShotRun:
     """One shot file bound to a cache root. Nothing runs until `run()`."""
 
     def __init__(self, shot: Shot, *, cache_root: str | Path | None = None, device: str | None = None,
-                 quiet: bool = False):
+                 quiet: bool = False, workers: int | None = None, scheduler: str | None = None,
+                 executor: Frames | None = None, publish: bool = True):
         self.shot = shot
         self.cache = Cache(cache_root or default_root(), shot.shot.name)
         self.device = device
         self.quiet = quiet
+        # Where independent frames run (mpmfx.stages.parallel): workers=1 serial, None auto.
+        self._own_executor = executor is None
+        self.executor = executor or Frames(workers=workers, scheduler=scheduler)
+        self.publish = publish
 
     # -- keys ------------------------------------------------------------------------------
     def entries(self) -> dict[str, Entry]:
@@ -91,7 +99,30 @@ class ShotRun:
     # -- run -------------------------------------------------------------------------------
     def run(self, *, until: str = "render", force: tuple[str, ...] | list[str] = (),
             frames: list[int] | None = None) -> list[StageResult]:
-        """Run stages up to `until` (inclusive). `force`: stages re-run from scratch."""
+        """Run stages up to `until` (inclusive). `force`: stages re-run from scratch. Independent
+        frames run on `self.executor` (a Dask cluster started when first worth it, closed here
+        unless it was handed in)."""
+        self.check(until=until, force=force, frames=frames)
+        entries = self.entries()
+        results = []
+        try:
+            for name in STAGES[: STAGES.index(until) + 1]:
+                if name in force:
+                    entries[name].remove()
+                ctx = self.begin(name, entries, frames)
+                if isinstance(ctx, StageResult):
+                    results.append(ctx)
+                    continue
+                t0 = time.perf_counter()
+                with self.failing(ctx):
+                    extra = stage_module(name).run(ctx) or {}
+                results.append(self.end(ctx, extra, time.perf_counter() - t0))
+        finally:
+            if self._own_executor:
+                self.executor.close()
+        return results
+
+    def check(self, *, until: str = "render", force=(), frames: list[int] | None = None) -> None:
         for name in (until, *force):
             if name not in STAGES:
                 raise ShotError(f"unknown stage '{name}': one of {', '.join(STAGES)}")
@@ -100,38 +131,48 @@ class ShotRun:
             if bad:
                 raise ShotError(f"--frames: {bad[0]} is outside the shot's frames "
                                 f"{self.shot.shot.frame_start}..{self.shot.shot.frame_end}")
-        entries = self.entries()
-        results = []
-        for name in STAGES[: STAGES.index(until) + 1]:
-            entry, mod = entries[name], stage_module(name)
-            wanted = self._wanted(name, frames)
-            if name in force:
-                entry.remove()
-            if entry.complete(wanted):
-                n = len(wanted) if wanted is not None else 1
-                results.append(StageResult(name, "cached", 0.0, n, entry.root))
-                continue
-            state = "resumed" if entry.root.exists() else "ran"
-            up = {s: entries[s] for s in STAGES[: STAGES.index(name)]}
-            ctx = Context(self.shot, entry, up, wanted if wanted is not None else [], self.device, self.quiet)
-            t0 = time.perf_counter()
-            entry.root.mkdir(parents=True, exist_ok=True)
-            try:
-                extra = mod.run(ctx) or {}
-            except BaseException:
-                # Complete frames stay (a re-run resumes from them); an entry with none is removed,
-                # so a failed run never leaves a half-made cache entry behind.
-                if state == "ran" and not (mod.PER_FRAME and entry.done_frames(mod.FRAME_EXT)):
-                    entry.remove()
-                raise
-            seconds = time.perf_counter() - t0
-            done = entry.done_frames(mod.FRAME_EXT) if mod.PER_FRAME else []
-            old = entry.manifest() or {}
-            timings = {**old.get("timings", {}), "last_run_s": round(seconds, 3)}
-            entry.write_manifest(frames=done, timings=timings, qa=extra.pop("qa", None),
-                                 extra={**extra, "notes": ctx.notes})
-            results.append(StageResult(name, state, seconds, len(wanted) if wanted is not None else 1, entry.root))
-        return results
+
+    def begin(self, name: str, entries: dict[str, Entry], frames: list[int] | None) -> Context | StageResult:
+        """A cached stage's result, or the context to run it in (its entry folder made, temp
+        files of a killed earlier run swept)."""
+        entry, wanted = entries[name], self._wanted(name, frames)
+        if entry.complete(wanted):
+            return StageResult(name, "cached", 0.0, len(wanted) if wanted is not None else 1, entry.root)
+        state = "resumed" if entry.root.exists() else "ran"
+        up = {s: entries[s] for s in STAGES[: STAGES.index(name)]}
+        ctx = Context(self.shot, entry, up, wanted if wanted is not None else [], self.device, self.quiet,
+                      executor=self.executor, publish=self.publish, state=state)
+        sweep_temps(entry)
+        entry.root.mkdir(parents=True, exist_ok=True)
+        return ctx
+
+    @contextlib.contextmanager
+    def failing(self, ctx: Context):
+        """Complete frames stay when a stage fails (a re-run resumes from them); an entry with none
+        is removed, so a failed run never leaves a half-made cache entry behind."""
+        try:
+            yield
+        except BaseException:
+            self.abandon(ctx)
+            raise
+
+    def abandon(self, ctx: Context) -> None:
+        """After a failure: keep complete frames, remove a new entry that has none."""
+        mod = stage_module(ctx.entry.stage)
+        if ctx.state == "ran" and not (mod.PER_FRAME and ctx.entry.done_frames(mod.FRAME_EXT)):
+            ctx.entry.remove()
+
+    def end(self, ctx: Context, extra: dict, seconds: float) -> StageResult:
+        """After every task of the stage: sweep temps, then the manifest (the client writes it)."""
+        entry, mod = ctx.entry, stage_module(ctx.entry.stage)
+        sweep_temps(entry)
+        done = entry.done_frames(mod.FRAME_EXT) if mod.PER_FRAME else []
+        old = entry.manifest() or {}
+        timings = {**old.get("timings", {}), "last_run_s": round(seconds, 3)}
+        entry.write_manifest(frames=done, timings=timings, qa=extra.pop("qa", None),
+                             extra={**extra, "notes": ctx.notes, "host": socket.gethostname()})
+        n = len(ctx.frames) if mod.PER_FRAME else 1
+        return StageResult(entry.stage, ctx.state, seconds, n, entry.root)
 
 
 def _why_stale(entry: Entry, other: Path) -> str:
@@ -153,6 +194,9 @@ def _why_stale(entry: Entry, other: Path) -> str:
 
 
 def load_shot(path: str | Path, *, overrides: list[str] = (), cache_root: str | Path | None = None,
-              device: str | None = None, quiet: bool = False) -> ShotRun:
-    """Load and validate a shot file; returns a ShotRun (see module docstring)."""
-    return ShotRun(load_shot_config(path, list(overrides)), cache_root=cache_root, device=device, quiet=quiet)
+              device: str | None = None, quiet: bool = False, workers: int | None = None,
+              scheduler: str | None = None) -> ShotRun:
+    """Load and validate a shot file; returns a ShotRun (see module docstring). workers /
+    scheduler: where independent frames run (`mpmfx.stages.parallel.Frames`)."""
+    return ShotRun(load_shot_config(path, list(overrides)), cache_root=cache_root, device=device, quiet=quiet,
+                   workers=workers, scheduler=scheduler)
