@@ -27,10 +27,12 @@ import os
 import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 from mpmfx.cache import Entry
-from mpmfx.config import Shot
+
+if TYPE_CHECKING:
+    from mpmfx.config import Shot
 
 SCHEDULER_ENV = "MPMFX_SCHEDULER"   # a farm scheduler's address, e.g. tcp://farm-head:8786
 WORKERS_ENV = "MPMFX_WORKERS"       # worker processes of the LocalCluster; 1 = serial
@@ -114,7 +116,7 @@ class Frames:
             else:
                 n = self.workers or os.cpu_count() or 1
                 self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                                             dashboard_address=None, silence_logs=logging.ERROR)
+                                             dashboard_address=":0", silence_logs=logging.ERROR)
                 self._client = Client(self._cluster)
         return self._client
 
