@@ -85,7 +85,9 @@ class ShotRun:
         out = []
         for name, entry in self.entries().items():
             if entry.complete(self._wanted(name, None)):
-                out.append(StageStatus(name, "cached", "all frames present", entry.root))
+                host = (entry.manifest() or {}).get("host")
+                other = f" (written on {host})" if host and host != socket.gethostname() else ""
+                out.append(StageStatus(name, "cached", "all frames present" + other, entry.root))
             elif entry.root.exists():
                 n = len(entry.done_frames(stage_module(name).FRAME_EXT))
                 out.append(StageStatus(name, "partial", f"{n} frames done; a run resumes", entry.root))

@@ -138,3 +138,14 @@ def test_vary_ranges_and_pick_writes_a_loadable_copy(tmp_path):
     assert picked.objects[0].mesh != load_shot_config(shot).objects[0].mesh  # rewritten for the new folder
     assert picked.model_dump(exclude={"objects", "base_dir"}) == load_shot_config(shot).model_dump(
         exclude={"objects", "base_dir"})
+
+
+def test_status_names_the_host_that_wrote_an_entry(reference, tmp_path):
+    import json
+    shot, ref = reference
+    cache = _cache_with_simulation(reference, tmp_path / "cache")
+    man = next((cache / "tiny" / "simulate").iterdir()) / "manifest.json"
+    man.write_text(json.dumps({**json.loads(man.read_text()), "host": "farm-node-7"}))
+    status = {s.stage: s for s in ShotRun(load_shot_config(shot), cache_root=cache).status()}
+    assert status["simulate"].state == "cached" and "farm-node-7" in status["simulate"].why
+    assert "written on" not in status["voxelise"].why  # written here (or by an older mpmfx)
