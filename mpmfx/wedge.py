@@ -31,8 +31,15 @@ SHEET_WIDTH = 1920      # px: a frame's sheet is scaled to at most this width
 CONTACT_FRAMES = 4      # columns of contact.png
 
 
+def _workers(text: str) -> int:
+    import argparse
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"--workers {text!r}: a whole number of processes, 1 or more (1 = serial)")
+    return int(text)
+
+
 def add_parallel_args(p) -> None:
-    p.add_argument("--workers", type=int, default=None, metavar="N",
+    p.add_argument("--workers", type=_workers, default=None, metavar="N",
                    help="Dask LocalCluster worker processes for independent frames; 1 = serial "
                         "(default: all cores when there are 8 or more frames to make, else serial; $MPMFX_WORKERS)")
     p.add_argument("--scheduler", default=None, metavar="ADDR",
