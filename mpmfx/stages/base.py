@@ -32,10 +32,11 @@ class Context:
     def job(self) -> FrameJob:
         return FrameJob.of(self.shot, self.entry, self.upstream, self.device)
 
-    def map_frames(self, fn, frames: list[int], *, desc: str = "") -> list:
-        """fn(self.job(), f) for each frame, serially or as Dask tasks (`mpmfx.stages.parallel`)."""
+    def map_frames(self, fn, frames: list[int], *, desc: str = "", auto: bool = True) -> list:
+        """fn(self.job(), f) for each frame, serially or as Dask tasks (`mpmfx.stages.parallel`;
+        auto=False: tasks only when workers or a scheduler were asked for)."""
         job = self.job()
-        return (self.executor or Frames(workers=1)).map(fn, [(job, f) for f in frames],
+        return (self.executor or Frames(workers=1)).map(fn, [(job, f) for f in frames], auto=auto,
                                                         desc=desc or self.entry.stage, quiet=self.quiet)
 
     def progress(self, iterable, *, total: int | None = None, desc: str = "", unit: str = "frame"):

@@ -121,21 +121,30 @@ class Frames:
         return self._client
 
     def close(self) -> None:
-        if self._client is not None:
-            self._client.close()
-        if self._cluster is not None:
-            self._cluster.close()
-        self._client = self._cluster = None
+        """Disconnect, and stop the LocalCluster if this started one. A worker slow to exit (a
+        loaded machine) is killed by its nanny; that is no error of the run, so it is not raised."""
+        try:
+            if self._client is not None:
+                self._client.close()
+            if self._cluster is not None:
+                self._cluster.close(timeout=30)
+        except (TimeoutError, OSError) as exc:
+            print(f"note: the Dask cluster did not stop cleanly ({type(exc).__name__}); its workers "
+                  f"were killed", file=sys.stderr)
+        finally:
+            self._client = self._cluster = None
 
     def map(self, fn: Callable[[FrameJob, int], Any], calls: list[tuple[FrameJob, int]], *,
-            desc: str = "", quiet: bool = False) -> list[Any]:
+            desc: str = "", quiet: bool = False, auto: bool = True) -> list[Any]:
         """fn(job, frame) for each call; results in call order. The first failure is raised
-        (the other tasks are cancelled; frames already written stay, a re-run resumes)."""
+        (the other tasks are cancelled; frames already written stay, a re-run resumes).
+        auto=False: stay serial unless workers or a scheduler were asked for (work that a GPU
+        does in a fraction of a second a frame, where starting workers costs more)."""
         if not calls:
             return []
         bar = _bar(len(calls), desc, quiet)
         try:
-            if not self.parallel(len(calls)):
+            if not self.parallel(len(calls), auto_min=AUTO_MIN_TASKS if auto else sys.maxsize):
                 out = []
                 for job, f in calls:
                     out.append(fn(job, f))

@@ -44,7 +44,13 @@ def todo(ctx: Context) -> list[int]:
 
 
 def run(ctx: Context) -> dict:
-    return finish(ctx, ctx.map_frames(frame, todo(ctx), desc="surface"))
+    import warp as wp
+
+    quiet_warp(ctx.device)
+    # On a GPU a frame takes ~0.2 s here, less than a worker takes to start and load its kernels
+    # (docs/scale-out.md): the default stays serial there; on the CPU, frames go to all cores.
+    on_gpu = wp.get_device(ctx.device).is_cuda
+    return finish(ctx, ctx.map_frames(frame, todo(ctx), desc="surface", auto=not on_gpu))
 
 
 def finish(ctx: Context, results: list[dict]) -> dict:
