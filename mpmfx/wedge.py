@@ -41,7 +41,7 @@ def _workers(text: str) -> int:
 def add_parallel_args(p) -> None:
     p.add_argument("--workers", type=_workers, default=None, metavar="N",
                    help="Dask LocalCluster worker processes for independent frames; 1 = serial "
-                        "(default: all cores when there are 8 or more frames to make, else serial; $MPMFX_WORKERS)")
+                        "(default: all cores when there are 10 or more frames to make, else serial; $MPMFX_WORKERS)")
     p.add_argument("--scheduler", default=None, metavar="ADDR",
                    help="a running Dask scheduler, e.g. tcp://farm-head:8786 (default $MPMFX_SCHEDULER)")
 

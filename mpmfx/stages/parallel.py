@@ -36,9 +36,11 @@ if TYPE_CHECKING:
 
 SCHEDULER_ENV = "MPMFX_SCHEDULER"   # a farm scheduler's address, e.g. tcp://farm-head:8786
 WORKERS_ENV = "MPMFX_WORKERS"       # worker processes of the LocalCluster; 1 = serial
-# Below this many frames to make, `workers=None` (auto) stays serial: starting a LocalCluster and
-# loading Warp and VTK in each worker costs seconds (docs/scale-out.md has the measurement).
-AUTO_MIN_TASKS = 8
+# Below this many frames to make, `workers=None` (auto) stays serial: a two-worker LocalCluster
+# costs ~20 CPU seconds (start, Warp kernels loaded in each worker), about 7 frames of CPU
+# surfacing at the default shot's size, so on an idle 2-core machine it pays from ~10 frames
+# (docs/scale-out.md has the measurement).
+AUTO_MIN_TASKS = 10
 TEMP_GLOB = ".*.tmp*"               # the names `mpmfx.cache.atomic_path` and the renderer write to
 
 
