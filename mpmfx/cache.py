@@ -133,6 +133,20 @@ def write_json(path: str | Path, data: Any) -> None:
         tmp.write_text(json.dumps(data, indent=2, sort_keys=True, default=str))
 
 
+TEMP_GLOB = ".*.tmp*"  # the names atomic_path (and the renderers) write to before the rename
+
+
+def remove_temps(folder: Path) -> list[Path]:
+    """Delete the temp files under `folder` (left by a killed writer); returns them. Only call it
+    when nothing writes there: under the shot's lock, or after a stage's tasks have finished."""
+    if not folder.is_dir():
+        return []
+    gone = [p for p in folder.rglob(TEMP_GLOB) if p.is_file()]
+    for p in gone:
+        p.unlink(missing_ok=True)
+    return gone
+
+
 @dataclass
 class Entry:
     """One stage's cache entry: a folder named by its key."""
@@ -250,14 +264,9 @@ class Cache:
             os.close(fd)  # releases the flock
 
     def remove_orphans(self) -> list[Path]:
-        """Delete temp files that a killed run left (`.<name>.<pid>-<uuid>.tmp*`). Call only
-        while holding `lock()`: then no writer of this shot is alive to own them."""
-        if not self.shot_dir.is_dir():
-            return []
-        orphans = [p for p in self.shot_dir.rglob(".*.tmp*") if p.is_file()]
-        for p in orphans:
-            p.unlink(missing_ok=True)
-        return orphans
+        """Delete temp files that a killed run left. Call only while holding `lock()`: then no
+        writer of this shot is alive to own them."""
+        return remove_temps(self.shot_dir)
 
     def entries(self, stage: str) -> list[Path]:
         d = self.shot_dir / stage

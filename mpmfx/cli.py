@@ -47,6 +47,10 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--strict", action="store_true", help="exit 1 when the QA flags a frame (CI, farms)")
     e = shot_cmd("export", "run export alone from the cached upstream stages")
     e.add_argument("--frames", type=_frames, default=None, metavar="A:B")
+    from mpmfx.wedge import add_parallel_args, add_wedge_parser
+    add_parallel_args(r)
+    add_parallel_args(e)
+    add_wedge_parser(shot_cmd("wedge", "side-by-side variants of a shot that differ in one field (guide 9.4)"))
     s = shot_cmd("status", "each stage: cached, partial, stale or missing, and why")
     s.add_argument("--qa", action="store_true", help="per-frame observables of the simulation")
     c = shot_cmd("clean", "delete this variant's cached results (listed with sizes first)")
@@ -141,10 +145,14 @@ def _dispatch(args) -> int:
 
     if args.cmd == "cache":
         return _prune(args)
+    if args.cmd == "wedge":
+        from mpmfx.wedge import main as wedge_main
+        return wedge_main(args)
 
     from mpmfx.stages.runner import load_shot
     run = load_shot(args.shot, overrides=args.overrides, cache_root=args.cache,
-                    device=getattr(args, "device", None), quiet=getattr(args, "quiet", False))
+                    device=getattr(args, "device", None), quiet=getattr(args, "quiet", False),
+                    workers=getattr(args, "workers", None), scheduler=getattr(args, "scheduler", None))
     if args.cmd == "run":
         results = run.run(until=args.until, force=args.force, frames=args.frames)
         _print_table(["stage", "result", "wall s", "frames", "qa"],

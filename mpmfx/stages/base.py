@@ -7,6 +7,7 @@ from typing import Protocol
 
 from mpmfx.cache import Entry
 from mpmfx.config import Shot
+from mpmfx.stages.parallel import FrameJob, Frames
 
 
 class StageError(RuntimeError):
@@ -24,6 +25,18 @@ class Context:
     device: str | None = None
     quiet: bool = False
     notes: list[str] = field(default_factory=list)
+    executor: Frames | None = None  # where independent frames run (None: here, one by one)
+    state: str = "ran"              # "ran" (a new entry) or "resumed" (complete frames were there)
+
+    def job(self) -> FrameJob:
+        return FrameJob.of(self.shot, self.entry, self.upstream, self.device)
+
+    def map_frames(self, fn, frames: list[int], *, desc: str = "", auto: bool = True) -> list:
+        """fn(self.job(), f) for each frame, serially or as Dask tasks (`mpmfx.stages.parallel`;
+        auto=False: tasks only when workers or a scheduler were asked for)."""
+        job = self.job()
+        return (self.executor or Frames(workers=1)).map(fn, [(job, f) for f in frames], auto=auto,
+                                                        desc=desc or self.entry.stage, quiet=self.quiet)
 
     def progress(self, iterable, *, total: int | None = None, desc: str = "", unit: str = "frame"):
         """A progress bar over frames on stderr (silent when quiet or not a terminal in tests)."""

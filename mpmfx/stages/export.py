@@ -11,6 +11,7 @@ import numpy as np
 from mpmfx.config import Shot
 from mpmfx.io.frames import ParticleFrame, SurfaceFrame
 from mpmfx.stages.base import Context
+from mpmfx.stages.parallel import FrameJob
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "export", 1, True, "usdc"
 CODE = ("mpmfx.stages.export", "mpmfx.io", "mpmfx.surface.params", "mpmfx.render.camera",
@@ -27,20 +28,29 @@ def inputs(shot: Shot) -> dict[str, str]:
     return {}
 
 
+def todo(ctx: Context) -> list[int]:
+    return [f for f in ctx.frames if not ctx.entry.frame_path(f, FRAME_EXT).exists()]
+
+
 def run(ctx: Context) -> dict:
-    shot, entry = ctx.shot, ctx.entry
-    writer = _writer(shot, entry)
-    todo = [f for f in ctx.frames if not entry.frame_path(f, FRAME_EXT).exists()]
-    for f in ctx.progress(todo, total=len(todo), desc="export"):
-        groups = SurfaceFrame.read(ctx.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
-        volumes = _write_vdbs(shot, entry, f, groups) if shot.export.vdb else {}
-        points = {}
-        if shot.export.points:
-            points = _points(shot, ParticleFrame.read(ctx.upstream["simulate"].frame_path(f, ParticleFrame.EXT)))
-        writer.write_frame(f, points=points, meshes=_meshes(groups), volumes=volumes,
-                           colliders=_colliders(shot, f))
-    done = entry.done_frames(FRAME_EXT)
-    root = writer.finalize(done, camera=_camera(shot))
+    return finish(ctx, ctx.map_frames(frame, todo(ctx), desc="export"))
+
+
+def frame(job: FrameJob, f: int) -> None:
+    """Frame `f`'s .vdb files, then its USD layer (its existence marks the frame done): a task."""
+    shot, entry = job.shot, job.entry
+    groups = SurfaceFrame.read(job.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
+    volumes = _write_vdbs(shot, entry, f, groups) if shot.export.vdb else {}
+    points = {}
+    if shot.export.points:
+        points = _points(shot, ParticleFrame.read(job.upstream["simulate"].frame_path(f, ParticleFrame.EXT)))
+    _writer(shot, entry).write_frame(f, points=points, meshes=_meshes(groups), volumes=volumes,
+                                     colliders=_colliders(shot, f))
+
+
+def finish(ctx: Context, results: list) -> dict:
+    """In the client, after every frame's task: the root stage stitches the frames' layers."""
+    root = _writer(ctx.shot, ctx.entry).finalize(ctx.entry.done_frames(FRAME_EXT), camera=_camera(ctx.shot))
     return {"usd": str(root)}
 
 

@@ -13,9 +13,11 @@ import os
 import shutil
 from pathlib import Path
 
+from mpmfx.cache import atomic_path
 from mpmfx.config import RenderEngine, Shot
 from mpmfx.io.frames import ParticleFrame, SurfaceFrame
 from mpmfx.stages.base import Context, StageError
+from mpmfx.stages.parallel import FrameJob
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "render", 2, True, "png"
 CODE = ("mpmfx.stages.render", "mpmfx.render", "mpmfx.io.frames", "mpmfx.geometry.colliders",
@@ -43,90 +45,129 @@ def inputs(shot: Shot) -> dict[str, str]:
     return {}
 
 
+def todo(ctx: Context) -> list[int]:
+    """The frames to draw: of the missing ones, those `render.frame_step` shows (the others hold)."""
+    step, start = ctx.shot.render.frame_step, ctx.shot.shot.frame_start
+    shown = {start + (f - start) // step * step for f in ctx.frames}
+    return sorted(f for f in shown if not ctx.entry.frame_path(f, FRAME_EXT).exists())
+
+
 def run(ctx: Context) -> dict:
+    if ctx.shot.render.engine is RenderEngine.CYCLES:
+        # One Blender process for every frame: it imports the USD stage once, and Cycles
+        # already uses every core, so frames do not go to Dask workers here.
+        return finish(ctx, [_cycles(ctx.job(), todo(ctx), progress=ctx.progress)])
+    try:
+        return finish(ctx, ctx.map_frames(frame, todo(ctx), desc="render"))
+    finally:
+        close()  # the serial path's renderer; a worker's ends with the worker
+
+
+def frame(job: FrameJob, f: int) -> dict:
+    """Draw frame `f` into the entry (a task: runs on any worker, e.g. a wedge's)."""
+    if job.shot.render.engine is RenderEngine.CYCLES:
+        return _cycles(job, [f])
+    _preview(job, f)
+    return {}
+
+
+def finish(ctx: Context, results: list[dict]) -> dict:
+    """In the client, after every frame's task: held frames, the movie, the contact sheet; the
+    runner publishes them (and the .blend) to renders/<shot>/."""
     from mpmfx.render.frames import contact_sheet, write_movie
 
     shot, entry = ctx.shot, ctx.entry
-    todo = [f for f in ctx.frames if not entry.frame_path(f, FRAME_EXT).exists()]
     step, start = shot.render.frame_step, shot.shot.frame_start
-    source = {f: start + (f - start) // step * step for f in todo}  # the frame each one shows
-    render = sorted({s for s in source.values() if not entry.frame_path(s, FRAME_EXT).exists()})
-    extras, timing = [], {}
-    if shot.render.engine is RenderEngine.CYCLES:
-        blend, timing = _cycles(ctx, render)
-        extras.append(blend)
-    else:
-        _preview(ctx, render)
-    for f, s in source.items():
-        if f != s:  # held frame: the same picture, so the movie keeps the shot's timing
-            _hold(entry.frame_path(s, FRAME_EXT), entry.frame_path(f, FRAME_EXT))
+    for f in ctx.frames:
+        src = start + (f - start) // step * step
+        if f != src and not entry.frame_path(f, FRAME_EXT).exists():
+            _hold(entry.frame_path(src, FRAME_EXT), entry.frame_path(f, FRAME_EXT))
+    extras = [entry.root / f"{shot.shot.name}.blend"]
     pngs = [entry.frame_path(f, FRAME_EXT) for f in entry.done_frames(FRAME_EXT)]
     if shot.render.movie and len(pngs) > 1:
         extras.append(write_movie(pngs, entry.root / f"{shot.shot.name}.mp4", fps=shot.shot.fps))
     shown = [entry.frame_path(f, FRAME_EXT) for f in entry.done_frames(FRAME_EXT) if (f - start) % step == 0]
     if shown:
         extras.append(contact_sheet(shown, entry.root / "contact.png", scale=2 if shot.render.width > 640 else 1))
-    return {"outputs": [str(p) for p in extras if p is not None and p.exists()], **timing}
+    seconds = {f: t for r in results for f, t in r.get("cycles_seconds", {}).items()}
+    return {"outputs": [str(p) for p in extras if p is not None and p.exists()],
+            **({"cycles_seconds": seconds} if seconds else {})}
 
 
-def _cycles(ctx: Context, frames: list[int]) -> tuple[Path, dict]:
-    """Cycles through Blender's own process; returns the saved .blend and the seconds per frame
-    (wall, and CPU of all render threads: wall / CPU shows how much of the machine it had)."""
+def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -> dict:
+    """Cycles through Blender's own process; saves the lit scene as `<shot>.blend` and returns
+    the seconds per frame (wall, and CPU of all render threads: wall / CPU shows how much of the
+    machine it had)."""
     from mpmfx.render.camera import VIEW_DIRECTION, default_camera, solver_box, solver_floor
     from mpmfx.render.cycles import CyclesError, run_job, write_job
     from mpmfx.render.looks import look_for
-    shot, entry, r = ctx.shot, ctx.entry, ctx.shot.render
-    blend = entry.root / f"{shot.shot.name}.blend"
+    shot, entry, r = job.shot, job.entry, job.shot.render
     if not frames:
-        return blend, {}
-    usd = ctx.upstream["export"].root / "shot.usda"
+        return {}
     looks = {g: look_for([g, o.name, o.material], r.looks) for g, o in zip(shot.surface_groups(), shot.objects)}
     looks |= {o.name: look_for([o.name, o.material], r.looks) for o in shot.objects}
     cam = None
     if r.camera_position is not None:
         pos, look = default_camera(shot)
         cam = {"position": pos, "look_at": look}
-    job = write_job(entry.root / "cycles_job.json", usd=usd, frames=frames, blend=blend,
-                    outputs=[entry.frame_path(f, FRAME_EXT) for f in frames], width=r.width, height=r.height,
-                    samples=r.samples, denoise=r.denoise, shutter=r.shutter, fps=shot.shot.fps,
-                    mode=r.mode, looks=looks, floor_y=solver_floor(shot), domain_origin=shot.domain.origin,
-                    domain_size=shot.domain.size, camera=cam, view_direction=VIEW_DIRECTION,
-                    sun_elevation=r.sun_elevation, sun_rotation=r.sun_rotation, walls=solver_box(shot),
-                    basin=r.basin, label=title(shot) if shot.overrides else "")
+    name = f"cycles_{frames[0]:04d}" if len(frames) == 1 else "cycles"  # a wedge's tasks: one job each
+    spec = write_job(entry.root / f"{name}_job.json", usd=job.upstream["export"].root / "shot.usda",
+                     frames=frames, blend=entry.root / f"{shot.shot.name}.blend",
+                     outputs=[entry.frame_path(f, FRAME_EXT) for f in frames], width=r.width, height=r.height,
+                     samples=r.samples, denoise=r.denoise, shutter=r.shutter, fps=shot.shot.fps,
+                     mode=r.mode, looks=looks, floor_y=solver_floor(shot), domain_origin=shot.domain.origin,
+                     domain_size=shot.domain.size, camera=cam, view_direction=VIEW_DIRECTION,
+                     sun_elevation=r.sun_elevation, sun_rotation=r.sun_rotation, walls=solver_box(shot),
+                     basin=r.basin, label=title(shot) if shot.overrides else "")
     entry.frames_dir.mkdir(parents=True, exist_ok=True)
     times = {}
     try:
-        for f, wall, cpu in ctx.progress(run_job(job, log=entry.root / "cycles.log"), total=len(frames), desc="render"):
+        for f, wall, cpu in progress(run_job(spec, log=entry.root / f"{name}.log"), total=len(frames), desc="render"):
             times[f] = [wall, cpu]
     except CyclesError as exc:
         raise StageError(f"render (cycles): {exc}") from None
-    return blend, {"cycles_seconds": times}
+    return {"cycles_seconds": times}
 
 
-def _preview(ctx: Context, frames: list[int]) -> None:
-    """PyVista viewport captures (the fast look) of the surfaces or particles."""
+# One preview renderer per process, reused for every frame it draws (creating a render window is
+# the slow part): the serial path's, or a Dask worker's, for the set-up it last drew (a wedge's
+# variants of one shot share it).
+_RENDERER: dict[str, object] = {}
+
+
+def _preview(job: FrameJob, f: int) -> None:
+    """PyVista viewport capture (the fast look) of frame f's surfaces or particles."""
     from mpmfx.render.camera import default_camera, solver_floor
     from mpmfx.render.frames import FrameRenderer, colour_for
-    shot, entry, r = ctx.shot, ctx.entry, ctx.shot.render
-    renderer = FrameRenderer(size=(r.width, r.height), camera=default_camera(shot), floor=solver_floor(shot),
-                             domain=(shot.domain.origin, shot.domain.size), title=title(shot))
-    material_of = {g: o.material for g, o in zip(shot.surface_groups(), shot.objects)}
-    try:
-        for f in ctx.progress(frames, total=len(frames), desc="render"):
-            label = f"frame {f}  t={(f - shot.shot.frame_start) / shot.shot.fps:.2f}s"
-            if r.mode == "particles":
-                p = ParticleFrame.read(ctx.upstream["simulate"].frame_path(f, ParticleFrame.EXT))
-                pts = {o.name: (p.x[p.body == i], colour_for(o.material, i)) for i, o in enumerate(shot.objects)}
-                px = r.height * shot.particle_spacing / shot.domain.size * 1.5
-                renderer.particles(pts, px, entry.frame_path(f, FRAME_EXT), label=label)
-            else:
-                groups = SurfaceFrame.read(ctx.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
-                meshes = {g: (d.vertices, d.faces, colour_for(material_of.get(g, g), i))
-                          for i, (g, d) in enumerate(groups.items())}
-                meshes |= _collider_meshes(shot, f)
-                renderer.surfaces(meshes, entry.frame_path(f, FRAME_EXT), label=label)
-    finally:
-        renderer.close()
+    shot, r = job.shot, job.shot.render
+    setup = dict(size=(r.width, r.height), camera=default_camera(shot), floor=solver_floor(shot),
+                 domain=(shot.domain.origin, shot.domain.size), title=title(shot))
+    if repr(setup) not in _RENDERER:
+        close()
+        _RENDERER[repr(setup)] = FrameRenderer(**setup)
+    renderer = _RENDERER[repr(setup)]
+    label = f"frame {f}  t={(f - shot.shot.frame_start) / shot.shot.fps:.2f}s"
+    # The renderer writes through its own temp name; this one is unique per writer, so two
+    # workers drawing one frame never share a temp file, and the frame is complete or absent.
+    with atomic_path(job.entry.frame_path(f, FRAME_EXT)) as out:
+        if r.mode == "particles":
+            p = ParticleFrame.read(job.upstream["simulate"].frame_path(f, ParticleFrame.EXT))
+            pts = {o.name: (p.x[p.body == i], colour_for(o.material, i)) for i, o in enumerate(shot.objects)}
+            px = r.height * shot.particle_spacing / shot.domain.size * 1.5
+            renderer.particles(pts, px, out, label=label)
+        else:
+            material_of = {g: o.material for g, o in zip(shot.surface_groups(), shot.objects)}
+            groups = SurfaceFrame.read(job.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
+            meshes = {g: (d.vertices, d.faces, colour_for(material_of.get(g, g), i))
+                      for i, (g, d) in enumerate(groups.items())}
+            meshes |= _collider_meshes(shot, f)
+            renderer.surfaces(meshes, out, label=label)
+
+
+def close() -> None:
+    """Close this process's preview renderer (the next frame makes a new one)."""
+    for key in list(_RENDERER):
+        _RENDERER.pop(key).close()
 
 
 def _hold(src: Path, dst: Path) -> None:

@@ -5,14 +5,17 @@
 """
 from __future__ import annotations
 
+import contextlib
+import socket
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from mpmfx.cache import Cache, Entry, code_hash, default_root
+from mpmfx.cache import Cache, Entry, code_hash, default_root, remove_temps
 from mpmfx.config import Shot, ShotError, load_shot_config
 from mpmfx.stages import STAGES, export, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage, StageError
+from mpmfx.stages.parallel import Frames
 
 MODULES: dict[str, Stage] = {m.NAME: m for m in (voxelise, simulate, surface, export, render)}
 assert tuple(MODULES) == STAGES, "mpmfx.stages.STAGES and the runner's modules disagree"
@@ -44,11 +47,17 @@ class ShotRun:
     """One shot file bound to a cache root. Nothing runs until `run()`."""
 
     def __init__(self, shot: Shot, *, cache_root: str | Path | None = None, device: str | None = None,
-                 quiet: bool = False):
+                 quiet: bool = False, workers: int | None = None, scheduler: str | None = None,
+                 executor: Frames | None = None, publish: bool = True, locked: bool = False):
         self.shot = shot
         self.cache = Cache(cache_root or default_root(), shot.shot.name)
         self.device = device
         self.quiet = quiet
+        # Where independent frames run (mpmfx.stages.parallel): workers=1 serial, None auto.
+        self._own_executor = executor is None
+        self.executor = executor or Frames(workers=workers, scheduler=scheduler)
+        self.publish = publish  # False for a wedge's variants: renders/ and published/ show the shot
+        self.locked = locked  # the caller holds the shot's lock (a wedge, for all its variants)
         self.published: dict[str, Path] = {}  # what the last run() published: "usd", "renders"
 
     # -- keys ------------------------------------------------------------------------------
@@ -79,7 +88,9 @@ class ShotRun:
         out = []
         for name, entry in self.entries().items():
             if entry.complete(self._wanted(name, None)):
-                out.append(StageStatus(name, "cached", "all frames present", entry.root))
+                host = (entry.manifest() or {}).get("host")
+                other = f" (written on {host})" if host and host != socket.gethostname() else ""
+                out.append(StageStatus(name, "cached", "all frames present" + other, entry.root))
             elif entry.root.exists():
                 n = len(entry.done_frames(stage_module(name).FRAME_EXT))
                 why = f"{n} frames done; a run resumes"
@@ -96,7 +107,29 @@ class ShotRun:
     # -- run -------------------------------------------------------------------------------
     def run(self, *, until: str = "render", force: tuple[str, ...] | list[str] = (),
             frames: list[int] | None = None) -> list[StageResult]:
-        """Run stages up to `until` (inclusive). `force`: stages re-run from scratch."""
+        """Run stages up to `until` (inclusive). `force`: stages re-run from scratch. Independent
+        frames run on `self.executor` (a Dask cluster started when first worth it, closed here
+        unless it was handed in). Holds the shot's lock throughout."""
+        self.check(until=until, force=force, frames=frames)
+        with contextlib.nullcontext() if self.locked else self.cache.lock():
+            if not self.locked:
+                self.cache.remove_orphans()
+            try:
+                results = self._run_locked(until, force, frames)
+            finally:
+                if self._own_executor:
+                    self.executor.close()
+            self.published = self._publish(results) if self.publish else {}
+        for r in results:
+            if r.stage == "simulate":  # cached or not: bad physics is said every time
+                from mpmfx.stages.qa import shot_flags, warn_flags
+                bad = shot_flags(self.shot, (self.entries()["simulate"].manifest() or {}).get("qa", {}))
+                warn_flags(bad, str(self.shot.source or "SHOT"))
+                r.flagged = len(bad)
+        return results
+
+    def check(self, *, until: str = "render", force=(), frames: list[int] | None = None) -> None:
+        """Refuse an unknown stage or a frame outside the shot (ShotError, exit 2)."""
         for name in (until, *force):
             if name not in STAGES:
                 raise ShotError(f"unknown stage '{name}': one of {', '.join(STAGES)}")
@@ -105,17 +138,6 @@ class ShotRun:
             if bad:
                 raise ShotError(f"--frames: {bad[0]} is outside the shot's frames "
                                 f"{self.shot.shot.frame_start}..{self.shot.shot.frame_end}")
-        with self.cache.lock():
-            self.cache.remove_orphans()
-            results = self._run_locked(until, force, frames)
-            self.published = self._publish(results)
-        for r in results:
-            if r.stage == "simulate":  # cached or not: bad physics is said every time
-                from mpmfx.stages.qa import shot_flags, warn_flags
-                bad = shot_flags(self.shot, (self.entries()["simulate"].manifest() or {}).get("qa", {}))
-                warn_flags(bad, str(self.shot.source or "SHOT"))
-                r.flagged = len(bad)
-        return results
 
     def _publish(self, results: list[StageResult]) -> dict[str, Path]:
         """Every run that reaches export / render publishes them at stable paths (`mpmfx.publish`)."""
@@ -132,42 +154,67 @@ class ShotRun:
         entries = self.entries()
         results = []
         for name in STAGES[: STAGES.index(until) + 1]:
-            entry, mod = entries[name], stage_module(name)
-            wanted = self._wanted(name, frames)
             if name in force:
-                entry.remove()
-            if entry.complete(wanted):
-                n = len(wanted) if wanted is not None else 1
-                results.append(StageResult(name, "cached", 0.0, n, entry.root))
+                entries[name].remove()
+            ctx = self.begin(name, entries, frames)
+            if isinstance(ctx, StageResult):
+                results.append(ctx)
                 continue
-            for rel in entry.damaged():  # lost or truncated since the manifest: redo, never trust
-                (entry.root / rel).unlink(missing_ok=True)
-                if mod.PER_FRAME and Path(rel).stem.isdigit():  # e.g. vdb/g/0003.vdb: redo frame 3
-                    entry.frame_path(int(Path(rel).stem), mod.FRAME_EXT).unlink(missing_ok=True)
-            state = "resumed" if entry.root.exists() else "ran"
-            up = {s: entries[s] for s in STAGES[: STAGES.index(name)]}
-            ctx = Context(self.shot, entry, up, wanted if wanted is not None else [], self.device, self.quiet)
             t0 = time.perf_counter()
-            entry.root.mkdir(parents=True, exist_ok=True)
-            try:
-                extra = mod.run(ctx) or {}
-            except BaseException:
-                # Complete frames stay (a re-run resumes from them); an entry with none is removed,
-                # so a failed run never leaves a half-made cache entry behind.
-                if state == "ran" and not (mod.PER_FRAME and entry.done_frames(mod.FRAME_EXT)):
-                    entry.remove()
-                raise
-            seconds = time.perf_counter() - t0
-            done = entry.done_frames(mod.FRAME_EXT) if mod.PER_FRAME else []
-            if missing := sorted(set(wanted or []) - set(done)):
-                raise StageError(f"{name}: frames {_ranges(missing)} are missing after the run (deleted by "
-                                 f"someone else?); no manifest written, run again to redo them")
-            old = entry.manifest() or {}
-            timings = {**old.get("timings", {}), "last_run_s": round(seconds, 3)}
-            entry.write_manifest(frames=done, timings=timings, qa=extra.pop("qa", None),
-                                 extra={**extra, "notes": ctx.notes})
-            results.append(StageResult(name, state, seconds, len(wanted) if wanted is not None else 1, entry.root))
+            with self.failing(ctx):
+                extra = stage_module(name).run(ctx) or {}
+            results.append(self.end(ctx, extra, time.perf_counter() - t0))
         return results
+
+    def begin(self, name: str, entries: dict[str, Entry], frames: list[int] | None) -> Context | StageResult:
+        """A cached stage's result, or the context to run it in (damaged files removed, so their
+        frames are redone; the entry folder made). Call with the shot's lock held."""
+        entry, mod, wanted = entries[name], stage_module(name), self._wanted(name, frames)
+        if entry.complete(wanted):
+            return StageResult(name, "cached", 0.0, len(wanted) if wanted is not None else 1, entry.root)
+        for rel in entry.damaged():  # lost or truncated since the manifest: redo, never trust
+            (entry.root / rel).unlink(missing_ok=True)
+            if mod.PER_FRAME and Path(rel).stem.isdigit():  # e.g. vdb/g/0003.vdb: redo frame 3
+                entry.frame_path(int(Path(rel).stem), mod.FRAME_EXT).unlink(missing_ok=True)
+        state = "resumed" if entry.root.exists() else "ran"
+        up = {s: entries[s] for s in STAGES[: STAGES.index(name)]}
+        ctx = Context(self.shot, entry, up, wanted if wanted is not None else [], self.device, self.quiet,
+                      executor=self.executor, state=state)
+        entry.root.mkdir(parents=True, exist_ok=True)
+        return ctx
+
+    @contextlib.contextmanager
+    def failing(self, ctx: Context):
+        """Complete frames stay when a stage fails (a re-run resumes from them); an entry with none
+        is removed, so a failed run never leaves a half-made cache entry behind."""
+        try:
+            yield
+        except BaseException:
+            self.abandon(ctx)
+            raise
+
+    def abandon(self, ctx: Context) -> None:
+        """After a failure: keep complete frames, remove a new entry that has none."""
+        mod = stage_module(ctx.entry.stage)
+        if ctx.state == "ran" and not (mod.PER_FRAME and ctx.entry.done_frames(mod.FRAME_EXT)):
+            ctx.entry.remove()
+
+    def end(self, ctx: Context, extra: dict, seconds: float) -> StageResult:
+        """After every task of the stage: temps of killed workers swept, then the manifest (the
+        client writes it), listing only frames that exist."""
+        entry, mod = ctx.entry, stage_module(ctx.entry.stage)
+        remove_temps(entry.root)
+        done = entry.done_frames(mod.FRAME_EXT) if mod.PER_FRAME else []
+        missing = sorted(set(ctx.frames) - set(done)) if mod.PER_FRAME else []
+        if missing:
+            raise StageError(f"{entry.stage}: frames {_ranges(missing)} are missing after the run (deleted by "
+                             f"someone else?); no manifest written, run again to redo them")
+        old = entry.manifest() or {}
+        timings = {**old.get("timings", {}), "last_run_s": round(seconds, 3)}
+        entry.write_manifest(frames=done, timings=timings, qa=extra.pop("qa", None),
+                             extra={**extra, "notes": ctx.notes, "host": socket.gethostname()})
+        n = len(ctx.frames) if mod.PER_FRAME else 1
+        return StageResult(entry.stage, ctx.state, seconds, n, entry.root)
 
 
 def _ranges(frames: list[int]) -> str:
@@ -199,6 +246,9 @@ def _why_stale(entry: Entry, other: Path) -> str:
 
 
 def load_shot(path: str | Path, *, overrides: list[str] = (), cache_root: str | Path | None = None,
-              device: str | None = None, quiet: bool = False) -> ShotRun:
-    """Load and validate a shot file; returns a ShotRun (see module docstring)."""
-    return ShotRun(load_shot_config(path, list(overrides)), cache_root=cache_root, device=device, quiet=quiet)
+              device: str | None = None, quiet: bool = False, workers: int | None = None,
+              scheduler: str | None = None) -> ShotRun:
+    """Load and validate a shot file; returns a ShotRun (see module docstring). workers /
+    scheduler: where independent frames run (`mpmfx.stages.parallel.Frames`)."""
+    return ShotRun(load_shot_config(path, list(overrides)), cache_root=cache_root, device=device, quiet=quiet,
+                   workers=workers, scheduler=scheduler)

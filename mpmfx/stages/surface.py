@@ -12,6 +12,7 @@ import numpy as np
 from mpmfx.config import Shot
 from mpmfx.io.frames import GroupSurface, ParticleFrame, SurfaceFrame
 from mpmfx.stages.base import Context, quiet_warp
+from mpmfx.stages.parallel import FrameJob
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "surface", 2, True, SurfaceFrame.EXT
 CODE = ("mpmfx.stages.surface", "mpmfx.surface", "mpmfx.io.frames")
@@ -38,33 +39,51 @@ def surface_params(shot: Shot):
                          min_feature_particles=s.min_feature_particles, density=s.density)
 
 
+def todo(ctx: Context) -> list[int]:
+    return [f for f in ctx.frames if not ctx.entry.frame_path(f, FRAME_EXT).exists()]
+
+
 def run(ctx: Context) -> dict:
-    from mpmfx.surface import surface_particles
+    import warp as wp
 
     quiet_warp(ctx.device)
-    shot, entry = ctx.shot, ctx.entry
+    # On a GPU a frame takes ~0.2 s here, less than a worker takes to start and load its kernels
+    # (docs/scale-out.md): the default stays serial there; on the CPU, frames go to all cores.
+    on_gpu = wp.get_device(ctx.device).is_cuda
+    return finish(ctx, ctx.map_frames(frame, todo(ctx), desc="surface", auto=not on_gpu))
+
+
+def finish(ctx: Context, results: list[dict]) -> dict:
+    """In the client, after every frame's task: the manifest's extras."""
+    return {"this_run": {k: sum(r[k] for r in results) for k in ("vertices", "faces")}}
+
+
+def frame(job: FrameJob, f: int) -> dict:
+    """Surface frame `f` into the entry (a task: runs on any worker); returns its mesh size."""
+    from mpmfx.surface import surface_particles
+
+    quiet_warp(job.device)
+    shot = job.shot
     sp = surface_params(shot)
     names = shot.surface_groups()
     groups = sorted(set(names))
-    todo = [f for f in ctx.frames if not entry.frame_path(f, FRAME_EXT).exists()]
     stats = {"vertices": 0, "faces": 0}
-    for f in ctx.progress(todo, total=len(todo), desc="surface"):
-        p = ParticleFrame.read(ctx.upstream["simulate"].frame_path(f, ParticleFrame.EXT))
-        group_of = np.asarray([groups.index(n) for n in names], np.int32)[p.body]
-        out = {}
-        for gi, g in enumerate(groups):
-            sel = group_of == gi
-            res = surface_particles(p.x[sel], p.v[sel], sp, device=ctx.device)
-            m, ls = res.mesh, res.sparse
-            out[g] = GroupSurface(
-                vertices=m.vertices, faces=m.faces, normals=m.normals, velocities=m.velocities,
-                block_ijk=ls.block_ijk, blocks=ls.values, inside_ijk=ls.inside_ijk, voxel_size=ls.voxel_size,
-                background=ls.background,
-                # motion-blur vectors: half precision is plenty, and half the bytes
-                vel_blocks=None if ls.velocity is None else ls.velocity.astype(np.float16),
-                # 0..1 for a fog shader: float16's 5e-4 steps are invisible
-                density_blocks=None if ls.density is None else ls.density.astype(np.float16))
-            stats["vertices"] += len(m.vertices)
-            stats["faces"] += len(m.faces)
-        SurfaceFrame(out).write(entry.frame_path(f, FRAME_EXT))
-    return {"this_run": stats}
+    p = ParticleFrame.read(job.upstream["simulate"].frame_path(f, ParticleFrame.EXT))
+    group_of = np.asarray([groups.index(n) for n in names], np.int32)[p.body]
+    out = {}
+    for gi, g in enumerate(groups):
+        sel = group_of == gi
+        res = surface_particles(p.x[sel], p.v[sel], sp, device=job.device)
+        m, ls = res.mesh, res.sparse
+        out[g] = GroupSurface(
+            vertices=m.vertices, faces=m.faces, normals=m.normals, velocities=m.velocities,
+            block_ijk=ls.block_ijk, blocks=ls.values, inside_ijk=ls.inside_ijk, voxel_size=ls.voxel_size,
+            background=ls.background,
+            # motion-blur vectors: half precision is plenty, and half the bytes
+            vel_blocks=None if ls.velocity is None else ls.velocity.astype(np.float16),
+            # 0..1 for a fog shader: float16's 5e-4 steps are invisible
+            density_blocks=None if ls.density is None else ls.density.astype(np.float16))
+        stats["vertices"] += len(m.vertices)
+        stats["faces"] += len(m.faces)
+    SurfaceFrame(out).write(job.entry.frame_path(f, FRAME_EXT))
+    return stats

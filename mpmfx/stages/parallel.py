@@ -1,0 +1,198 @@
+"""Independent work as dask.distributed tasks: a stage's frames, a wedge's variants (issue 16).
+
+A stage whose frames are independent (surface, export, render) does its work in calls
+`frame(job, f)`; `Frames` runs them either here, one after another (`workers=1`: the serial
+path, the byte-for-byte reference), or as Dask tasks: on a `LocalCluster` of worker processes
+with one thread each (Warp's CPU kernels and VTK use one core, and the GIL would serialise
+threads), or on a farm's scheduler (`scheduler="tcp://host:8786"`, or $MPMFX_SCHEDULER).
+
+The cache contract with many writers:
+- a task writes its own frame file through `mpmfx.cache.atomic_path`, so a frame file is
+  complete or absent, whichever worker (or two) wrote it;
+- the client writes the manifest, after every task has finished;
+- a task's key is the entry key plus the frame number, so two clients asking one scheduler for
+  the same frame share one task, and a worker that dies mid-task has its task re-run on another
+  worker by the scheduler (`distributed.scheduler.allowed-failures`, 3 by default);
+- temp files a killed worker left behind are swept by the client (`mpmfx.cache.remove_temps`),
+  under the shot's lock before a run starts and after a stage's tasks have finished, so an entry
+  never holds a partial file when done.
+
+Paths in a task are absolute: a farm worker's working directory is not the client's (the cache
+root must then be a folder every host mounts at the same path).
+"""
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable
+
+from mpmfx.cache import Entry
+
+if TYPE_CHECKING:
+    from mpmfx.config import Shot
+
+SCHEDULER_ENV = "MPMFX_SCHEDULER"   # a farm scheduler's address, e.g. tcp://farm-head:8786
+WORKERS_ENV = "MPMFX_WORKERS"       # worker processes of the LocalCluster; 1 = serial
+# Below this many frames to make, `workers=None` (auto) stays serial: a two-worker LocalCluster
+# costs ~20 CPU seconds (start, Warp kernels loaded in each worker), about 7 frames of CPU
+# surfacing at the default shot's size, so on an idle 2-core machine it pays from ~10 frames
+# (docs/scale-out.md has the measurement).
+AUTO_MIN_TASKS = 10
+
+
+@dataclass(frozen=True)
+class FrameJob:
+    """What a per-frame task reads: the shot, its stage entry and the upstream entries (paths
+    absolute), and the Warp device. Small and picklable: it travels with every task."""
+
+    shot: Shot
+    entry: Entry
+    upstream: dict[str, Entry]
+    device: str | None = None
+
+    @classmethod
+    def of(cls, shot: Shot, entry: Entry, upstream: dict[str, Entry], device: str | None) -> FrameJob:
+        absolute = lambda e: dataclasses.replace(e, root=e.root.resolve())  # noqa: E731
+        return cls(shot, absolute(entry), {k: absolute(e) for k, e in upstream.items()}, device)
+
+
+def task_key(entry: Entry, frame: int | None = None) -> str:
+    """The Dask key of an entry's frame (or of the whole entry): equal work has an equal key."""
+    return f"{entry.stage}-{entry.key[:20]}" + ("" if frame is None else f"-{frame:04d}")
+
+
+class Frames:
+    """Runs independent calls serially or as Dask tasks; the cluster starts at the first call
+    that is worth one, and stops at `close()` (a `with` block does that).
+
+    workers: LocalCluster worker processes; 1 = serial in this process; None = auto (all cores
+    when there are at least AUTO_MIN_TASKS calls, else serial), or $MPMFX_WORKERS.
+    scheduler: a running scheduler's address (a farm); overrides workers. Default $MPMFX_SCHEDULER.
+    """
+
+    def __init__(self, *, workers: int | None = None, scheduler: str | None = None):
+        self.scheduler = scheduler or os.environ.get(SCHEDULER_ENV) or None
+        if workers is None and os.environ.get(WORKERS_ENV):
+            workers = int(os.environ[WORKERS_ENV])
+        if workers is not None and workers < 1:
+            raise ValueError(f"workers must be at least 1 (1 = serial), not {workers}")
+        self.workers = workers
+        self._client = self._cluster = None
+
+    def __enter__(self) -> Frames:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def parallel(self, n_calls: int, *, auto_min: int = AUTO_MIN_TASKS) -> bool:
+        """Whether `n_calls` calls go to Dask (auto: only `auto_min` calls or more)."""
+        if self._client is not None or self.scheduler:
+            return True
+        n = self.workers if self.workers is not None else (os.cpu_count() or 1)
+        if n < 2 or n_calls < 2:
+            return False
+        return self.workers is not None or n_calls >= auto_min
+
+    def client(self):
+        """The Dask client: connected to the scheduler, or to a LocalCluster started now."""
+        if self._client is None:
+            from distributed import Client, LocalCluster
+            if self.scheduler:
+                self._client = Client(self.scheduler)
+            else:
+                n = self.workers or os.cpu_count() or 1
+                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                             dashboard_address=":0", silence_logs=logging.ERROR)
+                self._client = Client(self._cluster)
+        return self._client
+
+    def close(self) -> None:
+        """Disconnect, and stop the LocalCluster if this started one. A worker slow to exit (a
+        loaded machine) is killed by its nanny; that is no error of the run, so it is not raised."""
+        try:
+            if self._client is not None:
+                self._client.close()
+            if self._cluster is not None:
+                self._cluster.close(timeout=30)
+        except (TimeoutError, OSError) as exc:
+            print(f"note: the Dask cluster did not stop cleanly ({type(exc).__name__}); its workers "
+                  f"were killed", file=sys.stderr)
+        finally:
+            self._client = self._cluster = None
+
+    def map(self, fn: Callable[[FrameJob, int], Any], calls: list[tuple[FrameJob, int]], *,
+            desc: str = "", quiet: bool = False, auto: bool = True) -> list[Any]:
+        """fn(job, frame) for each call; results in call order. The first failure is raised
+        (the other tasks are cancelled; frames already written stay, a re-run resumes).
+        auto=False: stay serial unless workers or a scheduler were asked for (work that a GPU
+        does in a fraction of a second a frame, where starting workers costs more)."""
+        if not calls:
+            return []
+        bar = _bar(len(calls), desc, quiet)
+        try:
+            if not self.parallel(len(calls), auto_min=AUTO_MIN_TASKS if auto else sys.maxsize):
+                out = []
+                for job, f in calls:
+                    out.append(fn(job, f))
+                    bar.update()
+                return out
+            client = self.client()
+            futures = [client.submit(fn, job, f, key=task_key(job.entry, f), pure=False) for job, f in calls]
+            return _gather(client, futures, bar)
+        finally:
+            bar.close()
+
+    def call(self, fn: Callable[..., Any], *args, key: str, desc: str = "", quiet: bool = False) -> Any:
+        """One call, e.g. one shot's whole simulation: a single task, or run here when serial."""
+        return self.calls(fn, [args], keys=[key], desc=desc, quiet=quiet)[0]
+
+    def calls(self, fn: Callable[..., Any], args: list[tuple], *, keys: list[str], desc: str = "",
+              quiet: bool = False) -> list[Any]:
+        """fn(*a) for each a in `args` (e.g. a wedge's simulations): tasks, or here when serial."""
+        if not args:
+            return []
+        bar = _bar(len(args), desc, quiet)
+        try:
+            if not self.parallel(len(args), auto_min=2):
+                out = []
+                for a in args:
+                    out.append(fn(*a))
+                    bar.update()
+                return out
+            client = self.client()
+            return _gather(client, [client.submit(fn, *a, key=k, pure=False) for a, k in zip(args, keys)], bar)
+        finally:
+            bar.close()
+
+
+def _gather(client, futures: list, bar) -> list[Any]:
+    from distributed import as_completed
+    try:
+        for fut in as_completed(futures):
+            fut.result()  # raises the task's exception here, in the client
+            bar.update()
+        return [f.result() for f in futures]
+    except BaseException:
+        client.cancel(futures)
+        raise
+
+
+class _NoBar:
+    def update(self, n: int = 1) -> None:
+        pass
+
+    def close(self) -> None:
+        pass
+
+
+def _bar(total: int, desc: str, quiet: bool):
+    """A progress bar over tasks as they complete (in any order), on stderr."""
+    if quiet:
+        return _NoBar()
+    from tqdm import tqdm
+    return tqdm(total=total, desc=f"{desc:>9}", unit="frame", file=sys.stderr, leave=False, dynamic_ncols=True)

@@ -1,0 +1,429 @@
+"""`mpmfx wedge`: side-by-side variants of one shot that differ in exactly one field (guide 9.4, rule 2).
+
+    mpmfx wedge SHOT --vary surface.smooth_iters=0,2,6
+    mpmfx wedge SHOT --vary objects.bear.overrides.youngs_modulus=300:1200:3 --log --keep renders/jelly_splash
+    mpmfx wedge SHOT --vary surface.smooth_iters=0,2,6 --pick 6     # writes a copy of SHOT with it
+
+Each variant is the shot with one `--set` more, plus `solver.deterministic=true`; the scene seed
+is the shot's own in every variant. The variants keep the shot's name, so they share its cache
+and every stage entry the field does not touch (vary a surfacing field: one simulation, N
+surfacings). Stages run in order over all variants at once: each distinct entry of a stage once
+(a whole-shot stage as one task), and every frame of every variant of a per-frame stage as one
+Dask task each (`mpmfx.stages.parallel`). Output, under `renders/<shot>/wedge-<field>/`: one sheet
+per frame (`NNNN.png`, the tiles labelled field=value), `wedge.mp4`, `contact.png` (a row per
+variant, four frames each) and `wedge.json`.
+"""
+from __future__ import annotations
+
+
+import json
+import math
+import os
+import re
+import sys
+import time
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from mpmfx.config import ShotError
+
+SHEET_WIDTH = 1920      # px: a frame's sheet is scaled to at most this width
+CONTACT_FRAMES = 4      # columns of contact.png
+
+
+def _workers(text: str) -> int:
+    import argparse
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"--workers {text!r}: a whole number of processes, 1 or more (1 = serial)")
+    return int(text)
+
+
+def add_parallel_args(p) -> None:
+    p.add_argument("--workers", type=_workers, default=None, metavar="N",
+                   help="Dask LocalCluster worker processes for independent frames; 1 = serial "
+                        "(default: all cores when there are 10 or more frames to make, else serial; $MPMFX_WORKERS)")
+    p.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="a running Dask scheduler, e.g. tcp://farm-head:8786 (default $MPMFX_SCHEDULER)")
+
+
+def add_wedge_parser(w) -> None:
+    w.add_argument("--vary", required=True, metavar="KEY=V1,V2,..|KEY=LO:HI:N",
+                   help="the one field to vary (any key --set takes; list items also by name, e.g. "
+                        "objects.bear.overrides.youngs_modulus) and its values")
+    w.add_argument("--log", action="store_true", help="LO:HI:N steps evenly in log space")
+    w.add_argument("--keep", default=None, metavar="PATH",
+                   help="the previous champion's render for the first tile: a folder of NNNN.png or one image")
+    w.add_argument("--pick", default=None, metavar="VALUE",
+                   help="run nothing: write a copy of the shot file with KEY = VALUE (see --out)")
+    w.add_argument("--out", default=None, metavar="PATH",
+                   help="--pick: the copy's path (default beside the shot: NAME-FIELD-VALUE.toml)")
+    w.add_argument("--frames", default=None, metavar="A:B", help="only these frames (inclusive)")
+    w.add_argument("--device", choices=("cpu", "cuda"), default=None, help="Warp device")
+    w.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    add_parallel_args(w)
+
+
+# ---------------------------------------------------------------------------------------------
+# Values and keys
+
+
+def parse_vary(text: str, *, log: bool = False) -> tuple[str, list[Any]]:
+    """`key=1,2,3` or `key=lo:hi:n` (`log`: geometric steps) -> (key, values)."""
+    key, sep, raw = text.partition("=")
+    if not sep or not key.strip() or not raw.strip():
+        raise ShotError(f"--vary {text!r}: expected KEY=V1,V2,... or KEY=LO:HI:N, "
+                        f"e.g. --vary surface.smooth_iters=0,2,6")
+    key, raw = key.strip(), raw.strip()
+    span = raw.split(":")
+    if len(span) == 3 and "," not in raw:
+        try:
+            lo, hi, n = float(span[0]), float(span[1]), int(span[2])
+        except ValueError:
+            raise ShotError(f"--vary {text!r}: LO:HI:N needs two numbers and a count") from None
+        if n < 2:
+            raise ShotError(f"--vary {text!r}: N must be at least 2")
+        if log and (lo <= 0 or hi <= 0):
+            raise ShotError(f"--vary {text!r}: --log needs LO and HI above 0")
+        if log:
+            values = [lo * (hi / lo) ** (i / (n - 1)) for i in range(n)]
+        else:
+            values = [lo + (hi - lo) * i / (n - 1) for i in range(n)]
+        values = [float(f"{v:.6g}") for v in values]
+        if all(s.strip().lstrip("+-").isdigit() for s in span[:2]) and all(v == int(v) for v in values):
+            values = [int(v) for v in values]
+        return key, values
+    if log:
+        raise ShotError(f"--vary {text!r}: --log goes with LO:HI:N, not a list of values")
+    values = [_toml_value(part.strip()) for part in raw.split(",")]
+    if len(values) < 2 or len(set(map(repr, values))) != len(values):
+        raise ShotError(f"--vary {text!r}: give two or more different values")
+    return key, values
+
+
+def _toml_value(raw: str) -> Any:
+    try:
+        return tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        return raw  # a bare string, as --set takes it
+
+
+def resolve_key(data: dict, key: str, *, source: str) -> str:
+    """`objects.bear.overrides.x` -> `objects.0.overrides.x`: list items may be named by their
+    `name`, as in the shot file; `--set` itself takes indexes."""
+    node: Any = data
+    out = []
+    for part in key.split("."):
+        if isinstance(node, list):
+            names = [item.get("name") for item in node if isinstance(item, dict)]
+            if not part.isdigit():
+                if part not in names:
+                    raise ShotError(f"{source}: --vary {key}: no item named '{part}' (names: {', '.join(map(str, names))})")
+                part = str(names.index(part))
+            node = node[int(part)] if int(part) < len(node) else None
+        elif isinstance(node, dict):
+            node = node.get(part)
+        else:
+            node = None
+        out.append(part)
+    return ".".join(out)
+
+
+def label(field: str, value: Any) -> str:
+    return f"{field.split('.')[-1]}={value}"
+
+
+# ---------------------------------------------------------------------------------------------
+# Running
+
+
+def variant_shots(path: str | Path, field: str, values: list[Any], overrides: list[str] = ()) -> list:
+    """One validated shot per value: the shot, `overrides`, deterministic mode, field = value."""
+    from mpmfx.config import load_shot_config
+    fixed = [*overrides, "solver.deterministic=true"]
+    return [load_shot_config(path, [*fixed, f"{field}={_toml_text(v)}"]) for v in values]
+
+
+def run_wedge(shots: list, *, cache_root: str | Path | None = None, executor=None, frames: list[int] | None = None,
+              device: str | None = None, quiet: bool = False) -> list[dict[str, Any]]:
+    """Run every variant to `render`, stage by stage over all variants; each distinct entry once.
+    Returns, per variant, each stage's entry root. `executor`: `mpmfx.stages.parallel.Frames`."""
+    from mpmfx.cache import Cache, default_root
+    from mpmfx.stages import STAGES
+    from mpmfx.stages.parallel import Frames, task_key
+    from mpmfx.stages.runner import ShotRun, stage_module
+
+    if not shots:
+        return []
+    ex = executor or Frames(workers=1)
+    root = Path(cache_root or default_root()).resolve()
+    cache = Cache(root, shots[0].shot.name)
+    # The variants share the shot's cache folder: this process holds its lock for them all
+    # (their runs and tasks write under it and never take it themselves).
+    with cache.lock():
+        cache.remove_orphans()
+        runs = [ShotRun(s, cache_root=root, device=device, quiet=quiet, executor=ex, publish=False, locked=True)
+                for s in shots]
+        runs[0].check(frames=frames)
+        entries = [r.entries() for r in runs]
+        for name in STAGES:
+            first: dict[str, int] = {}          # distinct entry key -> first variant that has it
+            for i, e in enumerate(entries):
+                first.setdefault(e[name].key, i)
+            mod = stage_module(name)
+            if hasattr(mod, "frame"):
+                _frame_stage(mod, [runs[i] for i in first.values()], [entries[i] for i in first.values()], frames)
+                continue
+            todo = [i for i in first.values() if not entries[i][name].complete(runs[i]._wanted(name, frames))]
+            in_tasks = ex.parallel(len(todo), auto_min=2)
+            ex.calls(_run_stage, [(shots[i], root, name, frames, device, quiet or in_tasks) for i in todo],
+                     keys=[task_key(entries[i][name]) for i in todo], desc=name, quiet=quiet or not in_tasks)
+        return [{name: e[name].root for name in STAGES} for e in entries]
+
+
+def _run_stage(shot, cache_root: Path, name: str, frames, device, quiet: bool):
+    """One variant's whole-shot stage (voxelise, simulate), its upstream already cached: a task."""
+    from mpmfx.stages.runner import ShotRun
+    return ShotRun(shot, cache_root=cache_root, device=device, quiet=quiet, workers=1,
+                   publish=False, locked=True).run(until=name, frames=frames)[-1]
+
+
+def _frame_stage(mod, runs: list, entries: list[dict], frames: list[int] | None) -> None:
+    """Every frame of every variant of a per-frame stage as one batch of tasks; then each
+    variant's finish (in the client) and its manifest."""
+    from mpmfx.stages.base import Context
+    ctxs = [(r, c) for r, e in zip(runs, entries) if isinstance(c := r.begin(mod.NAME, e, frames), Context)]
+    if not ctxs:
+        return
+    calls, owner = [], []
+    for k, (_, c) in enumerate(ctxs):
+        job = c.job()
+        for f in mod.todo(c):
+            calls.append((job, f))
+            owner.append(k)
+    t0 = time.perf_counter()
+    ex = runs[0].executor
+    try:
+        results = ex.map(mod.frame, calls, desc=mod.NAME, quiet=runs[0].quiet)
+        for k, (r, c) in enumerate(ctxs):
+            with r.failing(c):
+                extra = mod.finish(c, [res for res, o in zip(results, owner) if o == k]) or {}
+            r.end(c, extra, time.perf_counter() - t0)
+    except BaseException:
+        for r, c in ctxs:
+            r.abandon(c)
+        raise
+    finally:
+        getattr(mod, "close", lambda: None)()
+
+
+# ---------------------------------------------------------------------------------------------
+# Sheets
+
+
+def write_sheets(out: Path, tiles: list[tuple[str, dict[int, Path]]], frames: list[int], *, fps: float,
+                 movie: bool = True) -> dict[str, Path]:
+    """Per frame, the tiles side by side (a grid of up to 3 columns) with their labels; then a
+    movie of the sheets and `contact.png` (a row per tile, CONTACT_FRAMES frames each)."""
+    import numpy as np
+
+    from mpmfx.cache import atomic_path
+    from mpmfx.render.frames import write_movie
+    out.mkdir(parents=True, exist_ok=True)
+    cols = min(len(tiles), 3 if len(tiles) != 4 else 2)
+    sheets = []
+    for f in frames:
+        images = [_labelled(paths.get(f), text) for text, paths in tiles]
+        sheet = _grid(images, cols, max_width=SHEET_WIDTH)
+        with atomic_path(out / f"{f:04d}.png") as tmp:
+            _save(sheet, tmp)
+        sheets.append(out / f"{f:04d}.png")
+    result = {"sheets": out}
+    if movie and len(sheets) > 1:
+        result["movie"] = write_movie(sheets, out / "wedge.mp4", fps=fps)
+    picks = [frames[round(i * (len(frames) - 1) / max(CONTACT_FRAMES - 1, 1))]
+             for i in range(min(CONTACT_FRAMES, len(frames)))]
+    rows = [np.concatenate([_labelled(paths.get(f), text if j == 0 else "", scale=4) for j, f in enumerate(picks)],
+                           axis=1) for text, paths in tiles]
+    with atomic_path(out / "contact.png") as tmp:
+        _save(np.concatenate(rows, axis=0), tmp)
+    result["contact"] = out / "contact.png"
+    return result
+
+
+def _labelled(path: Path | None, text: str, *, scale: int = 1):
+    """The image at `path` (or a grey 'missing' tile), downscaled by `scale`, `text` in its corner."""
+    import numpy as np
+    from PIL import Image, ImageDraw, ImageFont
+    img = Image.open(path).convert("RGB") if path and Path(path).is_file() else Image.new("RGB", (960, 540), "#404040")
+    if scale > 1:
+        img = img.resize((img.width // scale, img.height // scale), Image.LANCZOS)
+    if text or not (path and Path(path).is_file()):
+        text = text or "missing"
+        draw = ImageDraw.Draw(img)
+        font = ImageFont.load_default(size=max(12, img.height // 14))
+        box = draw.textbbox((0, 0), text, font=font)
+        pad = max(4, img.height // 60)
+        draw.rectangle((0, img.height - box[3] - 3 * pad, box[2] + 2 * pad, img.height), fill="#000000")
+        draw.text((pad, img.height - box[3] - 2 * pad), text, fill="#ffffff", font=font)
+    return np.asarray(img)
+
+
+def _grid(images: list, cols: int, *, max_width: int):
+    import numpy as np
+    from PIL import Image
+    h, w = images[0].shape[:2]
+    images = [np.asarray(Image.fromarray(a).resize((w, h))) if a.shape[:2] != (h, w) else a for a in images]
+    blank = np.zeros_like(images[0])
+    rows = [np.concatenate([*images[i:i + cols], *[blank] * (cols - len(images[i:i + cols]))], axis=1)
+            for i in range(0, len(images), cols)]
+    sheet = np.concatenate(rows, axis=0)
+    if sheet.shape[1] > max_width:
+        k = max_width / sheet.shape[1]
+        size = (int(sheet.shape[1] * k) // 2 * 2, int(sheet.shape[0] * k) // 2 * 2)  # even: H.264
+        sheet = np.asarray(Image.fromarray(sheet).resize(size, Image.LANCZOS))
+    return sheet
+
+
+def _save(image, path: Path) -> None:
+    from PIL import Image
+    Image.fromarray(image).save(path, format="PNG")
+
+
+def _keep_tile(keep: str, frames: list[int]) -> dict[int, Path]:
+    """--keep: a folder of NNNN.png (a render or an earlier wedge variant) or one image for all."""
+    p = Path(keep)
+    if p.is_dir():
+        found = {f: p / f"{f:04d}.png" for f in frames if (p / f"{f:04d}.png").is_file()}
+        if not found:
+            raise ShotError(f"--keep {keep}: no frame images NNNN.png for frames {frames[0]}..{frames[-1]} there")
+        return found
+    if p.is_file():
+        return dict.fromkeys(frames, p)
+    raise ShotError(f"--keep {keep}: no such folder or image")
+
+
+# ---------------------------------------------------------------------------------------------
+# --pick: a copy of the shot file with the chosen value
+
+
+def pick(path: str | Path, field: str, value: Any, *, out: str | Path | None = None) -> Path:
+    """Write a copy of the shot file with `field` = `value` (comments are not kept); relative
+    mesh paths are rewritten for the copy's folder. The copy is validated; returns its path."""
+    from mpmfx.config import apply_override, load_shot_config
+    path = Path(path)
+    data = tomllib.loads(path.read_text())
+    apply_override(data, field.split("."), value, source=str(path))
+    target = Path(out) if out else path.with_name(f"{path.stem}-{field.split('.')[-1]}-{_slug(value)}.toml")
+    here, there = path.resolve().parent, target.resolve().parent
+    for section in ("objects", "colliders"):
+        for item in data.get(section, []):
+            if isinstance(item, dict) and isinstance(item.get("mesh"), str) and not Path(item["mesh"]).is_absolute():
+                item["mesh"] = os.path.relpath(here / item["mesh"], there)
+    header = f"# {path.name} with {field} = {_toml_text(value)} (picked with mpmfx wedge --pick)\n"
+    target.parent.mkdir(parents=True, exist_ok=True)
+    target.write_text(header + dump_toml(data))
+    load_shot_config(target)
+    return target
+
+
+def _slug(value: Any) -> str:
+    return re.sub(r"[^A-Za-z0-9.+-]+", "_", str(value))
+
+
+def _toml_text(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return repr(value) if math.isfinite(value) else ("nan" if math.isnan(value) else ("inf" if value > 0 else "-inf"))
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_text(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_text(v)}" for k, v in value.items()) + "}"
+    raise ShotError(f"cannot write {value!r} to TOML")
+
+
+def _toml_key(key: str) -> str:
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else json.dumps(key)
+
+
+def dump_toml(data: dict) -> str:
+    """A shot's data as TOML: top-level keys, tables, arrays of tables; deeper values inline."""
+    lines = [f"{_toml_key(k)} = {_toml_text(v)}" for k, v in data.items() if not _is_table(v)]
+    for k, v in data.items():
+        if isinstance(v, dict):
+            lines += ["", f"[{_toml_key(k)}]", *(f"{_toml_key(a)} = {_toml_text(b)}" for a, b in v.items())]
+        elif _is_table(v):
+            for item in v:
+                lines += ["", f"[[{_toml_key(k)}]]", *(f"{_toml_key(a)} = {_toml_text(b)}" for a, b in item.items())]
+    return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def _is_table(v: Any) -> bool:
+    return isinstance(v, dict) or (isinstance(v, list) and bool(v) and all(isinstance(i, dict) for i in v))
+
+
+# ---------------------------------------------------------------------------------------------
+# The command
+
+
+def main(args) -> int:
+    from mpmfx.stages.parallel import Frames
+
+    key, values = parse_vary(args.vary, log=args.log) if args.pick is None else (args.vary.partition("=")[0], [])
+    path = Path(args.shot)
+    if not path.is_file():
+        raise ShotError(f"{path}: shot file not found")
+    field = resolve_key(tomllib.loads(path.read_text()), key.strip(), source=str(path))
+    if args.pick is not None:
+        print(f"wrote {pick(path, field, _toml_value(args.pick), out=args.out)}")
+        return 0
+    shots = variant_shots(path, field, values, args.overrides)
+    frames = _frames(args.frames, shots[0])
+    labels = [label(key, v) for v in values]
+    with Frames(workers=args.workers, scheduler=args.scheduler) as ex:
+        t0 = time.perf_counter()
+        roots = run_wedge(shots, cache_root=args.cache, executor=ex, frames=frames, device=args.device,
+                          quiet=args.quiet)
+        seconds = time.perf_counter() - t0
+    shot = shots[0]
+    out = Path("renders") / shot.shot.name / f"wedge-{_slug(key)}"
+    tiles = [(f"champion: {Path(args.keep).name}", _keep_tile(args.keep, frames))] if args.keep else []
+    tiles += [(text, {f: r["render"] / "frames" / f"{f:04d}.png" for f in frames}) for text, r in zip(labels, roots)]
+    made = write_sheets(out, tiles, frames, fps=shot.shot.fps, movie=shot.render.movie)
+    (out / "wedge.json").write_text(json.dumps({
+        "shot": str(path), "field": field, "values": values, "overrides": args.overrides, "keep": args.keep,
+        "frames": frames, "wall_s": round(seconds, 1),
+        "variants": [{"value": v, **{k: str(p) for k, p in r.items()}} for v, r in zip(values, roots)]},
+        indent=2, default=str))
+    _report(key, values, roots)
+    print(f"wedge: {len(values)} variants in {seconds:.1f} s -> {made['sheets']}/ (NNNN.png, "
+          f"{'wedge.mp4, ' if 'movie' in made else ''}contact.png, wedge.json)")
+    return 0
+
+
+def _frames(text: str | None, shot) -> list[int]:
+    if not text:
+        return list(shot.frames)
+    from mpmfx.cli import _frames as parse
+    try:
+        frames = parse(text)
+    except Exception as exc:  # argparse.ArgumentTypeError
+        raise ShotError(str(exc)) from None
+    bad = sorted(set(frames) - set(shot.frames))
+    if bad:
+        raise ShotError(f"--frames: {bad[0]} is outside the shot's frames {shot.shot.frame_start}..{shot.shot.frame_end}")
+    return frames
+
+
+def _report(key: str, values: list, roots: list[dict[str, Path]]) -> None:
+    """Which entries the variants share: one row per stage, the number of distinct entries."""
+    from mpmfx.stages import STAGES
+    print(f"{key}: {', '.join(map(str, values))}", file=sys.stderr)
+    for name in STAGES:
+        n = len({r[name] for r in roots})
+        print(f"  {name:<9} {n} entr{'y' if n == 1 else 'ies'}" + ("  (shared)" if n == 1 else ""), file=sys.stderr)

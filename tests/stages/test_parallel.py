@@ -1,0 +1,152 @@
+"""Issue 16: per-frame stages on a two-worker Dask LocalCluster, killed workers, and wedges."""
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+from distributed import WorkerPlugin
+
+from mpmfx.config import ShotError, load_shot_config
+from mpmfx.cache import TEMP_GLOB
+from mpmfx.stages.parallel import Frames
+from mpmfx.stages.runner import ShotRun
+from mpmfx.wedge import parse_vary, pick, run_wedge, variant_shots, write_sheets
+from tests.conftest import write_tiny_shot
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The tiny shot run serially (workers=1) to render: the byte-for-byte reference."""
+    folder = tmp_path_factory.mktemp("parallel")
+    shot = write_tiny_shot(folder)
+    cwd = os.getcwd()
+    os.chdir(folder)  # render publishes to renders/<shot>/ in the working directory
+    try:
+        results = ShotRun(load_shot_config(shot), cache_root=folder / "serial", quiet=True, workers=1).run()
+    finally:
+        os.chdir(cwd)
+    return shot, {r.stage: r.entry for r in results}
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """One two-worker LocalCluster for the module (starting one costs seconds)."""
+    with Frames(workers=2) as ex:
+        yield ex
+
+
+def _cache_with_simulation(reference, cache: Path) -> Path:
+    """A fresh cache holding only the reference's voxelise and simulate entries."""
+    shot, entries = reference
+    for stage in ("voxelise", "simulate"):
+        src = entries[stage]
+        shutil.copytree(src, cache / "tiny" / stage / src.name)
+    return cache
+
+
+def _files(root: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*"))
+            if p.is_file() and p.name != "manifest.json"}
+
+
+def test_two_worker_cluster_writes_the_serial_cache_byte_for_byte(reference, cluster, tmp_path, monkeypatch):
+    shot, ref = reference
+    cache = _cache_with_simulation(reference, tmp_path / "cache")
+    monkeypatch.chdir(tmp_path)
+    results = ShotRun(load_shot_config(shot), cache_root=cache, quiet=True, executor=cluster).run()
+    got = {r.stage: r for r in results}
+    assert [got[s].state for s in ("voxelise", "simulate", "surface", "export", "render")] == \
+        ["cached", "cached", "ran", "ran", "ran"]
+    for stage in ("surface", "export", "render"):
+        a, b = _files(ref[stage]), _files(got[stage].entry)
+        assert a.keys() == b.keys(), stage
+        vdb = {k for k in a if k.endswith(".vdb")}  # OpenVDB writes a random file UUID: compare grids
+        assert {k for k in a if a[k] != b[k]} <= vdb, f"{stage}: files differ from the serial run's"
+        for k in vdb:
+            assert _vdb_values(ref[stage] / k) == _vdb_values(got[stage].entry / k)
+    assert not list(cache.rglob(TEMP_GLOB))
+    assert len(list((tmp_path / "renders" / "tiny").glob("[0-9]*.png"))) == 6
+
+
+def _vdb_values(path: Path) -> dict[str, bytes]:
+    from mpmfx.io.vdb import read_vdb
+    return {name: np.asarray(g["values"]).tobytes() for name, g in read_vdb(path, with_values=True)["grids"].items()}
+
+
+class KillOnce(WorkerPlugin):
+    """A Dask worker plugin: SIGKILL the worker the first time a task for `frame` starts on it."""
+
+    def __init__(self, frame: int, marker: str):
+        self.frame, self.marker = frame, marker
+
+    def transition(self, key, start, finish, **kwargs):
+        if finish == "executing" and str(key).endswith(f"-{self.frame:04d}") and not os.path.exists(self.marker):
+            Path(self.marker).write_text(str(os.getpid()))
+            os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_killed_worker_is_retried_and_the_cache_holds_nothing_partial(reference, cluster, tmp_path):
+    shot, ref = reference
+    cache = _cache_with_simulation(reference, tmp_path / "cache")
+    run = ShotRun(load_shot_config(shot), cache_root=cache, quiet=True, executor=cluster)
+    surface = run.entries()["surface"]
+    # what a writer killed mid-write leaves: a temp file beside the frames
+    surface.frames_dir.mkdir(parents=True)
+    (surface.frames_dir / ".0002.999-dead.tmp.npz").write_bytes(b"PK\x03\x04 half a zip")
+    marker = tmp_path / "killed"
+    cluster.client().register_plugin(KillOnce(3, str(marker)), name="kill-once")
+    results = run.run(until="surface")
+    assert marker.is_file(), "the worker running frame 3 must have been killed"
+    assert results[-1].state == "resumed"
+    assert not list(cache.rglob(TEMP_GLOB))
+    assert _files(ref["surface"]) == _files(surface.root)
+    assert surface.complete(list(range(1, 7)))
+    assert run.run(until="surface")[-1].state == "cached"
+
+
+def test_wedge_of_a_surfacing_field_shares_one_simulation(reference, cluster, tmp_path):
+    shot, _ = reference
+    cache = _cache_with_simulation(reference, tmp_path / "cache")
+    key, values = parse_vary("surface.smooth_iters=0,3")
+    shots = variant_shots(shot, key, values)
+    roots = run_wedge(shots, cache_root=cache, executor=cluster, frames=[1, 2, 3], quiet=True)
+    assert len({r["simulate"] for r in roots}) == 1 and len(list((cache / "tiny" / "simulate").iterdir())) == 1
+    assert len({r["surface"] for r in roots}) == 2
+    assert all(shot.solver.deterministic and shot.voxelise.seed == 0 for shot in shots)
+    a, b = (sorted((r["render"] / "frames").glob("*.png")) for r in roots)
+    assert len(a) == len(b) == 3 and a[0].read_bytes() != b[0].read_bytes()
+    tiles = [(f"smooth_iters={v}", {f: r["render"] / "frames" / f"{f:04d}.png" for f in (1, 2, 3)})
+             for v, r in zip(values, roots)]
+    made = write_sheets(tmp_path / "wedge", tiles, [1, 2, 3], fps=24, movie=False)
+    import imageio.v2 as imageio
+    sheet = imageio.imread(made["sheets"] / "0002.png")
+    assert sheet.shape[1] == 2 * 160 and sheet.shape[0] == 120  # two tiles side by side
+
+
+def test_vary_ranges_and_pick_writes_a_loadable_copy(tmp_path):
+    assert parse_vary("surface.smooth_iters=0:6:4") == ("surface.smooth_iters", [0, 2, 4, 6])
+    assert parse_vary("objects.cube.overrides.youngs_modulus=100:10000:3", log=True)[1] == [100.0, 1000.0, 10000.0]
+    with pytest.raises(ShotError, match="two or more"):
+        parse_vary("surface.smooth_iters=2")
+    shot = write_tiny_shot(tmp_path)
+    out = pick(shot, "objects.0.overrides.youngs_modulus", 3000, out=tmp_path / "picked" / "tiny.toml")
+    picked = load_shot_config(out)
+    assert picked.objects[0].overrides == {"youngs_modulus": 3000}
+    assert picked.objects[0].mesh != load_shot_config(shot).objects[0].mesh  # rewritten for the new folder
+    assert picked.model_dump(exclude={"objects", "base_dir"}) == load_shot_config(shot).model_dump(
+        exclude={"objects", "base_dir"})
+
+
+def test_status_names_the_host_that_wrote_an_entry(reference, tmp_path):
+    import json
+    shot, ref = reference
+    cache = _cache_with_simulation(reference, tmp_path / "cache")
+    man = next((cache / "tiny" / "simulate").iterdir()) / "manifest.json"
+    man.write_text(json.dumps({**json.loads(man.read_text()), "host": "farm-node-7"}))
+    status = {s.stage: s for s in ShotRun(load_shot_config(shot), cache_root=cache).status()}
+    assert status["simulate"].state == "cached" and "farm-node-7" in status["simulate"].why
+    assert "written on" not in status["voxelise"].why  # written here (or by an older mpmfx)
