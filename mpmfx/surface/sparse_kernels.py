@@ -241,6 +241,7 @@ def gather_zhu_bridson(
     far_vox: float,
     phi: wp.array(dtype=float),
     w_out: wp.array(dtype=float),
+    offset: wp.array(dtype=wp.vec3),
     vel: wp.array(dtype=wp.vec3),
 ):
     """Zhu-Bridson phi at one active voxel, gathered from particles of nearby blocks.
@@ -283,10 +284,12 @@ def gather_zhu_bridson(
     w_out[t] = w
     if w <= 0.0:
         phi[t] = far_vox
+        offset[t] = wp.vec3(0.0)
         if with_v != 0:
             vel[t] = wp.vec3(0.0)
         return
     d = -dw / w  # x - xbar
+    offset[t] = d
     dist = wp.length(d)
     gl = wp.length(gw)
     if gl > 0.0:
@@ -402,6 +405,76 @@ def flip_unreached(phi: wp.array(dtype=float), reached: wp.array(dtype=wp.int32)
             phi[t] = inside_value
         else:
             phi[t] = outside_value
+
+
+@wp.func
+def weight_at(bmap: wp.array3d(dtype=wp.int32), w: wp.array(dtype=float), t: int, i: int, j: int, k: int):
+    """Kernel weight sum at voxel (i, j, k): 0 on OUTSIDE tiles (no particle within reach), and
+    voxel t's own value on INSIDE tiles (the bulk, where the field is flat anyway)."""
+    s = slot(bmap, i, j, k)
+    if s >= 0:
+        return w[s]
+    if s == TILE_INSIDE:
+        return w[t]
+    return 0.0
+
+
+@wp.kernel
+def blur_weight_axis(
+    bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float), axis: int,
+    step: int, dst: wp.array(dtype=float),
+):
+    """dst = [1 2 1]/4 blur of the kernel weight sum along `axis` with taps `step` voxels apart
+    (variance 0.5 step^2 voxel^2; tiles as in weight_at)."""
+    t = wp.tid()
+    c = voxel_of(t, bcoord)
+    o = wp.vec3i(0)
+    o[axis] = step
+    a = weight_at(bmap, src, t, c[0] - o[0], c[1] - o[1], c[2] - o[2])
+    b = weight_at(bmap, src, t, c[0] + o[0], c[1] + o[1], c[2] + o[2])
+    dst[t] = 0.25 * a + 0.5 * src[t] + 0.25 * b
+
+
+@wp.kernel
+def project_on_wide_normal(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    wide: wp.array(dtype=float),
+    w: wp.array(dtype=float),
+    offset: wp.array(dtype=wp.vec3),
+    radius_vox: float,
+    far_vox: float,
+    phi: wp.array(dtype=float),
+):
+    """phi = -(x - xbar) . n - r with n = -grad(wide) / |grad(wide)|, `wide` the kernel weight sum
+    blurred to a wider kernel. The normal of the kernel itself is estimated from the same
+    particles with nearly the same weights as xbar, so on irregular samples their sideways
+    errors correlate and the projected distance reads long (the surface sits ~0.1 h inside);
+    a wider kernel's normal decorrelates them and leaves lattices as they were."""
+    t = wp.tid()
+    if w[t] <= 0.0:
+        phi[t] = far_vox
+        return
+    c = voxel_of(t, bcoord)
+    g = wp.vec3(0.0)
+    for a in range(3):
+        o = wp.vec3i(0)
+        o[a] = 1
+        g[a] = weight_at(bmap, wide, t, c[0] + o[0], c[1] + o[1], c[2] + o[2]) - weight_at(
+            bmap, wide, t, c[0] - o[0], c[1] - o[1], c[2] - o[2])
+    d = offset[t]
+    dist = wp.length(d)
+    gl = wp.length(g)
+    if gl > 0.0:
+        dist = -wp.dot(d, g) / gl  # g points inward (towards the particles)
+    phi[t] = dist - radius_vox
+
+
+@wp.kernel
+def average_into(a: wp.array(dtype=float), b: wp.array(dtype=float)):
+    """a = (a + b) / 2."""
+    t = wp.tid()
+    a[t] = 0.5 * (a[t] + b[t])
 
 
 @wp.kernel
