@@ -35,7 +35,8 @@ from mpmfx.surface.params import LevelSet, SparseLevelSet, SurfaceMesh, SurfaceP
 log = logging.getLogger(__name__)
 
 BS = 8
-MAX_BLOCKS = 1 << 28  # block-grid cells (int32 each): 2^28 blocks = 2^37 voxels of bounding box
+CELLS_PER_BLOCK = 2  # gather cells per block edge (sparse_kernels.CS = BS / 2 voxels)
+MAX_BLOCKS = 1 << 26  # block-grid cells: 2^26 blocks = 2^35 voxels of bounding box (8x as many int32 gather cells)
 MAX_SWEEP_ROUNDS = 1024
 NORMAL_STEP = 2  # voxels between the taps of the weight blur (the weights are smooth at 1 voxel)
 MAX_BLOCK_SWEEP_ROUNDS = 256  # block-grid flood fill (a full line per launch: settles in a few rounds)
@@ -162,7 +163,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     # grid coordinates on the device: float32 keeps 1e-4 voxel at 2000 voxels across
     g = wp.empty(n, dtype=wp.vec3)
     wp.launch(S.to_grid, n, inputs=[x, wp.vec3(*grid.origin.astype(np.float32)), 1.0 / grid.voxel, g])
-    counts, starts, order = _bin_particles(wp, S, g, grid)
+    counts, cells, starts, order = _bin_particles(wp, S, g, grid)
     bmap, bcoord = _classify(wp, S, g, counts, grid)
     nact = bcoord.shape[0]
     nvox = nact * BS**3
@@ -177,7 +178,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
         wp.launch(
             S.gather_zhu_bridson,
             nvox,
-            inputs=[bcoord, counts, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
+            inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
             outputs=[phi, w, offset, vel],
         )
         if grid.normal_passes > 0:
@@ -235,15 +236,17 @@ def _scan(wp, a, *, inclusive: bool):
 
 
 def _bin_particles(wp, S, g, grid: SparseGrid):
-    """(counts per block (3-D int32), first sorted slot per block (flat), particle order)."""
+    """(counts per block (3-D int32), counts per gather cell (3-D, CELLS_PER_BLOCK per block and
+    axis), first sorted slot per cell (flat), particle order sorted by cell)."""
     n = g.shape[0]
     counts = wp.zeros(grid.nblocks, dtype=wp.int32)
+    cells = wp.zeros(tuple(b * CELLS_PER_BLOCK for b in grid.nblocks), dtype=wp.int32)
     keys = wp.empty(2 * n, dtype=wp.int32)
     order = wp.empty(2 * n, dtype=wp.int32)
-    wp.launch(S.count_blocks, n, inputs=[g, counts, keys, order])
+    wp.launch(S.count_blocks, n, inputs=[g, counts, cells, keys, order])
     wp.utils.radix_sort_pairs(keys, order, n)
-    starts = _scan(wp, counts.flatten(), inclusive=False)
-    return counts, starts, order
+    starts = _scan(wp, cells.flatten(), inclusive=False)
+    return counts, cells, starts, order
 
 
 def _classify(wp, S, g, counts, grid: SparseGrid):

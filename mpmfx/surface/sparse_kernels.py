@@ -10,6 +10,7 @@ grid coordinates (i, j, k), i.e. world `origin + (i, j, k) * voxel` as in the de
 import warp as wp
 
 BS = wp.constant(8)  # block edge in voxels
+CS = wp.constant(4)  # edge of the cells particles are binned in for the field gather, voxels
 BV = wp.constant(512)  # voxels per block
 TILE_OUTSIDE = wp.constant(-1)
 TILE_INSIDE = wp.constant(-2)
@@ -85,17 +86,20 @@ def to_grid(x: wp.array(dtype=wp.vec3), origin: wp.vec3, inv_voxel: float, g: wp
 def count_blocks(
     g: wp.array(dtype=wp.vec3),
     counts: wp.array3d(dtype=wp.int32),
+    cells: wp.array3d(dtype=wp.int32),
     keys: wp.array(dtype=wp.int32),
     order: wp.array(dtype=wp.int32),
 ):
-    """Particles per block; keys[p] = linear block index of particle p, order[p] = p (to sort)."""
+    """Particles per block and per gather cell (CS^3 voxels); keys[p] = linear cell index of
+    particle p, order[p] = p (to sort)."""
     p = wp.tid()
     gp = g[p]
-    bi = int(wp.floor(gp[0])) // BS
-    bj = int(wp.floor(gp[1])) // BS
-    bk = int(wp.floor(gp[2])) // BS
-    wp.atomic_add(counts, bi, bj, bk, 1)
-    keys[p] = (bi * counts.shape[1] + bj) * counts.shape[2] + bk
+    ci = int(wp.floor(gp[0])) // CS
+    cj = int(wp.floor(gp[1])) // CS
+    ck = int(wp.floor(gp[2])) // CS
+    wp.atomic_add(counts, ci // (BS // CS), cj // (BS // CS), ck // (BS // CS), 1)
+    wp.atomic_add(cells, ci, cj, ck, 1)
+    keys[p] = (ci * cells.shape[1] + cj) * cells.shape[2] + ck
     order[p] = p
 
 
@@ -230,7 +234,7 @@ def active_flags(state: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int
 @wp.kernel
 def gather_zhu_bridson(
     bcoord: wp.array(dtype=wp.vec3i),
-    counts: wp.array3d(dtype=wp.int32),
+    cells: wp.array3d(dtype=wp.int32),
     starts: wp.array(dtype=wp.int32),
     order: wp.array(dtype=wp.int32),
     g: wp.array(dtype=wp.vec3),
@@ -244,7 +248,8 @@ def gather_zhu_bridson(
     offset: wp.array(dtype=wp.vec3),
     vel: wp.array(dtype=wp.vec3),
 ):
-    """Zhu-Bridson phi at one active voxel, gathered from particles of nearby blocks.
+    """Zhu-Bridson phi at one active voxel, gathered from particles of the nearby cells (CS^3
+    voxels each: a finer bin than the blocks, so few particles beyond the kernel are visited).
 
     phi = -(x - xbar) . n - r with n = -grad w / |grad w| (analytic kernel gradient). Projecting
     on the normal matters on irregular samples: xbar jitters sideways as much as along the
@@ -257,8 +262,8 @@ def gather_zhu_bridson(
     lo = wp.vec3i(0)
     hi = wp.vec3i(0)
     for a in range(3):
-        lo[a] = wp.max(int(wp.floor((x[a] - reach) / 8.0)), 0)
-        hi[a] = wp.min(int(wp.floor((x[a] + reach) / 8.0)), counts.shape[a] - 1)
+        lo[a] = wp.max(int(wp.floor((x[a] - reach) / float(CS))), 0)
+        hi[a] = wp.min(int(wp.floor((x[a] + reach) / float(CS))), cells.shape[a] - 1)
     w = float(0.0)
     dw = wp.vec3(0.0)  # sum w * (x_p - x)
     gw = wp.vec3(0.0)  # gradient of w (up to the factor 6 / R^2)
@@ -266,9 +271,9 @@ def gather_zhu_bridson(
     for bi in range(lo[0], hi[0] + 1):
         for bj in range(lo[1], hi[1] + 1):
             for bk in range(lo[2], hi[2] + 1):
-                cnt = counts[bi, bj, bk]
+                cnt = cells[bi, bj, bk]
                 if cnt > 0:
-                    s = starts[(bi * counts.shape[1] + bj) * counts.shape[2] + bk]
+                    s = starts[(bi * cells.shape[1] + bj) * cells.shape[2] + bk]
                     for q in range(s, s + cnt):
                         p = order[q]
                         d = g[p] - x
