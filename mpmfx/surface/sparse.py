@@ -35,6 +35,7 @@ from mpmfx.surface.params import LevelSet, SparseLevelSet, SurfaceMesh, SurfaceP
 log = logging.getLogger(__name__)
 
 BS = 8
+PINNED_DOWNLOAD = False  # DeviceSurface.download's default (README: measured both ways)
 CELLS_PER_BLOCK = 2  # gather cells per block edge (sparse_kernels.CS = BS / 2 voxels)
 MAX_BLOCKS = 1 << 26  # block-grid cells: 2^26 blocks = 2^35 voxels of bounding box (8x as many int32 gather cells)
 MAX_SWEEP_ROUNDS = 1024
@@ -107,16 +108,24 @@ class DeviceSurface:
     mesh: tuple | None
     stats: dict
 
-    def download(self, params: SurfaceParams) -> SurfaceResult:
+    def download(self, params: SurfaceParams, *, pinned: bool = PINNED_DOWNLOAD) -> SurfaceResult:
         """Copy to the host: mesh, sparse leaves (with fog density if params.density) and
-        (params.dense_output) dense arrays."""
+        (params.dense_output) dense arrays. pinned: stage the mesh and leaves through page-locked
+        host memory, all copies queued before one wait (CUDA only). Adds the seconds of each part
+        to stats ("download_mesh", "download_leaves", "download_dense")."""
         import warp as wp
         from mpmfx.surface import sparse_mesh_kernels as M
 
-        mesh = _download_mesh(self.mesh)
-        sparse = _sparse_output(wp, M, self, params)
+        stats = dict(self.stats)
+        t0 = time.perf_counter()
+        mesh = _download_mesh(wp, self.mesh, pinned=pinned)
+        t1 = time.perf_counter()
+        sparse = _sparse_output(wp, M, self, params, pinned=pinned)
+        t2 = time.perf_counter()
         result = _dense_output(wp, M, self, params)
-        result.mesh, result.sparse, result.stats = mesh, sparse, dict(self.stats)
+        t3 = time.perf_counter()
+        stats.update(download_mesh=round(t1 - t0, 4), download_leaves=round(t2 - t1, 4), download_dense=round(t3 - t2, 4))
+        result.mesh, result.sparse, result.stats = mesh, sparse, stats
         return result
 
 
@@ -405,19 +414,36 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
     return world, normals, velocities, faces
 
 
-def _download_mesh(mesh: tuple | None) -> SurfaceMesh:
+def _to_host(wp, arrays: list, *, pinned: bool) -> list:
+    """numpy copies of device arrays (None stays None). pinned (CUDA only): page-locked host
+    buffers, every copy queued before one wait; else one synchronous copy each."""
+    if not pinned or all(a is None or a.device.is_cpu for a in arrays):
+        return [None if a is None else a.numpy() for a in arrays]
+    out = []
+    for a in arrays:
+        if a is None:
+            out.append(None)
+            continue
+        host = wp.empty(a.shape, dtype=a.dtype, device="cpu", pinned=True)
+        wp.copy(host, a)
+        out.append(host)
+    wp.synchronize()
+    return [None if h is None else h.numpy() for h in out]
+
+
+def _download_mesh(wp, mesh: tuple | None, *, pinned: bool) -> SurfaceMesh:
     if mesh is None:
         return SurfaceMesh.empty()
-    world, normals, velocities, faces = (a.numpy() for a in mesh)
+    world, normals, velocities, faces = _to_host(wp, list(mesh), pinned=pinned)
     f = faces.reshape(-1, 3)
-    bad = (f < 0).any(axis=1)
-    if bad.any():  # a crossing on a tile face: match_tiles should make this impossible
+    if f.min() < 0:  # a crossing on a tile face: match_tiles should make this impossible
+        bad = (f < 0).any(axis=1)
         log.warning("sparse marching cubes: %d triangles touched a constant tile and were dropped", int(bad.sum()))
         f = f[~bad]
-    return SurfaceMesh(world, f.astype(np.int32), normals, velocities)
+    return SurfaceMesh(world, f.astype(np.int32, copy=False), normals, velocities)
 
 
-def _sparse_output(wp, M, d: DeviceSurface, params: SurfaceParams) -> SparseLevelSet:
+def _sparse_output(wp, M, d: DeviceSurface, params: SurfaceParams, *, pinned: bool) -> SparseLevelSet:
     """Blocks holding a voxel inside the band; blocks wholly at -background join the inside tiles,
     wholly at +background are dropped (what OpenVDB's pruning would do). params.density adds
     the fog density of the kept blocks."""
@@ -426,30 +452,29 @@ def _sparse_output(wp, M, d: DeviceSurface, params: SurfaceParams) -> SparseLeve
     _launch(wp, M.kind_equals, nact, [d.kind, 2, keep])
     offsets = _scan(wp, keep, inclusive=False)
     m = int(offsets[-1:].numpy()[0] + keep[-1:].numpy()[0]) if nact else 0
-    out = wp.empty(max(m, 1) * BS**3, dtype=float)
+    size = m * BS**3
+    out = wp.empty(max(size, 1), dtype=float)
     _launch(wp, M.gather_blocks, nact * BS**3, [keep, offsets, d.values, out])
-    velocity = None
+    vout = fog = None
     if d.vel is not None:
-        vout = wp.empty(max(m, 1) * BS**3, dtype=wp.vec3)
+        vout = wp.empty(max(size, 1), dtype=wp.vec3)
         _launch(wp, M.gather_blocks_vec, nact * BS**3, [keep, offsets, d.vel, vout])
-        velocity = vout.numpy()[: m * BS**3].reshape(m, BS, BS, BS, 3)
-    kinds = d.kind.numpy()[:nact]
-    blocks = d.bcoord.numpy().astype(np.int64).reshape(-1, 3)
-    inside = np.concatenate([np.argwhere(d.bmap.numpy() == -2).astype(np.int64), blocks[kinds == 1]])
-    density = None
     if params.density:
-        fog = wp.empty(max(m, 1) * BS**3, dtype=float)
+        fog = wp.empty(max(size, 1), dtype=float)
         _launch(wp, M.gather_blocks, nact * BS**3, [keep, offsets, d.w, fog])
-        _launch(wp, M.scale_clamp01, m * BS**3, [fog, 1.0 / _bulk_weight(d, params)])
-        density = fog.numpy()[: m * BS**3].reshape(m, BS, BS, BS)
+        _launch(wp, M.scale_clamp01, size, [fog, 1.0 / _bulk_weight(d, params)])
+    values, velocity, density, kinds, bcoord, bmap = _to_host(wp, [out, vout, fog, d.kind, d.bcoord, d.bmap], pinned=pinned)
+    kinds = kinds[:nact]
+    blocks = bcoord.astype(np.int64).reshape(-1, 3)
+    inside = np.concatenate([np.argwhere(bmap == -2).astype(np.int64), blocks[kinds == 1]])
     return SparseLevelSet(
         block_ijk=blocks[kinds == 2] * BS + grid.ijk0,
-        values=out.numpy()[: m * BS**3].reshape(m, BS, BS, BS),
-        velocity=velocity,
+        values=values[:size].reshape(m, BS, BS, BS),
+        velocity=None if velocity is None else velocity[:size].reshape(m, BS, BS, BS, 3),
         inside_ijk=inside * BS + grid.ijk0,
         voxel_size=grid.voxel,
         background=grid.background,
-        density=density,
+        density=None if density is None else density[:size].reshape(m, BS, BS, BS),
     )
 
 
