@@ -35,7 +35,7 @@ from mpmfx.surface.params import LevelSet, SparseLevelSet, SurfaceMesh, SurfaceP
 log = logging.getLogger(__name__)
 
 BS = 8
-PINNED_DOWNLOAD = False  # DeviceSurface.download's default (README: measured both ways)
+PINNED_DOWNLOAD = False  # DeviceSurface.download's default: pinned staging measured 1.2-4x slower (allocating page-locked memory per call; H100, 10M)
 CELLS_PER_BLOCK = 2  # gather cells per block edge (sparse_kernels.CS = BS / 2 voxels)
 MAX_BLOCKS = 1 << 26  # block-grid cells: 2^26 blocks = 2^35 voxels of bounding box (8x as many int32 gather cells)
 MAX_SWEEP_ROUNDS = 1024
@@ -118,7 +118,7 @@ class DeviceSurface:
 
         stats = dict(self.stats)
         t0 = time.perf_counter()
-        mesh = _download_mesh(wp, self.mesh, pinned=pinned)
+        mesh = _download_mesh(wp, self.mesh, with_v=self.vel is not None, pinned=pinned)
         t1 = time.perf_counter()
         sparse = _sparse_output(wp, M, self, params, pinned=pinned)
         t2 = time.perf_counter()
@@ -431,10 +431,14 @@ def _to_host(wp, arrays: list, *, pinned: bool) -> list:
     return [None if h is None else h.numpy() for h in out]
 
 
-def _download_mesh(wp, mesh: tuple | None, *, pinned: bool) -> SurfaceMesh:
+def _download_mesh(wp, mesh: tuple | None, *, with_v: bool, pinned: bool) -> SurfaceMesh:
     if mesh is None:
         return SurfaceMesh.empty()
-    world, normals, velocities, faces = _to_host(wp, list(mesh), pinned=pinned)
+    world, normals, velocities, faces = mesh
+    # without particle velocities the vertex velocities are zeros: made here, not copied
+    world, normals, velocities, faces = _to_host(wp, [world, normals, velocities if with_v else None, faces], pinned=pinned)
+    if velocities is None:
+        velocities = np.zeros_like(world)
     f = faces.reshape(-1, 3)
     if f.min() < 0:  # a crossing on a tile face: match_tiles should make this impossible
         bad = (f < 0).any(axis=1)
