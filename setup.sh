@@ -4,7 +4,8 @@
 #   bash setup.sh demo       install, then run the default shot end to end
 #   bash setup.sh test       install, then run the test suite
 # Installs Debian's python3-openvdb (apt), a virtual environment in .venv with numpy<2
-# (Debian's pyopenvdb is built for numpy 1.x) and mpmfx editable with its test extras.
+# (Debian's pyopenvdb is built for numpy 1.x) and mpmfx editable with its test extras, which
+# include Blender as a Python module (bpy 4.5 LTS, ~0.9 GB) for the Cycles renders.
 set -euo pipefail
 cd "$(dirname "$0")"
 VENV=${MPMFX_VENV:-.venv}

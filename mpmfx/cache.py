@@ -16,17 +16,43 @@ only when a run finishes, so an entry without one is "partial" and resumes.
 from __future__ import annotations
 
 import contextlib
+import datetime
+import errno
+import fcntl
 import hashlib
 import json
 import os
+import socket
+import sys
 import shutil
 import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any, Callable, Iterator
 
 MANIFEST_SCHEMA = 1
+
+
+class BusyError(RuntimeError):
+    """Another run holds the shot's lock (exit code 1); the message names it."""
+
+
+class PathError(ValueError):
+    """A path the project would write or delete lies outside its root (exit code 2)."""
+
+
+def child(root: str | Path, *parts: str, what: str = "shot.name") -> Path:
+    """`root / parts...`, refused unless it resolves strictly inside `root`: a shot named `..`
+    or `.` must never turn the cache or renders root itself (or its parent) into a target."""
+    root = Path(root)
+    path = root.joinpath(*parts)
+    base = root.resolve()
+    real = base.joinpath(*parts)  # the last part is not followed: it may be a link we replace
+    if any(p in ("", ".", "..") or "/" in p or os.sep in p for p in parts) or base not in real.parents:
+        raise PathError(f"{what} {'/'.join(parts)!r}: resolves to {real}, outside {base}; "
+                        f"use letters, digits, '_', '-' and '.', not starting with '.'")
+    return path
 
 
 def canonical_json(obj: Any) -> str:
@@ -65,21 +91,41 @@ def stage_key(stage: str, version: int, params: dict, upstream: dict[str, str], 
     return hashlib.sha256(canonical_json(payload).encode()).hexdigest()
 
 
+class WriteError(OSError):
+    """A writer returned without error but left an incomplete or unreadable file (a full disk:
+    some C++ writers, pyopenvdb's among them, report nothing)."""
+
+
 @contextlib.contextmanager
-def atomic_path(path: str | Path) -> Iterator[Path]:
+def atomic_path(path: str | Path, *, verify: Callable[[Path], object] | None = None) -> Iterator[Path]:
     """Yield a fresh temp path beside `path` with the same suffix (writers such as USD pick the
     format from it); rename it over `path` on success, delete it on failure, so `path` is
-    complete or untouched. The writer creates the temp file itself, so it gets the usual
-    (umask) permissions that a farm user reading the cache needs."""
+    complete or untouched. Before the rename the temp file must exist, be non-empty and pass
+    `verify(tmp)` (which raises or returns False for a bad file): else WriteError.
+    The writer creates the temp file itself, so it gets the usual (umask) permissions that a
+    farm user reading the cache needs."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp_path = path.with_name(f".{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
     try:
         yield tmp_path
+        _verify(tmp_path, path, verify)
         os.replace(tmp_path, path)
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
+
+
+def _verify(tmp: Path, path: Path, verify: Callable[[Path], object] | None) -> None:
+    try:
+        ok = tmp.stat().st_size > 0 and (verify is None or verify(tmp) is not False)
+    except Exception as exc:  # noqa: BLE001 - any failure to read it back means a bad file
+        ok, why = False, f" ({type(exc).__name__}: {exc})"
+    else:
+        why = ""
+    if not ok:
+        raise WriteError(errno.EIO, f"the written file is incomplete or unreadable{why}; is the disk full? "
+                         f"free space (or point --cache / $MPMFX_CACHE at a larger disk) and run again", str(path))
 
 
 def write_json(path: str | Path, data: Any) -> None:
@@ -120,16 +166,43 @@ class Entry:
         return sorted(int(p.stem) for p in self.frames_dir.glob(f"[0-9]*.{ext}"))
 
     def complete(self, frames: list[int] | None = None) -> bool:
-        """True when a manifest exists and covers `frames` (all of its own frames if None)."""
+        """True when a manifest exists, covers `frames` (all of its own frames if None) and every
+        file it lists is still there with its size (a lost or truncated file makes it partial)."""
         man = self.manifest()
         if man is None or man.get("schema") != MANIFEST_SCHEMA:
             return False
-        return frames is None or set(frames) <= set(man.get("frames", []))
+        if frames is not None and not set(frames) <= set(man.get("frames", [])):
+            return False
+        return not self.damaged(man)
+
+    def damaged(self, man: dict | None = None) -> list[str]:
+        """Files the manifest lists that are missing or changed size since it was written."""
+        man = man or self.manifest() or {}
+        bad = []
+        for rel, size in man.get("files", {}).items():
+            try:
+                if (self.root / rel).stat().st_size != size:
+                    bad.append(rel)
+            except OSError:
+                bad.append(rel)
+        return bad
+
+    def files(self) -> dict[str, int]:
+        """Every output file of the entry -> bytes (not the manifest, temp files, checkpoints, QA)."""
+        out = {}
+        for p in sorted(self.root.rglob("*")):
+            rel = p.relative_to(self.root)
+            if p.is_file() and not p.name.startswith(".") and rel.parts[0] not in ("checkpoints", "qa") \
+                    and p != self.manifest_path:
+                out[rel.as_posix()] = p.stat().st_size
+        return out
 
     def write_manifest(self, *, frames: list[int], timings: dict, qa: dict | None = None, extra: dict | None = None):
+        files = self.files()
         write_json(self.manifest_path, {
             "schema": MANIFEST_SCHEMA, "stage": self.stage, "key": self.key, "key_inputs": self.key_inputs,
-            "frames": sorted(frames), "timings": timings, "qa": qa or {}, "written": time.time(), **(extra or {}),
+            "frames": sorted(frames), "timings": timings, "qa": qa or {}, "written": time.time(),
+            "files": files, "bytes": sum(files.values()), **(extra or {}),
         })
 
     def invalidate(self) -> None:
@@ -145,7 +218,7 @@ class Cache:
 
     def __init__(self, root: str | Path, shot: str):
         self.root = Path(root)
-        self.shot_dir = self.root / shot
+        self.shot_dir = child(self.root, shot)
 
     def entry(self, stage: str, version: int, params: dict, upstream: dict[str, str],
               inputs: dict[str, str]) -> Entry:
@@ -153,16 +226,50 @@ class Cache:
         key_inputs = {"version": version, "params": params, "upstream": upstream, "inputs": inputs}
         return Entry(self.shot_dir / stage / f"{stage}-{key[:12]}", stage, key, key_inputs)
 
+    @contextlib.contextmanager
+    def lock(self) -> Iterator[None]:
+        """Hold `<shot>/.lock` (an flock, so a killed holder never leaves it stuck) while a run
+        or a clean touches the shot; a second one stops at once naming the holder (host, pid,
+        command). Held by the orchestrating process only: workers it starts write freely."""
+        self.shot_dir.mkdir(parents=True, exist_ok=True)
+        path = self.shot_dir / ".lock"
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        try:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise BusyError(f"another run is using {self.shot_dir}: {_holder(os.pread(fd, 4096, 0))}; "
+                                f"wait for it to finish, or stop it first (a killed run keeps its complete "
+                                f"frames and the next run resumes)") from None
+            info = {"host": socket.gethostname(), "pid": os.getpid(), "argv": sys.argv,
+                    "since": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")}
+            os.ftruncate(fd, 0)
+            os.pwrite(fd, json.dumps(info).encode(), 0)
+            yield
+        finally:
+            os.close(fd)  # releases the flock
+
+    def remove_orphans(self) -> list[Path]:
+        """Delete temp files that a killed run left (`.<name>.<pid>-<uuid>.tmp*`). Call only
+        while holding `lock()`: then no writer of this shot is alive to own them."""
+        if not self.shot_dir.is_dir():
+            return []
+        orphans = [p for p in self.shot_dir.rglob(".*.tmp*") if p.is_file()]
+        for p in orphans:
+            p.unlink(missing_ok=True)
+        return orphans
+
     def entries(self, stage: str) -> list[Path]:
         d = self.shot_dir / stage
         return sorted(d.glob(f"{stage}-*")) if d.is_dir() else []
 
-    def clean(self, stage: str | None = None) -> list[Path]:
-        targets = [self.shot_dir / stage] if stage else [self.shot_dir]
-        removed = [t for t in targets if t.exists()]
-        for t in removed:
-            shutil.rmtree(t)
-        return removed
+
+def _holder(raw: bytes) -> str:
+    try:
+        h = json.loads(raw.decode())
+        return f"pid {h['pid']} on {h['host']} since {h['since']} ({' '.join(h['argv'])})"
+    except (ValueError, KeyError, TypeError):
+        return "a process that has not written its name yet"
 
 
 def default_root() -> Path:

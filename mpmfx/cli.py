@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+from pathlib import Path
 
 from mpmfx.stages import STAGES
 
@@ -25,6 +26,8 @@ def _frames(text: str) -> list[int]:
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="mpmfx", description="Meshes to simulated, surfaced and rendered MPM "
                                 "snow, sand, mud, water and jelly.")
+    from mpmfx import __version__
+    p.add_argument("--version", action="version", version=f"mpmfx {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
 
     def shot_cmd(name, help_):
@@ -41,12 +44,24 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--frames", type=_frames, default=None, metavar="A:B", help="only these frames (inclusive)")
     r.add_argument("--device", choices=("cpu", "cuda"), default=None, help="Warp device (default: cuda if present)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    r.add_argument("--strict", action="store_true", help="exit 1 when the QA flags a frame (CI, farms)")
     e = shot_cmd("export", "run export alone from the cached upstream stages")
     e.add_argument("--frames", type=_frames, default=None, metavar="A:B")
     s = shot_cmd("status", "each stage: cached, partial, stale or missing, and why")
     s.add_argument("--qa", action="store_true", help="per-frame observables of the simulation")
-    c = shot_cmd("clean", "delete cached results")
-    c.add_argument("--stage", choices=STAGES, default=None, help="only this stage (default: the whole shot)")
+    c = shot_cmd("clean", "delete this variant's cached results (listed with sizes first)")
+    c.add_argument("--stage", choices=STAGES, default=None, help="only this stage (default: every stage)")
+    c.add_argument("--all-variants", action="store_true", help="every variant's entries, not only this one's")
+    c.add_argument("--dry-run", action="store_true", help="list what would be deleted, delete nothing")
+    c.add_argument("-y", "--yes", action="store_true", help="delete a simulation without asking")
+
+    m = sub.add_parser("cache", help="cache housekeeping")
+    m.add_argument("action", choices=("prune",), help="prune: delete old variants (listed with sizes first)")
+    m.add_argument("--keep", type=int, default=2, metavar="N", help="newest variants kept per shot and stage "
+                   "(entries a published output uses are always kept)")
+    m.add_argument("--cache", default=None, help="cache root (default $MPMFX_CACHE or ./cache)")
+    m.add_argument("--dry-run", action="store_true", help="list what would be deleted, delete nothing")
+    m.add_argument("-y", "--yes", action="store_true", help="delete simulations without asking")
 
     k = sub.add_parser("check", help="five-cell thickness check of an asset (exit 0 pass/warn, 1 fail, 2 bad input)")
     k.add_argument("asset", help="mesh file (obj, ply, stl, glb, gltf, usd)")
@@ -56,7 +71,7 @@ def _parser() -> argparse.ArgumentParser:
     k.add_argument("--json", action="store_true", help="JSON for pipelines")
 
     b = sub.add_parser("bench", help="speed and accuracy benchmarks (run them on the GPU)")
-    b.add_argument("what", choices=("accuracy", "surface", "solver", "voxelise"), help="which benchmark")
+    b.add_argument("what", choices=("accuracy", "gpu", "surface", "solver", "voxelise"), help="which benchmark")
     b.add_argument("--quick", action="store_true", help="small CPU-sized sweep")
     b.add_argument("--device", choices=("cpu", "cuda"), default=None)
     b.add_argument("--out", default="renders/bench", help="folder for CSV/JSON/PNG")
@@ -76,15 +91,32 @@ def main(argv: list[str] | None = None) -> int:
         print("interrupted: complete frames are cached; run again to resume", file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - every error becomes a message and an exit code
+        from mpmfx.cache import BusyError, PathError
         from mpmfx.config import ShotError
         from mpmfx.stages.base import StageError
-        if isinstance(exc, ShotError):
+        if isinstance(exc, (ShotError, PathError)):
             print(f"error: {exc}", file=sys.stderr)
             return 2
-        if isinstance(exc, StageError):
+        if isinstance(exc, (StageError, BusyError)):
             print(f"error: {exc}", file=sys.stderr)
             return 1
+        if isinstance(exc, OSError) and exc.filename:
+            print(f"error: {_os_message(exc)}", file=sys.stderr)
+            return 1
         raise
+
+
+def _os_message(exc: OSError) -> str:
+    """A file system error as the path and what to do (no traceback)."""
+    import errno
+    keep = "complete frames are kept: run again to resume"
+    if exc.errno == errno.ENOSPC:
+        return (f"no space left on the device writing {exc.filename}: free space, or point --cache "
+                f"(or $MPMFX_CACHE) at a larger disk; {keep}")
+    if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
+        return (f"permission denied writing {exc.filename}: make it writable for this user, or point "
+                f"--cache (or $MPMFX_CACHE) at a folder you own; {keep}")
+    return f"{exc.filename}: {exc.strerror}; {keep}"
 
 
 def _dispatch(args) -> int:
@@ -102,36 +134,88 @@ def _dispatch(args) -> int:
         return run_check(args.asset, grid_n=args.grid_n, origin=origin, size=size, as_json=args.json)
     if args.cmd == "bench":
         from mpmfx.bench import main as bench_main
+        from mpmfx.stages.base import quiet_warp
+        quiet_warp()  # stdout carries the benchmark's tables only, never Warp's banner
         return bench_main(args.what, quick=args.quick, device=args.device, out=args.out, peers=args.peers,
                           counts=args.counts)
+
+    if args.cmd == "cache":
+        return _prune(args)
 
     from mpmfx.stages.runner import load_shot
     run = load_shot(args.shot, overrides=args.overrides, cache_root=args.cache,
                     device=getattr(args, "device", None), quiet=getattr(args, "quiet", False))
     if args.cmd == "run":
         results = run.run(until=args.until, force=args.force, frames=args.frames)
-        _print_table(["stage", "result", "wall s", "frames"],
-                     [[r.stage, r.state, f"{r.seconds:.1f}", str(r.frames)] for r in results])
+        _print_table(["stage", "result", "wall s", "frames", "qa"],
+                     [[r.stage, r.state, f"{r.seconds:.1f}", str(r.frames),
+                       f"{r.flagged} frame{'s' * (r.flagged != 1)} flagged" if r.flagged else ""] for r in results])
+        _print_outputs(run, results)
+        flagged = sum(r.flagged for r in results)
+        if flagged and args.strict:
+            print(f"error: --strict: the QA flags {flagged} frame(s) (see above)", file=sys.stderr)
+            return 1
         return 0
     if args.cmd == "export":
         results = run.run(until="export", frames=args.frames)
         missing = [r.stage for r in results[:-1] if r.state != "cached"]
         if missing:
             print(f"note: export needed upstream stages first and ran them: {', '.join(missing)}", file=sys.stderr)
-        print(f"USD: {results[-1].entry / 'shot.usda'}")
+        _print_outputs(run, results)
         return 0
     if args.cmd == "status":
-        rows = [[s.stage, s.state, s.why, os.path.relpath(s.entry)] for s in run.status()]
-        _print_table(["stage", "state", "why", "entry"], rows)
+        from mpmfx.maintain import human, tree_size
+        rows = [[s.stage, s.state, s.why, human(tree_size(s.entry)) if s.entry.exists() else "",
+                 os.path.relpath(s.entry)] for s in run.status()]
+        _print_table(["stage", "state", "why", "disk", "entry"], rows)
+        shot_dir = run.cache.shot_dir
+        if shot_dir.is_dir():
+            print(f"\nall variants of this shot: {human(tree_size(shot_dir))} in {os.path.relpath(shot_dir)} "
+                  f"(`mpmfx clean SHOT --all-variants` or `mpmfx cache prune` to free it)")
         if args.qa:
             from mpmfx.stages.qa import print_qa
             return print_qa(run)
         return 0
     if args.cmd == "clean":
-        removed = run.cache.clean(args.stage)
-        print("removed: " + (", ".join(str(p) for p in removed) if removed else "nothing cached"))
-        return 0
+        from mpmfx.maintain import clean_targets, delete
+        with run.cache.lock():
+            targets = clean_targets(run, stage=args.stage, all_variants=args.all_variants)
+            return delete(targets, root=run.cache.root, dry_run=args.dry_run, yes=args.yes)
     raise AssertionError(args.cmd)
+
+
+def _prune(args) -> int:
+    """`mpmfx cache prune`: every shot of the cache root, each under its lock."""
+    import contextlib
+
+    from mpmfx.cache import Cache, default_root
+    from mpmfx.maintain import delete, prune_targets
+    from mpmfx.publish import published_entries
+    root = Path(args.cache) if args.cache else default_root()
+    if args.keep < 1:
+        print("error: --keep must be at least 1 (clean SHOT --all-variants deletes everything)", file=sys.stderr)
+        return 2
+    if not root.is_dir():
+        print(f"nothing to prune: no cache at {root}")
+        return 0
+    with contextlib.ExitStack() as locks:
+        for shot_dir in sorted(p for p in root.iterdir() if p.is_dir()):
+            locks.enter_context(Cache(root, shot_dir.name).lock())
+        targets = prune_targets(root, keep=args.keep, in_use=published_entries())
+        return delete(targets, root=root, dry_run=args.dry_run, yes=args.yes)
+
+
+def _print_outputs(run, results) -> None:
+    """Where every output of this run is: the stable published paths, then the cache entries."""
+    entries = {r.stage: r.entry for r in results}
+    print()
+    if "usd" in run.published:
+        print(f"USD + VDB  {run.published['usd']}  (-> {os.path.relpath(entries['export'])})")
+    if "renders" in run.published:
+        print(f"renders    {run.published['renders']}/  (-> {os.path.relpath(entries['render'])})")
+    for stage in ("simulate", "surface"):
+        if stage in entries:
+            print(f"{stage:<9}  {os.path.relpath(entries[stage])}/frames/")
 
 
 def _print_table(header: list[str], rows: list[list[str]]) -> None:

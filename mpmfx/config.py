@@ -14,13 +14,18 @@ import difflib
 import enum
 import tomllib
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import AllowInfNan, BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator
 
-from mpmfx.mpm.config import STANDARD_GRAVITY, SolverConfig, SolverConfigError
+from mpmfx.mpm.config import STANDARD_GRAVITY, SolverConfig, SolverConfigError, WallType
 
-Vec3 = tuple[float, float, float]
+# Every number of the schema is one of these: finite (NaN or inf in a TOML file or a --set is a
+# typo, never a setting) and strict (a quoted "0.3" is an error, not silently a number).
+Real = Annotated[float, Strict(), AllowInfNan(False)]
+Int = Annotated[int, Strict()]
+Bool = Annotated[bool, Strict()]
+Vec3 = tuple[Real, Real, Real]
 _SOLVER = SolverConfig()  # the solver's defaults: the only ones (its docstring has the ranges)
 
 
@@ -33,16 +38,17 @@ class _Section(BaseModel):
 
 
 class ShotInfo(_Section):
-    name: str = Field(pattern=r"^[A-Za-z0-9_.-]+$", description="Shot name; names the cache and renders/<name>/.")
-    frame_start: int = Field(1, ge=0, description="First frame number (frame_start is the initial state, t = 0).")
-    frame_end: int = Field(48, ge=0, description="Last frame number, inclusive.")
-    fps: float = Field(24.0, gt=0, le=1000, description="Frames per second; one frame is 1/fps seconds.")
+    name: str = Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$", description="Shot name; names the cache and "
+                      "renders/<name>/ (letters, digits, _ - ., not starting with '.').")
+    frame_start: Int = Field(1, ge=0, description="First frame number (frame_start is the initial state, t = 0).")
+    frame_end: Int = Field(48, ge=0, description="Last frame number, inclusive.")
+    fps: Real = Field(24.0, gt=0, le=1000, description="Frames per second; one frame is 1/fps seconds.")
 
 
 class Domain(_Section):
     origin: Vec3 = Field((-1.0, 0.0, -1.0), description="World position (m) of the domain's min corner.")
-    size: float = Field(2.0, gt=0, description="Edge of the cubic domain (m).")
-    grid_n: int = Field(64, description="Grid cells per axis (8-4096, checked by the solver); dx = size / grid_n (m).")
+    size: Real = Field(2.0, gt=0, description="Edge of the cubic domain (m).")
+    grid_n: Int = Field(64, description="Grid cells per axis (8-4096, checked by the solver); dx = size / grid_n (m).")
 
 
 class SceneObject(_Section):
@@ -51,11 +57,12 @@ class SceneObject(_Section):
     prim_path: str | None = Field(None, description="USD files only: the prim whose meshes are taken.")
     material: str = Field("Elastic", description="Preset name from the guide's section 8 (Soft, Mushy, Goopy, Wet, "
                           "Slush, Elastic, Granular, CohesiveGranular, Water, Tracer).")
-    overrides: dict[str, float | bool] = Field(default_factory=dict,
-                                               description="Material fields to change, e.g. {youngs_modulus = 3000}.")
+    overrides: dict[str, Real | Bool | str] = Field(
+        default_factory=dict, description="Material fields to change, e.g. {youngs_modulus = 3000} or "
+        "{friction_fit = \"plane_strain\"}.")
     translate: Vec3 = Field((0.0, 0.0, 0.0), description="Translation (m), applied after rotate and scale.")
     rotate: Vec3 = Field((0.0, 0.0, 0.0), description="XYZ Euler rotation (degrees).")
-    scale: float = Field(1.0, gt=0, description="Uniform scale of the mesh file's units to metres.")
+    scale: Real = Field(1.0, gt=0, description="Uniform scale of the mesh file's units to metres.")
     velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Initial linear velocity (m/s).")
     angular_velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Initial angular velocity about the centroid (rad/s).")
 
@@ -68,11 +75,11 @@ class Thickness(str, enum.Enum):
 
 class Voxelise(_Section):
     ppc: Literal[1, 8, 27, 64] = Field(8, description="Particles per grid cell: a k*k*k jittered lattice.")
-    seed: int = Field(0, ge=0, description="Jitter seed; the same seed re-voxelises identically.")
+    seed: Int = Field(0, ge=0, description="Jitter seed; the same seed re-voxelises identically.")
     thickness: Thickness = Field(Thickness.WARN, description="What a failed five-cell thickness check does.")
 
 
-WallName = Literal["sticky", "slip", "separate"]
+WallName = Literal[tuple(w.value for w in WallType)]  # the names mpm.config.WallType declares
 
 
 class ColliderShape(str, enum.Enum):
@@ -83,7 +90,7 @@ class ColliderShape(str, enum.Enum):
 
 
 class Keyframe(_Section):
-    time: float = Field(ge=0, description="Seconds from frame_start.")
+    time: Real = Field(ge=0, description="Seconds from frame_start.")
     translate: Vec3 = Field((0.0, 0.0, 0.0), description="Position (m) of the collider's origin.")
     rotate: Vec3 = Field((0.0, 0.0, 0.0), description="XYZ Euler rotation (degrees).")
 
@@ -91,12 +98,12 @@ class Keyframe(_Section):
 class ColliderCfg(_Section):
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
     shape: ColliderShape
-    friction: float = Field(0.3, ge=0, description="Coulomb friction coefficient.")
+    friction: Real = Field(0.3, ge=0, description="Coulomb friction coefficient.")
     normal: Vec3 = Field((0.0, 1.0, 0.0), description="plane: outward normal.")
     half_extents: Vec3 = Field((0.1, 0.1, 0.1), description="box: half extents (m).")
-    radius: float = Field(0.1, gt=0, description="sphere: radius (m).")
+    radius: Real = Field(0.1, gt=0, description="sphere: radius (m).")
     mesh: Path | None = Field(None, description="mesh: file, relative to the shot file.")
-    scale: float = Field(1.0, gt=0, description="mesh: uniform scale.")
+    scale: Real = Field(1.0, gt=0, description="mesh: uniform scale.")
     keyframes: list[Keyframe] = Field(default_factory=lambda: [Keyframe(time=0.0)],
                                       description="Rigid transform keys, interpolated per substep.")
 
@@ -105,28 +112,31 @@ class Solver(_Section):
     """The solver's knobs in world units. Defaults and ranges are `mpmfx.mpm.SolverConfig`'s
     (checked when the shot loads: `Shot.solver_config()`), so the CLI and the Python API agree."""
 
-    cfl: float = Field(_SOLVER.cfl, description="CFL number: dt = cfl * dx / (c_max + |v|_max), in (0, 1].")
+    cfl: Real = Field(_SOLVER.cfl, description="CFL number: dt = cfl * dx / (c_max + |v|_max), in (0, 1].")
     gravity: Vec3 = Field((0.0, -STANDARD_GRAVITY, 0.0), description="Gravity (m/s^2, world); the solver sees "
                           "it / domain.size.")
-    damping: float = Field(_SOLVER.damping, description="Velocity decay rate (1/s): v *= 1 - damping*dt (trap 5).")
-    drag: float = Field(_SOLVER.drag, description="PIC blend as a rate (1/s), never a per-substep fraction.")
-    time_scale: float = Field(_SOLVER.time_scale, description="Playback speed: simulated seconds per shot "
+    damping: Real = Field(_SOLVER.damping, description="Velocity decay rate (1/s): v *= 1 - damping*dt (trap 5).")
+    drag: Real = Field(_SOLVER.drag, description="PIC blend as a rate (1/s), never a per-substep fraction.")
+    time_scale: Real = Field(_SOLVER.time_scale, description="Playback speed: simulated seconds per shot "
                               "second (trap 1).")
     walls: WallName | list[WallName] = Field(_SOLVER.walls[0].value, description="Domain walls: one type, or "
                                              "six for -x,+x,-y,+y,-z,+z.")
-    wall_friction: float = Field(_SOLVER.wall_friction, description="Coulomb friction at the walls.")
-    dt_max: float = Field(_SOLVER.dt_max, description="Largest substep (s).")
-    dt_min: float = Field(_SOLVER.dt_min, description="Substep floor (s): below it the run stops with advice.")
-    deterministic: bool = Field(_SOLVER.deterministic, description="Fixed-point P2G: bit-identical replays "
+    wall_friction: Real = Field(_SOLVER.wall_friction, description="Coulomb friction at the walls.")
+    dt_max: Real = Field(_SOLVER.dt_max, description="Largest substep (s).")
+    dt_min: Real = Field(_SOLVER.dt_min, description="Substep floor (s): below it the run stops with advice.")
+    deterministic: Bool = Field(_SOLVER.deterministic, description="Fixed-point P2G: bit-identical replays "
                                 "(guide 10.1).")
-    multi_field: bool = Field(_SOLVER.multi_field, description="One velocity field per object so bodies "
+    multi_field: Bool = Field(_SOLVER.multi_field, description="One velocity field per object so bodies "
                               "don't fuse.")
-    contact_friction: float = Field(_SOLVER.contact_friction, description="Coulomb friction between objects "
+    contact_friction: Real = Field(_SOLVER.contact_friction, description="Coulomb friction between objects "
                                     "(multi_field).")
     out_of_domain: Literal["clamp", "remove"] = Field(_SOLVER.out_of_domain.value, description="Particles "
                                                       "reaching the domain edge: clamped in, or removed and "
                                                       "counted in the QA.")
-    checkpoint_every: int = Field(5, ge=1, description="Frames between full-state checkpoints (resume points).")
+    max_substeps_per_frame: Int = Field(_SOLVER.max_substeps_per_frame, description="A frame needing more "
+                                        "substeps stops the run with advice (a runaway guard).")
+    checkpoint_every: Int = Field(1, ge=1, description="Frames between full-state checkpoints (resume points; "
+                                  "every frame: 0.1 % of simulate's time on jelly_splash, two states kept on disk).")
 
     @field_validator("walls")
     @classmethod
@@ -143,30 +153,63 @@ class SurfaceGroup(str, enum.Enum):
 
 
 class Surface(_Section):
-    radius_scale: float = Field(1.0, gt=0, description="Multiplier on the particle radius (0.6 x the spacing: mpmfx.surface.PARTICLE_RADIUS_PER_SPACING).")
-    voxel_size: float | None = Field(None, gt=0, description="Level-set voxel (m); default half the particle spacing.")
-    smooth_iters: int = Field(2, ge=0, le=50, description="Level-set smoothing passes.")
-    dilate: float = Field(0.0, description="Offset (m): + dilates, - erodes.")
-    min_feature_particles: int = Field(8, ge=0, description="Blobs of fewer particles are removed (specks).")
+    radius_scale: Real = Field(1.0, gt=0, description="Multiplier on the particle radius (0.6 x the spacing: mpmfx.surface.PARTICLE_RADIUS_PER_SPACING).")
+    voxel_size: Real | None = Field(None, gt=0, description="Level-set voxel (m); default half the particle spacing.")
+    smooth_iters: Int = Field(2, ge=0, le=50, description="Level-set smoothing passes.")
+    dilate: Real = Field(0.0, description="Offset (m): + dilates, - erodes.")
+    min_feature_particles: Int = Field(8, ge=0, description="Blobs of fewer particles are removed (specks).")
     group: SurfaceGroup = Field(SurfaceGroup.MATERIAL, description="One surface per material, per object, or one.")
-    density: bool = Field(False, description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "
+    density: Bool = Field(False, description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "
                                              "the material) for granular / volume looks.")
 
 
 class Export(_Section):
     """The USD stage is always written (it is the stage's product); these add to it."""
 
-    vdb: bool = Field(True, description="Write per-frame .vdb level sets.")
-    points: bool = Field(True, description="Include particles as UsdGeomPoints.")
+    vdb: Bool = Field(True, description="Write per-frame .vdb level sets.")
+    points: Bool = Field(True, description="Include particles as UsdGeomPoints.")
+
+
+class RenderEngine(str, enum.Enum):
+    CYCLES = "cycles"
+    PREVIEW = "preview"
 
 
 class Render(_Section):
-    width: int = Field(960, ge=16, le=8192)
-    height: int = Field(540, ge=16, le=8192)
+    """How frames are drawn. `cycles`: Blender's path tracer on the exported USD stage (lit,
+    shaded, per-material looks; Blender runs in its own process); `preview`: a fast PyVista
+    viewport capture of the surfaces."""
+
+    engine: RenderEngine = Field(RenderEngine.CYCLES, description="cycles (Blender, the look) or preview "
+                                 "(PyVista, seconds a frame).")
+    width: Int = Field(960, ge=16, le=8192, description="Picture width (pixels).")
+    height: Int = Field(540, ge=16, le=8192, description="Picture height (pixels).")
+    samples: Int = Field(16, ge=1, le=65536, description="cycles: path-tracing samples per pixel.")
+    denoise: Bool = Field(True, description="cycles: OpenImageDenoise on the finished frame.")
+    shutter: Real = Field(0.5, ge=0, le=1, description="cycles: motion blur along the exported velocities, "
+                           "shutter open this fraction of a frame (0.5: a 180-degree shutter; 0: no blur).")
+    frame_step: Int = Field(1, ge=1, description="Render every n-th frame; the frames between hold the last "
+                            "rendered one, so the movie keeps the shot's timing.")
+    looks: dict[str, str] = Field(default_factory=dict, description="cycles: look per preset, object or surface "
+                                  "group, e.g. {Goopy = \"mud\"} (looks: mpmfx/render/looks.py).")
+    basin: Real | None = Field(None, gt=0, description="cycles: height (m) of a stone basin drawn along the "
+                                "solver's side walls, for a pool that the walls hold; default none.")
+    sun_elevation: Real = Field(35.0, ge=0, le=90, description="cycles: sun height above the horizon (degrees).")
+    sun_rotation: Real = Field(150.0, description="cycles: sun direction about the up axis (degrees).")
     mode: Literal["surface", "particles"] = Field("surface", description="particles: the guide's debug look (9.4).")
-    camera_position: Vec3 | None = Field(None, description="Camera position (m); default a 3/4 view of the domain.")
+    camera_position: Vec3 | None = Field(None, description="Camera position (m); default: cycles frames what "
+                                         "was simulated, preview a 3/4 view of the domain.")
     camera_look_at: Vec3 | None = Field(None, description="Camera target (m); default the domain centre.")
-    movie: bool = Field(True, description="Also write an mp4 of the frames.")
+    movie: Bool = Field(True, description="Also write an mp4 of the frames.")
+
+    @field_validator("looks")
+    @classmethod
+    def _known_looks(cls, v):
+        from mpmfx.render.looks import LOOKS
+        bad = {k: look for k, look in v.items() if look not in LOOKS}
+        if bad:
+            raise ValueError(f"unknown look(s) {bad}: use one of {', '.join(LOOKS)}")
+        return v
 
 
 class Shot(_Section):
@@ -181,6 +224,8 @@ class Shot(_Section):
     render: Render = Render()
     # Not part of the schema's TOML: where the file lives (relative paths resolve from here).
     base_dir: Path = Field(Path("."), exclude=True)
+    source: Path | None = Field(None, exclude=True)                # the shot file, for messages
+    overrides: tuple[str, ...] = Field((), exclude=True)           # the --set values it was loaded with
 
     @property
     def frames(self) -> range:
@@ -270,8 +315,13 @@ def _model_at(loc: tuple) -> type[BaseModel] | None:
     return model
 
 
+_UNION_TAGS = {"float", "bool", "int", "str", "list", "tuple"}
+_TYPE_ERRORS = {"float_type", "int_type", "bool_type", "float_parsing", "int_parsing", "bool_parsing"}
+
+
 def _format_error(err: dict, source: str) -> str:
-    loc = tuple(err["loc"])
+    # a union's members add their tag to the location (overrides.x.float): the key is without it
+    loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and (p in _UNION_TAGS or "[" in p)))
     key = _loc(loc)
     if err["type"] == "extra_forbidden":
         model = _model_at(loc)
@@ -284,7 +334,10 @@ def _format_error(err: dict, source: str) -> str:
     model = _model_at(loc)
     field = model.model_fields.get(str(loc[-1])) if model else None
     doc = f" ({field.description})" if field is not None and field.description else ""
-    return f"{source}: '{key}' = {err.get('input')!r}: {err['msg']}{doc}"
+    hint = ""
+    if err["type"] in _TYPE_ERRORS and isinstance(err.get("input"), str):
+        hint = "; write numbers and true/false without quotes"
+    return f"{source}: '{key}' = {err.get('input')!r}: {err['msg']}{hint}{doc}"
 
 
 def load_shot_config(path: str | Path, overrides: list[str] = ()) -> Shot:
@@ -301,9 +354,14 @@ def load_shot_config(path: str | Path, overrides: list[str] = ()) -> Shot:
         key, value = parse_override(text)
         apply_override(data, key, value, source=str(path))
     try:
-        shot = Shot.model_validate({**data, "base_dir": path.resolve().parent})
+        shot = Shot.model_validate({**data, "base_dir": path.resolve().parent, "source": path,
+                                    "overrides": tuple(overrides)})
     except ValidationError as exc:
-        raise ShotError("\n".join(_format_error(e, str(path)) for e in exc.errors())) from None
+        by_key: dict[str, str] = {}
+        for e in exc.errors():  # a union (float | bool) reports each member: its first error per key
+            line = _format_error(e, str(path))
+            by_key.setdefault(line.split("' = ")[0], line)
+        raise ShotError("\n".join(by_key.values())) from None
     _check_semantics(shot, str(path))
     return shot
 

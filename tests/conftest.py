@@ -37,6 +37,7 @@ checkpoint_every = 2
 smooth_iters = 1
 
 [render]
+engine = "preview"   # seconds a frame; tests/render/ runs the Cycles path itself
 width = 160
 height = 120
 movie = false

@@ -97,3 +97,30 @@ def test_solver_ranges_are_checked_once_and_named_as_shot_keys(tiny_shot):
                           ("solver.dt_min=0.5", "solver.dt_min"), ("domain.grid_n=4", "domain.grid_n")):
         with pytest.raises(ShotError, match=f"tiny.toml: {key}: "):
             load_shot_config(tiny_shot, [override])
+
+
+NON_FINITE = ["solver.gravity=[0.0, inf, 0.0]", "domain.origin=[nan, 0.0, 0.0]", "objects.0.translate=[inf, 0, 0]",
+              "objects.0.velocity=[0.0, -inf, 0.0]", "solver.damping=inf", "solver.time_scale=inf",
+              "domain.size=inf", "surface.dilate=nan", "objects.0.overrides.youngs_modulus=inf",
+              "surface.voxel_size=inf", "shot.fps=nan"]
+
+
+@pytest.mark.parametrize("override", NON_FINITE)
+def test_non_finite_numbers_are_refused_naming_the_key(tiny_shot, override):
+    key = override.split("=")[0]
+    with pytest.raises(ShotError) as err:
+        load_shot_config(tiny_shot, [override])
+    assert key.replace(".0.", "[0].") in str(err.value) and "finite" in str(err.value)
+
+
+@pytest.mark.parametrize("override", ['solver.cfl="0.3"', 'domain.grid_n="32"', 'objects.0.velocity=["1", 0, 0]',
+                                      'export.vdb="yes"'])
+def test_numbers_given_as_strings_are_errors(tiny_shot, override):
+    with pytest.raises(ShotError, match="quotes"):
+        load_shot_config(tiny_shot, [override])
+
+
+def test_cli_non_finite_exits_2(tiny_shot, tmp_path, capsys):
+    from mpmfx.cli import main
+    assert main(["run", str(tiny_shot), "--set", "solver.damping=inf", "--cache", str(tmp_path / "c")]) == 2
+    assert "solver.damping" in capsys.readouterr().err

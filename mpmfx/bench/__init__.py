@@ -13,7 +13,7 @@ def main(what: str, *, quick: bool = False, device: str | None = None, out: str 
          peers: list[str] | None = None, counts: list[int] | None = None) -> int:
     """Run benchmark `what`; `peers` and `counts` are `surface`'s own options (None: its defaults)."""
     module = {"accuracy": "mpmfx.bench.accuracy", "surface": "mpmfx.bench.surface",
-              "solver": "mpmfx.bench.solver", "voxelise": "mpmfx.bench.voxelise"}[what]
+              "solver": "mpmfx.bench.solver", "gpu": "mpmfx.bench.gpu", "voxelise": "mpmfx.bench.voxelise"}[what]
     own = {"peers": peers, "counts": counts} if what == "surface" else {}
     if not own and (peers is not None or counts is not None):
         print(f"error: --peers / --counts belong to `mpmfx bench surface`, not `{what}`", file=sys.stderr)

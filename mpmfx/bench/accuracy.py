@@ -5,7 +5,9 @@ particle-substeps/s, device), the observed convergence orders in space (halve dx
 and particles per cell, error against the exact solution) and in time (halve dt at fixed grid,
 error against the smallest-CFL run: self-convergence, since the spatial error does not vanish
 with dt), and writes accuracy.csv/json, orders.csv/json and accuracy.png (speed against error,
-log-log) under `out`. Needs numpy + warp + mpmfx.mpm only; the PNG needs pyvista and is
+log-log) under `out`. Then the experiments section (mpmfx.bench.lab): dam break and granular
+column collapse against published laboratory data at three resolutions, with their error
+trend, experiments.csv/json, experiments_trend.csv and experiments_{water,sand}.png. Needs numpy + warp + mpmfx.mpm only; the PNG needs pyvista and is
 skipped with a message without it.
 """
 from __future__ import annotations
@@ -81,6 +83,19 @@ def run_sweep(sweep: Sweep, device=None) -> tuple[list[dict], list[dict]]:
     return rows, orders
 
 
+# Why an observed order is far from the scheme's 2 in space (or says nothing in time): printed
+# beside the order, so a low number is read as what it measures, not as a broken solver.
+WHY = {
+    ("hydrostatic", "space"): "stress error is the particle quadrature's (cell-crossing noise and the "
+                              "-2.6..-2.9 % bias CB-Geo also reports), which refining dx at fixed particles "
+                              "per cell does not reduce: order ~0 is expected",
+    ("colliding_disks", "space"): "energy lost at single-field contact shrinks with dx at first order at best",
+    ("standing_wave", "time"): "the error is spatial: at grid 64 the time-step error is below it for every "
+                               "CFL tried, so halving dt changes nothing (order ~0); spend on grid_n",
+}
+LOW_ORDER = 1.5  # below this a space order gets its WHY note
+
+
 def _order_rows(results, t_runs, t_errs) -> list[dict]:
     out = []
     by_case: dict[str, list] = {}
@@ -96,11 +111,44 @@ def _order_rows(results, t_runs, t_errs) -> list[dict]:
     out += [{"case": "standing_wave", "in": "time", "from": f"cfl={a.cfl}", "to": f"cfl={b.cfl}",
              "error_from": ea, "error_to": eb, "order": o}
             for a, b, ea, eb, o in zip(t_runs, t_runs[1:], t_errs, t_errs[1:], orders)]
+    for row in out:
+        low = row["in"] == "time" or not (row["order"] >= LOW_ORDER)  # NaN counts as low
+        row["why"] = WHY.get((row["case"], row["in"]), "") if low else ""
     return out
 
 
 COLUMNS = ["case", "grid_n", "cfl", "ppc", "particles", "substeps", "error", "metric", "wall_s",
            "Mparticle_substeps_per_s", "device"]
+
+
+LAB_COLUMNS = ["case", "reference", "a", "grid_n", "cells_across", "value", "law", "error", "metric",
+               "particles", "wall_s", "device"]
+
+
+def experiments(*, quick: bool, device, out) -> list[dict]:
+    """The experiments section: prints its table, trend and summary; writes its files."""
+    from mpmfx.bench import lab
+    from mpmfx.bench.report import print_table, write_rows
+    import json
+    from pathlib import Path
+    rows, series = lab.run_lab(lab.QUICK if quick else lab.FULL, device)
+    print("\nexperiments (laboratory data; error = simulation / experiment - 1)")
+    print_table(rows, LAB_COLUMNS)
+    trend = lab.trend(rows)
+    print()
+    print_table(trend)
+    print()
+    for line in lab.summary(rows):
+        print(line)
+    write_rows(rows, out, "experiments")
+    write_rows(trend, out, "experiments_trend")
+    (Path(out) / "experiments_series.json").write_text(json.dumps(series))
+    try:
+        for path in lab.lab_plot(series, out):
+            print(f"plot: {path}")
+    except ImportError as err:
+        print(f"plot skipped: {err}")
+    return rows
 
 
 def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench") -> int:
@@ -118,5 +166,6 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
         print(f"plot: {path}")
     except ImportError as err:
         print(f"plot skipped: {err} (pip install pyvista to draw accuracy.png; the CSV/JSON are written)")
-    ok = all(np.isfinite(r["error"]) for r in rows)
+    lab_rows = experiments(quick=quick, device=device, out=out)
+    ok = all(np.isfinite(r["error"]) for r in rows + lab_rows)
     return 0 if ok else 1

@@ -22,6 +22,22 @@ def default_domain(mesh) -> tuple[np.ndarray, float]:
     return centre - size / 2.0, size
 
 
+def mesh_topology(mesh) -> dict:
+    """Edges used by one face (open: a hole) and by more than two (non-manifold). Either makes
+    inside/outside ambiguous there, which voxelise warns about and the thickness check inherits."""
+    _, counts = np.unique(np.asarray(mesh.edges_sorted), axis=0, return_counts=True)
+    open_, non_manifold = int((counts == 1).sum()), int((counts > 2).sum())
+    return {"watertight": open_ == 0 and non_manifold == 0, "open_edges": open_,
+            "non_manifold_edges": non_manifold}
+
+
+def _topology_line(t: dict) -> str:
+    if t["watertight"]:
+        return "closed (watertight, manifold)"
+    return (f"OPEN: {t['open_edges']} open edges, {t['non_manifold_edges']} non-manifold edges; inside is "
+            f"guessed near them: close the holes in your DCC")
+
+
 def run_check(asset: str, *, grid_n: int, origin=None, size=None, as_json: bool = False,
               out_dir: str | Path | None = None) -> int:
     """Check ``asset``'s thickness at ``grid_n`` cells per domain edge.
@@ -42,6 +58,7 @@ def run_check(asset: str, *, grid_n: int, origin=None, size=None, as_json: bool 
             origin, size = default_domain(mesh)
         elif size <= 0:
             raise MeshError(f"--domain size {size}: must be positive")
+        topology = mesh_topology(mesh)
         mesh = refine_for_heatmap(mesh, grid_n=grid_n, size=size)
         report = check_thickness(mesh, grid_n=grid_n, origin=origin, size=size,
                                  name=Path(asset).name)
@@ -52,6 +69,7 @@ def run_check(asset: str, *, grid_n: int, origin=None, size=None, as_json: bool 
     out.mkdir(parents=True, exist_ok=True)
     data = report.to_dict()
     data["domain"] = {"origin": [float(x) for x in origin], "size": float(size)}
+    data["mesh"] = topology
     (out / "report.json").write_text(json.dumps(data, indent=2) + "\n")
     from mpmfx.render.thickness import render_thickness_heatmap
 
@@ -61,5 +79,8 @@ def run_check(asset: str, *, grid_n: int, origin=None, size=None, as_json: bool 
         print(json.dumps(data, indent=2))
     else:
         print(report.format_table())
+        print(f"  mesh               {_topology_line(topology)}")
+        if any(r.thickness_cells == 0 for r in report.regions):
+            print("  (0.00 cells: parts thinner than the measuring lattice, which no grid_n here resolves)")
         print(f"  wrote {out / 'report.json'} and {png}")
     return 1 if report.verdict is Verdict.FAIL else 0

@@ -51,6 +51,10 @@ def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Tri
     else:
         raise MeshError(f"{path}: unsupported format '{suffix}'; export the asset as one of "
                         f"{', '.join(TRIMESH_SUFFIXES + USD_SUFFIXES)}")
+    bad = np.flatnonzero(~np.isfinite(vertices).all(axis=1))
+    if len(bad):  # checked before trimesh, which would drop them (and their faces) silently
+        raise MeshError(f"{path}: {len(bad)} vertices are NaN or inf (the first is vertex {bad[0]}); "
+                        "clean up the asset in your DCC and re-export it")
     mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=True)
     _validate(mesh, path)
     return mesh
@@ -60,7 +64,7 @@ def _load_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     import trimesh
 
     try:
-        scene = trimesh.load_scene(str(path))
+        scene = trimesh.load_scene(str(path), process=False)  # keep NaN vertices: load_mesh refuses them
         parts = [g for g in scene.dump(concatenate=False)
                  if isinstance(g, trimesh.Trimesh) and len(g.faces)]
     except Exception as exc:  # trimesh raises many types for corrupt files

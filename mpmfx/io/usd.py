@@ -109,8 +109,10 @@ class ColliderSample:
 
 @contextlib.contextmanager
 def _atomic_target(path: Path) -> Iterator[Path]:
-    """`mpmfx.cache.atomic_path`, then reload a layer this process already holds for `path`."""
-    with atomic_path(path) as tmp:
+    """`mpmfx.cache.atomic_path` (the layer is read back before the rename), then reload a
+    layer this process already holds for `path`."""
+    from pxr import Sdf
+    with atomic_path(path, verify=lambda tmp: Sdf.Layer.OpenAsAnonymous(str(tmp)) is not None) as tmp:
         yield tmp
     _reload_if_open(path)
 

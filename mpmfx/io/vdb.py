@@ -44,6 +44,8 @@ class VdbGrid:
     grid_class: GridClass or its value string.
     background: value of inactive voxels. For level sets the narrow-band half width in metres
         (> 0): values with |phi| >= background are pruned to +-background.
+    half: store the values as 16-bit floats on disk (OpenVDB's saveFloatAsHalf; readers get
+        float32 back, ~5e-4 relative): a quarter to a third less disk for render data.
     """
 
     name: str
@@ -52,6 +54,7 @@ class VdbGrid:
     voxel_size: float
     grid_class: GridClass | str = GridClass.LEVEL_SET
     background: float = 0.0
+    half: bool = False
 
     def __post_init__(self) -> None:
         try:
@@ -128,6 +131,7 @@ def _build_grid(vdb: Any, grid: VdbGrid, values: np.ndarray) -> Any:
     if grid.grid_class is GridClass.FOG_VOLUME:
         out.gridClass = vdb.GridClass.FOG_VOLUME
     out.name = grid.name
+    out.saveFloatAsHalf = bool(grid.half)
     out.transform = vdb.createLinearTransform(float(grid.voxel_size))
     return out
 
@@ -171,7 +175,10 @@ def write_vdb(path: str | Path, grids: Sequence[VdbGrid], *, metadata: dict[str,
     file_metadata = _check_metadata(metadata, path)
     vdb = import_pyopenvdb()
     vdb_grids = [_build_grid(vdb, g, values) for g, values in checked]
-    with atomic_path(path) as tmp:
+    def readable(tmp: Path) -> bool:  # pyopenvdb reports no error when a write fails: read it back
+        return sorted(g.name for g in vdb.readAllGridMetadata(str(tmp))) == sorted(names)
+
+    with atomic_path(path, verify=readable) as tmp:
         vdb.write(str(tmp), grids=vdb_grids, metadata=file_metadata)
     return path
 

@@ -26,6 +26,12 @@ class WallType(enum.Enum):
     SLIP = "slip"  # normal velocity zeroed both ways; tangential kept (minus friction)
     SEPARATE = "separate"  # normal velocity zeroed only when moving into the wall
 
+    @property
+    def code(self) -> int:
+        """The grid update's integer code for this wall (slots.WallCode, same name)."""
+        from .slots import WallCode
+        return int(WallCode[self.name])
+
 
 class OutOfDomain(enum.Enum):
     """What happens to a particle that reaches the last grid cell of the domain."""

@@ -22,13 +22,10 @@ from .constitutive import (
     snow_return_map,
     uninvert,
 )
+from .slots import Count, Stat
 from .state import SceneFlags
+from .stepper import SubstepDev
 
-# stats[] (float32) and counts[] (int32) slots, read by the stepper in solver.py
-STAT_MAX_SPEED, STAT_MAX_HARDENING, STAT_WATER_J_MIN, STAT_J_MIN, STAT_J_MAX = range(5)
-# COUNT_INVERTED: particle-substeps whose trial F was inverted and got mirrored (not a rejection)
-COUNT_NONFINITE, COUNT_TOO_FAR, COUNT_LOST, COUNT_GRID_NONFINITE, COUNT_INVERTED, COUNT_PER_MATERIAL = range(6)
-N_STATS = 5
 
 
 @wp.struct
@@ -128,7 +125,7 @@ def keep_in_domain(gp: G2PParams, x: wp.vec3, counts: wp.array(dtype=wp.int32)):
     if inside:
         return x, 1
     if gp.remove != 0:
-        wp.atomic_add(counts, COUNT_LOST, 1)
+        wp.atomic_add(counts, Count.LOST, 1)
         return x, 0
     return wp.vec3(wp.clamp(x[0], gp.lo, gp.hi), wp.clamp(x[1], gp.lo, gp.hi), wp.clamp(x[2], gp.lo, gp.hi)), 1
 
@@ -149,13 +146,13 @@ def recover_volume(gp: G2PParams, mat: MaterialParams, grid_m: wp.array3d(dtype=
 
 
 @functools.lru_cache(maxsize=None)
-def make_g2p(flags: SceneFlags):
-    """G2P kernel specialised for the scene's materials (see p2g.make_p2g)."""
+def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
+    """G2P kernel specialised for the scene's materials (see p2g.make_p2g, also for device_clock)."""
     has_solid = flags.solid
     has_water = flags.water
     recovery = flags.volume_recovery
 
-    @wp.kernel(enable_backward=False, module=flags.key)
+    @wp.kernel(enable_backward=False, module=flags.key + ("_dev" if device_clock else ""))
     def g2p(
         gp: G2PParams,
         grid_v: wp.array3d(dtype=wp.vec3),
@@ -172,8 +169,15 @@ def make_g2p(flags: SceneFlags):
         alive_out: wp.array(dtype=wp.int32),
         stats: wp.array(dtype=float),
         counts: wp.array(dtype=wp.int32),
+        sub: wp.array(dtype=SubstepDev),
     ):
         p = wp.tid()
+        if wp.static(device_clock):
+            s = sub[0]
+            if s.active == 0:
+                return
+            gp.dt = s.dt
+            gp.affine_keep = s.affine_keep
         F_new = wp.mat33(0.0)
         if wp.static(has_solid):
             F_new = F[p]
@@ -198,11 +202,11 @@ def make_g2p(flags: SceneFlags):
                     j_now = wp.determinant(F_new)
                     if j_trial <= 0.0:
                         # mirrored back out; the J stats keep the inversion so QA sees it
-                        wp.atomic_add(counts, COUNT_INVERTED, 1)
+                        wp.atomic_add(counts, Count.INVERTED, 1)
                         j_now = j_trial
                     finite = wp.isfinite(F_new) and wp.isfinite(jp_new)
                     if mat.mode == MODE_SNOW:
-                        wp.atomic_max(stats, STAT_MAX_HARDENING, hardening_factor(mat, jp_new))
+                        wp.atomic_max(stats, Stat.MAX_HARDENING, hardening_factor(mat, jp_new))
             if wp.static(has_water):
                 if mat.mode == MODE_WATER:
                     # water keeps only its volume ratio: J^{n+1} = det(I + dt C) J^n
@@ -215,21 +219,21 @@ def make_g2p(flags: SceneFlags):
                         # or it lands fluffy and stress-free until squeezed back to J = 1
                         J_new = wp.min(J_new, 1.0)
                     j_now = J_new
-                    wp.atomic_min(stats, STAT_WATER_J_MIN, J_new)
+                    wp.atomic_min(stats, Stat.WATER_J_MIN, J_new)
             x_new = x_new + gp.dt * v_new
             speed = wp.length(v_new)
             finite = finite and wp.isfinite(x_new) and wp.isfinite(C_new) and wp.isfinite(j_now)
             if not finite:
-                wp.atomic_add(counts, COUNT_NONFINITE, 1)
-                wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
+                wp.atomic_add(counts, Count.NONFINITE, 1)
+                wp.atomic_add(counts, Count.PER_MATERIAL + mid, 1)
                 return  # the substep is rejected; nothing of it is committed
             if gp.dt * speed > 1.0 / gp.inv_dx:
                 # more than a cell in one substep: the stencil never saw where it lands
-                wp.atomic_add(counts, COUNT_TOO_FAR, 1)
-                wp.atomic_add(counts, COUNT_PER_MATERIAL + mid, 1)
-            wp.atomic_max(stats, STAT_MAX_SPEED, speed)
-            wp.atomic_min(stats, STAT_J_MIN, j_now)
-            wp.atomic_max(stats, STAT_J_MAX, j_now)
+                wp.atomic_add(counts, Count.TOO_FAR, 1)
+                wp.atomic_add(counts, Count.PER_MATERIAL + mid, 1)
+            wp.atomic_max(stats, Stat.MAX_SPEED, speed)
+            wp.atomic_min(stats, Stat.J_MIN, j_now)
+            wp.atomic_max(stats, Stat.J_MAX, j_now)
             x_new, alive_new = keep_in_domain(gp, x_new, counts)
         # each output written once (G2P is memory bound)
         x_out[p] = x_new

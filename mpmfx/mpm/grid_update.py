@@ -13,17 +13,14 @@ centre-of-mass one; its tangential slip keeps all but Coulomb friction (Bardenha
 
 from __future__ import annotations
 
+import functools
+
 import warp as wp
 
 from .colliders import ColliderParams, apply_collider
+from .slots import Count, WallCode
+from .stepper import SubstepDev
 
-WALL_STICKY = wp.constant(0)
-WALL_SLIP = wp.constant(1)
-WALL_SEPARATE = wp.constant(2)
-WALL_CODES = {"sticky": 0, "slip": 1, "separate": 2}
-
-# counts[] slots shared with G2P (see solver.py)
-COUNT_GRID_NONFINITE = wp.constant(3)
 
 
 @wp.struct
@@ -60,10 +57,10 @@ class GridParams:
 def apply_wall(v: wp.vec3, n_out: wp.vec3, wall: int, mu: float) -> wp.vec3:
     """Wall boundary on one face. n_out: outward face normal. Coulomb friction removes
     mu * |vn| of tangential speed, where vn is the normal speed stopped by the wall."""
-    if wall == WALL_STICKY:
+    if wall == WallCode.STICKY:
         return wp.vec3(0.0)
     vn = wp.dot(v, n_out)  # > 0: moving into the wall
-    if wall == WALL_SEPARATE and vn <= 0.0:
+    if wall == WallCode.SEPARATE and vn <= 0.0:
         return v
     vt = v - vn * n_out
     if vn > 0.0:
@@ -135,42 +132,58 @@ def field_contact(v: wp.vec3, v_cm: wp.vec3, normal_in: wp.vec3, mu: float) -> w
     return v_cm + dvt
 
 
-@wp.kernel(enable_backward=False)
-def grid_update(
-    gp: GridParams,
-    grid_m: wp.array3d(dtype=float),
-    grid_mv: wp.array3d(dtype=wp.vec3),
-    grid_normal: wp.array3d(dtype=wp.vec3),
-    grid_fixed: wp.array4d(dtype=wp.int64),
-    colliders: wp.array(dtype=ColliderParams),
-    sdf: wp.array(dtype=float),
-    grid_v: wp.array3d(dtype=wp.vec3),
-    counts: wp.array(dtype=wp.int32),
-):
-    i, j, k = wp.tid()
-    m_tot = float(0.0)
-    p_tot = wp.vec3(0.0)
-    grad_tot = wp.vec3(0.0)
-    if gp.n_fields > 1:
+@functools.lru_cache(maxsize=None)
+def make_grid_update(*, device_clock: bool = False):
+    """The grid-update kernel; device_clock as in p2g.make_p2g."""
+    module = "mpmfx_mpm_grid_dev" if device_clock else __name__
+
+    @wp.kernel(enable_backward=False, module=module)
+    def grid_update(
+        gp: GridParams,
+        grid_m: wp.array3d(dtype=float),
+        grid_mv: wp.array3d(dtype=wp.vec3),
+        grid_normal: wp.array3d(dtype=wp.vec3),
+        grid_fixed: wp.array4d(dtype=wp.int64),
+        colliders: wp.array(dtype=ColliderParams),
+        sdf: wp.array(dtype=float),
+        grid_v: wp.array3d(dtype=wp.vec3),
+        counts: wp.array(dtype=wp.int32),
+        sub: wp.array(dtype=SubstepDev),
+    ):
+        i, j, k = wp.tid()
+        if wp.static(device_clock):
+            if sub[0].active == 0:
+                return
+            gp.dt = sub[0].dt
+            gp.damping_factor = sub[0].damping_factor
+        m_tot = float(0.0)
+        p_tot = wp.vec3(0.0)
+        grad_tot = wp.vec3(0.0)
+        if gp.n_fields > 1:
+            for f in range(gp.n_fields):
+                m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, f * gp.nodes + i, j, k)
+                m_tot += m
+                p_tot += m * v
+                grad_tot += mass_gradient(gp, grid_normal, grid_fixed, f * gp.nodes + i, j, k)
+        xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
         for f in range(gp.n_fields):
-            m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, f * gp.nodes + i, j, k)
-            m_tot += m
-            p_tot += m * v
-            grad_tot += mass_gradient(gp, grid_normal, grid_fixed, f * gp.nodes + i, j, k)
-    xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
-    for f in range(gp.n_fields):
-        fi = f * gp.nodes + i
-        m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, fi, j, k)
-        if m > 0.0:
-            if m < m_tot * (1.0 - 1.0e-6):  # another field shares this node
-                g = mass_gradient(gp, grid_normal, grid_fixed, fi, j, k)
-                # own gradient minus the others': for two fields the normals are exactly
-                # opposite, so the contact impulses cancel and momentum is conserved
-                v = field_contact(v, p_tot / m_tot, 2.0 * g - grad_tot, gp.contact_friction)
-            for c in range(gp.num_colliders):
-                v = apply_collider(colliders[c], sdf, xn, v, 0.5 * gp.dx)
-            v = apply_walls(v, wp.vec3i(i, j, k), gp)
-            if not wp.isfinite(v):
-                wp.atomic_add(counts, COUNT_GRID_NONFINITE, 1)
-                v = wp.vec3(0.0)  # the substep is rejected anyway; keep G2P finite
-        grid_v[fi, j, k] = v
+            fi = f * gp.nodes + i
+            m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, fi, j, k)
+            if m > 0.0:
+                if m < m_tot * (1.0 - 1.0e-6):  # another field shares this node
+                    g = mass_gradient(gp, grid_normal, grid_fixed, fi, j, k)
+                    # own gradient minus the others': for two fields the normals are exactly
+                    # opposite, so the contact impulses cancel and momentum is conserved
+                    v = field_contact(v, p_tot / m_tot, 2.0 * g - grad_tot, gp.contact_friction)
+                for c in range(gp.num_colliders):
+                    v = apply_collider(colliders[c], sdf, xn, v, 0.5 * gp.dx)
+                v = apply_walls(v, wp.vec3i(i, j, k), gp)
+                if not wp.isfinite(v):
+                    wp.atomic_add(counts, Count.GRID_NONFINITE, 1)
+                    v = wp.vec3(0.0)  # the substep is rejected anyway; keep G2P finite
+            grid_v[fi, j, k] = v
+
+    return grid_update
+
+
+grid_update = make_grid_update()  # the reference kernel

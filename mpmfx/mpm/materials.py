@@ -46,6 +46,13 @@ class Material:
         jp_max: upper clamp of Jp (snow), dimensionless.
         friction_angle: Drucker-Prager friction angle, degrees (sand); roughly the angle
             of repose (validation.md §4 says how roughly).
+        friction_fit: which Mohr-Coulomb state the Drucker-Prager cone is fitted to (sand).
+            "compression" (Klar et al. 2016, the guide): the outer cone, exact in triaxial
+            compression; in plane-strain flow (a slab, a dam, a chute: anything that flows
+            in a plane) it is as strong as Mohr-Coulomb at a much larger angle (asin of
+            2 sqrt(3) sin(phi) / (3 - sin(phi)): 63.5 deg for phi = 38, 43.9 deg for 30), so
+            such flows stop short. "plane_strain": exact for plane-strain flow at zero
+            dilatancy (sqrt(J2) = p sin(phi)); its angle of repose is friction_angle.
         cohesion: tensile strength of the sand cone, as a volumetric Hencky (log) strain
             the grains sustain before they separate (dimensionless; 0 = dry sand). The
             cone apex moves from tr(log strain) = 0 to tr = cohesion.
@@ -82,6 +89,7 @@ class Material:
     jp_min: float = 0.6
     jp_max: float = 20.0
     friction_angle: float = 38.0
+    friction_fit: str = "compression"
     cohesion: float = 0.0
     volume_correction: bool = True
     bulk_modulus: float = 100.0
@@ -98,6 +106,10 @@ class Material:
                 f"Material.mode: {self.mode!r} is not a mode; use one of "
                 f"{', '.join(m.name for m in Mode)}"
             ) from None
+        for f in dataclasses.fields(self):
+            value = getattr(self, f.name)
+            if f.type in ("float", "bool") and not isinstance(value, (int, float)):
+                raise ValueError(f"Material.{f.name} = {value!r}: give a {f.type}")
         checks = [
             ("youngs_modulus", self.youngs_modulus > 0, "must be > 0"),
             ("poisson_ratio", 0.0 <= self.poisson_ratio < 0.5, "must be in [0, 0.5)"),
@@ -112,6 +124,8 @@ class Material:
             ("eos_gamma", self.eos_gamma >= 1, "must be >= 1"),
             ("volume_recovery_rate", self.volume_recovery_rate >= 0, "must be >= 0 (a rate, 1/s)"),
         ]
+        if self.friction_fit not in FRICTION_FITS:
+            raise ValueError(f"Material.friction_fit = {self.friction_fit!r}: use one of {', '.join(FRICTION_FITS)}")
         for name, ok, what in checks:
             value = getattr(self, name)
             if not (ok and math.isfinite(float(value))):
@@ -130,8 +144,14 @@ class Material:
 
     @property
     def dp_alpha(self) -> float:
-        """Drucker-Prager cone parameter alpha = sqrt(2/3) 2 sin(phi) / (3 - sin(phi))."""
+        """Drucker-Prager cone parameter alpha: the yield surface is |dev tau| = -alpha tr tau
+        (Klar et al. 2016), i.e. sqrt(J2) = (3 / sqrt(2)) alpha p. friction_fit "compression":
+        alpha = sqrt(2/3) 2 sin(phi) / (3 - sin(phi)) (Mohr-Coulomb in triaxial compression);
+        "plane_strain": alpha = sqrt(2) sin(phi) / 3 (Mohr-Coulomb in plane-strain flow at
+        zero dilatancy, where the cone's non-dilatant return map puts the stress)."""
         s = math.sin(math.radians(self.friction_angle))
+        if self.friction_fit == "plane_strain":
+            return math.sqrt(2.0) * s / 3.0
         return math.sqrt(2.0 / 3.0) * 2.0 * s / (3.0 - s)
 
     @property
@@ -153,6 +173,8 @@ class Material:
         stiff = (self.lambda0 + 2.0 * self.mu0) * hardening_factor
         return math.sqrt(stiff / self.density)
 
+
+FRICTION_FITS = ("compression", "plane_strain")  # see Material.friction_fit
 
 _ELASTIC_YIELD = 1e9  # thetas this large mean "the clamp never fires" (guide §8)
 

@@ -40,6 +40,7 @@ from .constitutive import (
     tait_pressure,
 )
 from .state import SceneFlags
+from .stepper import SubstepDev
 
 FIXED_POINT_BITS = 32  # see module docstring
 
@@ -64,14 +65,43 @@ def to_fixed(value: float, quantum_inv: float) -> wp.int64:
 
 
 @functools.lru_cache(maxsize=None)
-def make_p2g(flags: SceneFlags):
-    """P2G kernel specialised for the scene's materials (wp.static drops unused branches,
-    so a water-only scene compiles no SVD). One kernel per scene flags, shared by solvers."""
+def make_particle_affine(flags: SceneFlags):
+    """The MLS affine term of one particle (guide §4.4), specialised like make_p2g:
+    -dt V0 (4 / dx^2) tau + m C, with tau the Kirchhoff stress of its mode. Shared by the
+    reference P2G and the binned one (p2g_binned.py) so both scatter the same numbers."""
     has_solid = flags.solid
     has_water = flags.water
-    multi = flags.multi_field
 
-    @wp.kernel(enable_backward=False, module=flags.key)
+    @wp.func
+    def particle_affine(pp: P2GParams, mat: MaterialParams, F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float),
+                        Jp: wp.array(dtype=float), C: wp.array(dtype=wp.mat33), volume: wp.array(dtype=float),
+                        p: int, m: float) -> wp.mat33:
+        tau = wp.mat33(0.0)
+        if wp.static(has_solid):
+            if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
+                tau = solid_tau(mat, F[p], Jp[p])
+        if wp.static(has_water):
+            if mat.mode == MODE_WATER:
+                Jw = J[p]
+                # pressure only, isotropic: tau = -p J I (guide §8.1)
+                tau = wp.identity(n=3, dtype=float) * (-tait_pressure(mat, Jw) * Jw)
+        inv_dx = pp.inv_dx
+        # D^-1 = 4 / dx^2 for quadratic B-splines
+        return (-pp.dt * volume[p] * 4.0 * inv_dx * inv_dx) * tau + m * C[p]
+
+    return particle_affine
+
+
+@functools.lru_cache(maxsize=None)
+def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
+    """P2G kernel specialised for the scene's materials (wp.static drops unused branches,
+    so a water-only scene compiles no SVD). One kernel per scene flags, shared by solvers.
+    device_clock: read dt from `sub` (the device stepper, stepper.py) and do nothing when
+    the substep is inactive; otherwise `sub` is unused (the reference path)."""
+    multi = flags.multi_field
+    particle_affine = make_particle_affine(flags)
+
+    @wp.kernel(enable_backward=False, module=flags.key + ("_dev" if device_clock else ""))
     def p2g(
         pp: P2GParams,
         x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
@@ -86,25 +116,19 @@ def make_p2g(flags: SceneFlags):
         grid_mv: wp.array3d(dtype=wp.vec3),
         grid_normal: wp.array3d(dtype=wp.vec3),
         grid_fixed: wp.array4d(dtype=wp.int64),
+        sub: wp.array(dtype=SubstepDev),
     ):
         p = wp.tid()
+        if wp.static(device_clock):
+            if sub[0].active == 0:
+                return
+            pp.dt = sub[0].dt
         m = mass[p]
         if alive[p] == 0 or m == 0.0:
             return  # tracers and removed particles add nothing
-        mat = materials[material[p]]
-        tau = wp.mat33(0.0)
-        if wp.static(has_solid):
-            if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
-                tau = solid_tau(mat, F[p], Jp[p])
-        if wp.static(has_water):
-            if mat.mode == MODE_WATER:
-                Jw = J[p]
-                # pressure only, isotropic: tau = -p J I (guide §8.1)
-                tau = wp.identity(n=3, dtype=float) * (-tait_pressure(mat, Jw) * Jw)
+        affine = particle_affine(pp, materials[material[p]], F, J, Jp, C, volume, p, m)
         inv_dx = pp.inv_dx
         dx = 1.0 / inv_dx
-        # D^-1 = 4 / dx^2 for quadratic B-splines
-        affine = (-pp.dt * volume[p] * 4.0 * inv_dx * inv_dx) * tau + m * C[p]
         mv = m * v[p]
         xg = x[p] * inv_dx
         bi = int(wp.floor(xg[0] - 0.5))

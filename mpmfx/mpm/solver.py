@@ -20,16 +20,18 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
-from . import g2p as g2p_mod
 from .clear_grid import clear_grid
 from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
 from .constitutive import MaterialParams, pack_material
 from .energy import make_energy
 from .g2p import G2PParams, make_g2p
-from .grid_update import WALL_CODES, GridParams, grid_update
+from .grid_update import GridParams, make_grid_update
 from .materials import Material, Mode
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
+from .chunked import DeviceAdvance
+from .stepper import SubstepDev, report_sums
+from .slots import REJECTING, Count, Stat
 from .state import ParticleBuffers, SceneFlags, State, StepperClock
 
 __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
@@ -40,7 +42,14 @@ _SYMPTOM = "Everything explodes / NaNs"  # the guide §9.3 row the errors point 
 
 
 class SimulationError(RuntimeError):
-    """The solver cannot continue without a knob change; the message says which."""
+    """The solver cannot continue without a knob change; the message says which. `field`: the
+    SolverConfig knob whose limit was hit ("dt_min", "max_substeps_per_frame") or None;
+    `needed`: what would have passed it (the substep dt in s, or the substeps the frame needs),
+    so a caller can phrase the advice in its own keys."""
+
+    def __init__(self, message: str, *, field: str | None = None, needed: float | None = None):
+        super().__init__(message)
+        self.field, self.needed = field, needed
 
 
 @dataclass
@@ -99,10 +108,13 @@ class Solver:
 
     materials: the material table; particles index into it. config: solver knobs.
     colliders: kinematic Colliders. device: Warp device ("cpu", "cuda:0"; None = default).
+    stepper: "device" runs `advance` in chunks of substeps decided on the device (stepper.py;
+    scenes with colliders use the host loop), "host" the reference loop that reads the
+    statistics back after every substep; both give the same substeps and results.
     """
 
     def __init__(self, materials: Sequence[Material], config: SolverConfig, *,
-                 colliders: Sequence[Collider] = (), device: str | None = None):
+                 colliders: Sequence[Collider] = (), device: str | None = None, stepper: str = "device"):
         self.materials = tuple(materials)
         if not self.materials:
             raise ValueError("Solver: materials is empty; give at least one Material")
@@ -115,8 +127,12 @@ class Solver:
         self.flags = SceneFlags.of(self.materials, multi_field=config.multi_field)
         # specialised kernels for this scene: all three land in one Warp module per flags,
         # built before the first launch so the module compiles once
-        self._p2g = make_p2g(self.flags)
-        self._g2p = make_g2p(self.flags)
+        # [device_clock]: the reference kernels, and the device stepper's (stepper.py)
+        self._kernels = {dc: (make_p2g(self.flags, device_clock=dc), make_g2p(self.flags, device_clock=dc),
+                              make_grid_update(device_clock=dc)) for dc in (False, True)}
+        if stepper not in ("device", "host"):
+            raise ValueError(f"Solver: stepper={stepper!r}; use 'device' (default) or 'host' (the reference loop)")
+        self.stepper = stepper
         self._energy = make_energy(self.flags)
         self._n_fields = 0
         self._allocate_grid(1)
@@ -124,14 +140,15 @@ class Solver:
             self._materials_dev = wp.array([pack_material(m) for m in self.materials], dtype=MaterialParams)
             self._sdf = wp.array(concat_sdfs(self.colliders), dtype=float)
             self._colliders_dev = wp.empty(max(1, len(self.colliders)), dtype=ColliderParams)
-            self._stats = wp.zeros(g2p_mod.N_STATS, dtype=float)
+            self._stats = wp.zeros(len(Stat), dtype=float)
             self._energy_sum = wp.zeros(1, dtype=wp.float64)
-            self._counts = wp.zeros(g2p_mod.COUNT_PER_MATERIAL + len(self.materials), dtype=wp.int32)
-            init = np.array([0.0, 0.0, 1e30, 1e30, -1e30], dtype=np.float32)
-            self._stats_init = wp.array(init, dtype=float)
+            self._counts = wp.zeros(Count.size(len(self.materials)), dtype=wp.int32)
+            self._stats_init = wp.array(np.array(Stat.initial(), np.float32), dtype=float)
+            self._sub = wp.zeros(1, dtype=SubstepDev)
         self._q_mass = 1.0
         self._q_mom = 1.0
         self._last_bad = None  # counts of the last rejected substep, for error messages
+        self._device_advance = DeviceAdvance(self)
 
     # ------------------------------------------------------------------ setup
     def _allocate_grid(self, n_fields: int) -> None:
@@ -246,29 +263,40 @@ class Solver:
 
     def _substep(self, state: State, dt: float, t0: float, t1: float) -> None:
         """clear grid -> P2G -> grid update -> G2P, writing state.nxt (state.cur intact)."""
-        cfg, cur, nxt = self.config, state.cur, state.nxt
-        inv_dx = float(cfg.grid_n)
         wp.copy(self._stats, self._stats_init)
         self._counts.zero_()
+        if self.colliders:
+            self._colliders_dev.assign(pack_colliders(self.colliders, t0, t1, dt))
+        self._phases(state, state.cur, state.nxt, dt, device_clock=False)
+
+    def _phases(self, state: State, cur: ParticleBuffers, nxt: ParticleBuffers, dt: float, *,
+                device_clock: bool, binned=None) -> None:
+        """Launch the four phases reading `cur`, writing `nxt`. device_clock: the kernels take
+        dt (and the dt-dependent factors) from self._sub instead of `dt` (stepper.py);
+        binned: a p2g_binned.BinnedP2G to scatter with (device clock only), else the reference P2G."""
+        cfg = self.config
+        inv_dx = float(cfg.grid_n)
+        nn = cfg.grid_n + 1
+        p2g, g2p, grid = self._kernels[device_clock]
         # 1 · clear
         clear_grid(self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
                    deterministic=cfg.deterministic, multi_field=self.flags.multi_field)
         # 2 · P2G
         pp = P2GParams()
-        pp.inv_dx, pp.dt, pp.nodes = inv_dx, float(dt), cfg.grid_n + 1
+        pp.inv_dx, pp.dt, pp.nodes = inv_dx, float(dt), nn
         pp.deterministic = int(cfg.deterministic)
         pp.q_mass_inv, pp.q_mom_inv = 1.0 / self._q_mass, 1.0 / self._q_mom
-        wp.launch(self._p2g, dim=state.n, device=self.device, inputs=[
-            pp, cur.x, cur.v, cur.C, cur.F, cur.J, cur.Jp, cur.alive, state.mass, state.volume,
-            state.material, state.field_id, self._materials_dev,
-            self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed])
+        if binned is not None:
+            binned.launch(pp, state, cur, self._materials_dev, self._grid_m, self._grid_mv, self._grid_fixed, self._sub)
+        else:
+            wp.launch(p2g, dim=state.n, device=self.device, inputs=[
+                pp, cur.x, cur.v, cur.C, cur.F, cur.J, cur.Jp, cur.alive, state.mass, state.volume,
+                state.material, state.field_id, self._materials_dev,
+                self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed, self._sub])
         # 3 · grid update
-        if self.colliders:
-            self._colliders_dev.assign(pack_colliders(self.colliders, t0, t1, dt))
-        nn = cfg.grid_n + 1
-        wp.launch(grid_update, dim=(nn, nn, nn), device=self.device, inputs=[
+        wp.launch(grid, dim=(nn, nn, nn), device=self.device, inputs=[
             self._grid_params(dt, state.n_fields), self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
-            self._colliders_dev, self._sdf, self._grid_v, self._counts])
+            self._colliders_dev, self._sdf, self._grid_v, self._counts, self._sub])
         # 4 · G2P
         gp = G2PParams()
         gp.dt, gp.inv_dx = float(dt), inv_dx
@@ -277,9 +305,9 @@ class Solver:
         gp.remove = int(cfg.out_of_domain == OutOfDomain.REMOVE)
         gp.nodes = nn
         gp.deterministic, gp.q_mass = int(cfg.deterministic), self._q_mass
-        wp.launch(self._g2p, dim=state.n, device=self.device, inputs=[
-            gp, self._grid_v, self._grid_m, self._grid_fixed, self._materials_dev, state.material, state.field_id, *cur.arrays(), *nxt.arrays(),
-            self._stats, self._counts])
+        wp.launch(g2p, dim=state.n, device=self.device, inputs=[
+            gp, self._grid_v, self._grid_m, self._grid_fixed, self._materials_dev, state.material, state.field_id,
+            *cur.arrays(), *nxt.arrays(), self._stats, self._counts, self._sub])
 
     def _grid_params(self, dt: float, n_fields: int) -> GridParams:
         cfg = self.config
@@ -287,7 +315,7 @@ class Solver:
         gp.dt, gp.dx = float(dt), cfg.dx
         gp.gravity = wp.vec3(*cfg.gravity)
         gp.damping_factor = max(0.0, 1.0 - cfg.damping * dt)  # v *= 1 - damping*dt (trap 5)
-        codes = [WALL_CODES[w.value] for w in cfg.walls]
+        codes = [w.code for w in cfg.walls]
         gp.walls_lo = wp.vec3i(codes[0], codes[2], codes[4])
         gp.walls_hi = wp.vec3i(codes[1], codes[3], codes[5])
         gp.wall_friction = cfg.wall_friction
@@ -316,9 +344,24 @@ class Solver:
         """Advance from shot time t0 to t1 (s), i.e. (t1 - t0) * time_scale simulated
         seconds, in adaptive substeps landing exactly on t1. Raises SimulationError when
         a substep would need dt < dt_min or the frame needs > max_substeps_per_frame."""
-        cfg = self.config
         if not t1 >= t0:
             raise ValueError(f"Solver.advance: t1 = {t1} must be >= t0 = {t0}")
+        if self.stepper == "device" and not self.colliders:
+            return self._device_advance.run(state, t0, t1)
+        return self._advance_host(state, t0, t1)
+
+    def _too_many(self, state: State, t: float, t1: float, substeps: int, dt_cfl: float,
+                  remaining: float) -> SimulationError:
+        """`remaining`: simulated seconds still to go (sets `needed`, the substeps that would do)."""
+        return SimulationError(
+            f"t={t:.4f}s: {substeps} substeps did not reach t1={t1:.4f}s "
+            f"(dt ~ {dt_cfl:.3g}s, c_max {self.wave_speed(state.clock):.3g} domain/s). Raise "
+            f"SolverConfig.max_substeps_per_frame, or lower youngs_modulus / bulk_modulus / grid_n",
+            field="max_substeps_per_frame", needed=substeps + math.ceil(remaining / dt_cfl))
+
+    def _advance_host(self, state: State, t0: float, t1: float) -> StepReport:
+        """The reference stepper: statistics read back after every substep."""
+        cfg = self.config
         wall0 = time.perf_counter()
         self._last_bad = None
         total = (t1 - t0) * cfg.time_scale
@@ -330,10 +373,7 @@ class Solver:
             if dt_cfl < cfg.dt_min:
                 self._raise_too_small(state, t0 + done / cfg.time_scale, dt_cfl)
             if substeps >= cfg.max_substeps_per_frame:
-                raise SimulationError(
-                    f"t={t0 + done / cfg.time_scale:.4f}s: {substeps} substeps did not reach t1={t1:.4f}s "
-                    f"(dt ~ {dt_cfl:.3g}s, c_max {self.wave_speed(state.clock):.3g} domain/s). Raise "
-                    f"SolverConfig.max_substeps_per_frame, or lower youngs_modulus / bulk_modulus / grid_n")
+                raise self._too_many(state, t0 + done / cfg.time_scale, t1, substeps, dt_cfl, total - done)
             last = remaining <= dt_cfl * (1.0 + 1e-6)
             dt = remaining if last else (0.5 * remaining if remaining < 2.0 * dt_cfl else dt_cfl)
             ts0 = t0 + done / cfg.time_scale
@@ -341,7 +381,7 @@ class Solver:
             self._substep(state, dt, ts0, ts1)
             stats = self._stats.numpy()
             counts = self._counts.numpy()
-            if counts[: g2p_mod.COUNT_LOST].sum() + counts[g2p_mod.COUNT_GRID_NONFINITE] > 0:
+            if counts[list(REJECTING)].sum() > 0:
                 rejected += 1
                 state.clock.dt_scale *= 0.5  # redo at half dt (Ziran)
                 self._last_bad = counts  # for the error message if dt runs out
@@ -353,38 +393,39 @@ class Solver:
             clock.substeps += 1
             clock.last_dt = dt
             clock.dt_scale = min(1.0, clock.dt_scale * 1.25)
-            clock.max_speed = float(stats[g2p_mod.STAT_MAX_SPEED])
+            clock.max_speed = float(stats[Stat.MAX_SPEED])
             if self.flags.snow:
-                clock.max_hardening = max(1.0, float(stats[g2p_mod.STAT_MAX_HARDENING]))
+                clock.max_hardening = max(1.0, float(stats[Stat.MAX_HARDENING]))
             if self.flags.water:
-                clock.water_j_min = min(1.0, float(stats[g2p_mod.STAT_WATER_J_MIN]))
+                clock.water_j_min = min(1.0, float(stats[Stat.WATER_J_MIN]))
             dts.append(dt)
             c = self.wave_speed(clock) + clock.max_speed
             cfl_used = max(cfl_used, dt * c / cfg.dx)
             vmax = max(vmax, clock.max_speed)
-            if stats[g2p_mod.STAT_J_MIN] <= stats[g2p_mod.STAT_J_MAX]:
-                jmin = min(jmin, float(stats[g2p_mod.STAT_J_MIN]))
-                jmax = max(jmax, float(stats[g2p_mod.STAT_J_MAX]))
-            lost += int(counts[g2p_mod.COUNT_LOST])
-            inverted += int(counts[g2p_mod.COUNT_INVERTED])
+            if stats[Stat.J_MIN] <= stats[Stat.J_MAX]:
+                jmin = min(jmin, float(stats[Stat.J_MIN]))
+                jmax = max(jmax, float(stats[Stat.J_MAX]))
+            lost += int(counts[Count.LOST])
+            inverted += int(counts[Count.INVERTED])
         report = self._report(state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0)
         report.inverted = inverted
         return report
 
     def _raise_too_small(self, state: State, t: float, dt: float) -> None:
         bad = getattr(self, "_last_bad", None)
-        per_mat = [] if bad is None else bad[g2p_mod.COUNT_PER_MATERIAL:]
+        per_mat = [] if bad is None else bad[Count.PER_MATERIAL:]
         names = [self._describe_material(i) for i, k in enumerate(per_mat) if k > 0] or [
             self._describe_material(i) for i in range(len(self.materials))]
-        n_bad = 0 if bad is None else int(bad[g2p_mod.COUNT_NONFINITE] + bad[g2p_mod.COUNT_TOO_FAR])
+        n_bad = 0 if bad is None else int(bad[Count.NONFINITE] + bad[Count.TOO_FAR])
         what = (f"the last rejected substep had {n_bad} particle(s) non-finite or moving more than "
                 f"one cell" if bad is not None else "no substep was rejected; the CFL step is this small")
         raise SimulationError(
             f"t={t:.4f}s: the substep fell to dt={dt:.3g}s < dt_min={self.config.dt_min:g}s "
             f"({state.n} particles, max speed {state.clock.max_speed:.3g} domain/s, c_max "
             f"{self.wave_speed(state.clock):.3g} domain/s); {what}, in {', '.join(names)} "
-            f"('{_SYMPTOM}', guide §9.3). Lower youngs_modulus / bulk_modulus, raise damping, or "
-            f"lower SolverConfig.cfl (<= 0.5); or lower SolverConfig.dt_min if this dt is intended")
+            f"('{_SYMPTOM}', guide §9.3). Lower youngs_modulus / bulk_modulus or raise damping; "
+            f"or lower SolverConfig.dt_min if this dt is intended (a lower cfl only shrinks dt further)",
+            field="dt_min", needed=dt)
 
     def _describe_material(self, i: int) -> str:
         m = self.materials[i]
@@ -393,15 +434,12 @@ class Solver:
         return f"material {i} ({m.mode.name}, youngs_modulus={m.youngs_modulus:g})"
 
     def _report(self, state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0) -> StepReport:
-        v = state.cur.v.numpy().astype(np.float64)
-        alive = state.cur.alive.numpy() > 0
-        m = state.mass.numpy().astype(np.float64) * alive
+        mass, momentum, kinetic = report_sums(state, self.device)  # on the device: no particle copy
         return StepReport(
             substeps=substeps, rejected_substeps=rejected,
             dt_min=min(dts) if dts else 0.0, dt_max=max(dts) if dts else 0.0,
-            max_speed=vmax, cfl_used=cfl_used, particles_lost=lost, mass=float(m.sum()),
-            momentum=(m[:, None] * v).sum(axis=0),
-            kinetic_energy=float(0.5 * (m * (v * v).sum(axis=1)).sum()),
+            max_speed=vmax, cfl_used=cfl_used, particles_lost=lost, mass=mass,
+            momentum=momentum, kinetic_energy=kinetic,
             elastic_energy=self.elastic_energy(state),
             j_min=jmin if dts else 1.0, j_max=jmax if dts else 1.0,
             wall_time_s=time.perf_counter() - wall0)

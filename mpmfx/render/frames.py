@@ -21,15 +21,17 @@ def colour_for(name: str, index: int) -> str:
 class FrameRenderer:
     """One plotter reused for every frame of a shot (creating a render window is the slow part)."""
 
-    def __init__(self, *, size: tuple[int, int], camera: tuple, domain: tuple, title: str = ""):
+    def __init__(self, *, size: tuple[int, int], camera: tuple, domain: tuple, floor: float, title: str = ""):
+        """camera: (position, look_at) m; domain: (origin (3,) m, size m); floor: ground height (m),
+        the solver's floor (`mpmfx.render.camera.solver_floor`)."""
         pv = self.pv = import_pyvista()
         self.plotter = pv.Plotter(off_screen=True, window_size=size, lighting="three lights")
         self.plotter.set_background("#20242c", top="#5d6d82")
         origin, L = np.asarray(domain[0], float), float(domain[1])
-        floor = pv.Plane(center=origin + [L / 2, 0, L / 2], direction=(0, 1, 0), i_size=L * 1.6, j_size=L * 1.6)
-        self.plotter.add_mesh(floor, color="#8a8f98", ambient=0.25, diffuse=0.7, specular=0.0, name="floor")
-        box = pv.Box(bounds=(origin[0], origin[0] + L, origin[1], origin[1] + L, origin[2], origin[2] + L))
-        self.plotter.add_mesh(box, style="wireframe", color="#9aa5b5", opacity=0.25, name="domain")
+        # The ground where the material rests (no domain box: its edges drew as scratches).
+        ground = pv.Plane(center=(origin[0] + L / 2, floor, origin[2] + L / 2), direction=(0, 1, 0),
+                          i_size=L * 1.6, j_size=L * 1.6)
+        self.plotter.add_mesh(ground, color="#8a8f98", ambient=0.25, diffuse=0.7, specular=0.0, name="floor")
         self.plotter.camera_position = [camera[0], camera[1], (0, 1, 0)]
         self.plotter.camera.view_angle = 35.0
         self.title = title
@@ -90,12 +92,16 @@ def write_movie(frames: list[Path], path: Path, *, fps: float) -> Path:
     return path
 
 
-def contact_sheet(frames: list[Path], path: Path, *, count: int = 4, scale: int = 2) -> Path:
-    """`count` evenly spaced frames side by side, each downsampled by `scale`: one picture of a shot."""
+def contact_sheet(frames: list[Path], path: Path, *, count: int = 4, scale: int = 1) -> Path:
+    """`count` evenly spaced frames in a grid of two columns, each downsampled by `scale`: one
+    picture of a shot, read left to right, top to bottom."""
     import imageio.v2 as imageio
     picks = [frames[round(i * (len(frames) - 1) / max(count - 1, 1))] for i in range(min(count, len(frames)))]
     images = [np.asarray(imageio.imread(p))[::scale, ::scale, :3] for p in picks]
+    if len(images) % 2:
+        images.append(np.zeros_like(images[0]))
+    rows = [np.concatenate(images[i:i + 2], axis=1) for i in range(0, len(images), 2)]
     tmp = path.with_name(f".{path.stem}.tmp.png")
-    imageio.imwrite(tmp, np.concatenate(images, axis=1))
+    imageio.imwrite(tmp, np.concatenate(rows, axis=0))
     tmp.replace(path)
     return path

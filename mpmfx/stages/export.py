@@ -93,13 +93,14 @@ def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
         if ls.values.size == 0:
             continue
         ijk0 = tuple(int(i) for i in ls.ijk0)
-        grids = [VdbGrid("surface", ls.values, ijk0, ls.voxel_size, "level_set", ls.background)]
+        # half floats on disk: 27 % smaller files (jelly_splash), ~5e-4 relative, invisible in a render
+        grids = [VdbGrid("surface", ls.values, ijk0, ls.voxel_size, "level_set", ls.background, half=True)]
         vel = sparse.velocity_dense(ls.ijk0, ls.values.shape)
         if vel is not None:
-            grids.append(VdbGrid("vel", vel, ijk0, ls.voxel_size, "unknown", 0.0))
+            grids.append(VdbGrid("vel", vel, ijk0, ls.voxel_size, "unknown", 0.0, half=True))
         density = sparse.density_dense(ls.ijk0, ls.values.shape)
         if density is not None:  # 0 outside the stored leaves: the writer leaves those voxels inactive
-            grids.append(VdbGrid("density", density, ijk0, ls.voxel_size, "fog_volume", 0.0))
+            grids.append(VdbGrid("density", density, ijk0, ls.voxel_size, "fog_volume", 0.0, half=True))
         rel = f"vdb/{g}/{frame:04d}.vdb"
         write_vdb(entry.root / rel, grids, metadata={"shot": shot.shot.name, "frame": frame, "units": "m",
                                                      "group": g})

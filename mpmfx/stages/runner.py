@@ -12,7 +12,7 @@ from pathlib import Path
 from mpmfx.cache import Cache, Entry, code_hash, default_root
 from mpmfx.config import Shot, ShotError, load_shot_config
 from mpmfx.stages import STAGES, export, render, simulate, surface, voxelise
-from mpmfx.stages.base import Context, Stage
+from mpmfx.stages.base import Context, Stage, StageError
 
 MODULES: dict[str, Stage] = {m.NAME: m for m in (voxelise, simulate, surface, export, render)}
 assert tuple(MODULES) == STAGES, "mpmfx.stages.STAGES and the runner's modules disagree"
@@ -29,6 +29,7 @@ class StageResult:
     seconds: float
     frames: int
     entry: Path
+    flagged: int = 0    # frames the QA flags (simulate only)
 
 
 @dataclass
@@ -48,6 +49,7 @@ class ShotRun:
         self.cache = Cache(cache_root or default_root(), shot.shot.name)
         self.device = device
         self.quiet = quiet
+        self.published: dict[str, Path] = {}  # what the last run() published: "usd", "renders"
 
     # -- keys ------------------------------------------------------------------------------
     def entries(self) -> dict[str, Entry]:
@@ -80,7 +82,10 @@ class ShotRun:
                 out.append(StageStatus(name, "cached", "all frames present", entry.root))
             elif entry.root.exists():
                 n = len(entry.done_frames(stage_module(name).FRAME_EXT))
-                out.append(StageStatus(name, "partial", f"{n} frames done; a run resumes", entry.root))
+                why = f"{n} frames done; a run resumes"
+                if bad := entry.damaged():
+                    why = f"{len(bad)} files lost or changed since written ({bad[0]}); a run redoes them"
+                out.append(StageStatus(name, "partial", why, entry.root))
             elif others := [p for p in self.cache.entries(name) if p != entry.root]:
                 newest = max(others, key=lambda p: p.stat().st_mtime)
                 out.append(StageStatus(name, "stale", _why_stale(entry, newest), entry.root))
@@ -100,6 +105,30 @@ class ShotRun:
             if bad:
                 raise ShotError(f"--frames: {bad[0]} is outside the shot's frames "
                                 f"{self.shot.shot.frame_start}..{self.shot.shot.frame_end}")
+        with self.cache.lock():
+            self.cache.remove_orphans()
+            results = self._run_locked(until, force, frames)
+            self.published = self._publish(results)
+        for r in results:
+            if r.stage == "simulate":  # cached or not: bad physics is said every time
+                from mpmfx.stages.qa import shot_flags, warn_flags
+                bad = shot_flags(self.shot, (self.entries()["simulate"].manifest() or {}).get("qa", {}))
+                warn_flags(bad, str(self.shot.source or "SHOT"))
+                r.flagged = len(bad)
+        return results
+
+    def _publish(self, results: list[StageResult]) -> dict[str, Path]:
+        """Every run that reaches export / render publishes them at stable paths (`mpmfx.publish`)."""
+        from mpmfx.publish import publish_renders, publish_stage
+        entries, out = self.entries(), {}
+        done = {r.stage for r in results}
+        if "export" in done:
+            out["usd"] = publish_stage(self.shot, entries["export"])
+        if "render" in done:
+            out["renders"] = publish_renders(self.shot, entries["render"])
+        return out
+
+    def _run_locked(self, until: str, force, frames: list[int] | None) -> list[StageResult]:
         entries = self.entries()
         results = []
         for name in STAGES[: STAGES.index(until) + 1]:
@@ -111,6 +140,10 @@ class ShotRun:
                 n = len(wanted) if wanted is not None else 1
                 results.append(StageResult(name, "cached", 0.0, n, entry.root))
                 continue
+            for rel in entry.damaged():  # lost or truncated since the manifest: redo, never trust
+                (entry.root / rel).unlink(missing_ok=True)
+                if mod.PER_FRAME and Path(rel).stem.isdigit():  # e.g. vdb/g/0003.vdb: redo frame 3
+                    entry.frame_path(int(Path(rel).stem), mod.FRAME_EXT).unlink(missing_ok=True)
             state = "resumed" if entry.root.exists() else "ran"
             up = {s: entries[s] for s in STAGES[: STAGES.index(name)]}
             ctx = Context(self.shot, entry, up, wanted if wanted is not None else [], self.device, self.quiet)
@@ -126,12 +159,25 @@ class ShotRun:
                 raise
             seconds = time.perf_counter() - t0
             done = entry.done_frames(mod.FRAME_EXT) if mod.PER_FRAME else []
+            if missing := sorted(set(wanted or []) - set(done)):
+                raise StageError(f"{name}: frames {_ranges(missing)} are missing after the run (deleted by "
+                                 f"someone else?); no manifest written, run again to redo them")
             old = entry.manifest() or {}
             timings = {**old.get("timings", {}), "last_run_s": round(seconds, 3)}
             entry.write_manifest(frames=done, timings=timings, qa=extra.pop("qa", None),
                                  extra={**extra, "notes": ctx.notes})
             results.append(StageResult(name, state, seconds, len(wanted) if wanted is not None else 1, entry.root))
         return results
+
+
+def _ranges(frames: list[int]) -> str:
+    """[1,2,3,7] -> '1-3, 7'."""
+    out, start = [], frames[0]
+    for a, b in zip(frames, frames[1:] + [None]):
+        if b != a + 1:
+            out.append(f"{start}-{a}" if a != start else str(a))
+            start = b
+    return ", ".join(out)
 
 
 def _why_stale(entry: Entry, other: Path) -> str:

@@ -4,7 +4,9 @@ World units stop here: particles enter the solver in the normalised domain [0,1]
 (x_dom = (x - origin) / size, v_dom = v / size, gravity_dom = g / size; guide section 2) and
 frames are written back in world units. Frames: `frames/NNNN.npz` with x, v (n,3) float32
 (m, m/s), id, material, body (n,) int32 and Jp, J (n,) float32; `checkpoints/NNNN.npz` hold the
-full solver state every `solver.checkpoint_every` frames so a killed run resumes exactly.
+full solver state every `solver.checkpoint_every` frames (default every frame; the last
+KEEP_CHECKPOINTS are kept), written just before the frame file, so a killed run resumes
+exactly from its last complete frame.
 Frame files are `mpmfx.io.frames.ParticleFrame` records.
 """
 from __future__ import annotations
@@ -93,7 +95,7 @@ def run(ctx: Context) -> dict:
     solver = Solver(mats, shot.solver_config(), colliders=colliders(shot), device=ctx.device)
     start, fps = shot.shot.frame_start, shot.shot.fps
     last = max(ctx.frames)
-    ckpt = _latest_checkpoint(entry.root / "checkpoints", entry.done_frames(FRAME_EXT))
+    ckpt = _latest_checkpoint(entry.root / "checkpoints", entry.done_frames(FRAME_EXT), start)
     if ckpt is None:
         p = SeedParticles.read(ctx.upstream["voxelise"].root)
         body = p.body.astype(np.int32)
@@ -101,23 +103,46 @@ def run(ctx: Context) -> dict:
                           volume=(p.volume / size**3).astype(np.float32),
                           material=np.asarray(obj_mat, np.int32)[body], body=body)
         state, frame = solver.init_state(parts), start
+        qa0 = _qa(solver.advance(state, 0.0, 0.0), size)  # a zero-length advance: the initial observables
+        qa0["max_speed"] = float(np.linalg.norm(p.v, axis=1).max())  # m/s; no substep measured it
+        write_json(entry.root / "qa" / f"{start:04d}.json", qa0)
         _write_frame(ctx, solver, state, frame, origin, size)
     else:
         frame = ckpt
         state, _ = solver.restore(read_arrays(entry.root / "checkpoints" / f"{ckpt:04d}.npz"))
+        if not entry.frame_path(frame, FRAME_EXT).exists():  # killed between checkpoint and frame
+            _write_frame(ctx, solver, state, frame, origin, size)
     for f in ctx.progress(range(frame + 1, last + 1), total=last - frame, desc="simulate"):
         try:
             report = solver.advance(state, (f - 1 - start) / fps, (f - start) / fps)
         except SimulationError as exc:
-            raise StageError(f"frame {f}: {exc}") from None
-        _write_frame(ctx, solver, state, f, origin, size)
+            raise StageError(f"frame {f}: {_advice(shot, exc)}") from None
+        # QA and checkpoint before the frame file: a complete frame always has its resume point
         write_json(entry.root / "qa" / f"{f:04d}.json", _qa(report, size))
         if (f - start) % shot.solver.checkpoint_every == 0 or f == last:
             _checkpoint(entry.root / "checkpoints", solver, state, f, (f - start) / fps)
+        _write_frame(ctx, solver, state, f, origin, size)
     qa = {int(p.stem): json.loads(p.read_text()) for p in sorted((entry.root / "qa").glob("*.json"))}
     n = solver.state_to_numpy(state)["x"].shape[0]
     return {"qa": qa, "particles": int(n), "device": str(solver.device),
             "materials": [m.mode.name for m in mats]}
+
+
+def _advice(shot: Shot, exc) -> str:
+    """The solver's diagnosis with its advice in shot keys, each a `--set` that helps here
+    (the solver's own text names SolverConfig fields, which a shot file cannot set)."""
+    what = str(exc).split(". Lower", 1)[0].split(". Raise", 1)[0]
+    stiff = " or ".join(f"objects[{i}].overrides.youngs_modulus" for i in range(len(shot.objects)))
+    if exc.field == "dt_min":
+        dt = float(f"{exc.needed / 10:.0e}")  # a decade of room: the step keeps shrinking as things speed up
+        return (f"{what}. If this material is meant to be this stiff, --set solver.dt_min={dt:g} (not a "
+                f"smaller solver.cfl: it would only shrink the step further); else soften it ({stiff}) or raise "
+                f"solver.damping")
+    if exc.field == "max_substeps_per_frame":
+        n = 2 * int(exc.needed)
+        return (f"{what}. --set solver.max_substeps_per_frame={n} (about {int(exc.needed)} are needed), "
+                f"or soften the stiffest material ({stiff}) or lower domain.grid_n")
+    return str(exc)
 
 
 def _write_frame(ctx, solver, state, frame: int, origin, size: float) -> None:
@@ -148,11 +173,15 @@ def _checkpoint(folder: Path, solver, state, frame: int, t: float) -> None:
         old.unlink()
 
 
-def _latest_checkpoint(folder: Path, done: list[int]) -> int | None:
-    """The newest checkpoint whose frame file also exists (a frame is written before its checkpoint)."""
+def _latest_checkpoint(folder: Path, done: list[int], start: int) -> int | None:
+    """The newest checkpoint c with every frame file before it present (c's own frame may be
+    missing: a checkpoint is written just before its frame, and resuming writes it; a frame lost
+    later must be redone, so resume before it)."""
+    have, f = set(done), start - 1
     if not folder.is_dir():
         return None
-    frames = sorted(int(p.stem) for p in folder.glob("[0-9]*.npz"))
-    ok = [f for f in frames if f in set(done)]
+    while f + 1 in have:
+        f += 1  # start..f: the unbroken run of frames from the first
+    ok = [c for c in sorted(int(p.stem) for p in folder.glob("[0-9]*.npz")) if start < c <= f + 1]
     return ok[-1] if ok else None
 

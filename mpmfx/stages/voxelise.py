@@ -10,7 +10,7 @@ import warnings
 import numpy as np
 
 from mpmfx.cache import file_hash, write_json
-from mpmfx.config import Shot, Thickness
+from mpmfx.config import Shot, ShotError, Thickness
 from mpmfx.io.frames import SeedParticles, write_arrays
 from mpmfx.stages.base import Context, StageError
 
@@ -54,8 +54,8 @@ def run(ctx: Context) -> dict:
             mesh = transform_mesh(load_mesh(path, prim_path=obj.prim_path), translate=obj.translate,
                                   rotate_deg=obj.rotate, scale=obj.scale)
             check_in_domain(mesh, origin=dom.origin, size=dom.size, name=f"objects.{obj.name} ({path})")
-        except MeshError as exc:
-            raise StageError(str(exc)) from None
+        except MeshError as exc:  # the asset or its placement: bad input, exit 2 like the README says
+            raise ShotError(f"objects.{obj.name}: {exc}") from None
         if fluid[body]:
             reports[obj.name] = {"skipped": "fluid: the five-cell rule is about holding a shape"}
         else:

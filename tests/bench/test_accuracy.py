@@ -41,3 +41,20 @@ def test_plot_and_tables_are_written(tmp_path):
     png = speed_error_plot(rows, tmp_path)
     img = iio.imread(png)
     assert img.shape[:2] == (700, 1000) and np.ptp(img) > 0  # not a blank image
+
+
+def test_experiments_section_runs_and_reads_its_sources(tmp_path):
+    """The quick experiments section: every row finite, the data files' laws match the code's."""
+    from mpmfx.bench import experiments as ex, lab
+    laws = {r["source"]: r for r in lab.read_csv("granular_collapse_laws.csv")}
+    for name, law in ex.GRANULAR_LAWS.items():
+        for k in ("l1", "l2", "a0", "h_a0", "h2"):
+            assert laws[name][k] == law[k], (name, k)
+    refs = lab.water_references()
+    assert set(refs) == {"martin_moyce_1952_a1.125in", "martin_moyce_1952_a2.25in", "koshizuka_oka_1996"}
+    rows = accuracy.experiments(quick=True, device=None, out=tmp_path)
+    assert rows and all(np.isfinite(r["error"]) for r in rows), rows
+    assert (tmp_path / "experiments.csv").exists() and (tmp_path / "experiments_trend.csv").exists()
+    # inviscid water on a frictionless floor runs ahead of every experiment, never behind
+    dam = [r for r in rows if r["case"] == "dam_break frictionless"]
+    assert all(r["error"] > -0.1 for r in dam), dam

@@ -47,3 +47,23 @@ def test_check_bad_input_exits_2(tmp_path, capsys):
     assert run_check(str(tmp_path / "nope.obj"), grid_n=32, out_dir=tmp_path) == 2
     assert "nope.obj" in capsys.readouterr().err
     assert run_check(str(tmp_path / "nope.obj"), grid_n=0, out_dir=tmp_path) == 2
+
+
+def test_check_says_open_and_non_manifold_in_the_table_and_the_json(tmp_path, capsys):
+    import json
+
+    import trimesh
+
+    from mpmfx.geometry.check import run_check
+    box = trimesh.creation.box(extents=[1.0, 1.0, 1.0])
+    open_box = trimesh.Trimesh(box.vertices, box.faces[:-2], process=False)  # one side missing
+    open_box.export(tmp_path / "open.obj")
+    box.export(tmp_path / "closed.obj")
+    assert run_check(str(tmp_path / "open.obj"), grid_n=8, out_dir=tmp_path / "o") in (0, 1)
+    assert "open" in capsys.readouterr().out
+    run_check(str(tmp_path / "open.obj"), grid_n=8, out_dir=tmp_path / "o", as_json=True)
+    data = json.loads(capsys.readouterr().out)
+    assert data["mesh"]["watertight"] is False and data["mesh"]["open_edges"] > 0
+    run_check(str(tmp_path / "closed.obj"), grid_n=8, out_dir=tmp_path / "c", as_json=True)
+    data = json.loads(capsys.readouterr().out)
+    assert data["mesh"] == {"watertight": True, "open_edges": 0, "non_manifold_edges": 0}

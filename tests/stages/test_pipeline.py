@@ -201,7 +201,7 @@ def test_mesh_outside_domain_fails_clearly_and_caches_nothing(tmp_path, capsys):
     shot = write_tiny_shot(tmp_path)
     code = main(["run", str(shot), "--set", "objects.0.translate=[3.0, 0.4, 0.5]", "--cache", str(tmp_path / "c")])
     err = capsys.readouterr().err
-    assert code == 1
+    assert code == 2  # bad input (the README's exit codes)
     assert "objects.cube" in err and "cube.obj" in err and "domain" in err
     assert not list((tmp_path / "c").rglob("voxelise-*"))  # no half-made entry
 

@@ -1,0 +1,96 @@
+"""`mpmfx clean` and `mpmfx cache prune`: delete cache entries, listing each with its size first.
+
+Both act only on entry folders (`<root>/<shot>/<stage>/<stage>-<key>`), each checked to lie
+inside the cache root; a simulation (minutes of work) is deleted only after a yes.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+from pathlib import Path
+
+from mpmfx.stages import STAGES
+
+ASK_BEFORE = ("simulate",)  # stages whose entries cost minutes: deleted only after a yes
+
+
+def tree_size(path: Path) -> int:
+    """Bytes in the files under `path` (0 if absent)."""
+    if path.is_file():
+        return path.stat().st_size
+    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file() and not p.is_symlink())
+
+
+def human(n: float) -> str:
+    for unit in ("B", "kB", "MB", "GB"):
+        if n < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000
+    raise AssertionError
+
+
+def clean_targets(run, *, stage: str | None, all_variants: bool) -> list[Path]:
+    """This variant's entries (of `stage`, or of every stage), or every variant's with all_variants."""
+    stages = [stage] if stage else list(STAGES)
+    if all_variants:
+        return [p for s in stages for p in run.cache.entries(s)]
+    entries = run.entries()
+    return [entries[s].root for s in stages if entries[s].root.exists()]
+
+
+def delete(targets: list[Path], *, root: Path, dry_run: bool, yes: bool, verb: str = "delete") -> int:
+    """List `targets` with sizes, ask before a simulation unless `yes`, delete. Exit code."""
+    from mpmfx.cache import child
+    if not targets:
+        print("nothing to delete")
+        return 0
+    sizes = [tree_size(t) for t in targets]
+    for t, n in zip(targets, sizes):
+        print(f"{'would ' + verb if dry_run else verb:>12}  {human(n):>9}  {os.path.relpath(t)}")
+    print(f"{'':>12}  {human(sum(sizes)):>9}  in all")
+    if dry_run:
+        return 0
+    costly = [t for t in targets if t.parent.name in ASK_BEFORE]
+    if costly and not yes:
+        if not sys.stdin.isatty():
+            print(f"error: this deletes {len(costly)} simulation(s), which take minutes to redo; "
+                  f"run again with --yes to confirm (or --dry-run to only list)", file=sys.stderr)
+            return 2
+        if input(f"delete {len(costly)} simulation(s)? [y/N] ").strip().lower() not in ("y", "yes"):
+            print("nothing deleted")
+            return 1
+    for t in targets:
+        child(root, *t.relative_to(root).parts, what="cache entry")  # never outside the root
+        shutil.rmtree(t)
+    return 0
+
+
+def prune_targets(root: Path, *, keep: int, in_use: set[Path]) -> list[Path]:
+    """Per shot and stage, every entry but the `keep` newest (by manifest time, else folder time)
+    and those `in_use` (resolved paths; with the entries they were made from, so re-running a
+    published variant costs nothing)."""
+    import json
+    protected = set()
+    todo = list(in_use)
+    while todo:  # a used entry's upstream entries are used too
+        entry = todo.pop()
+        if entry in protected or not entry.is_dir():
+            continue
+        protected.add(entry)
+        try:
+            upstream = json.loads((entry / "manifest.json").read_text())["key_inputs"]["upstream"]
+        except (OSError, ValueError, KeyError):
+            continue
+        for stage, key in upstream.items():
+            todo.append((entry.parent.parent / stage / f"{stage}-{key[:12]}").resolve())
+    out = []
+    for stage_dir in sorted(p for p in root.glob("*/*") if p.is_dir() and p.name in STAGES):
+        entries = sorted(stage_dir.glob(f"{stage_dir.name}-*"), key=_written, reverse=True)
+        out += [e for e in entries[keep:] if e.resolve() not in protected]
+    return out
+
+
+def _written(entry: Path) -> float:
+    man = entry / "manifest.json"
+    return (man if man.exists() else entry).stat().st_mtime

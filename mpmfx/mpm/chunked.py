@@ -1,0 +1,136 @@
+"""`Solver.advance` in chunks of substeps decided on the device (see stepper.py for the rules).
+
+The host uploads the clock once per advance, launches a chunk of substeps (one CUDA graph
+on a GPU), reads the clock back once per chunk, and acts on its status: continue, retry
+after a rejection (the chunk stopped at the rejected substep), finish, or raise the same
+SimulationError as the reference loop (`Solver._advance_host`).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import warp as wp
+
+from .p2g_binned import BinnedP2G
+from .slots import Clock, Count, Status
+from .stepper import CHUNKS, StepperParams, make_clock_kernels, wave_table, WaveParams
+
+__all__ = ["DeviceAdvance"]
+
+
+class DeviceAdvance:
+    """The device stepper of one Solver (its grid, statistics and kernels)."""
+
+    def __init__(self, solver):
+        self.s = solver
+        cfg = solver.config
+        with wp.ScopedDevice(solver.device):
+            self.clk = wp.zeros(len(Clock), dtype=wp.float64)
+            self.last_bad = wp.zeros(Count.size(len(solver.materials)), dtype=wp.int32)
+            self.waves = wp.array(wave_table(solver.materials), dtype=WaveParams)
+        sp = StepperParams()
+        sp.cfl, sp.dx, sp.dt_max, sp.dt_min = cfg.cfl, cfg.dx, cfg.dt_max, cfg.dt_min
+        sp.damping, sp.drag = cfg.damping, cfg.drag
+        sp.max_substeps = float(cfg.max_substeps_per_frame)
+        sp.n_materials, sp.n_counts = len(solver.materials), Count.size(len(solver.materials))
+        self.sp = sp
+        self.begin, self.end = make_clock_kernels(solver.flags.snow, solver.flags.water)
+        self.graphs = True  # capture chunks in CUDA graphs (off: launch each kernel; for measuring)
+        # binned P2G (p2g_binned.py) where it was measured faster: deterministic mode (1.4-1.5x
+        # at 2.4M-19M particles, H100); in fast mode it was not faster, so the reference P2G
+        self.binned = cfg.deterministic and not solver.flags.multi_field
+        self._binner = None
+        self._graphs: dict = {}
+        self._graph_state = None  # the State the cached graphs point into (kept alive with them)
+
+    # ------------------------------------------------------------------ one chunk
+    def _launch_chunk(self, state, k: int) -> None:
+        s, dev = self.s, self.s.device
+        bufs = (state.cur, state.nxt)
+        for i in range(k):
+            wp.launch(self.begin, dim=1, device=dev, inputs=[self.sp, self.waves, self.clk, s._sub, s._stats,
+                                                               s._stats_init, s._counts])
+            s._phases(state, bufs[i % 2], bufs[1 - i % 2], 0.0, device_clock=True,
+                      binned=self._binner if self.binned else None)
+            wp.launch(self.end, dim=1, device=dev, inputs=[self.sp, self.waves, self.clk, s._sub, s._stats,
+                                                             s._counts, self.last_bad])
+
+    def _chunk(self, state, k: int) -> None:
+        """k substeps starting from state.cur; on CUDA replayed from a captured graph."""
+        if not (self.s.device.is_cuda and self.graphs):
+            self._launch_chunk(state, k)
+            return
+        if self._graph_state is not state:
+            self._graphs.clear()
+            self._graph_state = state
+        key = (k, id(state.cur), self.s._grid_v.ptr, state.n_fields, self.s._q_mass, self.binned, id(self._binner))
+        graph = self._graphs.get(key)
+        if graph is None:
+            with wp.ScopedCapture(device=self.s.device) as cap:
+                self._launch_chunk(state, k)
+            graph = self._graphs[key] = cap.graph
+        wp.capture_launch(graph)
+
+    # ------------------------------------------------------------------ advance
+    def _upload(self, state, total: float) -> None:
+        ck = state.clock
+        c = np.zeros(len(Clock), np.float64)
+        c[Clock.TOTAL] = total
+        c[Clock.DT_SCALE], c[Clock.MAX_SPEED] = ck.dt_scale, ck.max_speed
+        c[Clock.MAX_HARDENING], c[Clock.WATER_J_MIN] = ck.max_hardening, ck.water_j_min
+        c[Clock.LAST_DT], c[Clock.SUBSTEPS] = ck.last_dt, ck.substeps
+        c[Clock.DT_MIN], c[Clock.DT_MAX] = math.inf, -math.inf
+        c[Clock.J_MIN], c[Clock.J_MAX] = math.inf, -math.inf
+        c[Clock.STATUS] = Status.RUNNING if 0.0 < total else Status.FINISHED
+        self.clk.assign(c)
+
+    @staticmethod
+    def _to_clock(state, c: np.ndarray) -> None:
+        ck = state.clock
+        ck.dt_scale, ck.max_speed = float(c[Clock.DT_SCALE]), float(c[Clock.MAX_SPEED])
+        ck.max_hardening, ck.water_j_min = float(c[Clock.MAX_HARDENING]), float(c[Clock.WATER_J_MIN])
+        ck.last_dt, ck.substeps = float(c[Clock.LAST_DT]), int(c[Clock.SUBSTEPS])
+
+    def _chunk_length(self, c: np.ndarray, dt_guess: float) -> int:
+        """Substeps to launch next: the largest chunk length that the rest of the advance
+        fills at the last dt (so no substep is launched only to do nothing, and the few
+        lengths each have one graph captured once), at least 1."""
+        remaining = c[Clock.TOTAL] - c[Clock.DONE]
+        dt = c[Clock.DT_CFL] if c[Clock.DT_CFL] > 0 else dt_guess
+        want = math.ceil(remaining / dt) if dt > 0 else CHUNKS[-1]
+        return max((k for k in CHUNKS if k <= want), default=CHUNKS[0])
+
+    def run(self, state, t0: float, t1: float):
+        s, cfg = self.s, self.s.config
+        wall0 = time.perf_counter()
+        s._last_bad = None
+        if self.binned and (self._binner is None or self._binner.n != state.n):
+            self._binner = BinnedP2G(s.flags, state.n, s.device)  # before any capture: it allocates
+        self._upload(state, (t1 - t0) * cfg.time_scale)
+        c = self.clk.numpy()
+        while int(c[Clock.STATUS]) in (Status.RUNNING, Status.REJECTED):
+            if int(c[Clock.STATUS]) == Status.REJECTED:
+                c[Clock.STATUS] = Status.RUNNING
+                self.clk.assign(c)
+            before = c[Clock.N_SUB]
+            self._chunk(state, self._chunk_length(c, s._cfl_dt(state.clock)))  # first chunk: the host's CFL dt
+            c = self.clk.numpy()
+            if int(c[Clock.N_SUB] - before) % 2:
+                state.swap()
+        self._to_clock(state, c)
+        t = t0 + c[Clock.DONE] / cfg.time_scale
+        if int(c[Clock.STATUS]) == Status.DT_TOO_SMALL:
+            s._last_bad = self.last_bad.numpy() if c[Clock.HAS_BAD] else None
+            s._raise_too_small(state, t, float(c[Clock.DT_CFL]))
+        if int(c[Clock.STATUS]) == Status.TOO_MANY:
+            raise s._too_many(state, t, t1, int(c[Clock.N_SUB]), float(c[Clock.DT_CFL]),
+                              float(c[Clock.TOTAL] - c[Clock.DONE]))
+        n = int(c[Clock.N_SUB])
+        dts = [float(c[Clock.DT_MIN]), float(c[Clock.DT_MAX])] if n else []
+        report = s._report(state, n, int(c[Clock.N_REJ]), dts, float(c[Clock.VMAX]), float(c[Clock.CFL_USED]),
+                           int(c[Clock.LOST]), float(c[Clock.J_MIN]), float(c[Clock.J_MAX]), wall0)
+        report.inverted = int(c[Clock.INVERTED])
+        return report

@@ -1,0 +1,157 @@
+"""A real client: Blender (bpy, its own USD libraries, in its own process) opens the exported
+USD stage of a small shot, and sees what the pipeline wrote; the Cycles render stage draws it."""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import mpmfx
+from mpmfx.io.frames import SurfaceFrame
+from mpmfx.render.cycles import bpy_available
+from tests.conftest import write_tiny_shot
+
+# Two objects (two surface groups), a keyframed collider: every kind of prim the export writes.
+EXTRA = """
+[[objects]]
+name = "pool"
+mesh = "cube.obj"
+material = "Water"
+translate = [0.25, 0.25, 0.5]
+scale = 0.6
+
+[[colliders]]
+name = "paddle"
+shape = "box"
+half_extents = [0.05, 0.05, 0.05]
+keyframes = [{ time = 0.0, translate = [0.2, 0.5, 0.2] }, { time = 0.2, translate = [0.3, 0.5, 0.2] }]
+"""
+
+# Runs inside Blender: import the stage as the render stage does, report what came in.
+INSPECT = """
+import json, sys
+import bpy
+from mpmfx.render.cycles_job import import_stage
+bpy.ops.wm.read_factory_settings(use_empty=True)
+got = import_stage(sys.argv[1])
+scene = bpy.context.scene
+out = {"frame_range": [scene.frame_start, scene.frame_end], "fps": scene.render.fps / scene.render.fps_base,
+       "names": {k: sorted(n for n, _ in v) for k, v in got.items()}, "frames": {}}
+for f in json.loads(sys.argv[2]):
+    scene.frame_set(f)
+    dg = bpy.context.evaluated_depsgraph_get()
+    row = {}
+    for kind in ("meshes", "points"):
+        for name, obj in got[kind]:
+            data = obj.evaluated_get(dg).data
+            vel = data.attributes.get("velocity")
+            speeds = [0.0] if vel is None else [v.vector.length for v in vel.data]
+            row[f"{kind}/{name}"] = {"count": len(data.vertices if kind == "meshes" else data.points),
+                                     "has_velocity": vel is not None, "max_speed": max(speeds, default=0.0)}
+    for name, obj in got["volumes"]:
+        grids = obj.data.grids
+        row[f"volumes/{name}"] = {"loaded": grids.load(), "file": bpy.path.abspath(grids.frame_filepath),
+                                  "grids": sorted(g.name for g in grids)}
+    out["frames"][f] = row
+print("INSPECT " + json.dumps(out))
+"""
+
+pytestmark = pytest.mark.skipif(not bpy_available(), reason="bpy (Blender as a module) is part of the test "
+                                "set-up: bash setup.sh test installs it")
+
+
+def _blender(script: str, *args: str) -> str:
+    env = {**os.environ, "PYTHONPATH": str(Path(mpmfx.__file__).parents[1])}
+    res = subprocess.run([sys.executable, "-c", script, *args], capture_output=True, text=True, env=env, timeout=300)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-3000:]
+    return res.stdout
+
+
+@pytest.fixture(scope="module")
+def exported(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("blender")
+    shot = write_tiny_shot(folder, frame_end=4, extra=EXTRA)
+    run = mpmfx.load_shot(shot, cache_root=folder / "cache", quiet=True)
+    results = {r.stage: r.entry for r in run.run(until="export")}
+    return folder, shot, results
+
+
+def test_blender_sees_every_object_frame_and_volume(exported):
+    _, _, entries = exported
+    frames = [2, 4]
+    line = next(s for s in _blender(INSPECT, str(entries["export"] / "shot.usda"), json.dumps(frames)).splitlines()
+                if s.startswith("INSPECT "))
+    seen = json.loads(line.removeprefix("INSPECT "))
+    assert seen["frame_range"] == [1, 4] and seen["fps"] == pytest.approx(24.0)
+    # surface groups (one per material), particles per object, the collider, the shot camera
+    assert seen["names"]["meshes"] == ["Elastic", "Water"]
+    assert seen["names"]["points"] == ["cube", "pool"]
+    assert seen["names"]["volumes"] == ["Elastic", "Water"]
+    assert seen["names"]["colliders"] == ["paddle"]
+    assert seen["names"]["cameras"] == ["camera"]
+    for f in frames:
+        row = seen["frames"][str(f)]
+        surf = SurfaceFrame.read(entries["surface"] / "frames" / f"{f:04d}.npz").groups
+        for g, data in surf.items():
+            mesh = row[f"meshes/{g}"]
+            assert mesh["count"] == len(data.vertices) > 0, (f, g)
+            assert mesh["has_velocity"] and mesh["max_speed"] > 0.0, (f, g)
+            vol = row[f"volumes/{g}"]
+            assert vol["loaded"] and "surface" in vol["grids"] and "vel" in vol["grids"]
+            assert Path(vol["file"]) == (entries["export"] / "vdb" / g / f"{f:04d}.vdb").resolve()
+        assert row["points/cube"]["count"] > 0 and row["points/cube"]["has_velocity"]
+
+
+def test_cycles_render_stage_draws_the_looks(exported):
+    """The render stage in Cycles: every frame written (frame_step holds the ones between), the
+    .blend saved, the jelly drawn red and in frame."""
+    import imageio.v2 as imageio
+    folder, shot, _ = exported
+    cwd = os.getcwd()
+    os.chdir(folder)  # renders/<shot>/ is published relative to the working directory
+    try:
+        run = mpmfx.load_shot(shot, cache_root=folder / "cache", quiet=True,
+                              overrides=["render.engine=cycles", "render.samples=2", "render.width=96",
+                                         "render.height=64", "render.frame_step=2", "render.movie=true"])
+        entry = {r.stage: r for r in run.run()}["render"].entry
+    finally:
+        os.chdir(cwd)
+    published = folder / "renders" / "tiny"
+    assert sorted(p.name for p in published.glob("[0-9]*.png")) == [f"{f:04d}.png" for f in range(1, 5)]
+    assert (published / "tiny.blend").stat().st_size > 0 and (published / "tiny.mp4").is_file()
+    one, two = (imageio.imread(entry / "frames" / f"{f:04d}.png") for f in (1, 2))
+    assert np.array_equal(one, two)  # frame 2 holds frame 1 (frame_step = 2)
+    rgb = imageio.imread(entry / "frames" / "0003.png")[..., :3].astype(int)
+    jelly = (rgb[..., 0] > rgb[..., 1] + 40) & (rgb[..., 0] > rgb[..., 2] + 30)
+    assert 0.01 < jelly.mean() < 0.6, "the jelly cube should be in the picture, red, and not fill it"
+
+
+def test_material_lands_on_the_drawn_ground(exported):
+    """The renders' ground is the solver's floor (the top of its wall band), where material stops."""
+    from mpmfx.config import load_shot_config
+    from mpmfx.io.frames import ParticleFrame
+    from mpmfx.render.camera import solver_floor
+    _, shot_path, entries = exported
+    shot = load_shot_config(shot_path)
+    floor, dx = solver_floor(shot), shot.domain.size / shot.domain.grid_n
+    assert floor == pytest.approx(shot.domain.origin[1] + 3 * dx)
+    lowest = [ParticleFrame.read(p).x[:, 1].min() for p in sorted((entries["simulate"] / "frames").glob("*.npz"))]
+    assert min(lowest) > floor - 0.5 * dx  # an impact presses in less than half a cell, never through
+    assert lowest[-1] < floor + dx  # and the pool has landed on it by the last frame
+
+
+def test_preview_engine_and_engine_switch_rerender_only(exported, tmp_path, monkeypatch):
+    """render.engine = preview (PyVista) renders the same frames; switching engines re-runs only render."""
+    _, shot, _ = exported
+    monkeypatch.chdir(tmp_path)
+    cache = exported[0] / "cache"
+    results = mpmfx.load_shot(shot, cache_root=cache, quiet=True, overrides=["render.engine=preview"]).run()
+    assert {r.stage: r.state for r in results} == {"voxelise": "cached", "simulate": "cached", "surface": "cached",
+                                                   "export": "cached", "render": "ran"}
+    pngs = sorted((tmp_path / "renders" / "tiny").glob("[0-9]*.png"))
+    assert len(pngs) == 4 and all(p.stat().st_size > 1000 for p in pngs)
