@@ -2,7 +2,9 @@
 
 Error = distance of output vertices to the analytic surface (validation.md section 6), in
 world units and in units of the particle spacing h; volume error of the closed mesh against
-the analytic volume; number of connected mesh pieces (1 = no interior bubbles, no specks).
+the analytic volume; number of connected mesh pieces (1 = no interior bubbles, no specks);
+jitter = how far the vertices move between two frames of a body at rest (ours only; see
+`rest_jitter`).
 The peers (mpmfx.bench.surface_peers: splashsurf, Newton) run on the same particles and get
 the same columns. Our surfacer runs at the shipped particle radius
 (mpmfx.surface.PARTICLE_RADIUS_PER_SPACING x h).
@@ -117,6 +119,37 @@ def _row(shape: str, sampling: str, x: np.ndarray, h: float, method: str, grid: 
     }
 
 
+REST_NOISE = 0.01
+"""Particle motion between two frames of a body at rest, in particle spacings h (per axis, rms):
+an MPM block settled on the floor creeps by about this much per frame."""
+
+
+def rest_jitter(x: np.ndarray, h: float, params: SurfaceParams, first, *, device: str | None = None,
+                seed: int = 0) -> tuple[float, float]:
+    """(mean vertex displacement / h between two frames of a body at rest, the same for the very
+    same particles surfaced again). x: (n, 3) m; first: the SurfaceResult of x. The second frame
+    moves each particle by N(0, REST_NOISE h) per axis. Where both frames have the same triangles
+    (the usual case) vertices are compared one to one, else each to the other frame's nearest."""
+    import warp as wp
+
+    def moved(a, b) -> float:
+        if a.faces.shape == b.faces.shape and np.array_equal(a.faces, b.faces):
+            return float(np.linalg.norm(a.vertices - b.vertices, axis=1).mean() / h)
+        from scipy.spatial import cKDTree
+        if len(a.vertices) == 0 or len(b.vertices) == 0:
+            return float("nan")
+        d1 = cKDTree(a.vertices).query(b.vertices)[0]
+        d2 = cKDTree(b.vertices).query(a.vertices)[0]
+        return float((d1.mean() + d2.mean()) / 2 / h)
+
+    dev = wp.get_device(device)
+    up = (lambda a: a) if dev.is_cpu else (lambda a: wp.array(a, dtype=wp.vec3, device=dev))
+    same = surface_particles(up(x), None, params, device=device).mesh
+    noise = np.random.default_rng(seed).normal(0.0, REST_NOISE * h, size=x.shape).astype(np.float32)
+    later = surface_particles(up(x + noise), None, params, device=device).mesh
+    return moved(first.mesh, later), moved(first.mesh, same)
+
+
 def measure(
     shape: str, count: int, sampling: str, *, radius_factor: float = PARTICLE_RADIUS_PER_SPACING,
     device: str | None = None, sample: tuple[np.ndarray, float] | None = None, repeats: int = 1, label: str = "",
@@ -161,7 +194,9 @@ def measure(
     settings = f"r {radius_factor:g}h voxel {params.resolved_voxel_size / h:g}h smooth {params.smooth_iters}"
     if params.min_feature_particles:
         settings += f" specks<{params.min_feature_particles}"
-    return {**row, "seconds_host": seconds_host, "device": str(dev), "settings": settings, "stages": res.stats}
+    jitter, repeat = rest_jitter(x, h, params, res, device=device)
+    return {**row, "seconds_host": seconds_host, "device": str(dev), "settings": settings, "stages": res.stats,
+            "jitter_h": jitter, "repeat_h": repeat}
 
 
 def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray, float], *,
@@ -234,7 +269,7 @@ def bench_surface(
 HEADER = (
     f"{'shape':7} {'sampling':8} {'n':>8} {'method':18} {'grid':>13} {'time s':>7} {'+host':>6} {'Mp/s':>6} "
     f"{'mean/h':>7} {'p99/h':>6} {'max/h':>6} {'mean m':>9} {'max m':>9} {'vol err':>8} {'pieces':>6} "
-    f"{'device':>7}  settings"
+    f"{'jitter/h':>8} {'device':>7}  settings"
 )
 
 
@@ -243,13 +278,18 @@ def _host(r: dict) -> str:
     return f"{r['seconds_host']:6.3f}" if "seconds_host" in r else "-"
 
 
+def _jitter(r: dict) -> str:
+    """Vertex jitter of a body at rest (ours only), or '-'."""
+    return f"{r['jitter_h']:8.4f}" if "jitter_h" in r else "-"
+
+
 def format_row(r: dict) -> str:
     """One line of the printed table (columns of HEADER)."""
     return (
         f"{r['shape']:7} {r['sampling']:8} {r['particles']:8d} {r['method']:18} {r['grid']:>13} "
         f"{r['seconds']:7.3f} {_host(r):>6} {r['particles_per_s'] / 1e6:6.2f} {r['err_mean_h']:7.3f} {r['err_p99_h']:6.3f} "
         f"{r['err_max_h']:6.2f} {r['err_mean']:9.2e} {r['err_max']:9.2e} {r['volume_err']:+8.2%} {r['components']:6d} "
-        f"{r.get('device', ''):>7}  {r.get('settings', '')}"
+        f"{_jitter(r):>8} {r.get('device', ''):>7}  {r.get('settings', '')}"
     )
 
 

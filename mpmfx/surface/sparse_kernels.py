@@ -10,6 +10,7 @@ grid coordinates (i, j, k), i.e. world `origin + (i, j, k) * voxel` as in the de
 import warp as wp
 
 BS = wp.constant(8)  # block edge in voxels
+CS = wp.constant(4)  # edge of the cells particles are binned in for the field gather, voxels
 BV = wp.constant(512)  # voxels per block
 TILE_OUTSIDE = wp.constant(-1)
 TILE_INSIDE = wp.constant(-2)
@@ -85,17 +86,20 @@ def to_grid(x: wp.array(dtype=wp.vec3), origin: wp.vec3, inv_voxel: float, g: wp
 def count_blocks(
     g: wp.array(dtype=wp.vec3),
     counts: wp.array3d(dtype=wp.int32),
+    cells: wp.array3d(dtype=wp.int32),
     keys: wp.array(dtype=wp.int32),
     order: wp.array(dtype=wp.int32),
 ):
-    """Particles per block; keys[p] = linear block index of particle p, order[p] = p (to sort)."""
+    """Particles per block and per gather cell (CS^3 voxels); keys[p] = linear cell index of
+    particle p, order[p] = p (to sort)."""
     p = wp.tid()
     gp = g[p]
-    bi = int(wp.floor(gp[0])) // BS
-    bj = int(wp.floor(gp[1])) // BS
-    bk = int(wp.floor(gp[2])) // BS
-    wp.atomic_add(counts, bi, bj, bk, 1)
-    keys[p] = (bi * counts.shape[1] + bj) * counts.shape[2] + bk
+    ci = int(wp.floor(gp[0])) // CS
+    cj = int(wp.floor(gp[1])) // CS
+    ck = int(wp.floor(gp[2])) // CS
+    wp.atomic_add(counts, ci // (BS // CS), cj // (BS // CS), ck // (BS // CS), 1)
+    wp.atomic_add(cells, ci, cj, ck, 1)
+    keys[p] = (ci * cells.shape[1] + cj) * cells.shape[2] + ck
     order[p] = p
 
 
@@ -230,7 +234,7 @@ def active_flags(state: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int
 @wp.kernel
 def gather_zhu_bridson(
     bcoord: wp.array(dtype=wp.vec3i),
-    counts: wp.array3d(dtype=wp.int32),
+    cells: wp.array3d(dtype=wp.int32),
     starts: wp.array(dtype=wp.int32),
     order: wp.array(dtype=wp.int32),
     g: wp.array(dtype=wp.vec3),
@@ -241,9 +245,11 @@ def gather_zhu_bridson(
     far_vox: float,
     phi: wp.array(dtype=float),
     w_out: wp.array(dtype=float),
+    offset: wp.array(dtype=wp.vec3),
     vel: wp.array(dtype=wp.vec3),
 ):
-    """Zhu-Bridson phi at one active voxel, gathered from particles of nearby blocks.
+    """Zhu-Bridson phi at one active voxel, gathered from particles of the nearby cells (CS^3
+    voxels each: a finer bin than the blocks, so few particles beyond the kernel are visited).
 
     phi = -(x - xbar) . n - r with n = -grad w / |grad w| (analytic kernel gradient). Projecting
     on the normal matters on irregular samples: xbar jitters sideways as much as along the
@@ -256,8 +262,8 @@ def gather_zhu_bridson(
     lo = wp.vec3i(0)
     hi = wp.vec3i(0)
     for a in range(3):
-        lo[a] = wp.max(int(wp.floor((x[a] - reach) / 8.0)), 0)
-        hi[a] = wp.min(int(wp.floor((x[a] + reach) / 8.0)), counts.shape[a] - 1)
+        lo[a] = wp.max(int(wp.floor((x[a] - reach) / float(CS))), 0)
+        hi[a] = wp.min(int(wp.floor((x[a] + reach) / float(CS))), cells.shape[a] - 1)
     w = float(0.0)
     dw = wp.vec3(0.0)  # sum w * (x_p - x)
     gw = wp.vec3(0.0)  # gradient of w (up to the factor 6 / R^2)
@@ -265,9 +271,9 @@ def gather_zhu_bridson(
     for bi in range(lo[0], hi[0] + 1):
         for bj in range(lo[1], hi[1] + 1):
             for bk in range(lo[2], hi[2] + 1):
-                cnt = counts[bi, bj, bk]
+                cnt = cells[bi, bj, bk]
                 if cnt > 0:
-                    s = starts[(bi * counts.shape[1] + bj) * counts.shape[2] + bk]
+                    s = starts[(bi * cells.shape[1] + bj) * cells.shape[2] + bk]
                     for q in range(s, s + cnt):
                         p = order[q]
                         d = g[p] - x
@@ -283,10 +289,12 @@ def gather_zhu_bridson(
     w_out[t] = w
     if w <= 0.0:
         phi[t] = far_vox
+        offset[t] = wp.vec3(0.0)
         if with_v != 0:
             vel[t] = wp.vec3(0.0)
         return
     d = -dw / w  # x - xbar
+    offset[t] = d
     dist = wp.length(d)
     gl = wp.length(gw)
     if gl > 0.0:
@@ -402,6 +410,76 @@ def flip_unreached(phi: wp.array(dtype=float), reached: wp.array(dtype=wp.int32)
             phi[t] = inside_value
         else:
             phi[t] = outside_value
+
+
+@wp.func
+def weight_at(bmap: wp.array3d(dtype=wp.int32), w: wp.array(dtype=float), t: int, i: int, j: int, k: int):
+    """Kernel weight sum at voxel (i, j, k): 0 on OUTSIDE tiles (no particle within reach), and
+    voxel t's own value on INSIDE tiles (the bulk, where the field is flat anyway)."""
+    s = slot(bmap, i, j, k)
+    if s >= 0:
+        return w[s]
+    if s == TILE_INSIDE:
+        return w[t]
+    return 0.0
+
+
+@wp.kernel
+def blur_weight_axis(
+    bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float), axis: int,
+    step: int, dst: wp.array(dtype=float),
+):
+    """dst = [1 2 1]/4 blur of the kernel weight sum along `axis` with taps `step` voxels apart
+    (variance 0.5 step^2 voxel^2; tiles as in weight_at)."""
+    t = wp.tid()
+    c = voxel_of(t, bcoord)
+    o = wp.vec3i(0)
+    o[axis] = step
+    a = weight_at(bmap, src, t, c[0] - o[0], c[1] - o[1], c[2] - o[2])
+    b = weight_at(bmap, src, t, c[0] + o[0], c[1] + o[1], c[2] + o[2])
+    dst[t] = 0.25 * a + 0.5 * src[t] + 0.25 * b
+
+
+@wp.kernel
+def project_on_wide_normal(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    wide: wp.array(dtype=float),
+    w: wp.array(dtype=float),
+    offset: wp.array(dtype=wp.vec3),
+    radius_vox: float,
+    far_vox: float,
+    phi: wp.array(dtype=float),
+):
+    """phi = -(x - xbar) . n - r with n = -grad(wide) / |grad(wide)|, `wide` the kernel weight sum
+    blurred to a wider kernel. The normal of the kernel itself is estimated from the same
+    particles with nearly the same weights as xbar, so on irregular samples their sideways
+    errors correlate and the projected distance reads long (the surface sits ~0.1 h inside);
+    a wider kernel's normal decorrelates them and leaves lattices as they were."""
+    t = wp.tid()
+    if w[t] <= 0.0:
+        phi[t] = far_vox
+        return
+    c = voxel_of(t, bcoord)
+    g = wp.vec3(0.0)
+    for a in range(3):
+        o = wp.vec3i(0)
+        o[a] = 1
+        g[a] = weight_at(bmap, wide, t, c[0] + o[0], c[1] + o[1], c[2] + o[2]) - weight_at(
+            bmap, wide, t, c[0] - o[0], c[1] - o[1], c[2] - o[2])
+    d = offset[t]
+    dist = wp.length(d)
+    gl = wp.length(g)
+    if gl > 0.0:
+        dist = -wp.dot(d, g) / gl  # g points inward (towards the particles)
+    phi[t] = dist - radius_vox
+
+
+@wp.kernel
+def average_into(a: wp.array(dtype=float), b: wp.array(dtype=float)):
+    """a = (a + b) / 2."""
+    t = wp.tid()
+    a[t] = 0.5 * (a[t] + b[t])
 
 
 @wp.kernel

@@ -28,3 +28,7 @@ def test_a_row_reports_stage_times_and_the_shipped_radius():
     assert row["method"] == "mpmfx fast" and row["settings"].startswith(f"r {PARTICLE_RADIUS_PER_SPACING:g}h")
     assert {"field", "mesh", "device", "download", "active_blocks"} <= set(row["stages"])
     assert row["components"] == 1 and row["err_mean_h"] < 0.2
+    # temporal coherence: the very same particles give the very same mesh, and a body at rest
+    # (particles creeping 0.01 h per frame) moves its surface about as little
+    assert row["repeat_h"] == 0.0
+    assert row["jitter_h"] < 0.03, f"vertex jitter {row['jitter_h']:.4f} h"  # measured ~0.01 h

@@ -58,6 +58,7 @@ def splat_zhu_bridson(
 @wp.kernel
 def zhu_bridson_phi(
     w_grid: wp.array3d(dtype=float),
+    wn_grid: wp.array3d(dtype=float),
     gw_grid: wp.array3d(dtype=wp.vec3),
     radius_vox: float,
     far_vox: float,
@@ -65,6 +66,7 @@ def zhu_bridson_phi(
     phi: wp.array3d(dtype=float),
 ):
     """phi = |g - gbar| - r in voxel units; `far_vox` where no particle reaches.
+    wn_grid: the weights whose gradient gives the normal (w_grid blurred wider, or w_grid).
 
     With `projected`, g - gbar is projected on the outward normal -grad(w)/|grad(w)|: on
     irregular (random) samples gbar jitters sideways as much as along the normal, and
@@ -84,9 +86,9 @@ def zhu_bridson_phi(
         ny = w_grid.shape[1] - 1
         nz = w_grid.shape[2] - 1
         grad = wp.vec3(
-            w_grid[wp.min(i + 1, nx), j, k] - w_grid[wp.max(i - 1, 0), j, k],
-            w_grid[i, wp.min(j + 1, ny), k] - w_grid[i, wp.max(j - 1, 0), k],
-            w_grid[i, j, wp.min(k + 1, nz)] - w_grid[i, j, wp.max(k - 1, 0)],
+            wn_grid[wp.min(i + 1, nx), j, k] - wn_grid[wp.max(i - 1, 0), j, k],
+            wn_grid[i, wp.min(j + 1, ny), k] - wn_grid[i, wp.max(j - 1, 0), k],
+            wn_grid[i, j, wp.min(k + 1, nz)] - wn_grid[i, j, wp.max(k - 1, 0)],
         )
         gl = wp.length(grad)
         if gl > 0.0:
@@ -149,6 +151,25 @@ def blur_axis(src: wp.array3d(dtype=float), axis: int, dst: wp.array3d(dtype=flo
     if t == n - 1:
         hi = c
     dst[i, j, k] = 0.25 * src[lo[0], lo[1], lo[2]] + 0.5 * src[i, j, k] + 0.25 * src[hi[0], hi[1], hi[2]]
+
+
+@wp.kernel
+def blur_axis_step(src: wp.array3d(dtype=float), axis: int, step: int, dst: wp.array3d(dtype=float)):
+    """dst = [1 2 1]/4 blur of src along `axis` with taps `step` voxels apart (edges repeated)."""
+    i, j, k = wp.tid()
+    n = src.shape[axis]
+    c = wp.vec3i(i, j, k)
+    lo = wp.vec3i(i, j, k)
+    hi = wp.vec3i(i, j, k)
+    lo[axis] = wp.max(c[axis] - step, 0)
+    hi[axis] = wp.min(c[axis] + step, n - 1)
+    dst[i, j, k] = 0.25 * src[lo[0], lo[1], lo[2]] + 0.5 * src[i, j, k] + 0.25 * src[hi[0], hi[1], hi[2]]
+
+
+@wp.kernel
+def average_into(a: wp.array3d(dtype=float), b: wp.array3d(dtype=float)):
+    i, j, k = wp.tid()
+    a[i, j, k] = 0.5 * (a[i, j, k] + b[i, j, k])
 
 
 @wp.kernel

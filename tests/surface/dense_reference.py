@@ -10,7 +10,10 @@ plus the kernel support; the grid is aligned to multiples of the voxel size):
    in voxel units;
 2. bubbles: outside voxels that no path from the grid boundary reaches are voids left by
    irregular sampling; they become inside (flood fill by repeated line sweeps);
-3. dilate; renormalise to a distance (phi / |grad phi|); smooth ([1 2 1]/4 blur along
+   The normal that x - xbar is projected on is the gradient of the weight field blurred to
+   normal_radius x the kernel (as the sparse surfacer);
+3. dilate; renormalise to a distance (the mean of phi / |grad phi| and that renormalised once
+   more, straight to second order, as the sparse surfacer); smooth ([1 2 1]/4 blur along
    each axis, `smooth_iters` times); fill bubbles the blur sealed;
 4. specks: inside components holding fewer than `min_feature_particles` particles go;
 5. renormalise to world-unit signed distance, clipped to the narrow band;
@@ -27,6 +30,7 @@ import numpy as np
 
 from mpmfx.surface.params import LevelSet, SurfaceMesh, SurfaceParams, SurfaceResult, kernel_volume
 from mpmfx.surface.reconstruct import check_inputs
+from mpmfx.surface.sparse import NORMAL_STEP
 
 log = logging.getLogger(__name__)
 
@@ -69,6 +73,9 @@ def surface_dense(
         distance = wp.empty_like(phi)
         wide = float(params.band_voxels + params.smooth_iters + 2)
         wp.launch(K.renormalise, phi.shape, inputs=[phi, 1.0, wide, distance])
+        again = wp.empty_like(phi)
+        wp.launch(K.renormalise, phi.shape, inputs=[distance, 1.0, wide, again])
+        wp.launch(K.average_into, phi.shape, inputs=[distance, again])
         phi = _smooth(wp, K, distance, params.smooth_iters)
         timings["smooth"] = _lap(wp, t0)
         if params.smooth_iters > 0:
@@ -99,6 +106,8 @@ class _Grid:
         self.r_vox = params.particle_radius * params.radius_scale / self.voxel
         self.kernel_vox = params.kernel_radius * params.particle_radius / self.voxel
         self.background = params.band_voxels * self.voxel
+        added = (params.normal_radius**2 - 1.0) * 0.0909 * self.kernel_vox**2  # as mpmfx.surface.sparse
+        self.normal_passes = int(round(added / (0.5 * NORMAL_STEP**2)))
         # the raw field's value where no particle reaches: beyond anything near the surface
         self.far_vox = max(self.kernel_vox, self.r_vox + params.band_voxels + 1.0)
 
@@ -145,7 +154,14 @@ def _raw_field(wp, K, g, v: np.ndarray | None, params: SurfaceParams, grid: _Gri
     va = wp.array(v if with_v else np.zeros((1, 3), np.float32), dtype=wp.vec3)
     wp.launch(K.splat_zhu_bridson, g.shape[0], inputs=[g, va, int(with_v), grid.kernel_vox, w, gw, vw])
     phi = wp.empty(shape, dtype=float)
-    wp.launch(K.zhu_bridson_phi, shape, inputs=[w, gw, grid.r_vox, grid.far_vox, PROJECTED, phi])
+    wn = w
+    if grid.normal_passes > 0:  # the weights blurred to a wider kernel, for the normal
+        wn, tmp = wp.clone(w), wp.empty_like(w)
+        for _ in range(grid.normal_passes):
+            for axis in range(3):
+                wp.launch(K.blur_axis_step, shape, inputs=[wn, axis, NORMAL_STEP, tmp])
+                wn, tmp = tmp, wn
+    wp.launch(K.zhu_bridson_phi, shape, inputs=[w, wn, gw, grid.r_vox, grid.far_vox, PROJECTED, phi])
     del gw
     vel = None
     if with_v:

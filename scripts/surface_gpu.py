@@ -1,0 +1,57 @@
+"""GPU run of the surfacing figures (README): `mpmfx bench surface` at the given counts (ours,
+plus the peers that are installed), then how long the copy to the host takes, pageable against
+pinned staging, at the largest count.
+
+    python3 scripts/surface_gpu.py --counts 10000000 --out $OUT
+"""
+import argparse
+import time
+
+import numpy as np
+import warp as wp
+
+from mpmfx.bench.report import write_rows
+from mpmfx.bench.surface import choose_peers
+from mpmfx.bench.surface_cases import HEADER, OURS, bench_surface, sample_shape
+from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams
+from mpmfx.surface.sparse import surface_on_device
+
+ap = argparse.ArgumentParser()
+ap.add_argument("--counts", type=int, nargs="+", default=[10_000_000])
+ap.add_argument("--device", default="cuda")
+ap.add_argument("--out", default="renders/bench")
+ap.add_argument("--repeats", type=int, default=3)
+args = ap.parse_args()
+wp.config.quiet = True
+wp.init()
+print(wp.get_device(args.device).name, flush=True)
+print(HEADER, flush=True)
+rows = bench_surface(args.counts, ("sphere", "torus", "box"), ("lattice", "random"), args.device,
+                     peers=choose_peers(None, quick=False), repeats=args.repeats)
+print("table:", write_rows(rows, args.out, "surface"), flush=True)
+for r in rows:
+    if "stages" in r and r["stages"]:
+        print(r["shape"], r["sampling"], r["method"], {k: v for k, v in r["stages"].items()}, flush=True)
+# the host copy, pageable against pinned, at the largest count (fast setting)
+count = max(args.counts)
+with wp.ScopedDevice(args.device):
+    for shape, sampling in (("sphere", "lattice"), ("torus", "random")):
+        x, h = sample_shape(shape, count, sampling)
+        xd = wp.array(x, dtype=wp.vec3)
+        p = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=OURS["fast"]["voxel_h"] * h,
+                          smooth_iters=OURS["fast"]["smooth_iters"], dense_output=False)
+        for pinned in (False, True, False, True):
+            times = []
+            for _ in range(3):
+                t0 = time.perf_counter()
+                d = surface_on_device(wp, xd, None, p)
+                wp.synchronize()
+                t1 = time.perf_counter()
+                res = d.download(p, pinned=pinned)
+                t2 = time.perf_counter()
+                times.append((t1 - t0, t2 - t1, res.stats["download_mesh"], res.stats["download_leaves"]))
+            dev, down, mesh, leaves = np.median(np.array(times), axis=0)
+            print(f"{shape} {sampling} n={count} pinned={pinned}: device {dev * 1e3:.1f} ms + download {down * 1e3:.1f} ms "
+                  f"(mesh {mesh * 1e3:.1f}, leaves {leaves * 1e3:.1f}) = {(dev + down) * 1e3:.1f} ms, "
+                  f"{count / (dev + down) / 1e6:.0f} M particles/s; {len(res.mesh.vertices)} vertices, "
+                  f"{len(res.sparse.block_ijk)} leaves", flush=True)
