@@ -75,11 +75,16 @@ class Frames:
     """
 
     def __init__(self, *, workers: int | None = None, scheduler: str | None = None):
+        from mpmfx.config import ShotError  # bad input: exit 2 with the setting's name
         self.scheduler = scheduler or os.environ.get(SCHEDULER_ENV) or None
         if workers is None and os.environ.get(WORKERS_ENV):
-            workers = int(os.environ[WORKERS_ENV])
+            try:
+                workers = int(os.environ[WORKERS_ENV])
+            except ValueError:
+                raise ShotError(f"${WORKERS_ENV} = {os.environ[WORKERS_ENV]!r}: give a whole number of worker "
+                                f"processes (1 = serial), or unset it") from None
         if workers is not None and workers < 1:
-            raise ValueError(f"workers must be at least 1 (1 = serial), not {workers}")
+            raise ShotError(f"--workers / ${WORKERS_ENV} = {workers}: give at least 1 (1 = serial)")
         self.workers = workers
         self._client = self._cluster = None
 
@@ -103,7 +108,13 @@ class Frames:
         if self._client is None:
             from distributed import Client, LocalCluster
             if self.scheduler:
-                self._client = Client(self.scheduler)
+                try:
+                    self._client = Client(self.scheduler, timeout="20s")
+                except (OSError, TimeoutError) as exc:
+                    from mpmfx.config import ShotError
+                    raise ShotError(f"--scheduler / ${SCHEDULER_ENV} = {self.scheduler!r}: no Dask scheduler "
+                                    f"answers there ({exc}); start one (dask scheduler) or check the address, "
+                                    f"or run without it") from None
             else:
                 n = self.workers or os.cpu_count() or 1
                 self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from mpm_wp_kernels import eval_return_map, eval_weights
+from tests.mpm.mpm_wp_kernels import eval_return_map, eval_weights
 from mpmfx.mpm import Material, Mode, preset
 from mpmfx.mpm.constitutive import pack_material
 

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from mpm_helpers import block, free_bar
+from tests.mpm.mpm_helpers import block, free_bar
 from mpmfx.mpm import PRESETS, Material, Mode, Solver, SolverConfig, preset
 
 ZERO_G = (0.0, 0.0, 0.0)

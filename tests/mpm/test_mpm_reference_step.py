@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from mpm_wp_kernels import eval_return_map
+from tests.mpm.mpm_wp_kernels import eval_return_map
 from mpmfx.bench.reference_step import sand_project, snow_clamp
 from mpmfx.mpm import preset
 from mpmfx.mpm.constitutive import pack_material

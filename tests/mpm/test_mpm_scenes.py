@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from mpm_helpers import block, concat, free_bar
+from tests.mpm.mpm_helpers import block, concat, free_bar
 from mpmfx.mpm import PRESETS, Collider, ColliderKind, Material, Mode, Solver, SolverConfig, preset
 
 ZERO_G = (0.0, 0.0, 0.0)

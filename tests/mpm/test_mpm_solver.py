@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from mpm_helpers import block, concat
+from tests.mpm.mpm_helpers import block, concat
 from mpmfx.mpm import Particles, SimulationError, Solver, SolverConfig, preset
 
 ZERO_G = (0.0, 0.0, 0.0)

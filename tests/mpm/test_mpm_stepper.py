@@ -8,7 +8,7 @@ same substeps and positions within 1e-4 domain units (1/600 of a cell), velociti
 import numpy as np
 import pytest
 
-from mpm_helpers import block, concat
+from tests.mpm.mpm_helpers import block, concat
 from mpmfx.mpm import SimulationError, Solver, SolverConfig, preset
 
 CASES = {

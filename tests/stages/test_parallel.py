@@ -150,3 +150,10 @@ def test_status_names_the_host_that_wrote_an_entry(reference, tmp_path):
     status = {s.stage: s for s in ShotRun(load_shot_config(shot), cache_root=cache).status()}
     assert status["simulate"].state == "cached" and "farm-node-7" in status["simulate"].why
     assert "written on" not in status["voxelise"].why  # written here (or by an older mpmfx)
+
+
+def test_a_bad_worker_count_is_bad_input_not_a_traceback(tiny_shot, tmp_path, monkeypatch, capsys):
+    from mpmfx.cli import main
+    monkeypatch.setenv("MPMFX_WORKERS", "two")
+    assert main(["run", str(tiny_shot), "--cache", str(tmp_path / "cache"), "--until", "voxelise"]) == 2
+    assert "$MPMFX_WORKERS = 'two'" in capsys.readouterr().err
