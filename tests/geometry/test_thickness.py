@@ -6,7 +6,7 @@ import trimesh
 
 from mpmfx.geometry.thickness import Verdict, check_thickness, local_thickness
 
-from .conftest import l_bracket, rod, slab, sphere_with_fin
+from .conftest import cube_asset, l_bracket, rod, slab, sphere_with_fin
 
 # (shape, true thickness in metres): thin part of each.
 SHAPES = {"slab": (slab, 0.1), "rod": (rod, 0.12), "L": (l_bracket, 0.08),
@@ -174,3 +174,27 @@ def test_pyvista_ant_leg_thickness_matches_the_mesh():
                 assert truth - 1.0 < r.thickness_cells <= truth + 0.1
                 checked += 1
     assert checked >= 2
+
+
+def _cube_domain(mesh):
+    size = float(mesh.extents.max()) * 1.1
+    return {"origin": mesh.bounds.mean(0) - size / 2, "size": size}
+
+
+@pytest.mark.parametrize("kind", ["union", "kitbash"])
+@pytest.mark.parametrize("cells_per_cube", [3, 2])
+def test_blocky_asset_reads_its_one_cube_wall(kind, cells_per_cube):
+    # Convex corners and edges, internal faces and buried vertices are no thin features:
+    # the thinnest part is the one-cube wall, and the grid_n to pass does pass.
+    cube = 0.1
+    mesh = cube_asset(cube, kind=kind)
+    dom = _cube_domain(mesh)
+    grid_n = int(round(cells_per_cube * dom["size"] / cube))
+    report = check_thickness(mesh, grid_n=grid_n, **dom)
+    wall = cube / report.dx
+    assert report.min_thickness_cells == pytest.approx(wall, abs=1.0)
+    assert all(r.thickness_cells > wall - 1.0 for r in report.regions)
+    assert report.verdict is _expected(wall)
+    again = check_thickness(mesh, grid_n=report.min_grid_n_to_pass, **dom)
+    assert again.verdict is Verdict.PASS, again.format_table()
+    assert again.min_grid_n_to_pass <= report.min_grid_n_to_pass + 1
