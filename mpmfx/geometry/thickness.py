@@ -254,7 +254,12 @@ def check_thickness(mesh, *, grid_n: int, origin, size: float, warn_cells: float
     # Exact distance to the mesh (not to the nearest outside voxel): features only two or
     # three voxels across then read their true width instead of a whole odd voxel count.
     depth = np.maximum(-signed_distance(mesh, lat, inside).astype(np.float64), 0.0) / h
-    depth[~inside] = 0.0
+    # The mesh distance also counts faces buried in the solid (kit-bashed parts overlapping,
+    # a model built of separate cubes): those are no surface. The distance to the nearest
+    # outside voxel centre is never below the true depth and at most ~sqrt(3)/2 voxel above
+    # it, so it minus one voxel is a floor that only buried faces push the mesh distance under.
+    floor = ndimage.distance_transform_edt(np.pad(inside, 1))[1:-1, 1:-1, 1:-1] - 1.0
+    depth = np.where(inside, np.maximum(depth, floor), 0.0)
     thick_v = _thickness_from_depth(depth, _FINE_UP_TO * warn_cells * dx / h)
     thick = thick_v * h  # metres
     thin = inside & (thick < warn_cells * dx)
@@ -322,7 +327,10 @@ def _regions(labels, cored, thick, core, lat: Lattice, dx: float) -> list[ThinRe
 
 def _vertex_thickness(mesh, inside, shown, lat: Lattice):
     """Per-vertex thickness (v,) metres from the nearest inside surface voxel, and a (v,)
-    bool mask of vertices with no inside voxel within 1.5 voxels (unresolved features)."""
+    bool mask of vertices with no inside voxel among the 3 x 3 x 3 centres around them
+    (unresolved features). Vertices buried in the solid (kit-bashed parts overlapping, a
+    box's corner inside another) are far from the skin but not lost: inside voxels surround
+    them."""
     from scipy import ndimage
     from scipy.spatial import cKDTree
 
@@ -331,9 +339,14 @@ def _vertex_thickness(mesh, inside, shown, lat: Lattice):
     idx = np.argwhere(skin)
     if len(idx) == 0:
         return np.zeros(len(verts)), np.ones(len(verts), bool)
-    dist, nearest = cKDTree(lat.points(idx)).query(verts)
+    _, nearest = cKDTree(lat.points(idx)).query(verts)
     values = shown[tuple(idx[nearest].T)]
-    lost = dist > 1.8 * lat.h  # a cube corner can be sqrt(3) h from the nearest centre
+    # The 3 x 3 x 3 block reaches at least 1.5 h: a cube corner can be sqrt(3)/2 h from
+    # its nearest centre, so a resolved corner always has an inside centre in it.
+    near = ndimage.binary_dilation(inside, structure=np.ones((3, 3, 3), bool))
+    cell = np.clip(np.rint((verts - lat.origin) / lat.h).astype(np.int64), 0,
+                   np.array(lat.shape) - 1)
+    lost = ~near[tuple(cell.T)]
     return np.where(lost, 0.0, values), lost
 
 

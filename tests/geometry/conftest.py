@@ -59,3 +59,14 @@ def cube_asset(cube: float, *, kind: str) -> trimesh.Trimesh:
     if kind == "union":
         return trimesh.boolean.union(parts, engine="manifold")
     return trimesh.util.concatenate(parts)
+
+
+def cube_block(cube: float, n: int = 3) -> trimesh.Trimesh:
+    """An n x n x n block of separate cubes of edge ``cube`` (m), concatenated as voxel art
+    is: every inner face is doubled and buried. Solid and n cubes thick everywhere."""
+    cubes = []
+    for i in np.ndindex(n, n, n):
+        b = trimesh.creation.box(extents=(cube,) * 3)
+        b.apply_translation((np.asarray(i) + 0.5) * cube)
+        cubes.append(b)
+    return trimesh.util.concatenate(cubes)

@@ -6,7 +6,7 @@ import trimesh
 
 from mpmfx.geometry.thickness import Verdict, check_thickness, local_thickness
 
-from .conftest import cube_asset, l_bracket, rod, slab, sphere_with_fin
+from .conftest import cube_asset, cube_block, l_bracket, rod, slab, sphere_with_fin
 
 # (shape, true thickness in metres): thin part of each.
 SHAPES = {"slab": (slab, 0.1), "rod": (rod, 0.12), "L": (l_bracket, 0.08),
@@ -198,3 +198,12 @@ def test_blocky_asset_reads_its_one_cube_wall(kind, cells_per_cube):
     again = check_thickness(mesh, grid_n=report.min_grid_n_to_pass, **dom)
     assert again.verdict is Verdict.PASS, again.format_table()
     assert again.min_grid_n_to_pass <= report.min_grid_n_to_pass + 1
+
+
+def test_block_of_separate_cubes_is_as_thick_as_the_block():
+    # 3 x 3 x 3 cubes of 2 cells each: 6 cells thick, whatever the buried faces.
+    mesh = cube_block(0.1)
+    dom = _cube_domain(mesh)
+    report = check_thickness(mesh, grid_n=int(round(2 * dom["size"] / 0.1)), **dom)
+    assert report.verdict is Verdict.PASS and not report.regions, report.format_table()
+    assert report.min_thickness_cells == pytest.approx(6.0, rel=0.1)
