@@ -320,10 +320,12 @@ def _regions(labels, cored, thick, core, lat: Lattice, dx: float, min_core: int
         sub = labels[sl] == lab
         offset = np.array([s.start for s in sl])
         parts = _split_features(sub & core[sl], thick[sl], dx=dx, h=lat.h, min_core=min_core)
-        for mask, t, is_rest in parts:
-            # The component's rest keeps its whole extent and volume (edge slivers
-            # included), as an unsplit component does.
-            idx = np.argwhere(sub if is_rest else mask)
+        for mask, t, _ in parts:
+            # The feature: its thin voxels within half its thickness (+1 voxel) of its core.
+            # Edge slivers of thick parts that merely touch it lie further and are left out
+            # (else a wall's box would span the whole body it stands on).
+            reach = ndimage.distance_transform_edt(~mask) * lat.h <= t / 2 + lat.h
+            idx = np.argwhere(sub & reach)
             lo, hi = offset + idx.min(0), offset + idx.max(0)
             out.append(ThinRegion(bbox_min=lat.points(lo[None])[0] - lat.h / 2,
                                   bbox_max=lat.points(hi[None])[0] + lat.h / 2,
@@ -333,7 +335,7 @@ def _regions(labels, cored, thick, core, lat: Lattice, dx: float, min_core: int
 
 
 def _split_features(core, thick, *, dx: float, h: float, min_core: int, levels: int = 4):
-    """[(mask, thickness m, is_rest), ...]: the features of one thin component.
+    """[(core mask, thickness m, is_rest), ...]: the features of one thin component.
 
     core: (a, b, c) bool core voxels of the component; thick: same shape, metres; dx, h:
     sim cell and raster voxel (m). is_rest: the part left after thinner features are split off.
