@@ -55,6 +55,9 @@ class ThinRegion:
     bbox_max: np.ndarray
     volume: float
     thickness_cells: float
+    # Lower quartile along the core, cells: what min_grid_n_to_pass scales, as the median
+    # reads high where a thin part widens into a thick one over a long fillet (fin on a ball).
+    lower_quartile_cells: float = 0.0
 
 
 @dataclass
@@ -239,7 +242,10 @@ def check_thickness(mesh, *, grid_n: int, origin, size: float, warn_cells: float
     voxel nearby and get thickness 0.
 
     Verdict rule: FAIL if any thin region is under ``fail_cells``; WARN if any region is
-    under ``warn_cells``; else PASS. min_grid_n_to_pass = ceil(warn_cells * size / t_min).
+    under ``warn_cells``; else PASS. min_grid_n_to_pass =
+    ceil(warn_cells * size / (t - h / 2)), t: the smallest lower quartile of a region's
+    thickness along its core (else t_min), h: the raster voxel (it reads faces up to h / 2
+    out), so that grid passes.
     """
     from scipy import ndimage
 
@@ -254,11 +260,21 @@ def check_thickness(mesh, *, grid_n: int, origin, size: float, warn_cells: float
     # Exact distance to the mesh (not to the nearest outside voxel): features only two or
     # three voxels across then read their true width instead of a whole odd voxel count.
     depth = np.maximum(-signed_distance(mesh, lat, inside).astype(np.float64), 0.0) / h
-    depth[~inside] = 0.0
+    # The mesh distance also counts faces buried in the solid (kit-bashed parts overlapping,
+    # a model built of separate cubes): those are no surface. The distance to the nearest
+    # outside voxel centre is never below the true depth and at most ~sqrt(3)/2 voxel above
+    # it, so it minus one voxel is a floor that only buried faces push the mesh distance under.
+    floor = ndimage.distance_transform_edt(np.pad(inside, 1))[1:-1, 1:-1, 1:-1] - 1.0
+    depth = np.where(inside, np.maximum(depth, floor), 0.0)
     thick_v = _thickness_from_depth(depth, _FINE_UP_TO * warn_cells * dx / h)
     thick = thick_v * h  # metres
     thin = inside & (thick < warn_cells * dx)
     core = inside & (thick_v <= _CORE_RATIO * 2.0 * depth + 1.0)
+    # The +1 voxel above lets the outermost voxels at a convex edge or corner (depth a few
+    # hundredths of a voxel, ball < 1 voxel) pass as cores: a line of them along a box edge
+    # read as a 0.1-cell feature. A voxel next to one covered by a ball more than twice its
+    # own (+2 voxels) is the raster's edge of that thick body, not a feature.
+    core &= ndimage.maximum_filter(thick_v, size=3) <= 2.0 * thick_v + 2.0
     labels, _ = ndimage.label(thin, structure=np.ones((3, 3, 3)))
     # A feature needs a core of at least one sim cell's worth of voxels; fewer are
     # staircase artefacts of the raster at curved or sloped faces.
@@ -266,7 +282,7 @@ def check_thickness(mesh, *, grid_n: int, origin, size: float, warn_cells: float
     core_count = np.bincount(labels[thin & core], minlength=labels.max() + 1)
     cored = np.flatnonzero(core_count >= min_core)
     cored = cored[cored > 0]
-    regions = _regions(labels, cored, thick, core, lat, dx)
+    regions = _regions(labels, cored, thick, core, lat, dx, min_core)
     in_feature = np.isin(labels, cored) & thin
     # Edge slivers show as "fine" (warn) in the heatmap rather than as false thin spots.
     shown = np.where(thin & ~in_feature, warn_cells * dx, thick)
@@ -286,7 +302,15 @@ def check_thickness(mesh, *, grid_n: int, origin, size: float, warn_cells: float
         worst = regions[0].thickness_cells
         verdict = Verdict.FAIL if worst < fail_cells else Verdict.WARN
     # Unresolved parts are thinner than one raster voxel: use that as their upper bound.
-    t_pass = t_min if t_min > 0 else h
+    # The raster reads a face up to half a voxel out (never thinner than the truth, as
+    # measured on slabs at random offsets): scale from the thinnest the part can be, so
+    # the grid_n given passes when re-run.
+    if regions:
+        t_min_q = min(r.lower_quartile_cells for r in regions) * dx
+        t_pass = min(t_min, t_min_q)
+    else:
+        t_pass = t_min
+    t_pass = t_pass - 0.5 * h if t_pass > h else h
     # The 1e-4 margin: a part exactly warn_cells thick at some grid measures a hair under
     # it there (float32 distances), so that grid would still warn.
     need = int(math.ceil(warn_cells * size / t_pass * (1.0 + 1e-4)))
@@ -297,7 +321,8 @@ def check_thickness(mesh, *, grid_n: int, origin, size: float, warn_cells: float
                            vertex_thickness_cells=vertex_cells)
 
 
-def _regions(labels, cored, thick, core, lat: Lattice, dx: float) -> list[ThinRegion]:
+def _regions(labels, cored, thick, core, lat: Lattice, dx: float, min_core: int
+             ) -> list[ThinRegion]:
     from scipy import ndimage
 
     out = []
@@ -307,22 +332,68 @@ def _regions(labels, cored, thick, core, lat: Lattice, dx: float) -> list[ThinRe
             continue
         sl = slices[lab - 1]
         sub = labels[sl] == lab
-        lo = np.array([s.start for s in sl])
-        hi = np.array([s.stop - 1 for s in sl])
-        # The median along the feature's core, not its minimum: features that taper to a
-        # point (cone tips, limbs pinched at their joints) would read 0 however thick they
-        # are elsewhere, and a neck shorter than a cell does not part the simulated body.
-        t = np.median(thick[sl][sub & core[sl]])
-        out.append(ThinRegion(bbox_min=lat.points(lo[None])[0] - lat.h / 2,
-                              bbox_max=lat.points(hi[None])[0] + lat.h / 2,
-                              volume=float(sub.sum()) * lat.h ** 3,
-                              thickness_cells=float(t) / dx))
+        offset = np.array([s.start for s in sl])
+        parts = _split_features(sub & core[sl], thick[sl], dx=dx, h=lat.h, min_core=min_core)
+        for mask, t, _ in parts:
+            # The feature: its thin voxels within half its thickness (+1 voxel) of its core.
+            # Edge slivers of thick parts that merely touch it lie further and are left out
+            # (else a wall's box would span the whole body it stands on).
+            reach = ndimage.distance_transform_edt(~mask) * lat.h <= t / 2 + lat.h
+            idx = np.argwhere(sub & reach)
+            lo, hi = offset + idx.min(0), offset + idx.max(0)
+            out.append(ThinRegion(bbox_min=lat.points(lo[None])[0] - lat.h / 2,
+                                  bbox_max=lat.points(hi[None])[0] + lat.h / 2,
+                                  volume=float(len(idx)) * lat.h ** 3,
+                                  thickness_cells=float(t) / dx,
+                                  lower_quartile_cells=float(
+                                      np.percentile(thick[sl][mask], 25)) / dx))
+    return out
+
+
+def _split_features(core, thick, *, dx: float, h: float, min_core: int, levels: int = 4):
+    """[(core mask, thickness m, is_rest), ...]: the features of one thin component.
+
+    core: (a, b, c) bool core voxels of the component; thick: same shape, metres; dx, h:
+    sim cell and raster voxel (m). is_rest: the part left after thinner features are split off.
+    A feature reads the median thickness along its core, not its minimum: features that
+    taper to a point (cone tips, limbs pinched at their joints) would read 0 however thick
+    they are elsewhere, and a neck shorter than a cell does not part the simulated body.
+    But thin parts of different thickness touch (a one-cube wall on a two-cube base): core
+    voxels a cell or more under the median that form a part longer than twice its own
+    thickness are a feature of their own (a taper's tip or a neck is shorter than that),
+    measured the same way; the rest keeps the median of what is left.
+    """
+    from scipy import ndimage
+
+    t = float(np.median(thick[core]))
+    out, rest = [], core.copy()
+    lower = core & (thick < t - dx)
+    if levels > 0 and lower.sum() >= min_core:
+        lab, _ = ndimage.label(lower, structure=np.ones((3, 3, 3)))
+        for k, sl in enumerate(ndimage.find_objects(lab), start=1):
+            part = np.zeros_like(core)
+            part[sl] = lab[sl] == k
+            n = int(part[sl].sum())
+            if n < min_core:
+                continue
+            tk = float(np.median(thick[part]))
+            extent = max(s.stop - s.start for s in sl) * h
+            if extent >= max(2.0 * tk, dx):
+                sub = _split_features(part, thick, dx=dx, h=h, min_core=min_core,
+                                      levels=levels - 1)
+                out += [(m, tm, False) for m, tm, _ in sub]
+                rest &= ~part
+    if rest.sum() >= min_core or not out:
+        out.append((rest if out else core, float(np.median(thick[rest if out else core])), True))
     return out
 
 
 def _vertex_thickness(mesh, inside, shown, lat: Lattice):
     """Per-vertex thickness (v,) metres from the nearest inside surface voxel, and a (v,)
-    bool mask of vertices with no inside voxel within 1.5 voxels (unresolved features)."""
+    bool mask of vertices with no inside voxel among the 3 x 3 x 3 centres around them
+    (unresolved features). Vertices buried in the solid (kit-bashed parts overlapping, a
+    box's corner inside another) are far from the skin but not lost: inside voxels surround
+    them."""
     from scipy import ndimage
     from scipy.spatial import cKDTree
 
@@ -331,9 +402,14 @@ def _vertex_thickness(mesh, inside, shown, lat: Lattice):
     idx = np.argwhere(skin)
     if len(idx) == 0:
         return np.zeros(len(verts)), np.ones(len(verts), bool)
-    dist, nearest = cKDTree(lat.points(idx)).query(verts)
+    _, nearest = cKDTree(lat.points(idx)).query(verts)
     values = shown[tuple(idx[nearest].T)]
-    lost = dist > 1.8 * lat.h  # a cube corner can be sqrt(3) h from the nearest centre
+    # The 3 x 3 x 3 block reaches at least 1.5 h: a cube corner can be sqrt(3)/2 h from
+    # its nearest centre, so a resolved corner always has an inside centre in it.
+    near = ndimage.binary_dilation(inside, structure=np.ones((3, 3, 3), bool))
+    cell = np.clip(np.rint((verts - lat.origin) / lat.h).astype(np.int64), 0,
+                   np.array(lat.shape) - 1)
+    lost = ~near[tuple(cell.T)]
     return np.where(lost, 0.0, values), lost
 
 

@@ -1,5 +1,6 @@
 """Analytic test shapes of known thickness (metres), built with trimesh / manifold3d."""
 
+import numpy as np
 import pytest
 import trimesh
 
@@ -37,3 +38,35 @@ DOMAIN = {"origin": (-0.5, -0.5, -0.5), "size": 1.0}
 @pytest.fixture
 def domain():
     return dict(DOMAIN)
+
+
+def cube_asset(cube: float, *, kind: str) -> trimesh.Trimesh:
+    """Hard-surface asset built of cubes of edge ``cube`` (m): a base slab 6 x 4 x 2 cubes,
+    a 2 x 2 cube tower 4 cubes tall and a wall exactly one cube thick (x), 3 wide, 3 tall.
+
+    kind "union": one watertight solid (manifold3d). "kitbash": the three boxes simply
+    concatenated, tower and wall sunk into the base (internal faces, buried vertices), as
+    artists' kit-bashed assets are. Same solid either way; its thinnest part is the wall.
+    """
+    def box(lo, hi):
+        lo, hi = np.asarray(lo, float) * cube, np.asarray(hi, float) * cube
+        b = trimesh.creation.box(extents=hi - lo)
+        b.apply_translation((lo + hi) / 2)
+        return b
+
+    parts = [box((0, 0, 0), (6, 4, 2)), box((0, 0, 1.5), (2, 2, 6)),
+             box((4, 0, 1.7), (5, 3, 5))]
+    if kind == "union":
+        return trimesh.boolean.union(parts, engine="manifold")
+    return trimesh.util.concatenate(parts)
+
+
+def cube_block(cube: float, n: int = 3) -> trimesh.Trimesh:
+    """An n x n x n block of separate cubes of edge ``cube`` (m), concatenated as voxel art
+    is: every inner face is doubled and buried. Solid and n cubes thick everywhere."""
+    cubes = []
+    for i in np.ndindex(n, n, n):
+        b = trimesh.creation.box(extents=(cube,) * 3)
+        b.apply_translation((np.asarray(i) + 0.5) * cube)
+        cubes.append(b)
+    return trimesh.util.concatenate(cubes)
