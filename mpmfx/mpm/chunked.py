@@ -39,9 +39,11 @@ class DeviceAdvance:
         self.sp = sp
         self.begin, self.end = make_clock_kernels(solver.flags.snow, solver.flags.water)
         self.graphs = True  # capture chunks in CUDA graphs (off: launch each kernel; for measuring)
-        # binned P2G (p2g_binned.py) where it was measured faster: deterministic mode (1.4-1.5x
-        # at 2.4M-19M particles, H100); in fast mode it was not faster, so the reference P2G
-        self.binned = cfg.deterministic and not solver.flags.multi_field
+        # binned P2G (p2g_binned.py) where it was measured faster: deterministic mode on a GPU
+        # (1.4-1.5x at 2.4M-19M particles, H100); in fast mode it was not faster, and on the CPU
+        # its per-substep sort costs more than it saves (a 56k-particle water + jelly frame: 9.8 s
+        # binned, 7.6 s plain, one core), so there the reference P2G
+        self.binned = cfg.deterministic and not solver.flags.multi_field and solver.device.is_cuda
         self._binner = None
         self._graphs: dict = {}
         self._graph_state = None  # the State the cached graphs point into (kept alive with them)
