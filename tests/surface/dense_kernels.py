@@ -10,6 +10,9 @@ import warp as wp
 LABEL_NONE = wp.constant(-1)  # voxel outside the region being labelled
 LABEL_BIG = wp.constant(2147483647)  # region voxel not (yet) reached by any seed
 
+# The flood fill's line sweep is the product's (the same kernel over any 3-D label grid, the same labels).
+from mpmfx.surface.sparse_kernels import sweep_block_labels as sweep_labels  # noqa: E402,F401
+
 
 @wp.func
 def zb_weight(s2: float):
@@ -196,39 +199,6 @@ def init_inside_labels(phi: wp.array3d(dtype=float), labels: wp.array3d(dtype=wp
         labels[i, j, k] = (i * phi.shape[1] + j) * phi.shape[2] + k
     else:
         labels[i, j, k] = LABEL_NONE
-
-
-@wp.kernel
-def sweep_labels(labels: wp.array3d(dtype=wp.int32), axis: int, reverse: int, changed: wp.array(dtype=wp.int32)):
-    """Carry the minimum label along one grid line through contiguous region voxels.
-
-    Launched over the two other axes; six sweeps (+-x, +-y, +-z) repeated until nothing
-    changes label every 6-connected component with its smallest seed (flood fill).
-    """
-    a, b = wp.tid()
-    n = labels.shape[axis]
-    carry = int(LABEL_BIG)
-    count = int(0)
-    for t in range(n):
-        s = t
-        if reverse != 0:
-            s = n - 1 - t
-        c = wp.vec3i(s, a, b)
-        if axis == 1:
-            c = wp.vec3i(a, s, b)
-        elif axis == 2:
-            c = wp.vec3i(a, b, s)
-        lab = labels[c[0], c[1], c[2]]
-        if lab == LABEL_NONE:
-            carry = LABEL_BIG
-        else:
-            if carry < lab:
-                labels[c[0], c[1], c[2]] = carry
-                count += 1
-            else:
-                carry = lab
-    if count > 0:
-        wp.atomic_add(changed, 0, count)
 
 
 @wp.kernel
