@@ -15,7 +15,6 @@ variant, four frames each) and `wedge.json`.
 """
 from __future__ import annotations
 
-
 import json
 import math
 import os
@@ -26,10 +25,15 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
-from mpmfx.config import ShotError
-
 SHEET_WIDTH = 1920      # px: a frame's sheet is scaled to at most this width
 CONTACT_FRAMES = 4      # columns of contact.png
+
+
+def _bad(message: str) -> Exception:
+    """Bad input (exit 2). The CLI builds this module's parser at start-up, so the schema
+    (pydantic) is imported only when an error is raised."""
+    from mpmfx.config import ShotError
+    return ShotError(message)
 
 
 def _workers(text: str) -> int:
@@ -72,7 +76,7 @@ def parse_vary(text: str, *, log: bool = False) -> tuple[str, list[Any]]:
     """`key=1,2,3` or `key=lo:hi:n` (`log`: geometric steps) -> (key, values)."""
     key, sep, raw = text.partition("=")
     if not sep or not key.strip() or not raw.strip():
-        raise ShotError(f"--vary {text!r}: expected KEY=V1,V2,... or KEY=LO:HI:N, "
+        raise _bad(f"--vary {text!r}: expected KEY=V1,V2,... or KEY=LO:HI:N, "
                         f"e.g. --vary surface.smooth_iters=0,2,6")
     key, raw = key.strip(), raw.strip()
     span = raw.split(":")
@@ -80,11 +84,11 @@ def parse_vary(text: str, *, log: bool = False) -> tuple[str, list[Any]]:
         try:
             lo, hi, n = float(span[0]), float(span[1]), int(span[2])
         except ValueError:
-            raise ShotError(f"--vary {text!r}: LO:HI:N needs two numbers and a count") from None
+            raise _bad(f"--vary {text!r}: LO:HI:N needs two numbers and a count") from None
         if n < 2:
-            raise ShotError(f"--vary {text!r}: N must be at least 2")
+            raise _bad(f"--vary {text!r}: N must be at least 2")
         if log and (lo <= 0 or hi <= 0):
-            raise ShotError(f"--vary {text!r}: --log needs LO and HI above 0")
+            raise _bad(f"--vary {text!r}: --log needs LO and HI above 0")
         if log:
             values = [lo * (hi / lo) ** (i / (n - 1)) for i in range(n)]
         else:
@@ -94,10 +98,10 @@ def parse_vary(text: str, *, log: bool = False) -> tuple[str, list[Any]]:
             values = [int(v) for v in values]
         return key, values
     if log:
-        raise ShotError(f"--vary {text!r}: --log goes with LO:HI:N, not a list of values")
+        raise _bad(f"--vary {text!r}: --log goes with LO:HI:N, not a list of values")
     values = [_toml_value(part.strip()) for part in raw.split(",")]
     if len(values) < 2 or len(set(map(repr, values))) != len(values):
-        raise ShotError(f"--vary {text!r}: give two or more different values")
+        raise _bad(f"--vary {text!r}: give two or more different values")
     return key, values
 
 
@@ -118,7 +122,7 @@ def resolve_key(data: dict, key: str, *, source: str) -> str:
             names = [item.get("name") for item in node if isinstance(item, dict)]
             if not part.isdigit():
                 if part not in names:
-                    raise ShotError(f"{source}: --vary {key}: no item named '{part}' (names: {', '.join(map(str, names))})")
+                    raise _bad(f"{source}: --vary {key}: no item named '{part}' (names: {', '.join(map(str, names))})")
                 part = str(names.index(part))
             node = node[int(part)] if int(part) < len(node) else None
         elif isinstance(node, dict):
@@ -296,11 +300,11 @@ def _keep_tile(keep: str, frames: list[int]) -> dict[int, Path]:
     if p.is_dir():
         found = {f: p / f"{f:04d}.png" for f in frames if (p / f"{f:04d}.png").is_file()}
         if not found:
-            raise ShotError(f"--keep {keep}: no frame images NNNN.png for frames {frames[0]}..{frames[-1]} there")
+            raise _bad(f"--keep {keep}: no frame images NNNN.png for frames {frames[0]}..{frames[-1]} there")
         return found
     if p.is_file():
         return dict.fromkeys(frames, p)
-    raise ShotError(f"--keep {keep}: no such folder or image")
+    raise _bad(f"--keep {keep}: no such folder or image")
 
 
 # ---------------------------------------------------------------------------------------------
@@ -344,7 +348,7 @@ def _toml_text(value: Any) -> str:
         return "[" + ", ".join(_toml_text(v) for v in value) + "]"
     if isinstance(value, dict):
         return "{" + ", ".join(f"{_toml_key(k)} = {_toml_text(v)}" for k, v in value.items()) + "}"
-    raise ShotError(f"cannot write {value!r} to TOML")
+    raise _bad(f"cannot write {value!r} to TOML")
 
 
 def _toml_key(key: str) -> str:
@@ -377,7 +381,7 @@ def main(args) -> int:
     key, values = parse_vary(args.vary, log=args.log) if args.pick is None else (args.vary.partition("=")[0], [])
     path = Path(args.shot)
     if not path.is_file():
-        raise ShotError(f"{path}: shot file not found")
+        raise _bad(f"{path}: shot file not found")
     field = resolve_key(tomllib.loads(path.read_text()), key.strip(), source=str(path))
     if args.pick is not None:
         print(f"wrote {pick(path, field, _toml_value(args.pick), out=args.out)}")
@@ -413,10 +417,10 @@ def _frames(text: str | None, shot) -> list[int]:
     try:
         frames = parse(text)
     except Exception as exc:  # argparse.ArgumentTypeError
-        raise ShotError(str(exc)) from None
+        raise _bad(str(exc)) from None
     bad = sorted(set(frames) - set(shot.frames))
     if bad:
-        raise ShotError(f"--frames: {bad[0]} is outside the shot's frames {shot.shot.frame_start}..{shot.shot.frame_end}")
+        raise _bad(f"--frames: {bad[0]} is outside the shot's frames {shot.shot.frame_start}..{shot.shot.frame_end}")
     return frames
 
 

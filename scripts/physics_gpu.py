@@ -1,7 +1,6 @@
 """Issue 13 measurements on the GPU: the experiments section of `mpmfx bench accuracy` (full),
 diagnostics of the sand runout at one aspect ratio, and production (GPU, float32) against
 the numpy reference step (CPU, float64) on the same set-ups. Prints tables; writes under $OUT."""
-import json
 import math
 import os
 import sys

@@ -3,7 +3,6 @@ one run per shot at a time, and a failing writer leaves nothing under a final na
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import pytest
 
