@@ -153,7 +153,6 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     if path == "device-binned":
         solver._device_advance.binned = not solver.flags.multi_field
     solver._device_advance.binned &= path != "device-unbinned"
-    solver._device_advance.tiled = path == "device-tiled"
     state = solver.init_state(parts)
     c = max(m.wave_speed() for m in mats)
     span = substeps * cfg.cfl * cfg.dx / c  # ~substeps CFL substeps at rest
@@ -238,8 +237,7 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
             rows.append(safe_case("Mixed", mixed, det, device, copy_gbs, substeps=k, path=path))
     # the levers, back to back in this run: the reference host loop, and no CUDA graphs
     levers = (("Mushy", "host", False), ("Water", "host", False), ("Mushy", "device-nograph", False),
-              ("Mushy", "device-binned", False), ("Mushy", "device-unbinned", True), ("Mushy", "host", True),
-              ("Mushy", "device-tiled", False), ("Water", "device-tiled", False))
+              ("Mushy", "device-binned", False), ("Mushy", "device-unbinned", True), ("Mushy", "host", True))
     for g in sizes:
         for name, path, det in levers:
             if name in MATERIALS:

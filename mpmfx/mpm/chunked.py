@@ -16,7 +16,6 @@ import warp as wp
 
 from .colliders import ColliderKeys, pack_colliders
 from .p2g_binned import BinnedP2G
-from .p2g_tiled import TiledP2G
 from .slots import Clock, Count, Status
 from .stepper import CHUNKS, StepperParams, make_clock_kernels, pose_colliders, wave_table, WaveParams
 
@@ -49,9 +48,6 @@ class DeviceAdvance:
         # its per-substep sort costs more than it saves (a 56k-particle water + jelly frame: 9.8 s
         # binned, 7.6 s plain, one core), so there the reference P2G
         self.binned = cfg.deterministic and not solver.flags.multi_field and solver.device.is_cuda
-        # tiled P2G (p2g_tiled.py): per-brick shared-memory accumulation, fast mode only; off
-        # by default until measured faster (`mpmfx bench gpu`'s device-tiled lever)
-        self.tiled = False
         self._binner = None
         self._graphs: dict = {}
         self._graph_state = None  # the State the cached graphs point into (kept alive with them)
@@ -69,7 +65,7 @@ class DeviceAdvance:
                     self.sp, self.clk, k_.times, k_.translations, k_.rotations, k_.offsets, k_.counts,
                     s._colliders_dev])
             s._phases(state, bufs[i % 2], bufs[1 - i % 2], 0.0, device_clock=True,
-                      binned=self._binner if self.binned or self.tiled else None)
+                      binned=self._binner if self.binned else None)
             wp.launch(self.end, dim=1, device=dev, inputs=[self.sp, self.waves, self.clk, s._sub, s._stats,
                                                              s._counts, self.last_bad])
 
@@ -81,8 +77,7 @@ class DeviceAdvance:
         if self._graph_state is not state:
             self._graphs.clear()
             self._graph_state = state
-        key = (k, id(state.cur), self.s._grid_v.ptr, state.n_fields, self.s._q_mass, self.binned, self.tiled,
-               id(self._binner))
+        key = (k, id(state.cur), self.s._grid_v.ptr, state.n_fields, self.s._q_mass, self.binned, id(self._binner))
         graph = self._graphs.get(key)
         if graph is None:
             with wp.ScopedCapture(device=self.s.device) as cap:
@@ -125,13 +120,8 @@ class DeviceAdvance:
         s, cfg = self.s, self.s.config
         wall0 = time.perf_counter()
         s._last_bad = None
-        if self.tiled and not (cfg.deterministic or s.flags.multi_field):
-            if not isinstance(self._binner, TiledP2G) or self._binner.n != state.n:
-                self._binner = TiledP2G(s.flags, state.n, s.device, cfg.grid_n + 1)  # before any capture
-        else:
-            self.tiled = False
-            if self.binned and (self._binner is None or self._binner.n != state.n):
-                self._binner = BinnedP2G(s.flags, state.n, s.device)  # before any capture: it allocates
+        if self.binned and (self._binner is None or self._binner.n != state.n):
+            self._binner = BinnedP2G(s.flags, state.n, s.device)  # before any capture: it allocates
         self._upload(state, t0, t1)
         if self.keys is not None:  # the fields no substep changes (kind, shape, friction, ...)
             s._colliders_dev.assign(pack_colliders(s.colliders, t0, t0, 1.0))
