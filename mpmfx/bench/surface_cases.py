@@ -119,6 +119,61 @@ def _row(shape: str, sampling: str, x: np.ndarray, h: float, method: str, grid: 
     }
 
 
+SHEET_RADIUS = 0.3
+"""Radius of the thin-sheet case (m): a disc one particle spacing thick (a water sheet)."""
+
+
+def sample_sheet(count: int, sampling: str, *, seed: int = 0) -> tuple[np.ndarray, float]:
+    """About `count` particles in a disc of radius SHEET_RADIUS and thickness h, axis z, centred
+    at 0; returns ((n, 3) float32 positions m, spacing h m). lattice: one square layer at z = 0;
+    random: uniform in the slab |z| < h / 2 at the same number density 1 / h^3 (a splash sheet)."""
+    h = math.sqrt(math.pi * SHEET_RADIUS**2 / count)
+    rng = np.random.default_rng(seed)
+    if sampling == "lattice":
+        a = np.arange(-SHEET_RADIUS, SHEET_RADIUS, h) + h / 2
+        p = np.stack(np.meshgrid(a, a, [0.0], indexing="ij"), -1).reshape(-1, 3)
+    elif sampling == "random":
+        p = rng.uniform([-SHEET_RADIUS, -SHEET_RADIUS, -h / 2], [SHEET_RADIUS, SHEET_RADIUS, h / 2], size=(int(count * 1.3), 3))
+    else:
+        raise ValueError(f"bench sampling {sampling!r}: use lattice or random")
+    p = p[np.hypot(p[:, 0], p[:, 1]) < SHEET_RADIUS][:count]
+    return p.astype(np.float32), h
+
+
+def sheet_stats(vertices: np.ndarray, faces: np.ndarray, h: float) -> dict:
+    """What a thin sheet's surface is judged by: pieces (connected components), holes (total genus
+    from the Euler characteristic V - E + F = sum over pieces of 2 - 2 genus: each hole through
+    the sheet is a handle), open edges (used by one triangle; 0 for a closed mesh) and the
+    thickness error (mean 2|z| over h, minus 1, of the vertices more than 2 h inside the rim)."""
+    if len(faces) == 0:
+        return {"components": 0, "holes": 0, "open_edges": 0, "thickness_err": float("nan")}
+    _, pieces = mesh_stats(vertices, faces)
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    edges, uses = np.unique(e, axis=0, return_counts=True)
+    euler = len(np.unique(faces)) - len(edges) + len(faces)
+    v = np.asarray(vertices, np.float64)
+    flat = np.hypot(v[:, 0], v[:, 1]) < SHEET_RADIUS - 2 * h
+    thickness = float(2 * np.abs(v[flat, 2]).mean() / h - 1.0) if flat.any() else float("nan")
+    return {"components": pieces, "holes": int(round((2 * pieces - euler) / 2)), "open_edges": int((uses == 1).sum()),
+            "thickness_err": thickness}
+
+
+def measure_sheet(count: int, sampling: str, *, label: str = "fine", device: str | None = None,
+                  radius_factor: float = PARTICLE_RADIUS_PER_SPACING, **overrides) -> dict:
+    """Our surfacer (setting OURS[label], plus SurfaceParams `overrides`, e.g. anisotropic=True)
+    on the thin-sheet case: time (s, whole call), pieces, holes, open edges, thickness error."""
+    x, h = sample_sheet(count, sampling)
+    setting = {**OURS[label], **overrides}
+    voxel_h = setting.pop("voxel_h")
+    params = SurfaceParams(particle_radius=radius_factor * h, voxel_size=voxel_h * h, dense_output=False, **setting)
+    t0 = time.perf_counter()
+    res = surface_particles(x, None, params, device=device)
+    seconds = time.perf_counter() - t0
+    method = f"mpmfx {label}" + ("".join(f" {k}={v}" for k, v in overrides.items()))
+    return {"shape": "sheet", "sampling": sampling, "particles": len(x), "h": h, "method": method, "seconds": seconds,
+            **sheet_stats(res.mesh.vertices, res.mesh.faces, h), "vertices": len(res.mesh.vertices)}
+
+
 REST_NOISE = 0.01
 """Particle motion between two frames of a body at rest, in particle spacings h (per axis, rms):
 an MPM block settled on the floor creeps by about this much per frame."""

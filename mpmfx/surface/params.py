@@ -45,6 +45,11 @@ class SurfaceParams:
         gradient). On random samples the kernel's own normal and xbar share their errors and the
         surface sat ~0.1 h inside (-2 % volume); 3 leaves -0.6 % and lattices unchanged (30k
         particles, r = 0.6 h; README).
+    anisotropic: Yu & Turk (2013) anisotropic kernels: each particle's kernel is stretched
+        along the principal axes of its neighbours (long along a sheet or surface, short across
+        it), so one-particle-thick sheets of water stay sheets instead of beading into holes.
+        Particles with fewer than ANISO_MIN_NEIGHBOURS neighbours (spray) stay round. Costs a
+        particle pass and a wider gather (README: thin-sheet case).
     dense_output: also return the level set (and velocity, density) as dense
         arrays over the band's bounding box; False returns only `SurfaceResult.sparse` (the
         dense arrays are then empty) -- what to use at millions of particles.
@@ -62,6 +67,7 @@ class SurfaceParams:
     band_voxels: int = 3
     kernel_radius: float = 3.7
     normal_radius: float = 3.0
+    anisotropic: bool = False
     dense_output: bool = True
     density: bool = False
 
@@ -85,6 +91,8 @@ class SurfaceParams:
             raise bad("band_voxels", f"got {self.band_voxels}; give at least 1 voxel")
         if not (math.isfinite(self.kernel_radius) and self.kernel_radius >= 1.0):
             raise bad("kernel_radius", f"got {self.kernel_radius!r}; give >= 1 (x particle_radius), 3.7 by default")
+        if not isinstance(self.anisotropic, bool):
+            raise bad("anisotropic", f"got {self.anisotropic!r}; give True or False")
         if not isinstance(self.density, bool):
             raise bad("density", f"got {self.density!r}; give True or False")
 
