@@ -169,7 +169,8 @@ def measure_sheet(count: int, sampling: str, *, label: str = "fine", device: str
     t0 = time.perf_counter()
     res = surface_particles(x, None, params, device=device)
     seconds = time.perf_counter() - t0
-    method = f"mpmfx {label}" + ("".join(f" {k}={v}" for k, v in overrides.items()))
+    method = f"mpmfx {label}" + (" anisotropic" if overrides.pop("anisotropic", False) else "") + "".join(
+        f" {k}={v}" for k, v in overrides.items())
     return {"shape": "sheet", "sampling": sampling, "particles": len(x), "h": h, "method": method, "seconds": seconds,
             **sheet_stats(res.mesh.vertices, res.mesh.faces, h), "vertices": len(res.mesh.vertices)}
 
@@ -266,11 +267,11 @@ def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray,
 
 
 OURS = {
-    # voxel = r (0.6 h) and one blur pass: the speed setting
-    "fast": {"voxel_h": PARTICLE_RADIUS_PER_SPACING, "smooth_iters": 1},
+    # voxel = r (0.6 h) and two blur passes: the speed setting
+    "fast": {"voxel_h": PARTICLE_RADIUS_PER_SPACING, "smooth_iters": 2},
     # what shots run with (the surface stage's defaults: mpmfx/stages/surface.py, config.Surface):
-    # voxel h / 2, two blur passes, blobs of fewer than 8 particles removed
-    "fine": {"voxel_h": 0.5, "smooth_iters": 2, "min_feature_particles": 8},
+    # voxel h / 2, five blur passes, blobs of fewer than 8 particles removed
+    "fine": {"voxel_h": 0.5, "smooth_iters": 5, "min_feature_particles": 8},
 }
 """Our settings in the benchmark: label -> `measure` keywords (voxel_h x particle spacing h)."""
 
@@ -321,6 +322,37 @@ def bench_surface(
     return rows
 
 
+SHEET_COUNTS = {"quick": 20_000, "full": 1_000_000}
+"""Particles in the thin-sheet case: CPU-sized for --quick, GPU-sized for the full run."""
+
+
+def bench_sheet(count: int, device: str | None = None, *, echo: bool = True) -> list[dict]:
+    """The thin-sheet case (a disc one spacing thick, lattice and random) with each of our
+    settings, isotropic and anisotropic: pieces, holes, open edges, thickness error, time."""
+    measure_sheet(500, "random", label="fast", device=device, anisotropic=True)  # compile
+    rows = []
+    if echo:
+        print(SHEET_HEADER, flush=True)
+    for sampling in ("lattice", "random"):
+        for label in OURS:
+            for aniso in (False, True):
+                row = measure_sheet(count, sampling, label=label, device=device, anisotropic=aniso)
+                row["count"] = count
+                rows.append(row)
+                if echo:
+                    print(format_sheet_row(row), flush=True)
+    return rows
+
+
+SHEET_HEADER = f"{'shape':7} {'sampling':8} {'n':>8} {'method':34} {'time s':>7} {'pieces':>6} {'holes':>6} {'open':>5} {'thick err':>9}"
+
+
+def format_sheet_row(r: dict) -> str:
+    """One line of the thin-sheet table (columns of SHEET_HEADER; thickness error in h)."""
+    return (f"{r['shape']:7} {r['sampling']:8} {r['particles']:8d} {r['method']:34} {r['seconds']:7.3f} "
+            f"{r['components']:6d} {r['holes']:6d} {r['open_edges']:5d} {r['thickness_err']:+9.3f}")
+
+
 HEADER = (
     f"{'shape':7} {'sampling':8} {'n':>8} {'method':18} {'grid':>13} {'time s':>7} {'+host':>6} {'Mp/s':>6} "
     f"{'mean/h':>7} {'p99/h':>6} {'max/h':>6} {'mean m':>9} {'max m':>9} {'vol err':>8} {'pieces':>6} "
@@ -359,6 +391,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--peers", nargs="*", default=[], help="also run these on the same particles: "
                     "splashsurf, newton, newton-aniso")
     ap.add_argument("--repeats", type=int, default=1, help="> 1: warm-up, then the median of this many")
+    ap.add_argument("--sheet", type=int, default=0, help="also the thin-sheet case with this many particles")
     args = ap.parse_args(argv)
     print(HEADER)
     bench_surface(
@@ -371,6 +404,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         stages=args.stages,
         dense_output=args.dense_output,
     )
+    if args.sheet:
+        bench_sheet(args.sheet, args.device)
 
 
 if __name__ == "__main__":

@@ -23,11 +23,14 @@ def init_eikonal(
     frozen: wp.array(dtype=wp.int32),
     dist: wp.array(dtype=float),
 ):
-    """Voxels with a 6-neighbour of the other sign keep phi (frozen = 1, their distance to the
-    crossing); the others start at +-clip with phi's sign."""
+    """Voxels with a 6-neighbour of the other sign keep phi (frozen = 1: their first-order
+    distance to the crossing), at most the distance to the nearest crossing interpolated along
+    an axis (where the field's gradient is small phi / |grad phi| can read long); the others
+    start at +-clip with phi's sign."""
     t = wp.tid()
     c = voxel_of(t, bcoord)
     v = phi[t]
+    near = float(1.0)
     cross = int(0)
     for n in range(6):
         o = wp.vec3i(0)
@@ -35,9 +38,10 @@ def init_eikonal(
         u = get(bmap, phi, c[0] + o[0], c[1] + o[1], c[2] + o[2], out_v, in_v)
         if (u > 0.0) != (v > 0.0):
             cross = 1
+            near = wp.min(near, wp.abs(v) / wp.max(wp.abs(v) + wp.abs(u), 1.0e-12))
     frozen[t] = cross
     if cross == 1:
-        dist[t] = wp.clamp(v, -clip, clip)
+        dist[t] = wp.where(v > 0.0, wp.min(wp.abs(v), near), -wp.min(wp.abs(v), near))
     else:
         dist[t] = wp.where(v > 0.0, clip, -clip)
 
