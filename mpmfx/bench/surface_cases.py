@@ -4,7 +4,8 @@ Error = distance of output vertices to the analytic surface (validation.md secti
 world units and in units of the particle spacing h; volume error of the closed mesh against
 the analytic volume; number of connected mesh pieces (1 = no interior bubbles, no specks);
 jitter = how far the vertices move between two frames of a body at rest (ours only; see
-`rest_jitter`).
+`rest_jitter`); moving = the same for a slowly moving body, measured against the moved
+surface (`moving_jitter`).
 The peers (mpmfx.bench.surface_peers: splashsurf, Newton) run on the same particles and get
 the same columns. Our surfacer runs at the shipped particle radius
 (mpmfx.surface.PARTICLE_RADIUS_PER_SPACING x h).
@@ -206,6 +207,37 @@ def rest_jitter(x: np.ndarray, h: float, params: SurfaceParams, first, *, device
     return moved(first.mesh, later), moved(first.mesh, same)
 
 
+MOVE_STEP = 0.1
+"""How far a slowly moving body travels between two frames, in particle spacings h."""
+
+
+def moving_jitter(x: np.ndarray, h: float, params: SurfaceParams, first, *, device: str | None = None,
+                  seed: int = 1) -> float:
+    """Flicker of a slowly moving body: the particles x (m) travel MOVE_STEP h along a fixed
+    oblique direction and creep as at rest (REST_NOISE h); returns the mean distance / h of the
+    second frame's vertices, moved back, to the first frame's surface (point to the tangent
+    plane of the nearest first-frame vertex, so a different triangulation of the same surface
+    reads 0). A surfacer that follows the body exactly gives about the rest jitter."""
+    import warp as wp
+    from scipy.spatial import cKDTree
+
+    a = first.mesh
+    if len(a.vertices) == 0:
+        return float("nan")
+    step = np.array([0.57, 0.41, 0.71]) / np.linalg.norm([0.57, 0.41, 0.71]) * MOVE_STEP * h
+    noise = np.random.default_rng(seed).normal(0.0, REST_NOISE * h, size=x.shape)
+    dev = wp.get_device(device)
+    y = (x + noise + step).astype(np.float32)
+    later = surface_particles(y if dev.is_cpu else wp.array(y, dtype=wp.vec3, device=dev), None, params,
+                              device=device).mesh
+    if len(later.vertices) == 0:
+        return float("nan")
+    back = later.vertices.astype(np.float64) - step
+    _, i = cKDTree(a.vertices).query(back)
+    off = np.einsum("ij,ij->i", back - a.vertices[i], a.normals[i].astype(np.float64))
+    return float(np.abs(off).mean() / h)
+
+
 def measure(
     shape: str, count: int, sampling: str, *, radius_factor: float = PARTICLE_RADIUS_PER_SPACING,
     device: str | None = None, sample: tuple[np.ndarray, float] | None = None, repeats: int = 1, label: str = "",
@@ -252,7 +284,7 @@ def measure(
         settings += f" specks<{params.min_feature_particles}"
     jitter, repeat = rest_jitter(x, h, params, res, device=device)
     return {**row, "seconds_host": seconds_host, "device": str(dev), "settings": settings, "stages": res.stats,
-            "jitter_h": jitter, "repeat_h": repeat}
+            "jitter_h": jitter, "repeat_h": repeat, "moving_h": moving_jitter(x, h, params, res, device=device)}
 
 
 def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray, float], *,
@@ -356,7 +388,7 @@ def format_sheet_row(r: dict) -> str:
 HEADER = (
     f"{'shape':7} {'sampling':8} {'n':>8} {'method':18} {'grid':>13} {'time s':>7} {'+host':>6} {'Mp/s':>6} "
     f"{'mean/h':>7} {'p99/h':>6} {'max/h':>6} {'mean m':>9} {'max m':>9} {'vol err':>8} {'pieces':>6} "
-    f"{'jitter/h':>8} {'device':>7}  settings"
+    f"{'jitter/h':>8} {'moving/h':>8} {'device':>7}  settings"
 )
 
 
@@ -370,13 +402,18 @@ def _jitter(r: dict) -> str:
     return f"{r['jitter_h']:8.4f}" if "jitter_h" in r else "-"
 
 
+def _moving(r: dict) -> str:
+    """Flicker of a slowly moving body (ours only), or '-'."""
+    return f"{r['moving_h']:8.4f}" if "moving_h" in r else "-"
+
+
 def format_row(r: dict) -> str:
     """One line of the printed table (columns of HEADER)."""
     return (
         f"{r['shape']:7} {r['sampling']:8} {r['particles']:8d} {r['method']:18} {r['grid']:>13} "
         f"{r['seconds']:7.3f} {_host(r):>6} {r['particles_per_s'] / 1e6:6.2f} {r['err_mean_h']:7.3f} {r['err_p99_h']:6.3f} "
         f"{r['err_max_h']:6.2f} {r['err_mean']:9.2e} {r['err_max']:9.2e} {r['volume_err']:+8.2%} {r['components']:6d} "
-        f"{_jitter(r):>8} {r.get('device', ''):>7}  {r.get('settings', '')}"
+        f"{_jitter(r):>8} {_moving(r):>8} {r.get('device', ''):>7}  {r.get('settings', '')}"
     )
 
 
