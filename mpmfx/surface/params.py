@@ -32,7 +32,7 @@ class SurfaceParams:
         voxel_size = particle_radius with smooth_iters = 2 is the benchmark's "fast" (README).
     smooth_iters: passes of a [1 2 1]/4 separable blur over the level set (each ~1 voxel), after
         it is made a signed distance over the band; together they move the surface at most
-        0.5 particle_radius (so a one-particle sheet is not eroded away). The surface stage
+        0.5 particle_radius inward (so a one-particle sheet is not eroded away). The surface stage
         runs 5 (README: random samples 0.14 -> 0.11 h mean error).
     dilate: offset of the surface before smoothing, outward (+) or inward (-).
     min_feature_particles: connected blobs holding fewer particles than this are removed.

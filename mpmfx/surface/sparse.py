@@ -42,7 +42,7 @@ MAX_SWEEP_ROUNDS = 1024
 NORMAL_STEP = 2  # voxels between the taps of the weight blur (the weights are smooth at 1 voxel)
 MAX_BLOCK_SWEEP_ROUNDS = 256  # block-grid flood fill (a full line per launch: settles in a few rounds)
 SEED_DEPTH = 0.5  # x particle radius: how deep a particle's voxel must be to seed a genuine inside component
-SMOOTH_LIMIT = 0.5  # x particle radius: how far smoothing may move the level set (see _smooth)
+SMOOTH_LIMIT = 0.5  # x particle radius: how far smoothing may move the level set inward (see _smooth)
 ANISO_NORMAL_ITERS = 4  # inverse-power iterations that turn the normal towards the neighbours' thinnest axis
 ANISO_COV_EPS = 0.01  # x kernel radius^2: regularises the covariance of a flat (lattice) sheet
 ANISO_MAX_RATIO = 4.0  # Yu & Turk's k_r: an ellipsoid's axes differ by at most this factor
@@ -415,9 +415,11 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
 
 def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     """`iters` passes of the [1 2 1]/4 blur along each axis over the distance `dist` (kept),
-    the result held within +-limit voxels of it. The blur averages the surface's noise on
-    random samples away; the limit keeps it from eroding what is thinner than the blur is wide
-    (a one-particle sheet: half thickness ~r) or rounding sharp edges further than `limit`."""
+    the surface then moved at most `limit` voxels inward. The blur averages the surface's noise
+    on random samples away (mean error 0.14 -> 0.11 h at 5 passes); the limit keeps it from
+    eroding what is thinner than the blur is wide (a one-particle sheet: half thickness ~r).
+    Outward it is free: that is how the dents of sample voids fill (max error 1.2 -> 0.75 h on
+    the random torus at 100k; a symmetric limit kept them)."""
     if iters == 0:
         return dist
     phi, tmp = wp.clone(dist), wp.empty_like(dist)
@@ -425,7 +427,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
         for axis in range(3):
             _launch(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
             phi, tmp = tmp, phi
-    _launch(wp, S.clamp_near, phi.shape[0], [phi, dist, limit])
+    _launch(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
     return phi
 
 

@@ -496,10 +496,11 @@ def project_on_wide_normal(
 
 
 @wp.kernel
-def clamp_near(a: wp.array(dtype=float), ref: wp.array(dtype=float), delta: float):
-    """a = clamp(a, ref - delta, ref + delta)."""
+def limit_inward(a: wp.array(dtype=float), ref: wp.array(dtype=float), delta: float):
+    """a = min(a, ref + delta): the level set a (signed distance, negative inside) lies at most
+    delta inside ref's."""
     t = wp.tid()
-    a[t] = wp.clamp(a[t], ref[t] - delta, ref[t] + delta)
+    a[t] = wp.min(a[t], ref[t] + delta)
 
 
 @wp.kernel

@@ -15,7 +15,7 @@ plus the kernel support; the grid is aligned to multiples of the voxel size):
 3. dilate; renormalise to a distance (the mean of phi / |grad phi| and that renormalised once
    more, straight to second order, as the sparse surfacer), kept next to the crossing and
    redistanced (|grad phi| = 1) over the rest of the band; smooth ([1 2 1]/4 blur along each
-   axis, `smooth_iters` times, held within SMOOTH_LIMIT r of that distance); fill bubbles the
+   axis, `smooth_iters` times, moving the surface at most SMOOTH_LIMIT r inward); fill bubbles the
    blur sealed;
 4. specks: inside components holding fewer than `min_feature_particles` particles go;
 5. renormalise to world-unit signed distance, clipped to the narrow band;
@@ -80,9 +80,8 @@ def surface_dense(
         wp.launch(K.average_into, phi.shape, inputs=[distance, again])
         distance = wp.array(_redistance(distance.numpy(), wide), dtype=float)
         phi = _smooth(wp, K, wp.clone(distance), params.smooth_iters)
-        if params.smooth_iters > 0:  # held within SMOOTH_LIMIT r of the distance, as the sparse surfacer
-            limit = SMOOTH_LIMIT * grid.r_vox
-            phi = wp.array(np.clip(phi.numpy(), distance.numpy() - limit, distance.numpy() + limit), dtype=float)
+        if params.smooth_iters > 0:  # at most SMOOTH_LIMIT r inward, as the sparse surfacer
+            phi = wp.array(np.minimum(phi.numpy(), distance.numpy() + SMOOTH_LIMIT * grid.r_vox), dtype=float)
         timings["smooth"] = _lap(wp, t0)
         if params.smooth_iters > 0:
             # blurring closes thin outside tunnels, sealing pockets they joined to the outside
