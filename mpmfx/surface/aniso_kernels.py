@@ -6,7 +6,7 @@ kernels", ACM TOG 32(1), 2013: per particle, the principal axes of its neighbour
 covariance stretch its kernel into an ellipsoid, long along a sheet or surface and short
 across it, so a one-particle-thick sheet stays a sheet. (Their "x-bar" step, moving each
 particle towards its neighbours' mean, is left out: on random samples it made the surface
-noisier, std 0.186 -> 0.197 h at lambda 0.3, and shrank it 2-4 % in volume; README.)
+noisier, std 0.186 -> 0.197 h at lambda 0.3, and shrank it 2-6 % in volume at lambda 0.3-0.6; README.)
 
 Units: grid (voxel) coordinates throughout, as in :mod:`mpmfx.surface.sparse_kernels`.
 """
