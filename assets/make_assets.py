@@ -61,10 +61,18 @@ def thin_fin():
     return union(icosphere(4, 0.1), at(fin, 0.15, 0, 0))
 
 
+def snow_wall():
+    """A packed snow wall for the GPU hero shot: 1.0 m long (z), 0.25 m thick (x), 0.6 m tall with a
+    rounded crest, standing on y = 0 (32 cells thick at the shot's dx 7.8 mm)."""
+    crest = cylinder(radius=0.125, height=1.0, sections=48)  # axis z: the wall's length
+    return union(slab(0.25, 0.475, 1.0), at(crest, 0, 0.475, 0))
+
+
 def main():
     meshes = {"jelly_bear.obj": jelly_bear(), "snowball.obj": snowball(), "sand_column.obj": sand_column(),
               "water_pool.obj": slab(0.7, 0.06, 0.7), "water_dam.obj": slab(0.3, 0.4, 0.5),
-              "snow_block.obj": slab(0.3, 0.15, 0.3), "thin_fin.obj": thin_fin()}
+              "snow_block.obj": slab(0.3, 0.15, 0.3), "thin_fin.obj": thin_fin(),
+              "snow_wall.obj": snow_wall()}
     for name, m in meshes.items():
         assert m.is_watertight, name
         m.export(HERE / name)
