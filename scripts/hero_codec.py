@@ -95,7 +95,7 @@ def _add_at(n: np.ndarray, idx: np.ndarray, vals: np.ndarray) -> None:
         n[:, c] += np.bincount(idx, weights=vals[:, c], minlength=len(n))
 
 
-def write(path: str | Path, groups: dict[str, dict], meta: dict | None = None, *, preset: int = 1,
+def write(path: str | Path, groups: dict[str, dict], meta: dict | None = None, *, preset: int = 3,
           part_bytes: int = 15 * 2**20) -> list[Path]:
     """groups: name -> {vertices, faces, velocities, voxel[, with_velocity]}. Written as `path`,
     or split into `path.000`, `path.001`, ... of at most part_bytes each. Returns the files."""
