@@ -59,7 +59,7 @@ class SceneObject(_Section):
                           "Slush, Elastic, Granular, CohesiveGranular, Water, Tracer).")
     overrides: dict[str, Real | Bool | str] = Field(
         default_factory=dict, description="Material fields to change, e.g. {youngs_modulus = 3000} or "
-        "{friction_fit = \"plane_strain\"}.")
+        "{friction_fit = \"compression\"}.")
     translate: Vec3 = Field((0.0, 0.0, 0.0), description="Translation (m), applied after rotate and scale.")
     rotate: Vec3 = Field((0.0, 0.0, 0.0), description="XYZ Euler rotation (degrees).")
     scale: Real = Field(1.0, gt=0, description="Uniform scale of the mesh file's units to metres.")
