@@ -25,7 +25,7 @@ sys.path[:0] = [str(ROOT), str(Path(__file__).resolve().parent)]
 
 import hero_codec  # noqa: E402  (scripts/, beside this file)
 
-# shot -> frames to surface and bring back, best first (the README still is the first).
+# shot -> frames to surface and bring back, best first (hero_render.py's README_STILL picks the README's).
 SHOTS = {"hero_dam": [8, 6], "hero_castle": [7, 12]}
 RETURN_BYTES = 58 * 2**20   # of the 64 MiB the device tool brings back; the JSON and log need little
 RETURN_FILES = 7            # of its 8 files: one is hero_times.json
