@@ -61,10 +61,23 @@ def thin_fin():
     return union(icosphere(4, 0.1), at(fin, 0.15, 0, 0))
 
 
+def sand_castle():
+    """A sand castle for the GPU hero shot, standing on y = 0: a 0.6 m square base 0.16 m tall, four
+    corner towers and a central keep (0.5 m tall), each >= 0.14 m across (18 cells at dx 7.8 mm)."""
+    def tower(r, h, x, z):
+        t = cylinder(radius=r, height=h, sections=32)
+        t.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1, 0, 0]))
+        return at(t, x, h / 2, z)
+    parts = [slab(0.6, 0.16, 0.6), slab(0.36, 0.3, 0.36), tower(0.13, 0.5, 0, 0)]
+    parts += [tower(0.075, 0.34, x, z) for x in (-0.27, 0.27) for z in (-0.27, 0.27)]
+    return union(*parts)
+
+
 def main():
     meshes = {"jelly_bear.obj": jelly_bear(), "snowball.obj": snowball(), "sand_column.obj": sand_column(),
               "water_pool.obj": slab(0.7, 0.06, 0.7), "water_dam.obj": slab(0.3, 0.4, 0.5),
-              "snow_block.obj": slab(0.3, 0.15, 0.3), "thin_fin.obj": thin_fin()}
+              "snow_block.obj": slab(0.3, 0.15, 0.3), "thin_fin.obj": thin_fin(),
+              "sand_castle.obj": sand_castle()}
     for name, m in meshes.items():
         assert m.is_watertight, name
         m.export(HERE / name)
