@@ -64,7 +64,8 @@ def thin_fin():
 def main():
     meshes = {"jelly_bear.obj": jelly_bear(), "snowball.obj": snowball(), "sand_column.obj": sand_column(),
               "water_pool.obj": slab(0.7, 0.06, 0.7), "water_dam.obj": slab(0.3, 0.4, 0.5),
-              "snow_block.obj": slab(0.3, 0.15, 0.3), "thin_fin.obj": thin_fin()}
+              "snow_block.obj": slab(0.3, 0.15, 0.3), "snow_bed.obj": slab(0.45, 0.12, 0.4),
+              "thin_fin.obj": thin_fin()}
     for name, m in meshes.items():
         assert m.is_watertight, name
         m.export(HERE / name)
