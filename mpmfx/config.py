@@ -59,7 +59,7 @@ class SceneObject(_Section):
                           "Slush, Elastic, Granular, CohesiveGranular, Water, Tracer).")
     overrides: dict[str, Real | Bool | str] = Field(
         default_factory=dict, description="Material fields to change, e.g. {youngs_modulus = 3000} or "
-        "{friction_fit = \"plane_strain\"}.")
+        "{friction_fit = \"compression\"}.")
     translate: Vec3 = Field((0.0, 0.0, 0.0), description="Translation (m), applied after rotate and scale.")
     rotate: Vec3 = Field((0.0, 0.0, 0.0), description="XYZ Euler rotation (degrees).")
     scale: Real = Field(1.0, gt=0, description="Uniform scale of the mesh file's units to metres.")
@@ -155,10 +155,12 @@ class SurfaceGroup(str, enum.Enum):
 class Surface(_Section):
     radius_scale: Real = Field(1.0, gt=0, description="Multiplier on the particle radius (0.6 x the spacing: mpmfx.surface.PARTICLE_RADIUS_PER_SPACING).")
     voxel_size: Real | None = Field(None, gt=0, description="Level-set voxel (m); default half the particle spacing.")
-    smooth_iters: Int = Field(2, ge=0, le=50, description="Level-set smoothing passes.")
+    smooth_iters: Int = Field(5, ge=0, le=50, description="Level-set smoothing passes (together they move the surface inward at most 0.3 x the particle spacing).")
     dilate: Real = Field(0.0, description="Offset (m): + dilates, - erodes.")
     min_feature_particles: Int = Field(8, ge=0, description="Blobs of fewer particles are removed (specks).")
     group: SurfaceGroup = Field(SurfaceGroup.MATERIAL, description="One surface per material, per object, or one.")
+    anisotropic: Bool = Field(False, description="Yu & Turk anisotropic kernels: thin sheets of water stay sheets "
+                                                 "(no holes); slower, and sharp box edges round off more.")
     density: Bool = Field(False, description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "
                                              "the material) for granular / volume looks.")
 

@@ -58,14 +58,17 @@ def extra_phi(phi):
 
 
 def convergence():
-    """a = 2 quasi-2D at finer grids than the lab's: does the runout settle?"""
+    """Finer grids than the lab's for the repose fit: does the runout settle?"""
     from mpmfx.bench import experiments as ex
     rows = []
-    for fit, n in (("plane_strain", 192), ("plane_strain", 256), ("compression", 256)):
-        r = ex.column_collapse(a=2.0, grid_n=n, fit=fit, ppz=1, device=DEV)
+    for fit, phi, a, n in (("repose", 32.0, 0.5, 192), ("repose", 32.0, 2.0, 192), ("repose", 32.0, 8.0, 192),
+                           ("repose", 32.0, 2.0, 256)):
+        r = ex.column_collapse(a=a, grid_n=n, fit=fit, friction_angle=phi, ppz=1, device=DEV)
         e = r.extra
-        rows.append({"fit": fit, "a": 2.0, "grid_n": n, "cells_across": e["cells_across"], "runout": e["runout"],
-                     "runout_q": e["runout_q"], "law": e["law_runout"], "error": e["runout"] / e["law_runout"] - 1,
+        lj = ex.runout_law(a, "lajeunesse2005")[0]
+        rows.append({"fit": f"{fit} {phi:g}", "a": a, "grid_n": n, "cells_across": e["cells_across"],
+                     "runout": e["runout"], "runout_q": e["runout_q"], "law_lube2005": e["law_runout"],
+                     "error_lube2005": e["runout"] / e["law_runout"] - 1, "error_lajeunesse2005": e["runout"] / lj - 1,
                      "height": e["height"], "particles": r.particles, "wall_s": r.wall_s, "device": r.device})
         stamp(f"conv {rows[-1]}")
     return rows

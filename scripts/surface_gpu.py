@@ -1,8 +1,10 @@
 """GPU run of the surfacing figures (README): `mpmfx bench surface` at the given counts (ours,
-plus the peers that are installed), then how long the copy to the host takes, pageable against
-pinned staging, at the largest count.
+plus the peers asked for with --peers), the thin-sheet case (isotropic and anisotropic kernels)
+at --sheet particles, then how long the copy to the host takes, pageable against pinned
+staging, at the largest count. Writes surface.csv/json and surface_sheet.csv/json under --out.
 
-    python3 scripts/surface_gpu.py --counts 10000000 --out $OUT
+    python3 scripts/surface_gpu.py --out $OUT                      # 1M and 10M, ours only, sheet 1M
+    python3 scripts/surface_gpu.py --counts 10000000 --peers splashsurf newton newton-aniso --out $OUT
 """
 import argparse
 import time
@@ -12,12 +14,14 @@ import warp as wp
 
 from mpmfx.bench.report import write_rows
 from mpmfx.bench.surface import choose_peers
-from mpmfx.bench.surface_cases import HEADER, OURS, bench_surface, sample_shape
+from mpmfx.bench.surface_cases import HEADER, OURS, SHEET_COUNTS, bench_sheet, bench_surface, sample_shape
 from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams
 from mpmfx.surface.sparse import surface_on_device
 
 ap = argparse.ArgumentParser()
-ap.add_argument("--counts", type=int, nargs="+", default=[10_000_000])
+ap.add_argument("--counts", type=int, nargs="+", default=[1_000_000, 10_000_000])
+ap.add_argument("--peers", nargs="*", default=[], help="peers to run too (their README rows are from an earlier run)")
+ap.add_argument("--sheet", type=int, default=SHEET_COUNTS["full"], help="particles in the thin-sheet case (0: skip)")
 ap.add_argument("--device", default="cuda")
 ap.add_argument("--out", default="renders/bench")
 ap.add_argument("--repeats", type=int, default=3)
@@ -27,8 +31,10 @@ wp.init()
 print(wp.get_device(args.device).name, flush=True)
 print(HEADER, flush=True)
 rows = bench_surface(args.counts, ("sphere", "torus", "box"), ("lattice", "random"), args.device,
-                     peers=choose_peers(None, quick=False), repeats=args.repeats)
+                     peers=choose_peers(args.peers, quick=False) if args.peers else [], repeats=args.repeats)
 print("table:", write_rows(rows, args.out, "surface"), flush=True)
+if args.sheet:
+    print("thin sheet:", write_rows(bench_sheet(args.sheet, args.device), args.out, "surface_sheet"), flush=True)
 for r in rows:
     if "stages" in r and r["stages"]:
         print(r["shape"], r["sampling"], r["method"], {k: v for k, v in r["stages"].items()}, flush=True)

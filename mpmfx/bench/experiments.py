@@ -109,6 +109,21 @@ def front_quantile(x, *, origin=0.0, q=0.998) -> float:
     return float(np.quantile(x[:, 0], q) - origin)
 
 
+def flank_angle(x, volume, dx, depth, **kw) -> float:
+    """Slope of the deposit's flank, degrees: a line fitted to the thickness profile where it
+    is between 20 % and 80 % of its maximum, beyond the thickest column (what a protractor
+    laid on the pile's side reads)."""
+    edges, h = column_profile(x, volume, dx, depth, **kw)
+    centre = 0.5 * (edges[1:] + edges[:-1])
+    top = int(np.argmax(h))
+    keep = np.zeros(len(h), bool)
+    keep[top:] = (h[top:] >= 0.2 * h[top]) & (h[top:] <= 0.8 * h[top])
+    if keep.sum() < 2:
+        return float("nan")
+    slope = np.polyfit(centre[keep], h[keep], 1)[0]
+    return float(np.degrees(np.arctan(abs(slope))))
+
+
 def tip_and_height(x, volume, dx, depth, **kw):
     """(far edge of the last column holding >= LAYER cell of material, thickest column)."""
     edges, h = column_profile(x, volume, dx, depth, **kw)
@@ -224,6 +239,7 @@ def column_collapse(*, a=1.0, grid_n=32, engine="warp", friction_angle=38.0, fit
     if axisymmetric:  # the annuli near the axis hold too few particles to give a thickness
         height = float(np.quantile(run.final[:, 1] - x0, 0.999)) + 0.5 * spacing
     run.extra = {**run.extra, "a": a, "L0": L0, "H0": H0, "dt": dt, "cells_across": L0 / dx,
+                 "flank_angle": flank_angle(run.final, run.volume, dx, depth, **kw),
                  "runout": (tip - L0) / L0, "runout_q": (front_quantile(run.final, origin=x0) - L0) / L0, "height": height / L0, "law_runout": law_run, "law_height": law_h,
                  "source": source, "friction_angle": mat.friction_angle,
                  "fit": getattr(mat, "friction_fit", "compression")}

@@ -169,7 +169,7 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     part, grid, moved = traffic(solver, state)
     k = report.substeps + report.rejected_substeps
     ms = 1e3 * wall / k
-    row = {"impl": "mpmfx", "path": path if not colliders else "host (colliders)", "scene": name, "grid_n": grid_n, "particles": state.n, "det": int(deterministic),
+    row = {"impl": "mpmfx", "path": path, "scene": name, "grid_n": grid_n, "particles": state.n, "det": int(deterministic),
            "substeps": report.substeps, "rejected": report.rejected_substeps, "dt_mean": span / max(1, report.substeps),
            "G_per_s": state.n * report.substeps / wall / 1e9, "ms_substep": ms, **phases,
            "B_per_particle": part / state.n, "grid_MB": grid / 2**20, "moved_MB": moved / 2**20,
@@ -232,8 +232,9 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
             for det in (False, True):
                 rows.append(safe_case(name, g, det, device, copy_gbs, substeps=k))
                 print_table(rows[-1:], COLS)
-    for det in (False, True):
-        rows.append(safe_case("Mixed", mixed, det, device, copy_gbs, substeps=k))
+    for det in (False, True):  # colliders posed on the device, and the host loop back to back
+        for path in ("device", "host"):
+            rows.append(safe_case("Mixed", mixed, det, device, copy_gbs, substeps=k, path=path))
     # the levers, back to back in this run: the reference host loop, and no CUDA graphs
     levers = (("Mushy", "host", False), ("Water", "host", False), ("Mushy", "device-nograph", False),
               ("Mushy", "device-binned", False), ("Mushy", "device-unbinned", True), ("Mushy", "host", True))

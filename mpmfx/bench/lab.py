@@ -2,8 +2,10 @@
 
 - water: dam-break surge front against Martin & Moyce 1952 (n^2 = 2, two column widths) and
   Koshizuka & Oka 1996, frictionless walls and a rough (sticky) floor;
-- sand: granular column collapse runout and final height against Lube et al. 2005
-  (quasi-2D) and Lube et al. 2004 (axisymmetric), Granular preset with both cone fits;
+- sand: granular column collapse runout and final height against Lube et al. 2005 and
+  Lajeunesse et al. 2005 (quasi-2D) and Lube et al. 2004 (axisymmetric): the Granular preset
+  as shipped, and the "repose" fit at a range of angles of repose (the materials differ:
+  Lube's natural sands, rice and sugar, Lajeunesse's glass beads);
 - snow: the confined-compression table of validation.md §3 (Stomakhin et al. 2013
   constants), a per-particle check of the return map (no grid, so one resolution).
 Each at the sweep's resolutions; rows carry the source, the error and the cells across the
@@ -27,15 +29,15 @@ DATA = Path(__file__).parent / "data"
 @dataclass(frozen=True)
 class LabSweep:
     """dam_grids / sand_grids / axi_grids: grid_n of each resolution; ppz: particles per cell
-    across the channel depth (the flow is uniform there); aspects: a = H0 / L0."""
+    across the channel depth (the flow is uniform there); aspects: a = H0 / L0; materials:
+    (friction_fit, friction_angle in degrees) of each Granular variant."""
 
     dam_grids: tuple = (16,)
     dam_width: float = 0.25
     dam_t_star: tuple = (1.0, 1.6, 2.2)
     sand_grids: tuple = (16,)
     aspects: tuple = (1.0,)
-    fits: tuple = ("compression", "plane_strain")
-    friction_angle: float = 38.0
+    materials: tuple = (("compression", 38.0), ("repose", 32.0))  # (friction_fit, friction_angle)
     axi_grids: tuple = ()
     axi_aspects: tuple = (1.0,)
     ppz: int = 1
@@ -44,6 +46,7 @@ class LabSweep:
 QUICK = LabSweep(axi_grids=(16,))
 FULL = LabSweep(dam_grids=(32, 64, 128), dam_width=0.2, dam_t_star=(0.8, 1.2, 1.6, 2.0, 2.4, 2.8),
                 sand_grids=(32, 64, 128), aspects=(0.5, 1.0, 2.0, 4.0, 8.0),
+                materials=(("compression", 38.0),) + tuple(("repose", p) for p in (24.0, 28.0, 32.0, 36.0)),
                 axi_grids=(32, 64, 128), axi_aspects=(0.5, 1.0, 2.0, 4.0))
 
 
@@ -106,23 +109,26 @@ def sand_rows(sweep: LabSweep, device) -> tuple[list[dict], list]:
     rows, runs = [], []
     todo = [(False, a, n) for a in sweep.aspects for n in sweep.sand_grids]
     todo += [(True, a, n) for a in sweep.axi_aspects for n in sweep.axi_grids]
-    for fit in sweep.fits:
+    for fit, phi in sweep.materials:
         for axi, a, n in todo:
-            r = ex.column_collapse(a=a, grid_n=n, fit=fit, friction_angle=sweep.friction_angle, ppz=sweep.ppz,
+            r = ex.column_collapse(a=a, grid_n=n, fit=fit, friction_angle=phi, ppz=sweep.ppz,
                                    axisymmetric=axi, device=device)
             e = r.extra
             runs.append(r)
-            print(f"  collapse {'axi' if axi else '2d'} {fit} a={a:g} grid {n}: runout {e['runout']:.3f} "
-                  f"(law {e['law_runout']:.3f}) height {e['height']:.3f} (law {e['law_height']:.3f}), "
+            print(f"  collapse {'axi' if axi else '2d'} {fit} {phi:g} a={a:g} grid {n}: runout {e['runout']:.3f} "
+                  f"(law {e['law_runout']:.3f}) height {e['height']:.3f} (law {e['law_height']:.3f}) "
+                  f"flank {e['flank_angle']:.1f} deg, "
                   f"{e['cells_across']:.1f} cells, {r.particles} particles, {r.wall_s:.1f} s", flush=True)
             geom = "axisymmetric" if axi else "quasi2d"
-            base = {"case": f"collapse {geom} {fit}", "reference": e["source"], "grid_n": n, "a": a,
-                    "cells_across": e["cells_across"], "friction_angle": sweep.friction_angle,
+            base = {"case": f"collapse {geom} {fit} {phi:g}", "grid_n": n, "a": a,
+                    "cells_across": e["cells_across"], "friction_angle": phi, "flank_angle": e["flank_angle"],
                     "particles": r.particles, "wall_s": r.wall_s, "device": r.device}
-            rows.append({**base, "metric": "runout (L-L0)/L0 / law - 1", "value": e["runout"],
-                         "law": e["law_runout"], "error": e["runout"] / e["law_runout"] - 1.0})
-            rows.append({**base, "metric": "height H/L0 / law - 1", "value": e["height"],
-                         "law": e["law_height"], "error": e["height"] / e["law_height"] - 1.0})
+            for source in (("lube2004",) if axi else ("lube2005", "lajeunesse2005")):
+                law_run, law_h = ex.runout_law(a, source)
+                rows.append({**base, "reference": source, "metric": "runout (L-L0)/L0 / law - 1",
+                             "value": e["runout"], "law": law_run, "error": e["runout"] / law_run - 1.0})
+                rows.append({**base, "reference": source, "metric": "height H/L0 / law - 1",
+                             "value": e["height"], "law": law_h, "error": e["height"] / law_h - 1.0})
     return rows, runs
 
 
@@ -156,7 +162,8 @@ def run_lab(sweep: LabSweep, device=None) -> tuple[list[dict], dict]:
     s_rows, s_runs = sand_rows(sweep, device)
     series = {"water": [{"label": f"{walls} grid {r.grid_n}", "T": list(r.extra["T"]), "Z": list(r.extra["Z"])}
                         for walls, r in w_runs],
-              "sand": [{"geom": "axi" if r.extra["source"] == "lube2004" else "2d", "fit": r.extra["fit"],
+              "sand": [{"geom": "axi" if r.extra["source"] == "lube2004" else "2d",
+                        "fit": f"{r.extra['fit']} {r.extra['friction_angle']:g}",
                         "grid_n": r.grid_n, "a": r.extra["a"], "runout": r.extra["runout"]} for r in s_runs]}
     return w_rows + s_rows + snow_rows(device), series
 
@@ -181,13 +188,19 @@ def lab_plot(series: dict, out, *, name: str = "experiments") -> list[Path]:
     a = np.linspace(0.3, 8.5, 60)
     for i, src in enumerate(("lube2005", "lajeunesse2005", "lube2004")):
         chart.line(a, np.array([ex.runout_law(v, src)[0] for v in a]), color=COLORS[i], width=2, label=src)
+    finest = {}
+    for r in series["sand"]:  # one series per material: its finest grid
+        finest[(r["geom"], r["fit"])] = max(finest.get((r["geom"], r["fit"]), 0), r["grid_n"])
     groups = {}
     for r in series["sand"]:
-        groups.setdefault((r["geom"], r["fit"], r["grid_n"]), []).append(r)
+        if r["grid_n"] == finest[(r["geom"], r["fit"])]:
+            groups.setdefault((r["geom"], r["fit"], r["grid_n"]), []).append(r)
     for k, ((geom, fit, n), rs) in enumerate(sorted(groups.items())):
         chart.scatter(np.array([r["a"] for r in rs]), np.array([r["runout"] for r in rs]),
-                      color=COLORS[(3 + k) % len(COLORS)], size=8, style="s" if fit == "plane_strain" else "d",
+                      color=COLORS[(3 + k) % len(COLORS)], size=8, style="d" if fit.startswith("compression") else "s",
                       label=f"{geom} {fit} grid {n}")
+    top = max([r["runout"] for r in series["sand"]] + [ex.runout_law(8.5, "lajeunesse2005")[0]])
+    chart.y_range = [0.0, 1.7 * top]  # headroom: the legend sits top right, over no data
     paths.append(_shot(pv, chart, out / f"{name}_sand.png"))
     return paths
 

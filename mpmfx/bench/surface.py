@@ -5,7 +5,9 @@ splashsurf where it is installed; the full run 1M and 10M (GPU) with every peer 
 installed (splashsurf on the CPU, Newton isotropic and anisotropic on the GPU), each method
 timed as the median of 3 calls after a warm-up. All methods see the same particles. Prints one
 table; writes surface.csv/json and surface.png (particles per second against mean vertex
-error, log-log; needs pyvista, skipped with a message without it) under --out.
+error, log-log; needs pyvista, skipped with a message without it) under --out. Then the
+thin-sheet case (a disc one particle spacing thick, isotropic and anisotropic kernels):
+surface_sheet.csv/json.
 """
 from __future__ import annotations
 
@@ -45,7 +47,7 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
          peers: Sequence[str] | None = None, counts: Sequence[int] | None = None) -> int:
     """Run the sweep; 0 on success, 2 on bad --peers / --counts."""
     from mpmfx.bench.report import write_rows
-    from mpmfx.bench.surface_cases import HEADER, bench_surface
+    from mpmfx.bench.surface_cases import HEADER, SHEET_COUNTS, bench_sheet, bench_surface
 
     try:
         chosen = choose_peers(peers, quick=quick)
@@ -68,4 +70,6 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
         print(f"plot skipped: {err} (pip install pyvista to draw surface.png; the CSV/JSON are written)")
     except ValueError as err:  # nothing with a positive speed and error (empty meshes only)
         print(f"plot skipped: {err}")
+    sheet = bench_sheet(SHEET_COUNTS["quick" if quick else "full"], device)
+    print(f"thin sheet: {write_rows(sheet, out, 'surface_sheet')} (+ .json)")
     return 0

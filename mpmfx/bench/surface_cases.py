@@ -4,7 +4,8 @@ Error = distance of output vertices to the analytic surface (validation.md secti
 world units and in units of the particle spacing h; volume error of the closed mesh against
 the analytic volume; number of connected mesh pieces (1 = no interior bubbles, no specks);
 jitter = how far the vertices move between two frames of a body at rest (ours only; see
-`rest_jitter`).
+`rest_jitter`); moving = the same for a slowly moving body, measured against the moved
+surface (`moving_jitter`).
 The peers (mpmfx.bench.surface_peers: splashsurf, Newton) run on the same particles and get
 the same columns. Our surfacer runs at the shipped particle radius
 (mpmfx.surface.PARTICLE_RADIUS_PER_SPACING x h).
@@ -119,6 +120,62 @@ def _row(shape: str, sampling: str, x: np.ndarray, h: float, method: str, grid: 
     }
 
 
+SHEET_RADIUS = 0.3
+"""Radius of the thin-sheet case (m): a disc one particle spacing thick (a water sheet)."""
+
+
+def sample_sheet(count: int, sampling: str, *, seed: int = 0) -> tuple[np.ndarray, float]:
+    """About `count` particles in a disc of radius SHEET_RADIUS and thickness h, axis z, centred
+    at 0; returns ((n, 3) float32 positions m, spacing h m). lattice: one square layer at z = 0;
+    random: uniform in the slab |z| < h / 2 at the same number density 1 / h^3 (a splash sheet)."""
+    h = math.sqrt(math.pi * SHEET_RADIUS**2 / count)
+    rng = np.random.default_rng(seed)
+    if sampling == "lattice":
+        a = np.arange(-SHEET_RADIUS, SHEET_RADIUS, h) + h / 2
+        p = np.stack(np.meshgrid(a, a, [0.0], indexing="ij"), -1).reshape(-1, 3)
+    elif sampling == "random":
+        p = rng.uniform([-SHEET_RADIUS, -SHEET_RADIUS, -h / 2], [SHEET_RADIUS, SHEET_RADIUS, h / 2], size=(int(count * 1.3), 3))
+    else:
+        raise ValueError(f"bench sampling {sampling!r}: use lattice or random")
+    p = p[np.hypot(p[:, 0], p[:, 1]) < SHEET_RADIUS][:count]
+    return p.astype(np.float32), h
+
+
+def sheet_stats(vertices: np.ndarray, faces: np.ndarray, h: float) -> dict:
+    """What a thin sheet's surface is judged by: pieces (connected components), holes (total genus
+    from the Euler characteristic V - E + F = sum over pieces of 2 - 2 genus: each hole through
+    the sheet is a handle), open edges (used by one triangle; 0 for a closed mesh) and the
+    thickness error (mean 2|z| over h, minus 1, of the vertices more than 2 h inside the rim)."""
+    if len(faces) == 0:
+        return {"components": 0, "holes": 0, "open_edges": 0, "thickness_err": float("nan")}
+    _, pieces = mesh_stats(vertices, faces)
+    e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    edges, uses = np.unique(e, axis=0, return_counts=True)
+    euler = len(np.unique(faces)) - len(edges) + len(faces)
+    v = np.asarray(vertices, np.float64)
+    flat = np.hypot(v[:, 0], v[:, 1]) < SHEET_RADIUS - 2 * h
+    thickness = float(2 * np.abs(v[flat, 2]).mean() / h - 1.0) if flat.any() else float("nan")
+    return {"components": pieces, "holes": int(round((2 * pieces - euler) / 2)), "open_edges": int((uses == 1).sum()),
+            "thickness_err": thickness}
+
+
+def measure_sheet(count: int, sampling: str, *, label: str = "fine", device: str | None = None,
+                  radius_factor: float = PARTICLE_RADIUS_PER_SPACING, **overrides) -> dict:
+    """Our surfacer (setting OURS[label], plus SurfaceParams `overrides`, e.g. anisotropic=True)
+    on the thin-sheet case: time (s, whole call), pieces, holes, open edges, thickness error."""
+    x, h = sample_sheet(count, sampling)
+    setting = {**OURS[label], **overrides}
+    voxel_h = setting.pop("voxel_h")
+    params = SurfaceParams(particle_radius=radius_factor * h, voxel_size=voxel_h * h, dense_output=False, **setting)
+    t0 = time.perf_counter()
+    res = surface_particles(x, None, params, device=device)
+    seconds = time.perf_counter() - t0
+    method = f"mpmfx {label}" + (" anisotropic" if overrides.pop("anisotropic", False) else "") + "".join(
+        f" {k}={v}" for k, v in overrides.items())
+    return {"shape": "sheet", "sampling": sampling, "particles": len(x), "h": h, "method": method, "seconds": seconds,
+            **sheet_stats(res.mesh.vertices, res.mesh.faces, h), "vertices": len(res.mesh.vertices)}
+
+
 REST_NOISE = 0.01
 """Particle motion between two frames of a body at rest, in particle spacings h (per axis, rms):
 an MPM block settled on the floor creeps by about this much per frame."""
@@ -148,6 +205,37 @@ def rest_jitter(x: np.ndarray, h: float, params: SurfaceParams, first, *, device
     noise = np.random.default_rng(seed).normal(0.0, REST_NOISE * h, size=x.shape).astype(np.float32)
     later = surface_particles(up(x + noise), None, params, device=device).mesh
     return moved(first.mesh, later), moved(first.mesh, same)
+
+
+MOVE_STEP = 0.1
+"""How far a slowly moving body travels between two frames, in particle spacings h."""
+
+
+def moving_jitter(x: np.ndarray, h: float, params: SurfaceParams, first, *, device: str | None = None,
+                  seed: int = 1) -> float:
+    """Flicker of a slowly moving body: the particles x (m) travel MOVE_STEP h along a fixed
+    oblique direction and creep as at rest (REST_NOISE h); returns the mean distance / h of the
+    second frame's vertices, moved back, to the first frame's surface (point to the tangent
+    plane of the nearest first-frame vertex, so a different triangulation of the same surface
+    reads 0). A surfacer that follows the body exactly gives about the rest jitter."""
+    import warp as wp
+    from scipy.spatial import cKDTree
+
+    a = first.mesh
+    if len(a.vertices) == 0:
+        return float("nan")
+    step = np.array([0.57, 0.41, 0.71]) / np.linalg.norm([0.57, 0.41, 0.71]) * MOVE_STEP * h
+    noise = np.random.default_rng(seed).normal(0.0, REST_NOISE * h, size=x.shape)
+    dev = wp.get_device(device)
+    y = (x + noise + step).astype(np.float32)
+    later = surface_particles(y if dev.is_cpu else wp.array(y, dtype=wp.vec3, device=dev), None, params,
+                              device=device).mesh
+    if len(later.vertices) == 0:
+        return float("nan")
+    back = later.vertices.astype(np.float64) - step
+    _, i = cKDTree(a.vertices).query(back)
+    off = np.einsum("ij,ij->i", back - a.vertices[i], a.normals[i].astype(np.float64))
+    return float(np.abs(off).mean() / h)
 
 
 def measure(
@@ -196,7 +284,7 @@ def measure(
         settings += f" specks<{params.min_feature_particles}"
     jitter, repeat = rest_jitter(x, h, params, res, device=device)
     return {**row, "seconds_host": seconds_host, "device": str(dev), "settings": settings, "stages": res.stats,
-            "jitter_h": jitter, "repeat_h": repeat}
+            "jitter_h": jitter, "repeat_h": repeat, "moving_h": moving_jitter(x, h, params, res, device=device)}
 
 
 def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray, float], *,
@@ -211,11 +299,11 @@ def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray,
 
 
 OURS = {
-    # voxel = r (0.6 h) and one blur pass: the speed setting
-    "fast": {"voxel_h": PARTICLE_RADIUS_PER_SPACING, "smooth_iters": 1},
+    # voxel = r (0.6 h) and two blur passes: the speed setting
+    "fast": {"voxel_h": PARTICLE_RADIUS_PER_SPACING, "smooth_iters": 2},
     # what shots run with (the surface stage's defaults: mpmfx/stages/surface.py, config.Surface):
-    # voxel h / 2, two blur passes, blobs of fewer than 8 particles removed
-    "fine": {"voxel_h": 0.5, "smooth_iters": 2, "min_feature_particles": 8},
+    # voxel h / 2, five blur passes, blobs of fewer than 8 particles removed
+    "fine": {"voxel_h": 0.5, "smooth_iters": 5, "min_feature_particles": 8},
 }
 """Our settings in the benchmark: label -> `measure` keywords (voxel_h x particle spacing h)."""
 
@@ -266,10 +354,41 @@ def bench_surface(
     return rows
 
 
+SHEET_COUNTS = {"quick": 20_000, "full": 1_000_000}
+"""Particles in the thin-sheet case: CPU-sized for --quick, GPU-sized for the full run."""
+
+
+def bench_sheet(count: int, device: str | None = None, *, echo: bool = True) -> list[dict]:
+    """The thin-sheet case (a disc one spacing thick, lattice and random) with each of our
+    settings, isotropic and anisotropic: pieces, holes, open edges, thickness error, time."""
+    measure_sheet(500, "random", label="fast", device=device, anisotropic=True)  # compile
+    rows = []
+    if echo:
+        print(SHEET_HEADER, flush=True)
+    for sampling in ("lattice", "random"):
+        for label in OURS:
+            for aniso in (False, True):
+                row = measure_sheet(count, sampling, label=label, device=device, anisotropic=aniso)
+                row["count"] = count
+                rows.append(row)
+                if echo:
+                    print(format_sheet_row(row), flush=True)
+    return rows
+
+
+SHEET_HEADER = f"{'shape':7} {'sampling':8} {'n':>8} {'method':34} {'time s':>7} {'pieces':>6} {'holes':>6} {'open':>5} {'thick err':>9}"
+
+
+def format_sheet_row(r: dict) -> str:
+    """One line of the thin-sheet table (columns of SHEET_HEADER; thickness error in h)."""
+    return (f"{r['shape']:7} {r['sampling']:8} {r['particles']:8d} {r['method']:34} {r['seconds']:7.3f} "
+            f"{r['components']:6d} {r['holes']:6d} {r['open_edges']:5d} {r['thickness_err']:+9.3f}")
+
+
 HEADER = (
     f"{'shape':7} {'sampling':8} {'n':>8} {'method':18} {'grid':>13} {'time s':>7} {'+host':>6} {'Mp/s':>6} "
     f"{'mean/h':>7} {'p99/h':>6} {'max/h':>6} {'mean m':>9} {'max m':>9} {'vol err':>8} {'pieces':>6} "
-    f"{'jitter/h':>8} {'device':>7}  settings"
+    f"{'jitter/h':>8} {'moving/h':>8} {'device':>7}  settings"
 )
 
 
@@ -283,13 +402,18 @@ def _jitter(r: dict) -> str:
     return f"{r['jitter_h']:8.4f}" if "jitter_h" in r else "-"
 
 
+def _moving(r: dict) -> str:
+    """Flicker of a slowly moving body (ours only), or '-'."""
+    return f"{r['moving_h']:8.4f}" if "moving_h" in r else "-"
+
+
 def format_row(r: dict) -> str:
     """One line of the printed table (columns of HEADER)."""
     return (
         f"{r['shape']:7} {r['sampling']:8} {r['particles']:8d} {r['method']:18} {r['grid']:>13} "
         f"{r['seconds']:7.3f} {_host(r):>6} {r['particles_per_s'] / 1e6:6.2f} {r['err_mean_h']:7.3f} {r['err_p99_h']:6.3f} "
         f"{r['err_max_h']:6.2f} {r['err_mean']:9.2e} {r['err_max']:9.2e} {r['volume_err']:+8.2%} {r['components']:6d} "
-        f"{_jitter(r):>8} {r.get('device', ''):>7}  {r.get('settings', '')}"
+        f"{_jitter(r):>8} {_moving(r):>8} {r.get('device', ''):>7}  {r.get('settings', '')}"
     )
 
 
@@ -304,6 +428,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--peers", nargs="*", default=[], help="also run these on the same particles: "
                     "splashsurf, newton, newton-aniso")
     ap.add_argument("--repeats", type=int, default=1, help="> 1: warm-up, then the median of this many")
+    ap.add_argument("--sheet", type=int, default=0, help="also the thin-sheet case with this many particles")
     args = ap.parse_args(argv)
     print(HEADER)
     bench_surface(
@@ -316,6 +441,8 @@ def main(argv: Sequence[str] | None = None) -> None:
         stages=args.stages,
         dense_output=args.dense_output,
     )
+    if args.sheet:
+        bench_sheet(args.sheet, args.device)
 
 
 if __name__ == "__main__":

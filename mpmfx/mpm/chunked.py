@@ -14,9 +14,10 @@ import time
 import numpy as np
 import warp as wp
 
+from .colliders import ColliderKeys, pack_colliders
 from .p2g_binned import BinnedP2G
 from .slots import Clock, Count, Status
-from .stepper import CHUNKS, StepperParams, make_clock_kernels, wave_table, WaveParams
+from .stepper import CHUNKS, StepperParams, make_clock_kernels, pose_colliders, wave_table, WaveParams
 
 __all__ = ["DeviceAdvance"]
 
@@ -35,9 +36,12 @@ class DeviceAdvance:
         sp.cfl, sp.dx, sp.dt_max, sp.dt_min = cfg.cfl, cfg.dx, cfg.dt_max, cfg.dt_min
         sp.damping, sp.drag = cfg.damping, cfg.drag
         sp.max_substeps = float(cfg.max_substeps_per_frame)
+        sp.time_scale = cfg.time_scale
         sp.n_materials, sp.n_counts = len(solver.materials), Count.size(len(solver.materials))
         self.sp = sp
         self.begin, self.end = make_clock_kernels(solver.flags.snow, solver.flags.water)
+        # keyframes on the device: the chunk poses the colliders itself (no host round trip)
+        self.keys = ColliderKeys(solver.colliders, solver.device) if solver.colliders else None
         self.graphs = True  # capture chunks in CUDA graphs (off: launch each kernel; for measuring)
         # binned P2G (p2g_binned.py) where it was measured faster: deterministic mode on a GPU
         # (1.4-1.5x at 2.4M-19M particles, H100); in fast mode it was not faster, and on the CPU
@@ -55,6 +59,11 @@ class DeviceAdvance:
         for i in range(k):
             wp.launch(self.begin, dim=1, device=dev, inputs=[self.sp, self.waves, self.clk, s._sub, s._stats,
                                                                s._stats_init, s._counts])
+            if self.keys is not None:
+                k_ = self.keys
+                wp.launch(pose_colliders, dim=k_.n, device=dev, inputs=[
+                    self.sp, self.clk, k_.times, k_.translations, k_.rotations, k_.offsets, k_.counts,
+                    s._colliders_dev])
             s._phases(state, bufs[i % 2], bufs[1 - i % 2], 0.0, device_clock=True,
                       binned=self._binner if self.binned else None)
             wp.launch(self.end, dim=1, device=dev, inputs=[self.sp, self.waves, self.clk, s._sub, s._stats,
@@ -77,10 +86,12 @@ class DeviceAdvance:
         wp.capture_launch(graph)
 
     # ------------------------------------------------------------------ advance
-    def _upload(self, state, total: float) -> None:
+    def _upload(self, state, t0: float, t1: float) -> None:
         ck = state.clock
+        total = (t1 - t0) * self.s.config.time_scale
         c = np.zeros(len(Clock), np.float64)
         c[Clock.TOTAL] = total
+        c[Clock.T0], c[Clock.T1] = t0, t1
         c[Clock.DT_SCALE], c[Clock.MAX_SPEED] = ck.dt_scale, ck.max_speed
         c[Clock.MAX_HARDENING], c[Clock.WATER_J_MIN] = ck.max_hardening, ck.water_j_min
         c[Clock.LAST_DT], c[Clock.SUBSTEPS] = ck.last_dt, ck.substeps
@@ -111,7 +122,9 @@ class DeviceAdvance:
         s._last_bad = None
         if self.binned and (self._binner is None or self._binner.n != state.n):
             self._binner = BinnedP2G(s.flags, state.n, s.device)  # before any capture: it allocates
-        self._upload(state, (t1 - t0) * cfg.time_scale)
+        self._upload(state, t0, t1)
+        if self.keys is not None:  # the fields no substep changes (kind, shape, friction, ...)
+            s._colliders_dev.assign(pack_colliders(s.colliders, t0, t0, 1.0))
         c = self.clk.numpy()
         while int(c[Clock.STATUS]) in (Status.RUNNING, Status.REJECTED):
             if int(c[Clock.STATUS]) == Status.REJECTED:

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
-__all__ = ["ColliderKind", "Collider", "ColliderParams", "collider_velocity", "pose_matrix"]
+__all__ = ["ColliderKind", "Collider", "ColliderParams", "ColliderKeys", "collider_velocity", "pose_matrix"]
 
 
 class ColliderKind(enum.IntEnum):
@@ -200,6 +200,113 @@ def pack_colliders(colliders, t0: float, t1: float, sim_dt: float) -> list:
         p.sdf_voxel = float(c.sdf_voxel)
         out.append(p)
     return out
+
+
+class ColliderKeys:
+    """Every collider's keyframes on the device, so a substep poses its colliders there
+    (`pose_colliders`, the device stepper) exactly as `pack_colliders` does on the host:
+    times (K,) float64 s, translations (K,) vec3, rotations (K,) quat xyzw, and per collider
+    the offset and count of its keys."""
+
+    def __init__(self, colliders, device):
+        self.n = len(colliders)
+        cat = lambda f: np.concatenate([f(c) for c in colliders])  # noqa: E731
+        counts = np.array([len(c.times) for c in colliders], np.int32)
+        with wp.ScopedDevice(device):
+            self.times = wp.array(cat(lambda c: c.times), dtype=wp.float64)
+            self.translations = wp.array(cat(lambda c: c.translations), dtype=wp.vec3)
+            self.rotations = wp.array(cat(lambda c: c.rotations), dtype=wp.quat)
+            self.offsets = wp.array(np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int32), dtype=wp.int32)
+            self.counts = wp.array(counts, dtype=wp.int32)
+
+
+@wp.func
+def _key_index(times: wp.array(dtype=wp.float64), o: int, k: int, t: wp.float64) -> int:
+    """Collider.pose's searchsorted(side="right") - 1: the last key at or before t; -1 at or
+    before the first key (or a single key), k - 1 at or after the last."""
+    if k == 1 or t <= times[o]:
+        return -1
+    if t >= times[o + k - 1]:
+        return k - 1
+    i = int(0)
+    while i + 1 < k and times[o + i + 1] <= t:
+        i += 1
+    return i
+
+
+@wp.func
+def _key_pos(keys_t: wp.array(dtype=wp.float64), keys_p: wp.array(dtype=wp.vec3), o: int, k: int,
+             t: wp.float64) -> wp.vec3d:
+    """Collider.pose's translation: float32 lerp as numpy does it on float32 keys."""
+    i = _key_index(keys_t, o, k, t)
+    if i < 0:
+        return wp.vec3d(keys_p[o])
+    if i == k - 1:
+        return wp.vec3d(keys_p[o + k - 1])
+    a = (t - keys_t[o + i]) / (keys_t[o + i + 1] - keys_t[o + i])
+    return wp.vec3d(float(wp.float64(1.0) - a) * keys_p[o + i] + float(a) * keys_p[o + i + 1])
+
+
+@wp.func
+def _key_rot(keys_t: wp.array(dtype=wp.float64), keys_q: wp.array(dtype=wp.quat), o: int, k: int,
+             t: wp.float64) -> wp.quatd:
+    """Collider.pose's rotation: _slerp in float64."""
+    i = _key_index(keys_t, o, k, t)
+    if i < 0:
+        return wp.quatd(keys_q[o])
+    if i == k - 1:
+        return wp.quatd(keys_q[o + k - 1])
+    a = (t - keys_t[o + i]) / (keys_t[o + i + 1] - keys_t[o + i])
+    q0 = wp.quatd(keys_q[o + i])
+    q1 = wp.quatd(keys_q[o + i + 1])
+    d = wp.dot(q0, q1)
+    if d < wp.float64(0.0):  # shortest arc
+        q1 = -q1
+        d = -d
+    q = q0
+    if d > wp.float64(0.9995):
+        q = q0 + a * (q1 - q0)
+    else:
+        th = wp.acos(d)
+        q = (wp.sin((wp.float64(1.0) - a) * th) * q0 + wp.sin(a * th) * q1) / wp.sin(th)
+    return q / wp.length(q)
+
+
+@wp.func
+def pose_collider(c: int, keys_t: wp.array(dtype=wp.float64), keys_p: wp.array(dtype=wp.vec3),
+                  keys_q: wp.array(dtype=wp.quat), offsets: wp.array(dtype=wp.int32),
+                  counts: wp.array(dtype=wp.int32), t0: wp.float64, t1: wp.float64, sim_dt: wp.float64,
+                  out: wp.array(dtype=ColliderParams)):
+    """collider_velocity of collider c over the shot interval [t0, t1] spread over sim_dt
+    (s), written into its ColliderParams (the static fields stay as packed)."""
+    o = offsets[c]
+    k = counts[c]
+    p0 = _key_pos(keys_t, keys_p, o, k, t0)
+    p1 = _key_pos(keys_t, keys_p, o, k, t1)
+    q0 = _key_rot(keys_t, keys_q, o, k, t0)
+    q1 = _key_rot(keys_t, keys_q, o, k, t1)
+    # relative rotation q1 * conj(q0) -> axis-angle / dt, as collider_velocity
+    x0 = -q0[0]
+    y0 = -q0[1]
+    z0 = -q0[2]
+    w0 = q0[3]
+    dq = wp.quatd(q1[3] * x0 + q1[0] * w0 + q1[1] * z0 - q1[2] * y0,
+                  q1[3] * y0 - q1[0] * z0 + q1[1] * w0 + q1[2] * x0,
+                  q1[3] * z0 + q1[0] * y0 - q1[1] * x0 + q1[2] * w0,
+                  q1[3] * w0 - q1[0] * x0 - q1[1] * y0 - q1[2] * z0)
+    if dq[3] < wp.float64(0.0):
+        dq = -dq
+    axis = wp.vec3d(dq[0], dq[1], dq[2])
+    s = wp.length(axis)
+    ang = wp.vec3d(wp.float64(0.0), wp.float64(0.0), wp.float64(0.0))
+    if s >= wp.float64(1e-12):
+        ang = axis / s * (wp.float64(2.0) * wp.atan2(s, dq[3]) / sim_dt)
+    p = out[c]
+    p.pos = wp.vec3(p0)
+    p.rot = wp.quat(q0)
+    p.lin_vel = wp.vec3((p1 - p0) / sim_dt)
+    p.ang_vel = wp.vec3(ang)
+    out[c] = p
 
 
 def concat_sdfs(colliders) -> np.ndarray:

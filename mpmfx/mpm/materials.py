@@ -44,15 +44,24 @@ class Material:
         theta_s: critical stretch, dimensionless; singular values <= 1 + theta_s (snow).
         jp_min: lower clamp of the plastic volume ratio Jp (snow), dimensionless.
         jp_max: upper clamp of Jp (snow), dimensionless.
-        friction_angle: Drucker-Prager friction angle, degrees (sand); roughly the angle
-            of repose (validation.md §4 says how roughly).
-        friction_fit: which Mohr-Coulomb state the Drucker-Prager cone is fitted to (sand).
-            "compression" (Klar et al. 2016, the guide): the outer cone, exact in triaxial
+        friction_angle: the sand's friction angle, degrees: the angle of repose (guide
+            §8 knob table) under the default fit; see friction_fit.
+        friction_fit: how friction_angle sets the Drucker-Prager cone (sand). Default
+            "repose" (below): the guide's promise "friction angle = angle of repose",
+            measured against column-collapse experiments (README, `mpmfx bench accuracy`).
+            "compression" (Klar et al. 2016, the guide's alpha formula): the outer cone, exact in triaxial
             compression; in plane-strain flow (a slab, a dam, a chute: anything that flows
             in a plane) it is as strong as Mohr-Coulomb at a much larger angle (asin of
             2 sqrt(3) sin(phi) / (3 - sin(phi)): 63.5 deg for phi = 38, 43.9 deg for 30), so
             such flows stop short. "plane_strain": exact for plane-strain flow at zero
-            dilatancy (sqrt(J2) = p sin(phi)); its angle of repose is friction_angle.
+            dilatancy (sqrt(J2) = p sin(phi)): Mohr-Coulomb's static strength; a flowing
+            layer stops on slopes below atan(sin(phi)) (31.6 deg for phi = 38).
+            "repose": friction_angle is read as the material's angle of repose, as
+            experiments quote it: friction coefficient mu = tan(phi) = sqrt(J2) / p in
+            simple shear, the convention of granular rheology (Jop, Forterre & Pouliquen
+            2006; Dunatunga & Kamrin 2015 use it in MPM). Same cone as "plane_strain" at
+            asin(tan(phi)); needs phi < 45 deg. Runouts of column collapses match Lube et
+            al. 2005 (sands) at 32 deg and Lajeunesse et al. 2005 (glass beads) at 24-28.
         cohesion: tensile strength of the sand cone, as a volumetric Hencky (log) strain
             the grains sustain before they separate (dimensionless; 0 = dry sand). The
             cone apex moves from tr(log strain) = 0 to tr = cohesion.
@@ -89,7 +98,7 @@ class Material:
     jp_min: float = 0.6
     jp_max: float = 20.0
     friction_angle: float = 38.0
-    friction_fit: str = "compression"
+    friction_fit: str = "repose"
     cohesion: float = 0.0
     volume_correction: bool = True
     bulk_modulus: float = 100.0
@@ -126,6 +135,9 @@ class Material:
         ]
         if self.friction_fit not in FRICTION_FITS:
             raise ValueError(f"Material.friction_fit = {self.friction_fit!r}: use one of {', '.join(FRICTION_FITS)}")
+        if self.friction_fit == "repose" and not self.friction_angle < 45.0:
+            raise ValueError(f"Material.friction_angle = {self.friction_angle!r} with friction_fit = \"repose\": "
+                             "an angle of repose must be < 45 degrees (tan(phi) is the friction coefficient)")
         for name, ok, what in checks:
             value = getattr(self, name)
             if not (ok and math.isfinite(float(value))):
@@ -148,10 +160,14 @@ class Material:
         (Klar et al. 2016), i.e. sqrt(J2) = (3 / sqrt(2)) alpha p. friction_fit "compression":
         alpha = sqrt(2/3) 2 sin(phi) / (3 - sin(phi)) (Mohr-Coulomb in triaxial compression);
         "plane_strain": alpha = sqrt(2) sin(phi) / 3 (Mohr-Coulomb in plane-strain flow at
-        zero dilatancy, where the cone's non-dilatant return map puts the stress)."""
-        s = math.sin(math.radians(self.friction_angle))
+        zero dilatancy, where the cone's non-dilatant return map puts the stress);
+        "repose": alpha = sqrt(2) tan(phi) / 3 (sqrt(J2) / p = tan(phi) in simple shear)."""
+        phi = math.radians(self.friction_angle)
+        s = math.sin(phi)
         if self.friction_fit == "plane_strain":
             return math.sqrt(2.0) * s / 3.0
+        if self.friction_fit == "repose":
+            return math.sqrt(2.0) * math.tan(phi) / 3.0
         return math.sqrt(2.0 / 3.0) * 2.0 * s / (3.0 - s)
 
     @property
@@ -174,7 +190,7 @@ class Material:
         return math.sqrt(stiff / self.density)
 
 
-FRICTION_FITS = ("compression", "plane_strain")  # see Material.friction_fit
+FRICTION_FITS = ("compression", "plane_strain", "repose")  # see Material.friction_fit
 
 _ELASTIC_YIELD = 1e9  # thetas this large mean "the clamp never fires" (guide §8)
 

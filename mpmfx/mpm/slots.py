@@ -83,6 +83,8 @@ class Clock(enum.IntEnum):
     LAST = 20  # 1 when the substep in flight lands on the end of the advance
     DT_CFL = 21  # the CFL dt of the last substep begun (for error messages)
     HAS_BAD = 22  # 1 once a substep of this advance was rejected (last_bad holds its counts)
+    T0 = 23  # shot time (s) at the start of this advance: poses the colliders
+    T1 = 24  # shot time (s) at its end
 
 
 class Status(enum.IntEnum):

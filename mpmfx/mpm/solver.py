@@ -108,8 +108,8 @@ class Solver:
 
     materials: the material table; particles index into it. config: solver knobs.
     colliders: kinematic Colliders. device: Warp device ("cpu", "cuda:0"; None = default).
-    stepper: "device" runs `advance` in chunks of substeps decided on the device (stepper.py;
-    scenes with colliders use the host loop), "host" the reference loop that reads the
+    stepper: "device" runs `advance` in chunks of substeps decided and colliders posed on the
+    device (stepper.py), "host" the reference loop that reads the
     statistics back after every substep; both give the same substeps and results.
     """
 
@@ -346,7 +346,7 @@ class Solver:
         a substep would need dt < dt_min or the frame needs > max_substeps_per_frame."""
         if not t1 >= t0:
             raise ValueError(f"Solver.advance: t1 = {t1} must be >= t0 = {t0}")
-        if self.stepper == "device" and not self.colliders:
+        if self.stepper == "device":
             return self._device_advance.run(state, t0, t1)
         return self._advance_host(state, t0, t1)
 

@@ -6,6 +6,7 @@ decisions run in two one-thread kernels around each substep, in float64 like the
 
     begin: dt from the CFL condition and the clock (or stop: finished, dt < dt_min, too many
            substeps), dt / damping / drag factors for the phase kernels, statistics reset
+    pose:  the colliders' poses and velocities over the substep (scenes with colliders)
     clear grid -> P2G -> grid update -> G2P        (phase kernels return at once when stopped)
     end:   reject (dt_scale halved, the chunk stops so `cur` stays current) or accept
            (clock, report accumulators, dt_scale regrown)
@@ -25,10 +26,12 @@ import functools
 import numpy as np
 import warp as wp
 
+from .colliders import ColliderParams, pose_collider
 from .materials import Mode
 from .slots import REJECTING, Clock, Count, Stat, Status
 
-__all__ = ["SubstepDev", "StepperParams", "WaveParams", "make_clock_kernels", "report_sums", "CHUNKS"]
+__all__ = ["SubstepDev", "StepperParams", "WaveParams", "make_clock_kernels", "pose_colliders", "report_sums",
+           "CHUNKS"]
 
 CHUNKS = (1, 2, 4, 8, 16, 32)  # substeps per chunk: each length is one captured graph
 REJECT_MASK = wp.constant(sum(1 << int(c) for c in REJECTING))  # counters that reject a substep
@@ -56,6 +59,7 @@ class StepperParams:
     damping: wp.float64
     drag: wp.float64
     max_substeps: wp.float64
+    time_scale: wp.float64
     n_materials: int
     n_counts: int
 
@@ -202,6 +206,22 @@ def make_clock_kernels(snow: bool, water: bool):
             stop(clk, sub, Status.FINISHED)
 
     return begin, end
+
+
+@wp.kernel(enable_backward=False)
+def pose_colliders(sp: StepperParams, clk: wp.array(dtype=wp.float64), keys_t: wp.array(dtype=wp.float64),
+                   keys_p: wp.array(dtype=wp.vec3), keys_q: wp.array(dtype=wp.quat),
+                   offsets: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32),
+                   out: wp.array(dtype=ColliderParams)):
+    """Pose every collider for the substep `begin` set up, on the shot clock as the host loop
+    does: [T0 + DONE / time_scale, T0 + (DONE + DT) / time_scale], or T1 on the last one."""
+    if int(clk[Clock.STATUS]) != Status.RUNNING:
+        return
+    ts0 = clk[Clock.T0] + clk[Clock.DONE] / sp.time_scale
+    ts1 = clk[Clock.T1]
+    if clk[Clock.LAST] == wp.float64(0.0):
+        ts1 = clk[Clock.T0] + (clk[Clock.DONE] + clk[Clock.DT]) / sp.time_scale
+    pose_collider(wp.tid(), keys_t, keys_p, keys_q, offsets, counts, ts0, ts1, clk[Clock.DT], out)
 
 
 REPORT_CHUNK = 256  # particles summed in order by one thread: the sums do not depend on scheduling

@@ -36,7 +36,8 @@ def surface_params(shot: Shot):
     # than the surfacer's own default (a quarter of the radius).
     return SurfaceParams(particle_radius=PARTICLE_RADIUS_PER_SPACING * h, radius_scale=s.radius_scale,
                          voxel_size=s.voxel_size or 0.5 * h, dense_output=False, smooth_iters=s.smooth_iters, dilate=s.dilate,
-                         min_feature_particles=s.min_feature_particles, density=s.density)
+                         min_feature_particles=s.min_feature_particles, density=s.density,
+                         anisotropic=s.anisotropic)
 
 
 def todo(ctx: Context) -> list[int]:

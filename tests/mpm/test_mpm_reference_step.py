@@ -22,7 +22,7 @@ def _production(mat, F, jp):
     return outs[0].numpy(), outs[1].numpy()
 
 
-@pytest.mark.parametrize("fit", ["compression", "plane_strain"])
+@pytest.mark.parametrize("fit", ["compression", "plane_strain", "repose"])
 def test_sand_cone_projection_matches_production(fit):
     rng = np.random.default_rng(3)
     F = np.eye(3) + 0.08 * rng.standard_normal((64, 3, 3))
@@ -52,11 +52,24 @@ def test_plane_strain_fit_is_mohr_coulomb_in_plane_strain():
     for phi in (20.0, 30.0, 38.0):
         s = np.sin(np.radians(phi))
         ps = preset("Granular", friction_angle=phi, friction_fit="plane_strain").dp_alpha
-        cc = preset("Granular", friction_angle=phi).dp_alpha
+        cc = preset("Granular", friction_angle=phi, friction_fit="compression").dp_alpha
         assert 3 / np.sqrt(2) * ps == pytest.approx(s)
         assert 3 / np.sqrt(2) * cc == pytest.approx(2 * np.sqrt(3) * s / (3 - s))
     # validation.md §4: the compression cone in plane strain is Mohr-Coulomb at 43.9 deg for 30
-    cc30 = preset("Granular", friction_angle=30.0).dp_alpha
+    cc30 = preset("Granular", friction_angle=30.0, friction_fit="compression").dp_alpha
     assert np.degrees(np.arcsin(3 / np.sqrt(2) * cc30)) == pytest.approx(43.9, abs=0.05)
     with pytest.raises(ValueError, match="friction_fit"):
         preset("Granular", friction_fit="triaxial")
+
+
+def test_repose_fit_takes_the_angle_of_repose_as_the_friction_coefficient():
+    """friction_fit "repose": sqrt(J2) / p = tan(phi) on the cone (mu = tan of the angle of
+    repose, granular rheology's convention), i.e. the plane-strain cone at asin(tan(phi))."""
+    for phi in (22.0, 31.6, 40.0):
+        rp = preset("Granular", friction_angle=phi, friction_fit="repose").dp_alpha
+        assert 3 / np.sqrt(2) * rp == pytest.approx(np.tan(np.radians(phi)))
+        ps = preset("Granular", friction_angle=np.degrees(np.arcsin(np.tan(np.radians(phi)))),
+                    friction_fit="plane_strain").dp_alpha
+        assert rp == pytest.approx(ps)
+    with pytest.raises(ValueError, match="angle of repose must be < 45"):
+        preset("Granular", friction_angle=45.0, friction_fit="repose")

@@ -22,11 +22,27 @@ CASES = {
         block((0.55, 0.15, 0.2), (0.8, 0.4, 0.8), grid_n=16, material=1)), {"deterministic": False}, 6),
     "rejections": (["Elastic"], lambda: block((0.3, 0.2, 0.3), (0.6, 0.45, 0.6), grid_n=16),
                    {"cfl": 1.0, "damping": 1.0, "gravity": (0, -4e4, 0)}, 2),
+    # keyframed colliders (posed on the device by the device stepper): a box sweeping and
+    # turning through snow, a sphere that stays, time_scale != 1
+    "colliders": (["Mushy"], lambda: block((0.25, 0.15, 0.25), (0.75, 0.4, 0.75), grid_n=16),
+                  {"time_scale": 0.8}, 5),
 }
 
 
+def _colliders():
+    from scipy.spatial.transform import Rotation
+    from mpmfx.mpm import Collider, ColliderKind
+    quats = Rotation.from_euler("y", [[0], [50], [140]], degrees=True).as_quat().astype(np.float32)
+    box = Collider(ColliderKind.BOX, half_extents=(0.04, 0.12, 0.2), friction=0.3, times=[0.0, 0.09, 0.2],
+                   translations=[(0.15, 0.3, 0.5), (0.45, 0.27, 0.5), (0.7, 0.3, 0.45)], rotations=quats)
+    sphere = Collider(ColliderKind.SPHERE, radius=0.08, translations=[(0.5, 0.2, 0.25)])
+    return [box, sphere]
+
+
 def _run(stepper, mats, parts, cfg, frames):
-    solver = Solver([preset(m) for m in mats], SolverConfig(grid_n=16, **cfg), device="cpu", stepper=stepper)
+    colliders = _colliders() if "time_scale" in cfg else ()
+    solver = Solver([preset(m) for m in mats], SolverConfig(grid_n=16, **cfg), colliders=colliders, device="cpu",
+                    stepper=stepper)
     solver._device_advance.binned = not solver.flags.multi_field  # the binned P2G in fast mode too
     state = solver.init_state(parts)
     reports = [solver.advance(state, f / 24, (f + 1) / 24) for f in range(frames)]

@@ -13,8 +13,10 @@ plus the kernel support; the grid is aligned to multiples of the voxel size):
    The normal that x - xbar is projected on is the gradient of the weight field blurred to
    normal_radius x the kernel (as the sparse surfacer);
 3. dilate; renormalise to a distance (the mean of phi / |grad phi| and that renormalised once
-   more, straight to second order, as the sparse surfacer); smooth ([1 2 1]/4 blur along
-   each axis, `smooth_iters` times); fill bubbles the blur sealed;
+   more, straight to second order, as the sparse surfacer), kept next to the crossing and
+   redistanced (|grad phi| = 1) over the rest of the band; smooth ([1 2 1]/4 blur along each
+   axis, `smooth_iters` times, moving the surface at most SMOOTH_LIMIT r inward); fill bubbles the
+   blur sealed;
 4. specks: inside components holding fewer than `min_feature_particles` particles go;
 5. renormalise to world-unit signed distance, clipped to the narrow band;
 6. marching cubes (warp.geometry) of the zero level; normals and velocities at vertices.
@@ -30,7 +32,7 @@ import numpy as np
 
 from mpmfx.surface.params import LevelSet, SurfaceMesh, SurfaceParams, SurfaceResult, kernel_volume
 from mpmfx.surface.reconstruct import check_inputs
-from mpmfx.surface.sparse import NORMAL_STEP
+from mpmfx.surface.sparse import NORMAL_STEP, SMOOTH_LIMIT
 
 log = logging.getLogger(__name__)
 
@@ -76,7 +78,10 @@ def surface_dense(
         again = wp.empty_like(phi)
         wp.launch(K.renormalise, phi.shape, inputs=[distance, 1.0, wide, again])
         wp.launch(K.average_into, phi.shape, inputs=[distance, again])
-        phi = _smooth(wp, K, distance, params.smooth_iters)
+        distance = wp.array(_redistance(distance.numpy(), wide), dtype=float)
+        phi = _smooth(wp, K, wp.clone(distance), params.smooth_iters)
+        if params.smooth_iters > 0:  # at most SMOOTH_LIMIT r inward, as the sparse surfacer
+            phi = wp.array(np.minimum(phi.numpy(), distance.numpy() + SMOOTH_LIMIT * grid.r_vox), dtype=float)
         timings["smooth"] = _lap(wp, t0)
         if params.smooth_iters > 0:
             # blurring closes thin outside tunnels, sealing pockets they joined to the outside
@@ -192,6 +197,40 @@ def _fill_bubbles(wp, K, phi, *, inside_value: float) -> None:
     wp.launch(K.init_outside_labels, phi.shape, inputs=[phi, labels])
     _sweep_until_stable(wp, K, labels)
     wp.launch(K.fill_unreached, phi.shape, inputs=[phi, labels, inside_value])
+
+
+def _redistance(d: np.ndarray, clip: float) -> np.ndarray:
+    """numpy version of the sparse surfacer's redistancing (mpmfx.surface.redistance_kernels):
+    voxels next to a sign change keep |d| capped at the axis-interpolated distance to it, the
+    rest of the band follows from Jacobi sweeps of |grad d| = 1; values in voxels, +-clip."""
+    pos = d > 0
+    near = np.ones_like(d)
+    cross = np.zeros(d.shape, bool)
+    for axis in range(3):
+        for shift in (1, -1):
+            u = np.roll(d, shift, axis)
+            edge = [slice(None)] * 3
+            edge[axis] = 0 if shift == 1 else -1
+            u[tuple(edge)] = d[tuple(edge)]  # no neighbour beyond the grid: no crossing
+            c = (u > 0) != pos
+            cross |= c
+            near = np.where(c, np.minimum(near, np.abs(d) / np.maximum(np.abs(d) + np.abs(u), 1e-12)), near)
+    a = np.where(cross, np.minimum(np.abs(d), near), clip).astype(np.float32)
+    for _ in range(int(math.ceil(clip)) + 1):
+        m = []
+        for axis in range(3):
+            p = np.pad(a, [(1, 1) if i == axis else (0, 0) for i in range(3)], constant_values=clip)
+            lo = p[tuple(slice(0, -2) if i == axis else slice(None) for i in range(3))]
+            hi = p[tuple(slice(2, None) if i == axis else slice(None) for i in range(3))]
+            m.append(np.minimum(lo, hi))
+        a0, a1, a2 = np.sort(np.stack(m), axis=0)
+        u = a0 + 1.0
+        two = 0.5 * (a0 + a1 + np.sqrt(np.maximum(2.0 - (a0 - a1) ** 2, 0.0)))
+        s3 = a0 + a1 + a2
+        three = (s3 + np.sqrt(np.maximum(s3 * s3 - 3.0 * (a0 * a0 + a1 * a1 + a2 * a2 - 1.0), 0.0))) / 3.0
+        u = np.where(u > a1, np.where(two > a2, three, two), u)
+        a = np.where(cross, a, np.minimum(np.minimum(u, a), clip)).astype(np.float32)
+    return np.where(pos, a, -a).astype(np.float32)
 
 
 def _smooth(wp, K, phi, iters: int):
