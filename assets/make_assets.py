@@ -76,8 +76,8 @@ def sand_castle():
 def main():
     meshes = {"jelly_bear.obj": jelly_bear(), "snowball.obj": snowball(), "sand_column.obj": sand_column(),
               "water_pool.obj": slab(0.7, 0.06, 0.7), "water_dam.obj": slab(0.3, 0.4, 0.5),
-              "snow_block.obj": slab(0.3, 0.15, 0.3), "thin_fin.obj": thin_fin(),
-              "sand_castle.obj": sand_castle()}
+              "snow_block.obj": slab(0.3, 0.15, 0.3), "snow_bed.obj": slab(0.45, 0.12, 0.4),
+              "thin_fin.obj": thin_fin(), "sand_castle.obj": sand_castle()}
     for name, m in meshes.items():
         assert m.is_watertight, name
         m.export(HERE / name)

@@ -193,9 +193,10 @@ class Render(_Section):
     frame_step: Int = Field(1, ge=1, description="Render every n-th frame; the frames between hold the last "
                             "rendered one, so the movie keeps the shot's timing.")
     looks: dict[str, str] = Field(default_factory=dict, description="cycles: look per preset, object or surface "
-                                  "group, e.g. {Goopy = \"mud\"} (looks: mpmfx/render/looks.py).")
-    basin: Real | None = Field(None, gt=0, description="cycles: height (m) of a stone basin drawn along the "
-                                "solver's side walls, for a pool that the walls hold; default none.")
+                                  "group, e.g. {Goopy = \"mud\"}, or of the basin, {basin = \"glass\"} "
+                                  "(looks: mpmfx/render/looks.py).")
+    basin: Real | None = Field(None, gt=0, description="cycles: height (m) of a basin drawn along the solver's "
+                                "side walls (stone, or render.looks.basin), for a pool that the walls hold; default none.")
     sun_elevation: Real = Field(35.0, ge=0, le=90, description="cycles: sun height above the horizon (degrees).")
     sun_rotation: Real = Field(150.0, description="cycles: sun direction about the up axis (degrees).")
     mode: Literal["surface", "particles"] = Field("surface", description="particles: the guide's debug look (9.4).")

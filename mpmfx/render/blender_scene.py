@@ -62,6 +62,8 @@ def make_material(name: str, look: str) -> bpy.types.Material:
             bump.inputs["Distance"].default_value = distance
             _link(tree, noise.outputs["Fac"], bump.inputs["Height"])
             _link(tree, bump.outputs["Normal"], bsdf.inputs["Normal"])
+    if spec.get("clear_shadow"):
+        _clear_shadow(tree, bsdf, out)
     if spec.get("absorb"):
         colour, density = spec["absorb"]
         absorb = tree.nodes.new("ShaderNodeVolumeAbsorption")
@@ -69,6 +71,17 @@ def make_material(name: str, look: str) -> bpy.types.Material:
         absorb.inputs["Density"].default_value = density
         _link(tree, absorb.outputs["Volume"], out.inputs["Volume"])
     return mat
+
+
+def _clear_shadow(tree, bsdf, out) -> None:
+    """Shadow rays see a transparent surface, camera and bounce rays the BSDF."""
+    path = tree.nodes.new("ShaderNodeLightPath")
+    clear = tree.nodes.new("ShaderNodeBsdfTransparent")
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    _link(tree, path.outputs["Is Shadow Ray"], mix.inputs["Fac"])
+    _link(tree, bsdf.outputs["BSDF"], mix.inputs[1])
+    _link(tree, clear.outputs["BSDF"], mix.inputs[2])
+    _link(tree, mix.outputs["Shader"], out.inputs["Surface"])
 
 
 def assign(obj, mat) -> None:
@@ -96,9 +109,10 @@ def add_ground(floor_y: float, centre, *, size: float) -> bpy.types.Object:
     return obj
 
 
-def add_basin(lo, hi, *, height: float, thickness: float) -> bpy.types.Object:
-    """Four stone walls of `height` m standing on the floor just outside the box [lo, hi] (stage
-    metres), where the solver's side walls hold a pool: the water meets a wall, not thin air."""
+def add_basin(lo, hi, *, height: float, thickness: float, look: str = "ground") -> bpy.types.Object:
+    """Four walls of `height` m (stone, or the look named) standing on the floor just outside the
+    box [lo, hi] (stage metres), where the solver's side walls hold a pool: the water meets a
+    wall, not thin air."""
     import bmesh
     bm = bmesh.new()
     x0, y0, z0 = lo
@@ -116,7 +130,7 @@ def add_basin(lo, hi, *, height: float, thickness: float) -> bpy.types.Object:
     bm.free()
     obj = bpy.data.objects.new("basin", mesh)
     bpy.context.scene.collection.objects.link(obj)
-    assign(obj, make_material("basin", "ground"))
+    assign(obj, make_material("basin", look))
     return obj
 
 

@@ -147,7 +147,10 @@ def build_scene(job: dict) -> None:
     centre = [o + dom_size / 2 for o in dom_lo]
     bs.add_ground(job["floor_y"], centre, size=40.0 * dom_size)
     if job.get("basin") and job.get("walls"):
-        bs.add_basin(*job["walls"], height=job["basin"], thickness=0.04 * dom_size)
+        look = job["looks"].get("basin", "ground")
+        # glass as thin as an aquarium's (thick glass would bend the view of the water)
+        bs.add_basin(*job["walls"], height=job["basin"], thickness=(0.012 if look == "glass" else 0.04) * dom_size,
+                     look=look)
     bs.add_sky(sun_elevation=job["sun_elevation"], sun_rotation=job["sun_rotation"])
     cam = job.get("camera")
     if cam is None:

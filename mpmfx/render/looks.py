@@ -21,7 +21,8 @@ DEFAULT_LOOK = {
 
 # name -> {"bsdf": Principled inputs, "bump": (feature size m, strength, distance m) or None,
 #          "absorb": (colour, density 1/m) for a volume absorption inside, or None,
-#          "grain": second base colour mixed in by a fine noise (sand grains), or None}
+#          "grain": second base colour mixed in by a fine noise (sand grains), or None,
+#          "clear_shadow": True where shadow rays pass straight through (optional; glass)}
 LOOKS: dict[str, dict] = {
     # Clear, refractive, slightly blue-green in depth: the absorption tints thick water only.
     "water": {"bsdf": {"Base Color": (1.0, 1.0, 1.0), "Roughness": 0.03, "IOR": 1.333,
@@ -54,10 +55,19 @@ LOOKS: dict[str, dict] = {
     # Scene props: colliders and the ground.
     "collider": {"bsdf": {"Base Color": (0.32, 0.34, 0.37), "Roughness": 0.35, "Metallic": 0.6},
                  "bump": None, "absorb": None, "grain": None},
+    # Clear glass for a tank's walls (`render.looks = {basin = "glass"}`): shadow rays pass
+    # through it (with caustics off, refracting walls would otherwise shade the water in them).
+    "glass": {"bsdf": {"Base Color": (1.0, 1.0, 1.0), "Roughness": 0.0, "IOR": 1.5, "Transmission Weight": 1.0},
+              "bump": None, "absorb": None, "grain": None, "clear_shadow": True},
     # A dark, slightly warm stone floor: snow, water and jelly all read against it.
     "ground": {"bsdf": {"Base Color": (0.11, 0.105, 0.10), "Roughness": 0.6},
                "bump": (0.03, 0.08, 0.002), "absorb": None, "grain": (0.075, 0.07, 0.065)},
 }
+
+
+# Scene props that `render.looks` may also name: the basin drawn along the solver's side walls
+# (stone by default).
+PROP_LOOKS = {"basin": "ground"}
 
 
 def look_for(names: list[str], overrides: dict[str, str] | None = None) -> str:

@@ -100,12 +100,13 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
     machine it had)."""
     from mpmfx.render.camera import VIEW_DIRECTION, default_camera, solver_box, solver_floor
     from mpmfx.render.cycles import CyclesError, run_job, write_job
-    from mpmfx.render.looks import look_for
+    from mpmfx.render.looks import PROP_LOOKS, look_for
     shot, entry, r = job.shot, job.entry, job.shot.render
     if not frames:
         return {}
     looks = {g: look_for([g, o.name, o.material], r.looks) for g, o in zip(shot.surface_groups(), shot.objects)}
     looks |= {o.name: look_for([o.name, o.material], r.looks) for o in shot.objects}
+    looks |= {prop: r.looks.get(prop, look) for prop, look in PROP_LOOKS.items()}
     cam = None
     if r.camera_position is not None:
         pos, look = default_camera(shot)

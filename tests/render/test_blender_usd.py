@@ -109,7 +109,7 @@ def test_blender_sees_every_object_frame_and_volume(exported):
 
 def test_cycles_render_stage_draws_the_looks(exported):
     """The render stage in Cycles: every frame written (frame_step holds the ones between), the
-    .blend saved, the jelly drawn red and in frame."""
+    .blend saved, the jelly drawn red and in frame, through the glass of a tank (render.looks.basin)."""
     import imageio.v2 as imageio
     folder, shot, _ = exported
     cwd = os.getcwd()
@@ -117,7 +117,8 @@ def test_cycles_render_stage_draws_the_looks(exported):
     try:
         run = mpmfx.load_shot(shot, cache_root=folder / "cache", quiet=True,
                               overrides=["render.engine=cycles", "render.samples=2", "render.width=96",
-                                         "render.height=64", "render.frame_step=2", "render.movie=true"])
+                                         "render.height=64", "render.frame_step=2", "render.movie=true",
+                                         "render.basin=0.05", 'render.looks={basin = "glass"}'])
         entry = {r.stage: r for r in run.run()}["render"].entry
     finally:
         os.chdir(cwd)
@@ -126,6 +127,7 @@ def test_cycles_render_stage_draws_the_looks(exported):
     assert (published / "tiny.blend").stat().st_size > 0 and (published / "tiny.mp4").is_file()
     one, two = (imageio.imread(entry / "frames" / f"{f:04d}.png") for f in (1, 2))
     assert np.array_equal(one, two)  # frame 2 holds frame 1 (frame_step = 2)
+    assert json.loads((entry / "cycles_job.json").read_text())["looks"]["basin"] == "glass"
     rgb = imageio.imread(entry / "frames" / "0003.png")[..., :3].astype(int)
     jelly = (rgb[..., 0] > rgb[..., 1] + 40) & (rgb[..., 0] > rgb[..., 2] + 30)
     assert 0.01 < jelly.mean() < 0.6, "the jelly cube should be in the picture, red, and not fill it"
