@@ -13,18 +13,7 @@ Units: grid (voxel) coordinates throughout, as in :mod:`mpmfx.surface.sparse_ker
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import CS, voxel_of
-
-
-@wp.func
-def cell_range(x: wp.vec3, reach: float, shape: wp.vec3i):
-    """(lo, hi) gather-cell indices (CS^3 voxels each) within `reach` voxels of x, clipped."""
-    lo = wp.vec3i(0)
-    hi = wp.vec3i(0)
-    for a in range(3):
-        lo[a] = wp.max(int(wp.floor((x[a] - reach) / float(CS))), 0)
-        hi[a] = wp.min(int(wp.floor((x[a] + reach) / float(CS))), shape[a] - 1)
-    return lo, hi
+from mpmfx.surface.sparse_kernels import cell_range, voxel_of, write_field
 
 
 @wp.kernel
@@ -163,27 +152,12 @@ def gather_zhu_bridson_aniso(
                                 tw += wk * thin[p]
                                 if with_v != 0:
                                     vw += wk * v[p]
-    w_out[t] = w
+    radius = radius_vox
+    cov[t] = wp.mat33(0.0)
     if w > 0.0:
         m = dw / w
         cov[t] = cw / w - wp.outer(m, m)
-    else:
-        cov[t] = wp.mat33(0.0)
-    if w <= 0.0:
-        phi[t] = far_vox
-        offset[t] = wp.vec3(0.0)
-        if with_v != 0:
-            vel[t] = wp.vec3(0.0)
-        return
-    d = -dw / w  # x - xbar
-    offset[t] = d
-    dist = wp.length(d)
-    gl = wp.length(gw)
-    if gl > 0.0:
-        dist = -wp.dot(d, gw) / gl  # gw points inward (towards the particles)
-    # the centroid of short kernels sits nearer the voxel: r shrinks with them (w > 0 here)
-    radius = radius_vox * 0.5 * (1.0 + tw / w)
-    phi[t] = dist - radius
-    offset_r[t] = radius
-    if with_v != 0:
-        vel[t] = vw / w
+        # the centroid of short kernels sits nearer the voxel: r shrinks with them
+        radius = radius_vox * 0.5 * (1.0 + tw / w)
+        offset_r[t] = radius
+    write_field(t, w, dw, gw, vw, radius, with_v, far_vox, phi, w_out, offset, vel)

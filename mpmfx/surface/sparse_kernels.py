@@ -54,6 +54,42 @@ def get(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), i: int, j
     return out_v
 
 
+@wp.func
+def cell_range(x: wp.vec3, reach: float, shape: wp.vec3i):
+    """(lo, hi) gather-cell indices (CS^3 voxels each) within `reach` voxels of x, clipped."""
+    lo = wp.vec3i(0)
+    hi = wp.vec3i(0)
+    for a in range(3):
+        lo[a] = wp.max(int(wp.floor((x[a] - reach) / float(CS))), 0)
+        hi[a] = wp.min(int(wp.floor((x[a] + reach) / float(CS))), shape[a] - 1)
+    return lo, hi
+
+
+@wp.func
+def write_field(t: int, w: float, dw: wp.vec3, gw: wp.vec3, vw: wp.vec3, radius: float, with_v: int,
+                far_vox: float, phi: wp.array(dtype=float), w_out: wp.array(dtype=float),
+                offset: wp.array(dtype=wp.vec3), vel: wp.array(dtype=wp.vec3)):
+    """Voxel t's Zhu-Bridson phi from its gathered sums (w, dw = sum w (x_p - x), gw the
+    weight gradient, vw = sum w v_p): -(x - xbar) . n - radius, n = -gw / |gw|; far_vox
+    where no particle reaches. Also w, the offset x - xbar and the mean velocity."""
+    w_out[t] = w
+    if w <= 0.0:
+        phi[t] = far_vox
+        offset[t] = wp.vec3(0.0)
+        if with_v != 0:
+            vel[t] = wp.vec3(0.0)
+        return
+    d = -dw / w  # x - xbar
+    offset[t] = d
+    dist = wp.length(d)
+    gl = wp.length(gw)
+    if gl > 0.0:
+        dist = -wp.dot(d, gw) / gl  # gw points inward (towards the particles)
+    phi[t] = dist - radius
+    if with_v != 0:
+        vel[t] = vw / w
+
+
 @wp.kernel
 def bounds(x: wp.array(dtype=wp.vec3), threads: int, out: wp.array(dtype=float)):
     """out[0:3] = min, out[3:6] = max of the finite positions, out[6] += count of non-finite
@@ -259,11 +295,7 @@ def gather_zhu_bridson(
     c = voxel_of(t, bcoord)
     x = wp.vec3(float(c[0]), float(c[1]), float(c[2]))
     r2 = reach * reach
-    lo = wp.vec3i(0)
-    hi = wp.vec3i(0)
-    for a in range(3):
-        lo[a] = wp.max(int(wp.floor((x[a] - reach) / float(CS))), 0)
-        hi[a] = wp.min(int(wp.floor((x[a] + reach) / float(CS))), cells.shape[a] - 1)
+    lo, hi = cell_range(x, reach, wp.vec3i(cells.shape[0], cells.shape[1], cells.shape[2]))
     w = float(0.0)
     dw = wp.vec3(0.0)  # sum w * (x_p - x)
     gw = wp.vec3(0.0)  # gradient of w (up to the factor 6 / R^2)
@@ -286,22 +318,7 @@ def gather_zhu_bridson(
                             gw += (u * u) * d
                             if with_v != 0:
                                 vw += wk * v[p]
-    w_out[t] = w
-    if w <= 0.0:
-        phi[t] = far_vox
-        offset[t] = wp.vec3(0.0)
-        if with_v != 0:
-            vel[t] = wp.vec3(0.0)
-        return
-    d = -dw / w  # x - xbar
-    offset[t] = d
-    dist = wp.length(d)
-    gl = wp.length(gw)
-    if gl > 0.0:
-        dist = -wp.dot(d, gw) / gl  # gw points inward (towards the particles)
-    phi[t] = dist - radius_vox
-    if with_v != 0:
-        vel[t] = vw / w
+    write_field(t, w, dw, gw, vw, radius_vox, with_v, far_vox, phi, w_out, offset, vel)
 
 
 @wp.kernel
