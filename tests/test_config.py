@@ -124,3 +124,12 @@ def test_cli_non_finite_exits_2(tiny_shot, tmp_path, capsys):
     from mpmfx.cli import main
     assert main(["run", str(tiny_shot), "--set", "solver.damping=inf", "--cache", str(tmp_path / "c")]) == 2
     assert "solver.damping" in capsys.readouterr().err
+
+
+def test_a_bad_material_override_names_the_shot_file_and_the_object(tiny_shot):
+    """An angle of repose of 50 deg has no friction coefficient under the default fit: the
+    message names the shot file, the object and the limit."""
+    from mpmfx.stages.simulate import materials
+    shot = load_shot_config(tiny_shot, ["objects.0.material=Granular", "objects.0.overrides.friction_angle=50"])
+    with pytest.raises(ShotError, match=rf"{tiny_shot.name}: objects\[0\] .*friction_angle = 50.*must be < 45"):
+        materials(shot)

@@ -53,7 +53,7 @@ def materials(shot: Shot) -> tuple[list, list[int]]:
         try:
             mat = preset(obj.material, **obj.overrides)
         except (ValueError, TypeError) as exc:
-            raise ShotError(f"{shot.base_dir}: objects[{i}] ({obj.name}) material: {exc}") from None
+            raise ShotError(f"{shot.source or shot.base_dir}: objects[{i}] ({obj.name}) material / overrides: {exc}") from None
         if mat not in mats:
             mats.append(mat)
         index.append(mats.index(mat))
