@@ -142,7 +142,9 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
              path: str = "device") -> dict:
     """One scene through advance(). path: "device" (the default stepper), "device-nograph"
     (same, CUDA graphs off), "device-binned" / "device-unbinned" (same, binned P2G forced
-    on / off; by default it is on in deterministic mode only) or "host" (the reference loop and kernels: statistics read every substep)."""
+    on / off; by default it is on in deterministic mode only), "device-binned-sort1" (binned,
+    re-sorted every substep, not once a chunk) or "host" (the reference loop and kernels:
+    statistics read every substep)."""
     import warp as wp
 
     from mpmfx.mpm import Solver, SolverConfig
@@ -150,8 +152,9 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     cfg = SolverConfig(grid_n=grid_n, deterministic=deterministic)
     solver = Solver(mats, cfg, colliders=colliders, device=device, stepper="host" if path == "host" else "device")
     solver._device_advance.graphs = path != "device-nograph"
-    if path == "device-binned":
+    if path.startswith("device-binned"):
         solver._device_advance.binned = not solver.flags.multi_field
+    solver._device_advance.sort_every_substep = path == "device-binned-sort1"
     solver._device_advance.binned &= path != "device-unbinned"
     state = solver.init_state(parts)
     c = max(m.wave_speed() for m in mats)

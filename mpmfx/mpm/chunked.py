@@ -49,6 +49,7 @@ class DeviceAdvance:
         # binned, 7.6 s plain, one core), so there the reference P2G
         self.binned = cfg.deterministic and not solver.flags.multi_field and solver.device.is_cuda
         self._binner = None
+        self.sort_every_substep = False  # the binned P2G re-sorts at chunk starts only (on: for measuring)
         self._graphs: dict = {}
         self._graph_state = None  # the State the cached graphs point into (kept alive with them)
 
@@ -65,7 +66,7 @@ class DeviceAdvance:
                     self.sp, self.clk, k_.times, k_.translations, k_.rotations, k_.offsets, k_.counts,
                     s._colliders_dev])
             s._phases(state, bufs[i % 2], bufs[1 - i % 2], 0.0, device_clock=True,
-                      binned=self._binner if self.binned else None)
+                      binned=self._binner if self.binned else None, resort=i == 0 or self.sort_every_substep)
             wp.launch(self.end, dim=1, device=dev, inputs=[self.sp, self.waves, self.clk, s._sub, s._stats,
                                                              s._counts, self.last_bad])
 
@@ -77,7 +78,8 @@ class DeviceAdvance:
         if self._graph_state is not state:
             self._graphs.clear()
             self._graph_state = state
-        key = (k, id(state.cur), self.s._grid_v.ptr, state.n_fields, self.s._q_mass, self.binned, id(self._binner))
+        key = (k, id(state.cur), self.s._grid_v.ptr, state.n_fields, self.s._q_mass, self.binned, id(self._binner),
+               self.sort_every_substep)
         graph = self._graphs.get(key)
         if graph is None:
             with wp.ScopedCapture(device=self.s.device) as cap:
