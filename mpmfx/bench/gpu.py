@@ -102,15 +102,16 @@ def traffic(solver, state) -> tuple[int, int, int]:
     const = [state.mass, state.volume, state.material, state.body, state.field_id]
     part = _bytes(cur) + _bytes(state.nxt.arrays()) + _bytes(const)
     da = solver._device_advance
-    binned = solver.stepper == "device" and not solver.colliders and da.binned and da._binner is not None
-    if binned:  # the binned P2G's scratch, and what it moves: payload out and in, 4 sort passes
+    binned = solver.stepper == "device" and da.binned and da._binner is not None
+    if binned:  # the binned P2G's scratch, and what it moves: keys, order, payload out and in, runs
+        # (its sort, once a chunk of up to 32 substeps, is left out)
         part += da._binner.nbytes()
     grid_arrays = [solver._grid_m, solver._grid_mv, solver._grid_fixed, solver._grid_v, solver._grid_normal]
     grid = _bytes(grid_arrays)
     acc = _bytes([solver._grid_fixed] if solver.config.deterministic else [solver._grid_m, solver._grid_mv])
     moved = (_bytes(cur) + _bytes(const) - state.body.capacity) + 2 * _bytes(cur) + 3 * acc + 2 * solver._grid_v.capacity
     if binned:
-        moved += 2 * 64 * state.n + 4 * 2 * 16 * state.n + 20 * state.n
+        moved += 2 * 80 * state.n + 3 * 4 * state.n + 2 * 4 * state.n + 20 * state.n
     return part, grid, moved
 
 
@@ -142,7 +143,7 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
              path: str = "device") -> dict:
     """One scene through advance(). path: "device" (the default stepper), "device-nograph"
     (same, CUDA graphs off), "device-binned" / "device-unbinned" (same, binned P2G forced
-    on / off; by default it is on in deterministic mode only), "device-binned-sort1" (binned,
+    on / off; by default it is on, on a GPU), "device-binned-sort1" (binned,
     re-sorted every substep, not once a chunk) or "host" (the reference loop and kernels:
     statistics read every substep)."""
     import warp as wp
@@ -240,7 +241,8 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
             rows.append(safe_case("Mixed", mixed, det, device, copy_gbs, substeps=k, path=path))
     # the levers, back to back in this run: the reference host loop, and no CUDA graphs
     levers = (("Mushy", "host", False), ("Water", "host", False), ("Mushy", "device-nograph", False),
-              ("Mushy", "device-binned", False), ("Mushy", "device-unbinned", True), ("Mushy", "host", True))
+              ("Mushy", "device-unbinned", False), ("Water", "device-unbinned", False),
+              ("Mushy", "device-unbinned", True), ("Mushy", "device-binned-sort1", False), ("Mushy", "host", True))
     for g in sizes:
         for name, path, det in levers:
             if name in MATERIALS:

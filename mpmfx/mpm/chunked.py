@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from .colliders import ColliderKeys, pack_colliders
-from .p2g_binned import BinnedP2G
+from . import p2g_binned
 from .slots import Clock, Count, Status
 from .stepper import CHUNKS, StepperParams, make_clock_kernels, pose_colliders, wave_table, WaveParams
 
@@ -43,13 +43,14 @@ class DeviceAdvance:
         # keyframes on the device: the chunk poses the colliders itself (no host round trip)
         self.keys = ColliderKeys(solver.colliders, solver.device) if solver.colliders else None
         self.graphs = True  # capture chunks in CUDA graphs (off: launch each kernel; for measuring)
-        # binned P2G (p2g_binned.py) where it was measured faster: deterministic mode on a GPU
-        # (1.4-1.5x at 2.4M-19M particles, H100); in fast mode it was not faster, and on the CPU
-        # its per-substep sort costs more than it saves (a 56k-particle water + jelly frame: 9.8 s
-        # binned, 7.6 s plain, one core), so there the reference P2G
-        self.binned = cfg.deterministic and not solver.flags.multi_field and solver.device.is_cuda
+        # binned P2G (p2g_binned.py) on a GPU, where it was measured faster (H100, both modes:
+        # snow 1.03 -> 1.82 G/s at 19M particles, 1.01 -> 1.37 at 2.4M; water 1.16 -> 2.28 and
+        # 1.13 -> 1.65); on the CPU its extra passes cost more than the atomics it saves (37k
+        # particles, one core: water 28.8 -> 46.6 ms a substep), so there the reference P2G
+        self.binned = not solver.flags.multi_field and solver.device.is_cuda
         self._binner = None
         self.sort_every_substep = False  # the binned P2G re-sorts at chunk starts only (on: for measuring)
+        self.brick = p2g_binned.BRICK  # its bins' cells per axis
         self._graphs: dict = {}
         self._graph_state = None  # the State the cached graphs point into (kept alive with them)
 
@@ -122,8 +123,9 @@ class DeviceAdvance:
         s, cfg = self.s, self.s.config
         wall0 = time.perf_counter()
         s._last_bad = None
-        if self.binned and (self._binner is None or self._binner.n != state.n):
-            self._binner = BinnedP2G(s.flags, state.n, s.device)  # before any capture: it allocates
+        if self.binned and (self._binner is None or (self._binner.n, self._binner.brick) != (state.n, self.brick)):
+            # before any capture: it allocates
+            self._binner = p2g_binned.BinnedP2G(s.flags, state.n, s.device, brick=self.brick)
         self._upload(state, t0, t1)
         if self.keys is not None:  # the fields no substep changes (kind, shape, friction, ...)
             s._colliders_dev.assign(pack_colliders(s.colliders, t0, t0, 1.0))

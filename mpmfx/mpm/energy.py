@@ -2,8 +2,11 @@
 
 Each particle adds rest volume * energy density of its elastic state (see
 `constitutive.solid_energy_density` and `tait_energy_density`), so kinetic + elastic
-energy is the quantity an undamped, wall-free scene conserves. Summed in float64: a
-float32 atomic sum over millions of particles loses the small changes QA looks for.
+energy is the quantity an undamped, wall-free scene conserves. Summed in float64 (a
+float32 sum over millions of particles loses the small changes QA looks for) and in a fixed
+order: each thread sums a chunk of particles, then `stepper.sum_partials` sums the chunks.
+A float64 atomic on one address instead serialised the threads (34 ms for 19M particles
+on an H100, once a frame) and made the reported energy differ between replays.
 """
 
 from __future__ import annotations
@@ -22,6 +25,8 @@ from .constitutive import (
 )
 from .state import SceneFlags
 
+ENERGY_CHUNK = 64  # particles per thread: enough threads for the SVDs, few partial sums
+
 
 @functools.lru_cache(maxsize=None)
 def make_energy(flags: SceneFlags):
@@ -35,21 +40,22 @@ def make_energy(flags: SceneFlags):
         material: wp.array(dtype=wp.int32),
         volume: wp.array(dtype=float),
         F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
-        alive: wp.array(dtype=wp.int32),
-        total: wp.array(dtype=wp.float64),
+        alive: wp.array(dtype=wp.int32), n: int,
+        partial: wp.array2d(dtype=wp.float64),
     ):
-        p = wp.tid()
-        if alive[p] == 0:
-            return
-        mat = materials[material[p]]
-        psi = float(0.0)
-        if wp.static(has_solid):
-            if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
-                psi = solid_energy_density(mat, F[p], Jp[p])
-        if wp.static(has_water):
-            if mat.mode == MODE_WATER:
-                psi = tait_energy_density(mat, J[p])
-        if psi != 0.0:
-            wp.atomic_add(total, 0, wp.float64(volume[p] * psi))
+        b = wp.tid()
+        acc = wp.float64(0.0)
+        for p in range(b * ENERGY_CHUNK, wp.min(n, (b + 1) * ENERGY_CHUNK)):
+            if alive[p] != 0:
+                mat = materials[material[p]]
+                psi = float(0.0)
+                if wp.static(has_solid):
+                    if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
+                        psi = solid_energy_density(mat, F[p], Jp[p])
+                if wp.static(has_water):
+                    if mat.mode == MODE_WATER:
+                        psi = tait_energy_density(mat, J[p])
+                acc = acc + wp.float64(volume[p] * psi)
+        partial[b, 0] = acc
 
     return elastic_energy

@@ -24,13 +24,13 @@ from .clear_grid import clear_grid
 from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
 from .constitutive import MaterialParams, pack_material
-from .energy import make_energy
+from .energy import ENERGY_CHUNK, make_energy
 from .g2p import G2PParams, make_g2p
 from .grid_update import GridParams, make_grid_update
 from .materials import Material, Mode
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
 from .chunked import DeviceAdvance
-from .stepper import SubstepDev, report_sums
+from .stepper import SubstepDev, report_sums, sum_partials
 from .slots import REJECTING, Count, Stat
 from .state import ParticleBuffers, SceneFlags, State, StepperClock
 
@@ -141,7 +141,6 @@ class Solver:
             self._sdf = wp.array(concat_sdfs(self.colliders), dtype=float)
             self._colliders_dev = wp.empty(max(1, len(self.colliders)), dtype=ColliderParams)
             self._stats = wp.zeros(len(Stat), dtype=float)
-            self._energy_sum = wp.zeros(1, dtype=wp.float64)
             self._counts = wp.zeros(Count.size(len(self.materials)), dtype=wp.int32)
             self._stats_init = wp.array(np.array(Stat.initial(), np.float32), dtype=float)
             self._sub = wp.zeros(1, dtype=SubstepDev)
@@ -451,12 +450,11 @@ class Solver:
         kinetic energy): sum of rest volume * energy density, with the hardened moduli of
         snow, Hencky StVK for sand, the Tait potential for water, 0 for tracers. One
         reduction kernel; `advance` calls it once per frame for the report."""
-        self._energy_sum.zero_()
         cur = state.cur
-        wp.launch(self._energy, dim=state.n, device=self.device, inputs=[
-            self._materials_dev, state.material, state.volume, cur.F, cur.J, cur.Jp, cur.alive,
-            self._energy_sum])
-        return float(self._energy_sum.numpy()[0])
+        part = wp.empty(((state.n + ENERGY_CHUNK - 1) // ENERGY_CHUNK, 1), dtype=wp.float64, device=self.device)
+        wp.launch(self._energy, dim=part.shape[0], device=self.device, inputs=[
+            self._materials_dev, state.material, state.volume, cur.F, cur.J, cur.Jp, cur.alive, state.n, part])
+        return float(sum_partials(part, self.device)[0])
 
     # ------------------------------------------------------------------ I/O
     def state_to_numpy(self, state: State) -> dict[str, np.ndarray]:

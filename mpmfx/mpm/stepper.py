@@ -31,7 +31,7 @@ from .materials import Mode
 from .slots import REJECTING, Clock, Count, Stat, Status
 
 __all__ = ["SubstepDev", "StepperParams", "WaveParams", "make_clock_kernels", "pose_colliders", "report_sums",
-           "CHUNKS"]
+           "CHUNKS", "sum_partials", "REPORT_CHUNK"]
 
 CHUNKS = (1, 2, 4, 8, 16, 32)  # substeps per chunk: each length is one captured graph
 REJECT_MASK = wp.constant(sum(1 << int(c) for c in REJECTING))  # counters that reject a substep
@@ -249,13 +249,24 @@ def _report_partials(v: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float), al
 
 @wp.kernel(enable_backward=False)
 def _sum_rows(src: wp.array2d(dtype=wp.float64), rows: int, out: wp.array2d(dtype=wp.float64)):
-    b = wp.tid()
-    acc = wp.vector(length=5, dtype=wp.float64)
+    """out[b, c] = src[b * REPORT_CHUNK : (b + 1) * REPORT_CHUNK, c] summed in order."""
+    b, c = wp.tid()
+    acc = wp.float64(0.0)
     for r in range(b * REPORT_CHUNK, wp.min(rows, (b + 1) * REPORT_CHUNK)):
-        for c in range(5):
-            acc[c] = acc[c] + src[r, c]
-    for c in range(5):
-        out[b, c] = acc[c]
+        acc = acc + src[r, c]
+    out[b, c] = acc
+
+
+def sum_partials(part, device) -> np.ndarray:
+    """Column sums of a (rows, columns) float64 device array of partial sums, in a fixed
+    order (replays give the same bits); only the last few rows come to the host."""
+    rows, cols = part.shape
+    while rows > REPORT_CHUNK:
+        nxt = (rows + REPORT_CHUNK - 1) // REPORT_CHUNK
+        out = wp.empty((nxt, cols), dtype=wp.float64, device=device)
+        wp.launch(_sum_rows, dim=(nxt, cols), device=device, inputs=[part, rows, out])
+        part, rows = out, nxt
+    return part.numpy().sum(axis=0)
 
 
 def report_sums(state, device) -> tuple[float, np.ndarray, float]:
@@ -264,10 +275,5 @@ def report_sums(state, device) -> tuple[float, np.ndarray, float]:
     rows = (state.n + REPORT_CHUNK - 1) // REPORT_CHUNK
     part = wp.empty((rows, 5), dtype=wp.float64, device=device)
     wp.launch(_report_partials, dim=rows, device=device, inputs=[state.cur.v, state.mass, state.cur.alive, state.n, part])
-    while rows > REPORT_CHUNK:
-        nxt = (rows + REPORT_CHUNK - 1) // REPORT_CHUNK
-        out = wp.empty((nxt, 5), dtype=wp.float64, device=device)
-        wp.launch(_sum_rows, dim=nxt, device=device, inputs=[part, rows, out])
-        part, rows = out, nxt
-    s = part.numpy().sum(axis=0)
+    s = sum_partials(part, device)
     return float(s[0]), s[1:4].copy(), float(0.5 * s[4])
