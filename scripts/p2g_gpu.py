@@ -14,7 +14,6 @@ import warp as wp
 
 from mpmfx.bench.gpu import COLS, copy_bandwidth, safe_case, scene
 from mpmfx.bench.report import print_table
-import mpmfx.mpm.p2g_binned as p2g_binned
 from mpmfx.mpm import Solver, SolverConfig, preset
 
 OUT = os.environ.get("OUT", "renders/bench")
@@ -26,29 +25,27 @@ def agreement(grid_n=32, frames=6):
     for name in ("Mushy", "Water"):
         for det in (True, False):
             res = []
-            for binned, brick in ((False, 1), (True, 1), (True, 2)):
+            for binned in (False, True):
                 mats, parts, _ = scene(name, grid_n)
                 s = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=det), device="cuda", stepper="device")
-                s._device_advance.binned, s._device_advance.brick = binned, brick
+                s._device_advance.binned = binned
                 st = s.init_state(parts)
                 subs = sum(s.advance(st, f / 24, (f + 1) / 24).substeps for f in range(frames))
                 res.append((s.state_to_numpy(st), subs))
-            (a, na) = res[0]
-            for brick, (b, nb) in ((1, res[1]), (2, res[2])):
-                rows.append({"scene": name, "det": int(det), "brick": brick, "substeps_ref": na, "substeps_binned": nb,
-                             "max_dx": float(np.abs(a["x"] - b["x"]).max()),
-                             "max_dv": float(np.abs(a["v"] - b["v"]).max()),
-                             "max_dF": float(np.abs(a["F"] - b["F"]).max()) if "F" in a else 0.0})
+            (a, na), (b, nb) = res
+            rows.append({"scene": name, "det": int(det), "substeps_ref": na, "substeps_binned": nb,
+                         "max_dx": float(np.abs(a["x"] - b["x"]).max()), "max_dv": float(np.abs(a["v"] - b["v"]).max()),
+                         "max_dF": float(np.abs(a["F"] - b["F"]).max()) if "F" in a else 0.0})
     print_table(rows, list(rows[0]))
     return rows
 
 
-def kernels(name, grid_n, det, binned, sort1=False, brick=1):
+def kernels(name, grid_n, det, binned, sort1=False):
     """Device ms per substep of each P2G kernel over one advance (graphs off)."""
     mats, parts, _ = scene(name, grid_n)
     s = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=det), device="cuda", stepper="device")
     da = s._device_advance
-    da.binned, da.sort_every_substep, da.graphs, da.brick = binned, sort1, False, brick
+    da.binned, da.sort_every_substep, da.graphs = binned, sort1, False
     st = s.init_state(parts)
     span = 32 * s.config.cfl * s.config.dx / max(m.wave_speed() for m in mats)
     s.advance(st, 0.0, span)
@@ -61,7 +58,7 @@ def kernels(name, grid_n, det, binned, sort1=False, brick=1):
     for r in res:
         nm = r.name.split("(")[0].split(" ")[-1][:40]
         ms[nm] = ms.get(nm, 0.0) + r.elapsed / k
-    row = {"scene": name, "grid_n": grid_n, "det": int(det), "binned": int(binned), "brick": brick, "sort1": int(sort1),
+    row = {"scene": name, "grid_n": grid_n, "det": int(det), "binned": int(binned), "sort1": int(sort1),
            "substeps": k, "n": st.n}
     row.update({kk: round(v, 3) for kk, v in sorted(ms.items(), key=lambda kv: -kv[1])[:12]})
     print(json.dumps(row), flush=True)
@@ -81,19 +78,15 @@ def main():
         for name in ("Mushy", "Water"):
             ks.append(kernels(name, g, False, False))
             ks.append(kernels(name, g, False, True))
-            ks.append(kernels(name, g, False, True, brick=2))
     print(f"kernels {time.time() - t0:.0f} s", flush=True)
     bw = copy_bandwidth(None)
     rows = []
     for g in grids:
         for name in ("Mushy", "Water"):
-            for det, path, brick in ((False, "device-binned", 1), (False, "device-binned", 2),
-                                     (True, "device-binned", 1), (True, "device-binned", 2)):
-                p2g_binned.BRICK = brick
+            for det, path in ((False, "device-unbinned"), (False, "device-binned"), (False, "device-binned-sort1"),
+                              (True, "device-unbinned"), (True, "device-binned")):
                 rows.append(safe_case(name, g, det, None, bw, substeps=50, path=path))
-                rows[-1]["path"] += f"-brick{brick}"
                 print_table(rows[-1:], COLS)
-    p2g_binned.BRICK = 1
     print_table(rows, COLS)
     print(f"total {time.time() - t0:.0f} s", flush=True)
     with open(os.path.join(OUT, "p2g_gpu.json"), "w") as f:

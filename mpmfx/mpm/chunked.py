@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from .colliders import ColliderKeys, pack_colliders
-from . import p2g_binned
+from .p2g_binned import BinnedP2G
 from .slots import Clock, Count, Status
 from .stepper import CHUNKS, StepperParams, make_clock_kernels, pose_colliders, wave_table, WaveParams
 
@@ -50,7 +50,6 @@ class DeviceAdvance:
         self.binned = not solver.flags.multi_field and solver.device.is_cuda
         self._binner = None
         self.sort_every_substep = False  # the binned P2G re-sorts at chunk starts only (on: for measuring)
-        self.brick = p2g_binned.BRICK  # its bins' cells per axis
         self._graphs: dict = {}
         self._graph_state = None  # the State the cached graphs point into (kept alive with them)
 
@@ -123,9 +122,8 @@ class DeviceAdvance:
         s, cfg = self.s, self.s.config
         wall0 = time.perf_counter()
         s._last_bad = None
-        if self.binned and (self._binner is None or (self._binner.n, self._binner.brick) != (state.n, self.brick)):
-            # before any capture: it allocates
-            self._binner = p2g_binned.BinnedP2G(s.flags, state.n, s.device, brick=self.brick)
+        if self.binned and (self._binner is None or self._binner.n != state.n):
+            self._binner = BinnedP2G(s.flags, state.n, s.device)  # before any capture: it allocates
         self._upload(state, t0, t1)
         if self.keys is not None:  # the fields no substep changes (kind, shape, friction, ...)
             s._colliders_dev.assign(pack_colliders(s.colliders, t0, t0, 1.0))
