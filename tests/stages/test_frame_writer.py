@@ -1,0 +1,50 @@
+"""The simulate stage writes frames on a background thread (`FrameWriter`): in order, one at
+a time, a failed write reported (not lost), and a frame simulated before an error still
+written."""
+
+import threading
+import time
+
+import pytest
+
+from mpmfx.stages.simulate import FrameWriter
+
+
+def test_jobs_run_in_order_off_the_main_thread():
+    done, threads = [], set()
+
+    def job(i):
+        time.sleep(0.02 * (3 - i))  # a later job would overtake an earlier one if they overlapped
+        done.append(i)
+        threads.add(threading.current_thread().name)
+
+    with FrameWriter() as w:
+        for i in range(3):
+            w.submit(job, i)
+    assert done == [0, 1, 2]
+    assert threading.current_thread().name not in threads
+
+
+def test_a_failed_write_is_raised_at_the_next_frame():
+    def fail():
+        raise OSError("No space left on device: frames/0003.npz")
+
+    with pytest.raises(OSError, match="0003.npz"):
+        with FrameWriter() as w:
+            w.submit(fail)
+            w.submit(lambda: None)  # the next frame's files: the failure surfaces here
+
+
+def test_a_failed_write_is_raised_on_leaving():
+    with pytest.raises(OSError, match="0005.npz"):
+        with FrameWriter() as w:
+            w.submit(lambda: (_ for _ in ()).throw(OSError("frames/0005.npz")))
+
+
+def test_the_pending_frame_is_written_when_the_simulation_fails():
+    written = []
+    with pytest.raises(RuntimeError, match="frame 4 blew up"):
+        with FrameWriter() as w:
+            w.submit(lambda: (time.sleep(0.1), written.append(3)))
+            raise RuntimeError("frame 4 blew up")
+    assert written == [3]
