@@ -124,6 +124,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=os.environ.get("OUT", "hero_out"))
     ap.add_argument("--budget-s", type=float, default=330.0,
                     help="start no further shot after this many seconds (the device call's limit is 600 s)")
+    ap.add_argument("--pack", action=argparse.BooleanOptionalAction, default=True,
+                    help="bring the stills' surfaces back (off: times only)")
     ap.add_argument("--warmup", action=argparse.BooleanOptionalAction, default=None,
                     help="a small first run that compiles the kernels (default: on, off with --smoke)")
     args = ap.parse_args(argv)
@@ -164,9 +166,10 @@ def main(argv=None) -> int:
         row = run_shot(name, frames, overrides=over, cache=cache, device=args.device)
         print(f"{name}: {row['stages']}", flush=True)
         rows.append(row)
-        _pack_into(row, 0, out, budget)  # its README still at once
+        if args.pack:
+            _pack_into(row, 0, out, budget)  # its README still at once
         save()
-    for row in rows:  # then the second frames, while the return budget lasts
+    for row in rows if args.pack else ():  # then the second frames, while the return budget lasts
         for rank in range(1, len(row["frames_surfaced"])):
             _pack_into(row, rank, out, budget)
     pack_dir = out / ".pack"
