@@ -107,12 +107,12 @@ def run(ctx: Context) -> dict:
             state, frame = solver.init_state(parts), start
             qa0 = _qa(solver.advance(state, 0.0, 0.0), size)  # a zero-length advance: the initial observables
             qa0["max_speed"] = float(np.linalg.norm(p.v, axis=1).max())  # m/s; no substep measured it
-            writer.submit(_write_frame, entry, frame, qa0, None, _frame(solver, state, frame, origin, size))
+            writer.submit(_write_frame, entry, frame, qa0, None, _host(solver, state), origin, size)
         else:
             frame = ckpt
             state, _ = solver.restore(read_arrays(entry.root / "checkpoints" / f"{ckpt:04d}.npz"))
             if not entry.frame_path(frame, FRAME_EXT).exists():  # killed between checkpoint and frame
-                writer.submit(_write_frame, entry, frame, None, None, _frame(solver, state, frame, origin, size))
+                writer.submit(_write_frame, entry, frame, None, None, _host(solver, state), origin, size)
         for f in ctx.progress(range(frame + 1, last + 1), total=last - frame, desc="simulate"):
             try:
                 report = solver.advance(state, (f - 1 - start) / fps, (f - start) / fps)
@@ -121,7 +121,7 @@ def run(ctx: Context) -> dict:
             ckpt_data = None
             if (f - start) % shot.solver.checkpoint_every == 0 or f == last:
                 ckpt_data = _host_copy(solver.checkpoint(state, (f - start) / fps), solver)
-            writer.submit(_write_frame, entry, f, _qa(report, size), ckpt_data, _frame(solver, state, f, origin, size))
+            writer.submit(_write_frame, entry, f, _qa(report, size), ckpt_data, _host(solver, state), origin, size)
     qa = {int(p.stem): json.loads(p.read_text()) for p in sorted((entry.root / "qa").glob("*.json"))}
     return {"qa": qa, "particles": int(state.n), "device": str(solver.device),
             "materials": [m.mode.name for m in mats]}
@@ -144,9 +144,19 @@ def _advice(shot: Shot, exc) -> str:
     return str(exc)
 
 
-def _frame(solver, state, frame: int, origin, size: float) -> ParticleFrame:
-    """The frame's particle record (a host copy, world units) of the live particles."""
-    s = solver.state_to_numpy(state)
+def _host(solver, state) -> dict:
+    """The particles' host copy for the frame file (the rest of its making is the writer's)."""
+    return _host_copy(solver.state_to_numpy(state), solver)
+
+
+def _host_copy(arrays: dict, solver) -> dict:
+    """On the CPU device `numpy()` views the solver's memory, which the next frame overwrites
+    while the writer thread is still busy: copy it (on a GPU it is a fresh host copy already)."""
+    return {k: np.array(a) for k, a in arrays.items()} if solver.device.is_cpu else arrays
+
+
+def _particles(s: dict, frame: int, origin, size: float) -> ParticleFrame:
+    """The frame's particle record (world units) of the live particles of a host copy."""
     alive = s.get("alive", np.ones(len(s["x"]), bool)).astype(bool)
     out = ParticleFrame(x=(s["x"][alive] * size + origin).astype(np.float32),
                         v=(s["v"][alive] * size).astype(np.float32), id=np.flatnonzero(alive).astype(np.int32),
@@ -158,15 +168,12 @@ def _frame(solver, state, frame: int, origin, size: float) -> ParticleFrame:
     return out
 
 
-def _host_copy(arrays: dict, solver) -> dict:
-    """On the CPU device `numpy()` views the solver's memory, which the next frame overwrites
-    while the writer thread is still busy: copy it (on a GPU it is a fresh host copy already)."""
-    return {k: np.array(a) for k, a in arrays.items()} if solver.device.is_cpu else arrays
-
-
-def _write_frame(entry, frame: int, qa: dict | None, checkpoint: dict | None, particles: ParticleFrame) -> None:
-    """One frame's files in the order resuming relies on: QA and checkpoint before the frame
-    file, so a complete frame always has its resume point."""
+def _write_frame(entry, frame: int, qa: dict | None, checkpoint: dict | None, state: dict, origin,
+                 size: float) -> None:
+    """One frame's files from its host copies, in the order resuming relies on: QA and
+    checkpoint before the frame file (a complete frame always has its resume point), and
+    none of them if the particles are not finite."""
+    particles = _particles(state, frame, origin, size)
     if qa is not None:
         write_json(entry.root / "qa" / f"{frame:04d}.json", qa)
     if checkpoint is not None:

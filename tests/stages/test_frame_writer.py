@@ -48,3 +48,29 @@ def test_the_pending_frame_is_written_when_the_simulation_fails():
             w.submit(lambda: (time.sleep(0.1), written.append(3)))
             raise RuntimeError("frame 4 blew up")
     assert written == [3]
+
+
+def test_a_non_finite_frame_writes_nothing(tmp_path):
+    import numpy as np
+
+    from mpmfx.stages.base import StageError
+    from mpmfx.stages.simulate import _write_frame
+
+    class Entry:
+        root = tmp_path
+
+        @staticmethod
+        def frame_path(frame, ext):
+            return tmp_path / "frames" / f"{frame:04d}.{ext}"
+
+    n = 4
+    state = {"x": np.full((n, 3), 0.5, np.float32), "v": np.zeros((n, 3), np.float32), "alive": np.ones(n, np.int32),
+             "material": np.zeros(n, np.int32), "body": np.zeros(n, np.int32)}
+    state["v"][2, 1] = np.nan
+    with pytest.raises(StageError, match="frame 7: the solver returned non-finite values"):
+        _write_frame(Entry, 7, {"substeps": 3}, {"x": state["x"]}, state, np.zeros(3), 2.0)
+    assert not any(tmp_path.rglob("*.*"))  # no QA, no checkpoint (a NaN resume point), no frame
+    state["v"][2, 1] = 0.0
+    _write_frame(Entry, 7, {"substeps": 3}, {"x": state["x"]}, state, np.zeros(3), 2.0)
+    assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.*")) == [
+        "checkpoints/0007.npz", "frames/0007.npz", "qa/0007.json"]
