@@ -50,6 +50,7 @@ from .stepper import SubstepDev
 __all__ = ["BinnedP2G"]
 
 NO_KEY = wp.constant(0x7FFFFFFF)  # tracers and removed particles: sorted last, never scattered
+ROW_MAJOR = True  # the scatter's thread layout (see make_binned)
 ROWS = 9  # threads per run: one per (i, j) row of the 3x3x3 stencil
 SCATTER_THREADS = 1 << 22  # the scatter's grid-stride width at most: the run count is known on the device only
 vec12l = wp.types.vector(length=12, dtype=wp.int64)  # deterministic sums of a row: node k, channel c at 4 k + c
@@ -90,11 +91,13 @@ def _starts(flag: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.int32), n: in
 
 
 @functools.lru_cache(maxsize=None)
-def make_binned(flags: SceneFlags):
-    """(payload, scatter) kernels for the scene's materials."""
+def make_binned(flags: SceneFlags, row_major: bool = True):
+    """(payload, scatter) kernels for the scene's materials. row_major: consecutive scatter
+    threads take the same stencil row of consecutive runs (their atomics land on consecutive
+    nodes), else the nine rows of one run."""
     particle_affine = make_particle_affine(flags)
 
-    @wp.kernel(enable_backward=False, module=flags.key + "_bin")
+    @wp.kernel(enable_backward=False, module=flags.key + ("_binr" if row_major else "_bin"))
     def payload(pp: P2GParams, keys: wp.array(dtype=wp.int32), idx: wp.array(dtype=wp.int32),
                 x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
                 F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
@@ -124,7 +127,7 @@ def make_binned(flags: SceneFlags):
         b = base_node(x[p], pp.inv_dx)
         px[s] = xg - wp.vec3(float(b[0]), float(b[1]), float(b[2]))
 
-    @wp.kernel(enable_backward=False, module=flags.key + "_bin")
+    @wp.kernel(enable_backward=False, module=flags.key + ("_binr" if row_major else "_bin"))
     def scatter(pp: P2GParams, keys: wp.array(dtype=wp.int32), start: wp.array(dtype=wp.int32),
                 n_runs: wp.array(dtype=wp.int32), n: int, stride: int, px: wp.array(dtype=wp.vec3), pm: wp.array(dtype=float),
                 pmv: wp.array(dtype=wp.vec3), paff: wp.array(dtype=wp.mat33),
@@ -135,10 +138,15 @@ def make_binned(flags: SceneFlags):
             return
         nn = pp.nodes
         dx = 1.0 / pp.inv_dx
-        for item in range(t, n_runs[0] * ROWS, stride):
+        runs = n_runs[0]
+        for item in range(t, runs * ROWS, stride):
             r = item // ROWS
-            i = (item % ROWS) // 3
-            j = item % 3
+            row = item % ROWS
+            if wp.static(row_major):
+                r = item % runs
+                row = item // runs
+            i = row // 3
+            j = row % 3
             s0 = start[r]
             key = keys[s0]
             bk = key % nn
@@ -196,7 +204,7 @@ class BinnedP2G:
 
     def __init__(self, flags: SceneFlags, n: int, device):
         self.n, self.device = n, device
-        self.payload, self.scatter = make_binned(flags)
+        self.payload, self.scatter = make_binned(flags, ROW_MAJOR)
         with wp.ScopedDevice(device):
             self.keys = wp.empty(2 * n, dtype=wp.int32)  # radix_sort_pairs sorts in double buffers
             self.idx = wp.array(np.tile(np.arange(n, dtype=np.int32), 2))  # slot -> particle
