@@ -14,7 +14,6 @@ import warp as wp
 
 from mpmfx.bench.gpu import COLS, copy_bandwidth, safe_case, scene
 from mpmfx.bench.report import print_table
-import mpmfx.mpm.p2g_binned as p2g_binned
 from mpmfx.mpm import Solver, SolverConfig, preset
 
 OUT = os.environ.get("OUT", "renders/bench")
@@ -26,26 +25,22 @@ def agreement(grid_n=32, frames=6):
     for name in ("Mushy", "Water"):
         for det in (True, False):
             res = []
-            for binned, row_major in ((False, True), (True, False), (True, True)):
-                p2g_binned.ROW_MAJOR = row_major
+            for binned in (False, True):
                 mats, parts, _ = scene(name, grid_n)
                 s = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=det), device="cuda", stepper="device")
                 s._device_advance.binned = binned
                 st = s.init_state(parts)
                 subs = sum(s.advance(st, f / 24, (f + 1) / 24).substeps for f in range(frames))
                 res.append((s.state_to_numpy(st), subs))
-            (a, na) = res[0]
-            for row_major, (b, nb) in ((False, res[1]), (True, res[2])):
-                rows.append({"scene": name, "det": int(det), "row_major": int(row_major), "substeps_ref": na,
-                             "substeps_binned": nb, "max_dx": float(np.abs(a["x"] - b["x"]).max()),
-                             "max_dv": float(np.abs(a["v"] - b["v"]).max()),
-                             "max_dF": float(np.abs(a["F"] - b["F"]).max()) if "F" in a else 0.0})
+            (a, na), (b, nb) = res
+            rows.append({"scene": name, "det": int(det), "substeps_ref": na, "substeps_binned": nb,
+                         "max_dx": float(np.abs(a["x"] - b["x"]).max()), "max_dv": float(np.abs(a["v"] - b["v"]).max()),
+                         "max_dF": float(np.abs(a["F"] - b["F"]).max()) if "F" in a else 0.0})
     print_table(rows, list(rows[0]))
     return rows
 
 
-def kernels(name, grid_n, det, binned, sort1=False, row_major=True):
-    p2g_binned.ROW_MAJOR = row_major
+def kernels(name, grid_n, det, binned, sort1=False):
     """Device ms per substep of each P2G kernel over one advance (graphs off)."""
     mats, parts, _ = scene(name, grid_n)
     s = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=det), device="cuda", stepper="device")
@@ -63,7 +58,7 @@ def kernels(name, grid_n, det, binned, sort1=False, row_major=True):
     for r in res:
         nm = r.name.split("(")[0].split(" ")[-1][:40]
         ms[nm] = ms.get(nm, 0.0) + r.elapsed / k
-    row = {"scene": name, "grid_n": grid_n, "det": int(det), "binned": int(binned), "row_major": int(row_major),
+    row = {"scene": name, "grid_n": grid_n, "det": int(det), "binned": int(binned), "sort1": int(sort1),
            "substeps": k, "n": st.n}
     row.update({kk: round(v, 3) for kk, v in sorted(ms.items(), key=lambda kv: -kv[1])[:12]})
     print(json.dumps(row), flush=True)
@@ -81,17 +76,16 @@ def main():
     ks = []
     for g in grids:
         for name in ("Mushy", "Water"):
-            ks.append(kernels(name, g, False, True, row_major=False))
-            ks.append(kernels(name, g, False, True, row_major=True))
+            ks.append(kernels(name, g, False, False))
+            ks.append(kernels(name, g, False, True))
     print(f"kernels {time.time() - t0:.0f} s", flush=True)
     bw = copy_bandwidth(None)
     rows = []
     for g in grids:
         for name in ("Mushy", "Water"):
-            for det, row_major in ((False, False), (False, True), (True, False), (True, True)):
-                p2g_binned.ROW_MAJOR = row_major
-                rows.append(safe_case(name, g, det, None, bw, substeps=50, path="device"))
-                rows[-1]["path"] += "-rowmajor" if row_major else "-runmajor"
+            for det, path in ((False, "device-unbinned"), (False, "device-binned"), (False, "device-binned-sort1"),
+                              (True, "device-unbinned"), (True, "device-binned")):
+                rows.append(safe_case(name, g, det, None, bw, substeps=50, path=path))
                 print_table(rows[-1:], COLS)
     print_table(rows, COLS)
     print(f"total {time.time() - t0:.0f} s", flush=True)

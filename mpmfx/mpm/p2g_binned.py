@@ -21,7 +21,9 @@ Measured on an H100 (19M particles, snow, fast mode): P2G 15.1 -> 6.8 ms a subst
 4.2, payload 1.6, keys 0.3, the scan and the sort once a chunk ~0.6). Also measured and
 dropped: re-sorting every substep (10.6 -> 11.4 ms a substep), bins of 2^3 cells sharing a
 4^3-node stencil (fewer atomics, but 2.4x the weight evaluations: scatter 4.9 -> 5.9 ms),
-and one thread per run looping over the 27 nodes (no faster than the reference's atomics).
+consecutive threads taking one stencil row of consecutive runs, so that a warp's atomics land
+on consecutive nodes (scatter 4.2 -> 6.6 ms), and one thread per run looping over the 27
+nodes (no faster than the reference's atomics).
 
 Deterministic mode: each contribution is rounded to fixed point exactly as in the
 reference before it is summed (integers, so neither the order nor the runs matter), so the
@@ -50,7 +52,6 @@ from .stepper import SubstepDev
 __all__ = ["BinnedP2G"]
 
 NO_KEY = wp.constant(0x7FFFFFFF)  # tracers and removed particles: sorted last, never scattered
-ROW_MAJOR = True  # the scatter's thread layout (see make_binned)
 ROWS = 9  # threads per run: one per (i, j) row of the 3x3x3 stencil
 SCATTER_THREADS = 1 << 22  # the scatter's grid-stride width at most: the run count is known on the device only
 vec12l = wp.types.vector(length=12, dtype=wp.int64)  # deterministic sums of a row: node k, channel c at 4 k + c
@@ -91,13 +92,11 @@ def _starts(flag: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.int32), n: in
 
 
 @functools.lru_cache(maxsize=None)
-def make_binned(flags: SceneFlags, row_major: bool = True):
-    """(payload, scatter) kernels for the scene's materials. row_major: consecutive scatter
-    threads take the same stencil row of consecutive runs (their atomics land on consecutive
-    nodes), else the nine rows of one run."""
+def make_binned(flags: SceneFlags):
+    """(payload, scatter) kernels for the scene's materials."""
     particle_affine = make_particle_affine(flags)
 
-    @wp.kernel(enable_backward=False, module=flags.key + ("_binr" if row_major else "_bin"))
+    @wp.kernel(enable_backward=False, module=flags.key + "_bin")
     def payload(pp: P2GParams, keys: wp.array(dtype=wp.int32), idx: wp.array(dtype=wp.int32),
                 x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
                 F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
@@ -127,7 +126,7 @@ def make_binned(flags: SceneFlags, row_major: bool = True):
         b = base_node(x[p], pp.inv_dx)
         px[s] = xg - wp.vec3(float(b[0]), float(b[1]), float(b[2]))
 
-    @wp.kernel(enable_backward=False, module=flags.key + ("_binr" if row_major else "_bin"))
+    @wp.kernel(enable_backward=False, module=flags.key + "_bin")
     def scatter(pp: P2GParams, keys: wp.array(dtype=wp.int32), start: wp.array(dtype=wp.int32),
                 n_runs: wp.array(dtype=wp.int32), n: int, stride: int, px: wp.array(dtype=wp.vec3), pm: wp.array(dtype=float),
                 pmv: wp.array(dtype=wp.vec3), paff: wp.array(dtype=wp.mat33),
@@ -138,15 +137,10 @@ def make_binned(flags: SceneFlags, row_major: bool = True):
             return
         nn = pp.nodes
         dx = 1.0 / pp.inv_dx
-        runs = n_runs[0]
-        for item in range(t, runs * ROWS, stride):
+        for item in range(t, n_runs[0] * ROWS, stride):
             r = item // ROWS
-            row = item % ROWS
-            if wp.static(row_major):
-                r = item % runs
-                row = item // runs
-            i = row // 3
-            j = row % 3
+            i = (item % ROWS) // 3
+            j = item % 3
             s0 = start[r]
             key = keys[s0]
             bk = key % nn
@@ -204,7 +198,7 @@ class BinnedP2G:
 
     def __init__(self, flags: SceneFlags, n: int, device):
         self.n, self.device = n, device
-        self.payload, self.scatter = make_binned(flags, ROW_MAJOR)
+        self.payload, self.scatter = make_binned(flags)
         with wp.ScopedDevice(device):
             self.keys = wp.empty(2 * n, dtype=wp.int32)  # radix_sort_pairs sorts in double buffers
             self.idx = wp.array(np.tile(np.arange(n, dtype=np.int32), 2))  # slot -> particle
