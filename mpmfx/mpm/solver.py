@@ -461,21 +461,35 @@ class Solver:
         """Host copy: x (n,3), v (n,3), C (n,3,3), F (n,3,3) if any solid, J (n,) (det F for
         solids, J for water, 1 for tracers), Jp (n,), mass, volume (n,), material, body,
         alive (n,) int32."""
-        cur = state.cur
-        out = {"x": cur.x.numpy(), "v": cur.v.numpy(), "C": cur.C.numpy(), "Jp": cur.Jp.numpy(),
-               "alive": cur.alive.numpy(), "mass": state.mass.numpy(), "volume": state.volume.numpy(),
-               "material": state.material.numpy(), "body": state.body.numpy()}
-        J = np.ones(state.n, np.float32)
-        if self.flags.solid:
-            out["F"] = cur.F.numpy()
-            J = np.linalg.det(out["F"]).astype(np.float32)
-        if self.flags.water:
-            Jw = cur.J.numpy()
-            water = np.array([m.mode == Mode.WATER for m in self.materials])[out["material"]]
-            J = np.where(water, Jw, J)
-        tracer = np.array([m.mode == Mode.TRACER for m in self.materials])[out["material"]]
-        out["J"] = np.where(tracer, 1.0, J).astype(np.float32)
+        out = self.host_arrays(state)
+        out["J"] = self.volume_ratio(out)
         return out
+
+    def host_arrays(self, state: State, names=None) -> dict[str, np.ndarray]:
+        """Host copies of the particle arrays as the solver stores them (`names`: a subset):
+        x, v, C, Jp, alive, mass, volume, material, body, F (if any solid) and J (water's
+        volume ratio, if any water; other particles' entries unused). `volume_ratio` turns
+        them into every particle's J."""
+        cur = state.cur
+        arrays = {"x": cur.x, "v": cur.v, "C": cur.C, "Jp": cur.Jp, "alive": cur.alive, "mass": state.mass,
+                  "volume": state.volume, "material": state.material, "body": state.body}
+        if self.flags.solid:
+            arrays["F"] = cur.F
+        if self.flags.water:
+            arrays["J"] = cur.J
+        return {k: a.numpy() for k, a in arrays.items() if names is None or k in names}
+
+    def volume_ratio(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
+        """J (n,) float32 from `host_arrays` (material, F, J): det F for solids, J for water,
+        1 for tracers. Host work only: safe on another thread."""
+        J = np.ones(len(arrays["material"]), np.float32)
+        if self.flags.solid:
+            J = np.linalg.det(arrays["F"]).astype(np.float32)
+        if self.flags.water:
+            water = np.array([m.mode == Mode.WATER for m in self.materials])[arrays["material"]]
+            J = np.where(water, arrays["J"], J)
+        tracer = np.array([m.mode == Mode.TRACER for m in self.materials])[arrays["material"]]
+        return np.where(tracer, 1.0, J).astype(np.float32)
 
     def checkpoint(self, state: State, t: float) -> dict[str, np.ndarray]:
         """Full state + stepper clock, as numpy arrays; `restore` resumes bit-identically."""

@@ -144,9 +144,13 @@ def _advice(shot: Shot, exc) -> str:
     return str(exc)
 
 
-def _host(solver, state) -> dict:
-    """The particles' host copy for the frame file (the rest of its making is the writer's)."""
-    return _host_copy(solver.state_to_numpy(state), solver)
+FRAME_ARRAYS = ("x", "v", "Jp", "alive", "material", "body", "F", "J")  # what a frame file is made of
+
+
+def _host(solver, state) -> tuple:
+    """The particles' host copy for the frame file; the rest of its making (J, masks, checks)
+    is the writer thread's."""
+    return solver, _host_copy(solver.host_arrays(state, FRAME_ARRAYS), solver)
 
 
 def _host_copy(arrays: dict, solver) -> dict:
@@ -155,9 +159,11 @@ def _host_copy(arrays: dict, solver) -> dict:
     return {k: np.array(a) for k, a in arrays.items()} if solver.device.is_cpu else arrays
 
 
-def _particles(s: dict, frame: int, origin, size: float) -> ParticleFrame:
+def _particles(host: tuple, frame: int, origin, size: float) -> ParticleFrame:
     """The frame's particle record (world units) of the live particles of a host copy."""
-    alive = s.get("alive", np.ones(len(s["x"]), bool)).astype(bool)
+    solver, s = host
+    s = {**s, "J": solver.volume_ratio(s)}
+    alive = s["alive"].astype(bool)
     out = ParticleFrame(x=(s["x"][alive] * size + origin).astype(np.float32),
                         v=(s["v"][alive] * size).astype(np.float32), id=np.flatnonzero(alive).astype(np.int32),
                         material=s["material"][alive].astype(np.int32), body=s["body"][alive].astype(np.int32),
@@ -168,7 +174,7 @@ def _particles(s: dict, frame: int, origin, size: float) -> ParticleFrame:
     return out
 
 
-def _write_frame(entry, frame: int, qa: dict | None, checkpoint: dict | None, state: dict, origin,
+def _write_frame(entry, frame: int, qa: dict | None, checkpoint: dict | None, state: tuple, origin,
                  size: float) -> None:
     """One frame's files from its host copies, in the order resuming relies on: QA and
     checkpoint before the frame file (a complete frame always has its resume point), and
