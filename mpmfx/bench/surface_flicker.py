@@ -8,7 +8,8 @@ out, a surfacer that follows the body leaves a mesh that stands still; what move
 - normal jitter: distance of each vertex of frame k, moved back, to the surface of frame k - 1
   (its closest point; a re-triangulation of the same surface reads 0), mean and p99 in h;
 - normal turn: angle between the vertex normal and frame k - 1's smooth-shading normal at that
-  closest point (degrees): what moves a highlight;
+  closest point (degrees): what moves a highlight; on the faces, and apart on the box's edges
+  (within EDGE_BAND h of two faces), where a random sample is roughest;
 - area and volume change between consecutive frames (%): a "breathing" or shimmering body.
 
 Every method gets its normals the same way (area-weighted face normals), so peers compare.
@@ -23,7 +24,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from mpmfx.bench.surface_cases import MOVE_STEP, OURS, REST_NOISE, mesh_stats, sample_shape
+from mpmfx.bench.surface_cases import BOX_HALF, MOVE_STEP, OURS, REST_NOISE, mesh_stats, sample_shape
 from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_particles
 
 FLICKER_FRAMES = 10
@@ -109,26 +110,42 @@ def closest_on_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,
     return x, normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-30)
 
 
-def frame_change(prev: tuple[np.ndarray, np.ndarray], cur: tuple[np.ndarray, np.ndarray], h: float) -> dict:
+def frame_change(prev: tuple[np.ndarray, np.ndarray], cur: tuple[np.ndarray, np.ndarray], h: float,
+                 *, edges: np.ndarray | None = None) -> dict:
     """Flicker between two consecutive meshes (vertices (m, 3) m, faces (k, 3)), both already moved
     back to the body's rest place: distance of each vertex of `cur` to the surface of `prev` (its
     closest point; a re-triangulation of the same surface reads 0), mean / p99 in h, and the turn
-    of the shading normal there (degrees: `cur`'s vertex normal against `prev`'s interpolated)."""
+    of the shading normal there (degrees: `cur`'s vertex normal against `prev`'s interpolated),
+    mean / p99 over the vertices off the `edges` mask ((m,) bool over `cur`'s vertices; None: all),
+    and p99 on it (nan without a mask): sharp edges flicker more than faces."""
     (va, fa), (vb, fb) = prev, cur
     va, vb = np.asarray(va, np.float64), np.asarray(vb, np.float64)
     na, nb = vertex_normals(va, fa), vertex_normals(vb, fb)
     x, n = closest_on_mesh(vb, va, fa, na)
     off = np.linalg.norm(vb - x, axis=1) / h
     turn = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n, nb), -1.0, 1.0)))
+    flat = turn if edges is None else turn[~edges]
+    sharp = turn[edges] if edges is not None and edges.any() else np.array([np.nan])
     return {"normal_jitter_h": float(off.mean()), "normal_jitter_p99_h": float(np.percentile(off, 99)),
-            "normal_turn_deg": float(turn.mean()), "normal_turn_p99_deg": float(np.percentile(turn, 99))}
+            "normal_turn_deg": float(flat.mean()), "normal_turn_p99_deg": float(np.percentile(flat, 99)),
+            "edge_turn_p99_deg": float(np.percentile(sharp, 99))}
+
+
+def box_edges(vertices: np.ndarray, h: float) -> np.ndarray:
+    """(m,) bool: vertices (m, 3) m within EDGE_BAND h of two or more faces of the bench's box."""
+    return (np.abs(np.abs(vertices) - BOX_HALF) < EDGE_BAND * h).sum(axis=1) >= 2
+
+
+EDGE_BAND = 1.5
+"""Vertices this close (in h) to two faces of the box count as its edges (the rounded strip)."""
 
 
 def flicker_run(surface: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], frames: list[np.ndarray], h: float,
                 step: np.ndarray) -> tuple[list[dict], list[tuple[np.ndarray, np.ndarray]]]:
     """Surface every frame with `surface` (positions -> (vertices, faces)); returns one row per
     frame (seconds, area, volume, and from the second frame on its change against the previous:
-    `frame_change` plus area_change / volume_change as fractions) and the meshes moved back."""
+    `frame_change`, box edges apart, plus area_change / volume_change as fractions) and the
+    meshes moved back."""
     rows, meshes = [], []
     for k, x in enumerate(frames):
         t0 = time.perf_counter()
@@ -139,7 +156,7 @@ def flicker_run(surface: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], 
         volume, pieces = mesh_stats(v, f)
         row = {"frame": k, "seconds": seconds, "area": surface_area(v, f), "volume": volume, "components": pieces}
         if meshes:
-            row.update(frame_change(meshes[-1], (v, f), h))
+            row.update(frame_change(meshes[-1], (v, f), h, edges=box_edges(v, h)))
             row["area_change"] = row["area"] / rows[-1]["area"] - 1.0
             row["volume_change"] = row["volume"] / rows[-1]["volume"] - 1.0
         rows.append(row)
@@ -179,6 +196,7 @@ def summarise(method: str, rows: list[dict], n: int, h: float) -> dict:
             "seconds": float(np.mean([r["seconds"] for r in rows])),
             "normal_jitter_h": mean("normal_jitter_h"), "normal_jitter_p99_h": mean("normal_jitter_p99_h"),
             "normal_turn_deg": mean("normal_turn_deg"), "normal_turn_p99_deg": mean("normal_turn_p99_deg"),
+            "edge_turn_p99_deg": mean("edge_turn_p99_deg"),
             "area_change_max": float(max(abs(r["area_change"]) for r in pairs)),
             "volume_change_max": float(max(abs(r["volume_change"]) for r in pairs)),
             "components_max": int(max(r["components"] for r in rows))}
@@ -207,13 +225,14 @@ def bench_flicker(count: int = 20_000, device: str | None = None, *, peers: Sequ
 
 
 FLICKER_HEADER = (f"{'case':18} {'n':>7} {'method':16} {'s/frame':>7} {'jitter/h':>8} {'p99/h':>6} {'turn deg':>8} "
-                  f"{'p99 deg':>7} {'dA max':>7} {'dV max':>7} {'pieces':>6}")
+                  f"{'p99 deg':>7} {'edge p99':>8} {'dA max':>7} {'dV max':>7} {'pieces':>6}")
 
 
 def format_flicker_row(r: dict) -> str:
     """One line of the flicker table (columns of FLICKER_HEADER; changes in %)."""
     return (f"{r['case']:18} {r['particles']:7d} {r['method']:16} {r['seconds']:7.3f} {r['normal_jitter_h']:8.4f} "
             f"{r['normal_jitter_p99_h']:6.3f} {r['normal_turn_deg']:8.2f} {r['normal_turn_p99_deg']:7.2f} "
+            f"{r['edge_turn_p99_deg']:8.2f} "
             f"{r['area_change_max']:7.3%} {r['volume_change_max']:7.3%} {r['components_max']:6d}")
 
 
