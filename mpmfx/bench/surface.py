@@ -72,12 +72,17 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
         print(f"plot skipped: {err} (pip install pyvista to draw surface.png; the CSV/JSON are written)")
     except ValueError as err:  # nothing with a positive speed and error (empty meshes only)
         print(f"plot skipped: {err}")
-    # the sheet is small: every installed peer runs on it (Newton too on the CPU) unless --peers chose
+    # the sheet, splash and flicker cases are small: every installed peer runs on them (Newton
+    # too on the CPU) unless --peers chose; none is larger than the largest of --counts
     sheet_peers = chosen if peers is not None else choose_peers(None, quick=False)
-    sheet = bench_sheet(SHEET_COUNTS["quick" if quick else "full"], device, peers=sheet_peers)
+    sheet = bench_sheet(min(SHEET_COUNTS["quick" if quick else "full"], max(counts)), device, peers=sheet_peers)
     print(f"thin sheet: {write_rows(sheet, out, 'surface_sheet')} (+ .json)")
-    from mpmfx.bench.surface_flicker import bench_flicker
-    from mpmfx.bench.surface_splash import bench_splash
-    print(f"splash frame: {write_rows(bench_splash(device, peers=sheet_peers), out, 'surface_splash')} (+ .json)")
-    print(f"flicker: {write_rows(bench_flicker(device=device, peers=sheet_peers), out, 'surface_flicker')} (+ .json)")
+    from mpmfx.bench.surface_flicker import FLICKER_COUNT, bench_flicker
+    from mpmfx.bench.surface_splash import SPLASH_PARTICLES, bench_splash
+    if max(counts) >= SPLASH_PARTICLES:
+        print(f"splash frame: {write_rows(bench_splash(device, peers=sheet_peers), out, 'surface_splash')} (+ .json)")
+    else:
+        print(f"splash frame skipped: --counts below its {SPLASH_PARTICLES} particles")
+    flicker = bench_flicker(min(FLICKER_COUNT, max(counts)), device, peers=sheet_peers)
+    print(f"flicker: {write_rows(flicker, out, 'surface_flicker')} (+ .json)")
     return 0

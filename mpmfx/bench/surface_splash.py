@@ -25,6 +25,8 @@ import numpy as np
 
 SPLASH_ASSET = Path(__file__).parent / "data" / "water_dam_splash.npz"
 SPLASH_SHOT = Path(__file__).parents[2] / "pipeline" / "shots" / "water_dam.toml"
+SPLASH_PARTICLES = 52_896
+"""Particles in the asset (`mpmfx bench surface` runs the splash only when --counts reach it)."""
 SPLASH_FRAME = 14
 """water_dam frame of the asset: the surge, 2 m/s, climbing the far wall as a thin tongue
 (frames 11-17 of the shot; its crest reaches 0.32 m at frame 17)."""
