@@ -142,17 +142,17 @@ EDGE_BAND = 1.5
 """Vertices this close (in h) to two faces of the box count as its edges (the rounded strip)."""
 
 
-def flicker_run(surface: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], frames: list[np.ndarray], h: float,
+def flicker_run(surface: Callable[[np.ndarray], tuple], frames: list[np.ndarray], h: float,
                 step: np.ndarray) -> tuple[list[dict], list[tuple[np.ndarray, np.ndarray]]]:
-    """Surface every frame with `surface` (positions -> (vertices, faces)); returns one row per
-    frame (seconds, area, volume, and from the second frame on its change against the previous:
-    `frame_change`, box edges apart, plus area_change / volume_change as fractions) and the
-    meshes moved back."""
+    """Surface every frame with `surface` (positions -> (vertices, faces), or (vertices, faces,
+    seconds) when it times itself); returns one row per frame (seconds, area, volume, and from
+    the second frame on its change against the previous: `frame_change`, box edges apart, plus
+    area_change / volume_change as fractions) and the meshes moved back."""
     rows, meshes = [], []
     for k, x in enumerate(frames):
         t0 = time.perf_counter()
-        v, f = surface(x)
-        seconds = time.perf_counter() - t0
+        v, f, *timed = surface(x)
+        seconds = timed[0] if timed else time.perf_counter() - t0
         v = np.asarray(v, np.float64) - k * step
         f = np.asarray(f, np.int64)
         volume, pieces = mesh_stats(v, f)
@@ -178,13 +178,14 @@ def ours(label: str, h: float, device: str | None = None) -> Callable[[np.ndarra
     return run
 
 
-def peer(name: str, h: float, device: str | None = None) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]:
-    """Peer `name` at its bench settings for random samples, one call per frame (no warm-up)."""
+def peer(name: str, h: float, device: str | None = None) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, float]]:
+    """Peer `name` at its bench settings for random samples as a positions -> (vertices, faces,
+    seconds) function; seconds = its timed call (run_peer warms up first, untimed)."""
     from mpmfx.bench.surface_peers import run_peer
 
-    def run(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def run(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         res = run_peer(name, x, h, "random", device=device, repeats=1)
-        return res.vertices, res.faces
+        return res.vertices, res.faces, res.seconds
     return run
 
 
