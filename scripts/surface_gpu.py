@@ -1,10 +1,11 @@
 """GPU run of the surfacing figures (README): `mpmfx bench surface` at the given counts (ours,
-plus the peers asked for with --peers), the thin-sheet case (isotropic and anisotropic kernels)
-at --sheet particles, then how long the copy to the host takes, pageable against pinned
+plus the peers asked for with --peers), the thin-sheet case (isotropic and anisotropic kernels,
+and the same peers) at --sheet particles, then how long the copy to the host takes, pageable against pinned
 staging, at the largest count. Writes surface.csv/json and surface_sheet.csv/json under --out.
 
     python3 scripts/surface_gpu.py --out $OUT                      # 1M and 10M, ours only, sheet 1M
     python3 scripts/surface_gpu.py --counts 10000000 --peers splashsurf newton newton-aniso --out $OUT
+    python3 scripts/surface_gpu.py --counts 1000000 --peers newton newton-aniso --sheet 1000000 --out $OUT  # sheet vs Newton
 """
 import argparse
 import time
@@ -30,11 +31,13 @@ wp.config.quiet = True
 wp.init()
 print(wp.get_device(args.device).name, flush=True)
 print(HEADER, flush=True)
+peers = choose_peers(args.peers, quick=False) if args.peers else []
 rows = bench_surface(args.counts, ("sphere", "torus", "box"), ("lattice", "random"), args.device,
-                     peers=choose_peers(args.peers, quick=False) if args.peers else [], repeats=args.repeats)
+                     peers=peers, repeats=args.repeats)
 print("table:", write_rows(rows, args.out, "surface"), flush=True)
 if args.sheet:
-    print("thin sheet:", write_rows(bench_sheet(args.sheet, args.device), args.out, "surface_sheet"), flush=True)
+    sheet = bench_sheet(args.sheet, args.device, peers=peers)  # the same peers on the sheet
+    print("thin sheet:", write_rows(sheet, args.out, "surface_sheet"), flush=True)
 for r in rows:
     if "stages" in r and r["stages"]:
         print(r["shape"], r["sampling"], r["method"], {k: v for k, v in r["stages"].items()}, flush=True)

@@ -6,8 +6,10 @@ installed (splashsurf on the CPU, Newton isotropic and anisotropic on the GPU), 
 timed as the median of 3 calls after a warm-up. All methods see the same particles. Prints one
 table; writes surface.csv/json and surface.png (particles per second against mean vertex
 error, log-log; needs pyvista, skipped with a message without it) under --out. Then the
-thin-sheet case (a disc one particle spacing thick, isotropic and anisotropic kernels):
-surface_sheet.csv/json.
+thin-sheet case (a disc one particle spacing thick, isotropic and anisotropic kernels, and
+every installed peer): surface_sheet.csv/json; a real splash frame of water_dam
+(mpmfx.bench.surface_splash): surface_splash.csv/json; and the flicker of a slowly moving block
+over 10 frames (mpmfx.bench.surface_flicker): surface_flicker.csv/json.
 """
 from __future__ import annotations
 
@@ -70,6 +72,17 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
         print(f"plot skipped: {err} (pip install pyvista to draw surface.png; the CSV/JSON are written)")
     except ValueError as err:  # nothing with a positive speed and error (empty meshes only)
         print(f"plot skipped: {err}")
-    sheet = bench_sheet(SHEET_COUNTS["quick" if quick else "full"], device)
+    # the sheet, splash and flicker cases are small: every installed peer runs on them (Newton
+    # too on the CPU) unless --peers chose; none is larger than the largest of --counts
+    sheet_peers = chosen if peers is not None else choose_peers(None, quick=False)
+    sheet = bench_sheet(min(SHEET_COUNTS["quick" if quick else "full"], max(counts)), device, peers=sheet_peers)
     print(f"thin sheet: {write_rows(sheet, out, 'surface_sheet')} (+ .json)")
+    from mpmfx.bench.surface_flicker import FLICKER_COUNT, bench_flicker
+    from mpmfx.bench.surface_splash import SPLASH_PARTICLES, bench_splash
+    if max(counts) >= SPLASH_PARTICLES:
+        print(f"splash frame: {write_rows(bench_splash(device, peers=sheet_peers), out, 'surface_splash')} (+ .json)")
+    else:
+        print(f"splash frame skipped: --counts below its {SPLASH_PARTICLES} particles")
+    flicker = bench_flicker(min(FLICKER_COUNT, max(counts)), device, peers=sheet_peers)
+    print(f"flicker: {write_rows(flicker, out, 'surface_flicker')} (+ .json)")
     return 0

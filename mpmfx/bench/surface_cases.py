@@ -163,6 +163,8 @@ def measure_sheet(count: int, sampling: str, *, label: str = "fine", device: str
                   radius_factor: float = PARTICLE_RADIUS_PER_SPACING, **overrides) -> dict:
     """Our surfacer (setting OURS[label], plus SurfaceParams `overrides`, e.g. anisotropic=True)
     on the thin-sheet case: time (s, whole call), pieces, holes, open edges, thickness error."""
+    import warp as wp
+
     x, h = sample_sheet(count, sampling)
     setting = {**OURS[label], **overrides}
     voxel_h = setting.pop("voxel_h")
@@ -172,8 +174,25 @@ def measure_sheet(count: int, sampling: str, *, label: str = "fine", device: str
     seconds = time.perf_counter() - t0
     method = f"mpmfx {label}" + (" anisotropic" if overrides.pop("anisotropic", False) else "") + "".join(
         f" {k}={v}" for k, v in overrides.items())
+    settings = f"r {radius_factor:g}h voxel {voxel_h:g}h smooth {params.smooth_iters}"
     return {"shape": "sheet", "sampling": sampling, "particles": len(x), "h": h, "method": method, "seconds": seconds,
-            **sheet_stats(res.mesh.vertices, res.mesh.faces, h), "vertices": len(res.mesh.vertices)}
+            **sheet_stats(res.mesh.vertices, res.mesh.faces, h), "vertices": len(res.mesh.vertices),
+            "device": str(wp.get_device(device)), "settings": settings}
+
+
+def measure_sheet_peer(name: str, count: int, sampling: str, *, device: str | None = None, repeats: int = 1) -> dict:
+    """Peer `name` (mpmfx.bench.surface_peers.PEERS) on the very particles `measure_sheet` sees, with
+    the settings the bench gives it for `sampling`: the same columns, plus its device and settings.
+    splashsurf 0.14 has no anisotropic kernel (its Laplacian mesh smoothing moves vertices but
+    keeps the topology: holes unchanged, measured), so its row is its isotropic colour field;
+    "newton-aniso" is Newton's Yu & Turk mode. Time: median of `repeats` after a warm-up."""
+    from mpmfx.bench.surface_peers import run_peer
+
+    x, h = sample_sheet(count, sampling)
+    res = run_peer(name, x, h, sampling, device=device, repeats=repeats)
+    return {"shape": "sheet", "sampling": sampling, "particles": len(x), "h": h, "method": res.name,
+            "seconds": res.seconds, **sheet_stats(res.vertices, res.faces, h), "vertices": len(res.vertices),
+            "device": res.device, "settings": res.settings}
 
 
 REST_NOISE = 0.01
@@ -358,31 +377,43 @@ SHEET_COUNTS = {"quick": 20_000, "full": 1_000_000}
 """Particles in the thin-sheet case: CPU-sized for --quick, GPU-sized for the full run."""
 
 
-def bench_sheet(count: int, device: str | None = None, *, echo: bool = True) -> list[dict]:
+def bench_sheet(count: int, device: str | None = None, *, peers: Sequence[str] = (), echo: bool = True) -> list[dict]:
     """The thin-sheet case (a disc one spacing thick, lattice and random) with each of our
-    settings, isotropic and anisotropic: pieces, holes, open edges, thickness error, time."""
+    settings, isotropic and anisotropic, and each peer on the same particles (`measure_sheet_peer`;
+    one that fails at run time is reported and left out): pieces, holes, open edges, thickness
+    error, time."""
     measure_sheet(500, "random", label="fast", device=device, anisotropic=True)  # compile
     rows = []
     if echo:
         print(SHEET_HEADER, flush=True)
+
+    def emit(row: dict) -> None:
+        row["count"] = count
+        rows.append(row)
+        if echo:
+            print(format_sheet_row(row), flush=True)
+
     for sampling in ("lattice", "random"):
         for label in OURS:
             for aniso in (False, True):
-                row = measure_sheet(count, sampling, label=label, device=device, anisotropic=aniso)
-                row["count"] = count
-                rows.append(row)
-                if echo:
-                    print(format_sheet_row(row), flush=True)
+                emit(measure_sheet(count, sampling, label=label, device=device, anisotropic=aniso))
+        for name in peers:
+            try:
+                emit(measure_sheet_peer(name, count, sampling, device=device))
+            except (RuntimeError, MemoryError, ValueError) as exc:
+                print(f"sheet {sampling} {count}: peer {name} failed, no row: {exc}", flush=True)
     return rows
 
 
-SHEET_HEADER = f"{'shape':7} {'sampling':8} {'n':>8} {'method':34} {'time s':>7} {'pieces':>6} {'holes':>6} {'open':>5} {'thick err':>9}"
+SHEET_HEADER = (f"{'shape':7} {'sampling':8} {'n':>8} {'method':34} {'time s':>7} {'pieces':>6} {'holes':>6} {'open':>5} "
+                f"{'thick err':>9} {'device':>7}  settings")
 
 
 def format_sheet_row(r: dict) -> str:
     """One line of the thin-sheet table (columns of SHEET_HEADER; thickness error in h)."""
     return (f"{r['shape']:7} {r['sampling']:8} {r['particles']:8d} {r['method']:34} {r['seconds']:7.3f} "
-            f"{r['components']:6d} {r['holes']:6d} {r['open_edges']:5d} {r['thickness_err']:+9.3f}")
+            f"{r['components']:6d} {r['holes']:6d} {r['open_edges']:5d} {r['thickness_err']:+9.3f} "
+            f"{r.get('device', ''):>7}  {r.get('settings', '')}")
 
 
 HEADER = (
@@ -442,7 +473,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         dense_output=args.dense_output,
     )
     if args.sheet:
-        bench_sheet(args.sheet, args.device)
+        bench_sheet(args.sheet, args.device, peers=args.peers)
 
 
 if __name__ == "__main__":
