@@ -43,9 +43,9 @@ class DeviceAdvance:
         # keyframes on the device: the chunk poses the colliders itself (no host round trip)
         self.keys = ColliderKeys(solver.colliders, solver.device) if solver.colliders else None
         self.graphs = True  # capture chunks in CUDA graphs (off: launch each kernel; for measuring)
-        # binned P2G (p2g_binned.py) on a GPU, where it was measured faster (H100, both modes:
-        # snow 1.03 -> 1.82 G/s at 19M particles, 1.01 -> 1.37 at 2.4M; water 1.16 -> 2.28 and
-        # 1.13 -> 1.65); on the CPU its extra passes cost more than the atomics it saves (37k
+        # binned P2G (p2g_binned.py) on a GPU, where it was measured faster (H100, both modes;
+        # fast: snow 1.07 -> 1.95 G/s at 19M particles, 1.06 -> 1.43 at 2.4M; water 1.16 -> 2.30
+        # and 1.13 -> 1.64); on the CPU its extra passes cost more than the atomics it saves (37k
         # particles, one core: water 28.8 -> 46.6 ms a substep), so there the reference P2G
         self.binned = not solver.flags.multi_field and solver.device.is_cuda
         self._binner = None

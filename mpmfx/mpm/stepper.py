@@ -31,7 +31,7 @@ from .materials import Mode
 from .slots import REJECTING, Clock, Count, Stat, Status
 
 __all__ = ["SubstepDev", "StepperParams", "WaveParams", "make_clock_kernels", "pose_colliders", "report_sums",
-           "CHUNKS", "sum_partials", "REPORT_CHUNK"]
+           "CHUNKS", "sum_partials"]
 
 CHUNKS = (1, 2, 4, 8, 16, 32)  # substeps per chunk: each length is one captured graph
 REJECT_MASK = wp.constant(sum(1 << int(c) for c in REJECTING))  # counters that reject a substep
