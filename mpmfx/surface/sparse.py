@@ -30,6 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mpmfx.surface.launch import launch_split
 from mpmfx.surface.params import LevelSet, SparseLevelSet, SurfaceMesh, SurfaceParams, SurfaceResult, kernel_volume
 
 log = logging.getLogger(__name__)
@@ -203,13 +204,13 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     # seal an outside pocket whose only way out ran along an inside tile (a bubble, seen on
     # random samples), so it comes before the last topology pass, not after. That pass also
     # catches what blurring did: closed thin outside tunnels (bubbles), cut inside necks (specks).
-    _launch(wp, S.match_tiles, nvox, [bcoord, bmap, phi, 1e-3])
+    _split(wp, S.match_tiles, nvox, [bcoord, bmap, phi, 1e-3])
     seed = SEED_DEPTH_SMOOTHED if params.smooth_iters > 0 else SEED_DEPTH * grid.r_vox
     steps += _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth=seed)
     if params.min_feature_particles > 0 and nvox:
         _remove_small(wp, S, bcoord, bmap, phi, g, params.min_feature_particles, tiles)
     values = wp.empty_like(phi)  # renormalising keeps every sign: the topology stands
-    _launch(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, grid.voxel, grid.background, values])
+    _split(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, grid.voxel, grid.background, values])
     tiles = (grid.background, -grid.background)
     timings["smooth"] = _lap(wp, t0)
     mesh = _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel if with_v else None, grid)
@@ -229,6 +230,12 @@ def _lap(wp, t0: float) -> float:
 def _launch(wp, kernel, dim: int, inputs: list) -> None:
     if dim:
         wp.launch(kernel, dim, inputs=inputs)
+
+
+def _split(wp, kernel, dim: int, inputs: list) -> None:
+    """Launch a kernel that takes a trailing `base` on the device of inputs[0], split across
+    CPU threads on the CPU (mpmfx.surface.launch)."""
+    launch_split(wp, kernel, dim, inputs, device=inputs[0].device)
 
 
 def _scan(wp, a, *, inclusive: bool):
@@ -275,6 +282,10 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         wp.launch(A.gather_zhu_bridson_aniso, nvox,
                   inputs=[bcoord, cells, starts, order, g, gmat, thin, va, int(with_v), grid.gather_vox, grid.kernel_vox,
                           grid.r_vox, grid.far_vox], outputs=[phi, w, offset, vel, cov, radius])
+    elif phi.device.is_cpu:  # one thread per block line: each candidate particle fetched once per 8 voxels
+        from mpmfx.surface import line_kernels as L
+        launch_split(wp, L.gather_zhu_bridson_lines, nvox // BS, [bcoord, cells, starts, order, g, va, int(with_v),
+                     grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w, offset, vel], device=phi.device)
     else:
         wp.launch(S.gather_zhu_bridson, nvox,
                   inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
@@ -338,14 +349,14 @@ def _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, *, seed_depth: float) -
 def _flood(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: bool) -> int:
     nvox = phi.shape[0]
     reached = wp.empty(nvox, dtype=wp.int32)
-    wp.launch(S.seed_reached, nvox, inputs=[bcoord, bmap, phi, mark, seed_depth, int(specks), reached])
+    _split(wp, S.seed_reached, nvox, [bcoord, bmap, phi, mark, seed_depth, int(specks), reached])
     changed = wp.zeros(1, dtype=wp.int32)
     nact = bcoord.shape[0]
     rounds = 0
     while rounds < MAX_SWEEP_ROUNDS:
         changed.zero_()
         for axis in range(3):
-            wp.launch(S.sweep_reached, nact * 64, inputs=[bcoord, bmap, phi, reached, axis, changed])
+            _split(wp, S.sweep_reached, nact * 64, [bcoord, bmap, phi, reached, axis, changed])
         rounds += 1
         if int(changed.numpy()[0]) == 0:
             break
@@ -379,7 +390,7 @@ def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
     a, b = wp.clone(w), wp.empty_like(w)
     for _ in range(passes):
         for axis in range(3):
-            wp.launch(S.blur_weight_axis, w.shape[0], inputs=[bcoord, bmap, a, axis, NORMAL_STEP, b])
+            _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
             a, b = b, a
     return a
 
@@ -393,8 +404,8 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     second order."""
     nvox = phi.shape[0]
     d1, d2 = wp.empty_like(phi), wp.empty_like(phi)
-    _launch(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, 1.0, clip, d1])
-    _launch(wp, S.renormalise, nvox, [bcoord, bmap, d1, clip, -clip, 1.0, clip, d2])
+    _split(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, 1.0, clip, d1])
+    _split(wp, S.renormalise, nvox, [bcoord, bmap, d1, clip, -clip, 1.0, clip, d2])
     _launch(wp, S.average_into, nvox, [d1, d2])
     if nvox == 0:
         return d1
@@ -406,9 +417,9 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
 
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
-    wp.launch(R.init_eikonal, nvox, inputs=[bcoord, bmap, d1, clip, -clip, clip, frozen, a])
+    _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, frozen, a])
     for _ in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
-        wp.launch(R.eikonal_sweep, nvox, inputs=[bcoord, bmap, a, frozen, clip, -clip, clip, b])
+        _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
         a, b = b, a
     return a
 
@@ -425,7 +436,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     phi, tmp = wp.clone(dist), wp.empty_like(dist)
     for _ in range(iters):
         for axis in range(3):
-            _launch(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
+            _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
             phi, tmp = tmp, phi
     _launch(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
     return phi
@@ -442,19 +453,19 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
     dev = values.device
     ecount = wp.empty(nvox * 3, dtype=wp.int32)
     edge_vert = wp.empty(nvox * 3, dtype=wp.int32)
-    wp.launch(M.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
+    _split(wp, M.mc_vertices, nvox * 3, [bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
     eoff = _scan(wp, ecount, inclusive=True)
     tables = list(device_tables(wp, dev))
     fcount = wp.empty(nvox, dtype=wp.int32)
-    wp.launch(M.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
+    _split(wp, M.mc_faces, nvox, [bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
     foff = _scan(wp, fcount, inclusive=True)
     m, k = (int(a[-1:].numpy()[0]) for a in (eoff, foff))  # the two sizes: one sync each
     if m == 0 or k == 0:
         return None
     verts = wp.empty(m, dtype=wp.vec3)
-    wp.launch(M.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
+    _split(wp, M.mc_vertices, nvox * 3, [bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
     faces = wp.empty(3 * k, dtype=wp.int32)
-    wp.launch(M.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
+    _split(wp, M.mc_faces, nvox, [bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
     origin = wp.vec3(*grid.origin.astype(np.float32))

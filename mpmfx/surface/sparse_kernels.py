@@ -55,6 +55,36 @@ def get(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), i: int, j
 
 
 @wp.func
+def stride(axis: int):
+    """Data-index step of one voxel along `axis` inside a block."""
+    return wp.where(axis == 0, BS * BS, wp.where(axis == 1, BS, 1))
+
+
+@wp.func
+def step_get(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), t: int, c: wp.vec3i, axis: int, sgn: int,
+             out_v: float, in_v: float):
+    """`get` of the voxel c + sgn along `axis` (sgn = +-1), c being active voxel t: most
+    neighbours lie in the same block, read directly (no block-map lookup)."""
+    l = c[axis] % BS  # voxel indices are >= 0
+    if (sgn > 0 and l < BS - 1) or (sgn < 0 and l > 0):
+        return data[t + sgn * stride(axis)]
+    o = wp.vec3i(0)
+    o[axis] = sgn
+    return get(bmap, data, c[0] + o[0], c[1] + o[1], c[2] + o[2], out_v, in_v)
+
+
+@wp.func
+def interior(c: wp.vec3i):
+    """True when all 26 neighbours of voxel c lie in its own block."""
+    ok = True
+    for a in range(3):
+        l = c[a] % BS
+        if l == 0 or l == BS - 1:
+            ok = False
+    return ok
+
+
+@wp.func
 def cell_range(x: wp.vec3, reach: float, shape: wp.vec3i):
     """(lo, hi) gather-cell indices (CS^3 voxels each) within `reach` voxels of x, clipped."""
     lo = wp.vec3i(0)
@@ -340,12 +370,13 @@ def seed_reached(
     seed_depth: float,
     specks: int,
     reached: wp.array(dtype=wp.int32),
+    base: int,
 ):
     """Seeds of a flood fill looking for bubbles (specks == 0: every inside voxel is a seed, and
     outside voxels touching an OUTSIDE tile) or for specks (specks == 1: every outside voxel,
     inside voxels touching an INSIDE tile, and particle voxels at least `seed_depth` deep: a lone
     particle is ~r deep at its centre, a voxel that sampling noise flips is barely below zero)."""
-    t = wp.tid()
+    t = wp.tid() + base
     c = voxel_of(t, bcoord)
     out = phi[t] > 0.0
     r = int(0)
@@ -353,7 +384,7 @@ def seed_reached(
         r = 1
     if specks != 0 and (out or (mark[t] != 0 and phi[t] <= -seed_depth)):
         r = 1
-    if r == 0:
+    if r == 0 and not interior(c):  # an interior voxel has no tile neighbour
         for n in range(6):
             o = wp.vec3i(0)
             o[n // 2] = 2 * (n % 2) - 1
@@ -386,16 +417,17 @@ def sweep_reached(
     reached: wp.array(dtype=wp.int32),
     axis: int,
     changed: wp.array(dtype=wp.int32),
+    base: int,
 ):
     """Flood fill through same-sign voxels along one block line, forward then backward,
     starting from the neighbouring block's voxel: 8 voxels of progress per launch."""
-    tid = wp.tid()
+    tid = wp.tid() + base
     b = tid // 64
     l = tid - b * 64
-    base = bcoord[b] * BS
+    corner = bcoord[b] * BS
     count = int(0)
     for dirn in range(2):
-        start = line_voxel(axis, wp.where(dirn == 0, -1, BS), l) + base
+        start = line_voxel(axis, wp.where(dirn == 0, -1, BS), l) + corner
         sl = slot(bmap, start[0], start[1], start[2])
         carry_r = int(0)
         carry_out = False
@@ -444,16 +476,27 @@ def weight_at(bmap: wp.array3d(dtype=wp.int32), w: wp.array(dtype=float), t: int
 @wp.kernel
 def blur_weight_axis(
     bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float), axis: int,
-    step: int, dst: wp.array(dtype=float),
+    step: int, dst: wp.array(dtype=float), base: int,
 ):
     """dst = [1 2 1]/4 blur of the kernel weight sum along `axis` with taps `step` voxels apart
     (variance 0.5 step^2 voxel^2; tiles as in weight_at)."""
-    t = wp.tid()
+    t = wp.tid() + base
     c = voxel_of(t, bcoord)
-    o = wp.vec3i(0)
-    o[axis] = step
-    a = weight_at(bmap, src, t, c[0] - o[0], c[1] - o[1], c[2] - o[2])
-    b = weight_at(bmap, src, t, c[0] + o[0], c[1] + o[1], c[2] + o[2])
+    l = c[axis] % BS
+    a = float(0.0)
+    b = float(0.0)
+    if l >= step:  # the tap lies in the same block
+        a = src[t - step * stride(axis)]
+    else:
+        o = wp.vec3i(0)
+        o[axis] = step
+        a = weight_at(bmap, src, t, c[0] - o[0], c[1] - o[1], c[2] - o[2])
+    if l + step < BS:
+        b = src[t + step * stride(axis)]
+    else:
+        o = wp.vec3i(0)
+        o[axis] = step
+        b = weight_at(bmap, src, t, c[0] + o[0], c[1] + o[1], c[2] + o[2])
     dst[t] = 0.25 * a + 0.5 * src[t] + 0.25 * b
 
 
@@ -543,20 +586,18 @@ def renormalise(
     scale: float,
     clip: float,
     out: wp.array(dtype=float),
+    base: int,
 ):
     """out = clip(phi / |grad phi| * scale, +-clip): a signed distance near the zero level.
 
     The raw field keeps its sign (so its zero level) but its slope is not 1 (Zhu-Bridson is
     ~0.7 at the surface and 0 deep inside); dividing by the central-difference gradient
     restores distances in the band, clipping handles the flat interior."""
-    t = wp.tid()
+    t = wp.tid() + base
     c = voxel_of(t, bcoord)
-    i = c[0]
-    j = c[1]
-    k = c[2]
-    gx = get(bmap, phi, i + 1, j, k, out_v, in_v) - get(bmap, phi, i - 1, j, k, out_v, in_v)
-    gy = get(bmap, phi, i, j + 1, k, out_v, in_v) - get(bmap, phi, i, j - 1, k, out_v, in_v)
-    gz = get(bmap, phi, i, j, k + 1, out_v, in_v) - get(bmap, phi, i, j, k - 1, out_v, in_v)
+    gx = step_get(bmap, phi, t, c, 0, 1, out_v, in_v) - step_get(bmap, phi, t, c, 0, -1, out_v, in_v)
+    gy = step_get(bmap, phi, t, c, 1, 1, out_v, in_v) - step_get(bmap, phi, t, c, 1, -1, out_v, in_v)
+    gz = step_get(bmap, phi, t, c, 2, 1, out_v, in_v) - step_get(bmap, phi, t, c, 2, -1, out_v, in_v)
     grad = 0.5 * wp.length(wp.vec3(gx, gy, gz))
     out[t] = wp.clamp(phi[t] / wp.max(grad, 0.05) * scale, -clip, clip)
 
@@ -570,24 +611,24 @@ def blur_axis(
     out_v: float,
     in_v: float,
     dst: wp.array(dtype=float),
+    base: int,
 ):
-    t = wp.tid()
+    t = wp.tid() + base
     c = voxel_of(t, bcoord)
-    o = wp.vec3i(0)
-    o[axis] = 1
-    lo = c - o
-    hi = c + o
-    a = get(bmap, src, lo[0], lo[1], lo[2], out_v, in_v)
-    b = get(bmap, src, hi[0], hi[1], hi[2], out_v, in_v)
+    a = step_get(bmap, src, t, c, axis, -1, out_v, in_v)
+    b = step_get(bmap, src, t, c, axis, 1, out_v, in_v)
     dst[t] = 0.25 * a + 0.5 * src[t] + 0.25 * b
 
 
 @wp.kernel
-def match_tiles(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), eps: float):
+def match_tiles(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), eps: float,
+                base: int):
     """Give voxels next to a constant tile that tile's sign, so no zero crossing touches a tile
     (marching cubes runs only on cells whose lower corner is active)."""
-    t = wp.tid()
+    t = wp.tid() + base
     c = voxel_of(t, bcoord)
+    if interior(c):
+        return
     v = phi[t]
     for n in range(27):
         s = slot(bmap, c[0] + n // 9 - 1, c[1] + (n // 3) % 3 - 1, c[2] + n % 3 - 1)
