@@ -14,7 +14,8 @@ threads (Warp's CPU launches release the GIL; mpmfx.surface.sparse._launch).
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, CS, write_field
+from mpmfx.surface.redistance_kernels import eikonal_update
+from mpmfx.surface.sparse_kernels import BS, BV, CS, TILE_INSIDE, TILE_OUTSIDE, line_voxel, slot, stride, write_field
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
 mat83 = wp.types.matrix(shape=(8, 3), dtype=wp.float32)
@@ -98,3 +99,321 @@ def gather_zhu_bridson_lines(
     for z in range(BS):
         write_field(tid * BS + z, w[z], row3(dw, z), row3(gw, z), row3(vw, z), radius_vox, with_v, far_vox, phi, w_out,
                     offset, vel)
+
+
+
+@wp.func
+def block_code(bmap: wp.array3d(dtype=wp.int32), bc: wp.vec3i):
+    """Active index of block bc, or its tile code (OUTSIDE beyond the grid), as `slot` gives."""
+    if bc[0] < 0 or bc[1] < 0 or bc[2] < 0 or bc[0] >= bmap.shape[0] or bc[1] >= bmap.shape[1] or bc[2] >= bmap.shape[2]:
+        return TILE_OUTSIDE
+    return bmap[bc[0], bc[1], bc[2]]
+
+
+@wp.func
+def side_code(bmap: wp.array3d(dtype=wp.int32), bc: wp.vec3i, axis: int, sgn: int):
+    """block_code of the block next to bc along `axis` (sgn = +-1)."""
+    n = wp.vec3i(bc[0], bc[1], bc[2])
+    n[axis] = n[axis] + sgn
+    return block_code(bmap, n)
+
+
+@wp.func
+def read(data: wp.array(dtype=float), code: int, local: int, out_v: float, in_v: float):
+    """Voxel `local` (0..511) of the block with code `code`: its value, or a tile's value."""
+    if code >= 0:
+        return data[code * BV + local]
+    if code == TILE_INSIDE:
+        return in_v
+    return out_v
+
+
+@wp.func
+def local_index(lc: wp.vec3i):
+    return (lc[0] * BS + lc[1]) * BS + lc[2]
+
+
+@wp.kernel
+def blur_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    src: wp.array(dtype=float),
+    axis: int,
+    out_v: float,
+    in_v: float,
+    dst: wp.array(dtype=float),
+    base: int,
+):
+    """sparse_kernels.blur_axis along one block line of `axis` (thread = block * 64 + line)."""
+    tid = wp.tid() + base
+    b = tid // 64
+    lc = line_voxel(axis, 0, tid - b * 64)
+    st = stride(axis)
+    t0 = b * BV + local_index(lc)
+    first = wp.vec3i(lc[0], lc[1], lc[2])
+    first[axis] = BS - 1  # the voxel before the line, in the block below
+    last = wp.vec3i(lc[0], lc[1], lc[2])  # the voxel after it, in the block above (local 0)
+    prev = read(src, side_code(bmap, bcoord[b], axis, -1), local_index(first), out_v, in_v)
+    after = read(src, side_code(bmap, bcoord[b], axis, 1), local_index(last), out_v, in_v)
+    cur = src[t0]
+    for q in range(BS):
+        nxt = after
+        if q < BS - 1:
+            nxt = src[t0 + (q + 1) * st]
+        dst[t0 + q * st] = 0.25 * prev + 0.5 * cur + 0.25 * nxt
+        prev = cur
+        cur = nxt
+
+
+@wp.func
+def weight_read(w: wp.array(dtype=float), code: int, local: int, own: float):
+    """sparse_kernels.weight_at by block code: 0 on OUTSIDE tiles, `own` on INSIDE ones."""
+    if code >= 0:
+        return w[code * BV + local]
+    if code == TILE_INSIDE:
+        return own
+    return 0.0
+
+
+@wp.kernel
+def blur_weight_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    src: wp.array(dtype=float),
+    axis: int,
+    step: int,
+    dst: wp.array(dtype=float),
+    base: int,
+):
+    """sparse_kernels.blur_weight_axis along one block line of `axis` (1 <= step <= 8)."""
+    tid = wp.tid() + base
+    b = tid // 64
+    lc = line_voxel(axis, 0, tid - b * 64)
+    st = stride(axis)
+    t0 = b * BV + local_index(lc)
+    below = side_code(bmap, bcoord[b], axis, -1)
+    above = side_code(bmap, bcoord[b], axis, 1)
+    for q in range(BS):
+        t = t0 + q * st
+        own = src[t]
+        a = float(0.0)
+        if q >= step:
+            a = src[t - step * st]
+        else:
+            n = wp.vec3i(lc[0], lc[1], lc[2])
+            n[axis] = q - step + BS
+            a = weight_read(src, below, local_index(n), own)
+        c = float(0.0)
+        if q + step < BS:
+            c = src[t + step * st]
+        else:
+            n = wp.vec3i(lc[0], lc[1], lc[2])
+            n[axis] = q + step - BS
+            c = weight_read(src, above, local_index(n), own)
+        dst[t] = 0.25 * a + 0.5 * own + 0.25 * c
+
+
+@wp.kernel
+def eikonal_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    src: wp.array(dtype=float),
+    frozen: wp.array(dtype=wp.int32),
+    out_v: float,
+    in_v: float,
+    clip: float,
+    dst: wp.array(dtype=float),
+    base: int,
+):
+    """redistance_kernels.eikonal_sweep on the 8 voxels of one block line along z."""
+    tid = wp.tid() + base
+    b = tid // 64
+    l = tid - b * 64
+    li = l // BS
+    lj = l - li * BS
+    bc = bcoord[b]
+    cxm = int(0)
+    cxp = int(0)
+    cym = int(0)
+    cyp = int(0)
+    if li == 0:
+        cxm = side_code(bmap, bc, 0, -1)
+    if li == BS - 1:
+        cxp = side_code(bmap, bc, 0, 1)
+    if lj == 0:
+        cym = side_code(bmap, bc, 1, -1)
+    if lj == BS - 1:
+        cyp = side_code(bmap, bc, 1, 1)
+    czm = side_code(bmap, bc, 2, -1)
+    czp = side_code(bmap, bc, 2, 1)
+    t0 = tid * BS
+    for z in range(BS):
+        t = t0 + z
+        v = src[t]
+        if frozen[t] != 0:
+            dst[t] = v
+            continue
+        xlo = float(0.0)
+        xhi = float(0.0)
+        ylo = float(0.0)
+        yhi = float(0.0)
+        zlo = float(0.0)
+        zhi = float(0.0)
+        if li > 0:
+            xlo = src[t - BS * BS]
+        else:
+            xlo = read(src, cxm, ((BS - 1) * BS + lj) * BS + z, out_v, in_v)
+        if li < BS - 1:
+            xhi = src[t + BS * BS]
+        else:
+            xhi = read(src, cxp, lj * BS + z, out_v, in_v)
+        if lj > 0:
+            ylo = src[t - BS]
+        else:
+            ylo = read(src, cym, (li * BS + BS - 1) * BS + z, out_v, in_v)
+        if lj < BS - 1:
+            yhi = src[t + BS]
+        else:
+            yhi = read(src, cyp, li * BS * BS + z, out_v, in_v)
+        if z > 0:
+            zlo = src[t - 1]
+        else:
+            zlo = read(src, czm, l * BS + BS - 1, out_v, in_v)
+        if z < BS - 1:
+            zhi = src[t + 1]
+        else:
+            zhi = read(src, czp, l * BS, out_v, in_v)
+        a = wp.vec3(wp.min(wp.abs(xlo), wp.abs(xhi)), wp.min(wp.abs(ylo), wp.abs(yhi)), wp.min(wp.abs(zlo), wp.abs(zhi)))
+        dst[t] = eikonal_update(a, v, clip)
+
+
+vec8i = wp.types.vector(length=8, dtype=wp.int32)
+
+
+@wp.func
+def corner_blocks(bmap: wp.array3d(dtype=wp.int32), b: int, bc: wp.vec3i):
+    """Codes of block bc (index 0, active index b) and its 7 upper neighbours: index
+    ox * 4 + oy * 2 + oz for the block bc + (ox, oy, oz), as block_code gives them."""
+    codes = vec8i(0)
+    for n in range(8):
+        if n == 0:
+            codes[n] = b
+        else:
+            codes[n] = block_code(bmap, wp.vec3i(bc[0] + n // 4, bc[1] + (n // 2) % 2, bc[2] + n % 2))
+    return codes
+
+
+@wp.func
+def corner_get(phi: wp.array(dtype=float), codes: vec8i, x: int, y: int, z: int, out_v: float, in_v: float):
+    """`get` of the voxel at local (x, y, z) of the block of codes[0], each in 0..8."""
+    ox = x // BS
+    oy = y // BS
+    oz = z // BS
+    return read(phi, codes[ox * 4 + oy * 2 + oz], local_index(wp.vec3i(x - ox * BS, y - oy * BS, z - oz * BS)), out_v,
+                in_v)
+
+
+@wp.kernel
+def mc_vertices_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    offsets: wp.array(dtype=wp.int32),
+    count_only: int,
+    counts: wp.array(dtype=wp.int32),
+    edge_vert: wp.array(dtype=wp.int32),
+    verts: wp.array(dtype=wp.vec3),
+    base: int,
+):
+    """sparse_mesh_kernels.mc_vertices for the 24 edges (voxel * 3 + axis) of one block line
+    along z, counted per line (counts[line]; offsets: their inclusive scan): the same vertices
+    in the same order."""
+    tid = wp.tid() + base
+    b = tid // 64
+    l = tid - b * 64
+    li = l // BS
+    lj = l - li * BS
+    bc = bcoord[b]
+    codes = corner_blocks(bmap, b, bc)
+    idx = int(0)
+    if count_only == 0:
+        idx = offsets[tid] - counts[tid]
+    n = int(0)
+    for z in range(BS):
+        t = tid * BS + z
+        a = phi[t]
+        for axis in range(3):
+            o = wp.vec3i(0)
+            o[axis] = 1
+            v = corner_get(phi, codes, li + o[0], lj + o[1], z + o[2], out_v, in_v)
+            e = t * 3 + axis
+            if (a >= 0.0) != (v >= 0.0):
+                n += 1
+                if count_only == 0:
+                    edge_vert[e] = idx
+                    p = wp.vec3(float(bc[0] * BS + li), float(bc[1] * BS + lj), float(bc[2] * BS + z))
+                    p[axis] = p[axis] + wp.clamp(a / (a - v), 0.0, 1.0)
+                    verts[idx] = p
+                    idx += 1
+            elif count_only == 0:
+                edge_vert[e] = -1
+    if count_only != 0:
+        counts[tid] = n
+
+
+@wp.kernel
+def mc_faces_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    edge_vert: wp.array(dtype=wp.int32),
+    tri_range: wp.array(dtype=wp.int32),
+    tri_local: wp.array(dtype=wp.int32),
+    edge_offset: wp.array2d(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    count_only: int,
+    counts: wp.array(dtype=wp.int32),
+    faces: wp.array(dtype=wp.int32),
+    base: int,
+):
+    """sparse_mesh_kernels.mc_faces for the 8 cells of one block line along z, counted per
+    line: the same triangles in the same order."""
+    tid = wp.tid() + base
+    b = tid // 64
+    l = tid - b * 64
+    li = l // BS
+    lj = l - li * BS
+    bc = bcoord[b]
+    codes = corner_blocks(bmap, b, bc)
+    first = int(0)
+    if count_only == 0:
+        first = offsets[tid] - counts[tid]
+    total = int(0)
+    for z in range(BS):
+        code = int(0)
+        for n in range(8):
+            # corner order of warp.geometry: (0,0,0) (1,0,0) (1,1,0) (0,1,0), then z + 1
+            q = n % 4
+            dx = wp.where(q == 1 or q == 2, 1, 0)
+            dy = wp.where(q >= 2, 1, 0)
+            if corner_get(phi, codes, li + dx, lj + dy, z + n // 4, out_v, in_v) >= 0.0:
+                code += 1 << n
+        start = tri_range[code]
+        ntri = (tri_range[code + 1] - start) // 3
+        if count_only == 0:
+            c = wp.vec3i(bc[0] * BS + li, bc[1] * BS + lj, bc[2] * BS + z)
+            for m in range(ntri):
+                for s in range(3):
+                    le = tri_local[start + 3 * m + s]
+                    sl = slot(bmap, c[0] + edge_offset[le, 0], c[1] + edge_offset[le, 1], c[2] + edge_offset[le, 2])
+                    idx = int(-1)
+                    if sl >= 0:
+                        idx = edge_vert[sl * 3 + edge_offset[le, 3]]
+                    faces[3 * (first + total + m) + s] = idx
+        total += ntri
+    if count_only != 0:
+        counts[tid] = total

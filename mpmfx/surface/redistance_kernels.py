@@ -69,6 +69,13 @@ def eikonal_sweep(
         lo = wp.abs(step_get(bmap, src, t, c, axis, -1, out_v, in_v))
         hi = wp.abs(step_get(bmap, src, t, c, axis, 1, out_v, in_v))
         a[axis] = wp.min(lo, hi)
+    dst[t] = eikonal_update(a, v, clip)
+
+
+@wp.func
+def eikonal_update(a: wp.vec3, v: float, clip: float):
+    """The upwind solution of |grad u| = 1 from the smaller neighbour magnitude per axis `a`,
+    at most |v| and clip, with v's sign."""
     # sort a[0] <= a[1] <= a[2]
     a0 = wp.min(a[0], wp.min(a[1], a[2]))
     a2 = wp.max(a[0], wp.max(a[1], a[2]))
@@ -80,4 +87,4 @@ def eikonal_sweep(
             s = a0 + a1 + a2
             u = (s + wp.sqrt(wp.max(s * s - 3.0 * (a0 * a0 + a1 * a1 + a2 * a2 - 1.0), 0.0))) / 3.0
     u = wp.min(wp.min(u, wp.abs(v)), clip)
-    dst[t] = wp.where(v > 0.0, u, -u)
+    return wp.where(v > 0.0, u, -u)

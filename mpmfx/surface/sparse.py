@@ -49,6 +49,7 @@ ANISO_COV_EPS = 0.01  # x kernel radius^2: regularises the covariance of a flat 
 ANISO_MAX_RATIO = 4.0  # Yu & Turk's k_r: an ellipsoid's axes differ by at most this factor
 ANISO_MAX_STRETCH = 1.6  # longest axis / the isotropic kernel radius (bounds the gather's reach)
 ANISO_MIN_NEIGHBOURS = 8  # fewer neighbours within the kernel (spray) keep a round kernel; a one-layer sheet has ~15
+LINE_KERNELS_ON_CPU = True  # tests compare both paths on the CPU (tests/surface/test_line_kernels.py)
 SEED_DEPTH_SMOOTHED = 0.25  # voxels, the same after smoothing (a lone particle's blob is ~1 voxel deep then)
 
 class SparseGrid:
@@ -232,6 +233,12 @@ def _launch(wp, kernel, dim: int, inputs: list) -> None:
         wp.launch(kernel, dim, inputs=inputs)
 
 
+def _lines(a) -> bool:
+    """Whether the kernels on `a`'s device take a block line per thread (mpmfx.surface.line_kernels:
+    on the CPU, where a launch runs its threads one after another) or a voxel (on a GPU)."""
+    return LINE_KERNELS_ON_CPU and a.device.is_cpu
+
+
 def _split(wp, kernel, dim: int, inputs: list) -> None:
     """Launch a kernel that takes a trailing `base` on the device of inputs[0], split across
     CPU threads on the CPU (mpmfx.surface.launch)."""
@@ -262,6 +269,8 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
     """The raw Zhu-Bridson field at the active voxels: (phi (voxels), kernel weight sums w,
     kernel-weighted velocity or a 1-element placeholder), isotropic or with Yu & Turk's
     ellipsoids (params.anisotropic)."""
+    from mpmfx.surface import line_kernels as L
+
     nvox = bcoord.shape[0] * BS**3
     with_v = v is not None
     va = v if with_v else wp.zeros(1, dtype=wp.vec3)
@@ -282,8 +291,7 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         wp.launch(A.gather_zhu_bridson_aniso, nvox,
                   inputs=[bcoord, cells, starts, order, g, gmat, thin, va, int(with_v), grid.gather_vox, grid.kernel_vox,
                           grid.r_vox, grid.far_vox], outputs=[phi, w, offset, vel, cov, radius])
-    elif phi.device.is_cpu:  # one thread per block line: each candidate particle fetched once per 8 voxels
-        from mpmfx.surface import line_kernels as L
+    elif _lines(phi):  # one thread per block line: each candidate particle fetched once per 8 voxels
         launch_split(wp, L.gather_zhu_bridson_lines, nvox // BS, [bcoord, cells, starts, order, g, va, int(with_v),
                      grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w, offset, vel], device=phi.device)
     else:
@@ -377,7 +385,7 @@ def _remove_small(wp, S, bcoord, bmap, phi, g, min_count: int, tiles) -> None:
     for _ in range(MAX_SWEEP_ROUNDS):
         changed.zero_()
         for axis in range(3):
-            wp.launch(S.sweep_min_labels, bcoord.shape[0] * 64, inputs=[bcoord, bmap, labels, axis, changed])
+            _split(wp, S.sweep_min_labels, bcoord.shape[0] * 64, [bcoord, bmap, labels, axis, changed])
         if int(changed.numpy()[0]) == 0:
             break
     counts = wp.zeros(nvox + 1, dtype=wp.int32)
@@ -387,10 +395,15 @@ def _remove_small(wp, S, bcoord, bmap, phi, g, min_count: int, tiles) -> None:
 
 def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
     """The kernel weight sums blurred `passes` times along each axis (a new array)."""
+    from mpmfx.surface import line_kernels as L
+
     a, b = wp.clone(w), wp.empty_like(w)
     for _ in range(passes):
         for axis in range(3):
-            _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
+            if _lines(w):
+                _split(wp, L.blur_weight_lines, w.shape[0] // BS, [bcoord, bmap, a, axis, NORMAL_STEP, b])
+            else:
+                _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
             a, b = b, a
     return a
 
@@ -402,6 +415,8 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     outward as far as it would move the raw field inward (0.3-0.5 % volume per pass, measured).
     Renormalising that once more flips the curvature back; the mean of the two is straight to
     second order."""
+    from mpmfx.surface import line_kernels as L
+
     nvox = phi.shape[0]
     d1, d2 = wp.empty_like(phi), wp.empty_like(phi)
     _split(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, 1.0, clip, d1])
@@ -419,7 +434,10 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, frozen, a])
     for _ in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
-        _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
+        if _lines(a):
+            _split(wp, L.eikonal_lines, nvox // BS, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
+        else:
+            _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
         a, b = b, a
     return a
 
@@ -431,12 +449,17 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     eroding what is thinner than the blur is wide (a one-particle sheet: half thickness ~r).
     Outward it is free: that is how the dents of sample voids fill (max error 1.2 -> 0.75 h on
     the random torus at 100k; a symmetric limit kept them)."""
+    from mpmfx.surface import line_kernels as L
+
     if iters == 0:
         return dist
     phi, tmp = wp.clone(dist), wp.empty_like(dist)
     for _ in range(iters):
         for axis in range(3):
-            _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
+            if _lines(phi):
+                _split(wp, L.blur_lines, phi.shape[0] // BS, [bcoord, bmap, phi, axis, *tiles, tmp])
+            else:
+                _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
             phi, tmp = tmp, phi
     _launch(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
     return phi
@@ -451,21 +474,26 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
     if nvox == 0:
         return None
     dev = values.device
-    ecount = wp.empty(nvox * 3, dtype=wp.int32)
+    # a thread per edge and per cell (GPU), or per block line along z, counting its 24 edges and 8 cells (CPU)
+    from mpmfx.surface import line_kernels as L
+    lines = _lines(values)
+    kv, kf, nv, nf = (L.mc_vertices_lines, L.mc_faces_lines, nvox // BS, nvox // BS) if lines else (
+        M.mc_vertices, M.mc_faces, nvox * 3, nvox)
+    ecount = wp.empty(nv, dtype=wp.int32)
     edge_vert = wp.empty(nvox * 3, dtype=wp.int32)
-    _split(wp, M.mc_vertices, nvox * 3, [bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
+    _split(wp, kv, nv, [bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
     eoff = _scan(wp, ecount, inclusive=True)
     tables = list(device_tables(wp, dev))
-    fcount = wp.empty(nvox, dtype=wp.int32)
-    _split(wp, M.mc_faces, nvox, [bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
+    fcount = wp.empty(nf, dtype=wp.int32)
+    _split(wp, kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
     foff = _scan(wp, fcount, inclusive=True)
     m, k = (int(a[-1:].numpy()[0]) for a in (eoff, foff))  # the two sizes: one sync each
     if m == 0 or k == 0:
         return None
     verts = wp.empty(m, dtype=wp.vec3)
-    _split(wp, M.mc_vertices, nvox * 3, [bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
+    _split(wp, kv, nv, [bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
     faces = wp.empty(3 * k, dtype=wp.int32)
-    _split(wp, M.mc_faces, nvox, [bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
+    _split(wp, kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
     origin = wp.vec3(*grid.origin.astype(np.float32))

@@ -85,6 +85,17 @@ def interior(c: wp.vec3i):
 
 
 @wp.func
+def in_block(c: wp.vec3i, o: wp.vec3i):
+    """True when voxel c + o lies in voxel c's block."""
+    ok = True
+    for a in range(3):
+        l = c[a] % BS + o[a]
+        if l < 0 or l >= BS:
+            ok = False
+    return ok
+
+
+@wp.func
 def cell_range(x: wp.vec3, reach: float, shape: wp.vec3i):
     """(lo, hi) gather-cell indices (CS^3 voxels each) within `reach` voxels of x, clipped."""
     lo = wp.vec3i(0)
@@ -388,7 +399,9 @@ def seed_reached(
         for n in range(6):
             o = wp.vec3i(0)
             o[n // 2] = 2 * (n % 2) - 1
-            s = slot(bmap, c[0] + o[0], c[1] + o[1], c[2] + o[2])
+            s = int(0)
+            if not in_block(c, o):
+                s = slot(bmap, c[0] + o[0], c[1] + o[1], c[2] + o[2])
             if (out and s == TILE_OUTSIDE) or ((not out) and s == TILE_INSIDE):
                 r = 1
     reached[t] = r
@@ -409,6 +422,13 @@ def line_voxel(axis: int, s: int, l: int):
     return c
 
 
+@wp.func
+def line_start(axis: int, l: int):
+    """(index within its block of line l's first voxel along `axis`, the index step along it)."""
+    c = line_voxel(axis, 0, l)
+    return (c[0] * BS + c[1]) * BS + c[2], stride(axis)
+
+
 @wp.kernel
 def sweep_reached(
     bcoord: wp.array(dtype=wp.vec3i),
@@ -425,6 +445,7 @@ def sweep_reached(
     b = tid // 64
     l = tid - b * 64
     corner = bcoord[b] * BS
+    first, st = line_start(axis, l)
     count = int(0)
     for dirn in range(2):
         start = line_voxel(axis, wp.where(dirn == 0, -1, BS), l) + corner
@@ -435,8 +456,7 @@ def sweep_reached(
             carry_r = reached[sl]
             carry_out = phi[sl] > 0.0
         for q in range(BS):
-            lc = line_voxel(axis, wp.where(dirn == 0, q, BS - 1 - q), l)
-            t = b * BV + (lc[0] * BS + lc[1]) * BS + lc[2]
+            t = b * BV + first + wp.where(dirn == 0, q, BS - 1 - q) * st
             out = phi[t] > 0.0
             r = reached[t]
             if r == 0 and carry_r != 0 and carry_out == out:
@@ -631,11 +651,13 @@ def match_tiles(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int3
         return
     v = phi[t]
     for n in range(27):
-        s = slot(bmap, c[0] + n // 9 - 1, c[1] + (n // 3) % 3 - 1, c[2] + n % 3 - 1)
-        if s == TILE_OUTSIDE and v <= 0.0:
-            v = eps
-        if s == TILE_INSIDE and v > 0.0:
-            v = -eps
+        o = wp.vec3i(n // 9 - 1, (n // 3) % 3 - 1, n % 3 - 1)
+        if not in_block(c, o):  # a neighbour in c's own block is active
+            s = slot(bmap, c[0] + o[0], c[1] + o[1], c[2] + o[2])
+            if s == TILE_OUTSIDE and v <= 0.0:
+                v = eps
+            if s == TILE_INSIDE and v > 0.0:
+                v = -eps
     phi[t] = v
 
 
@@ -664,22 +686,23 @@ def sweep_min_labels(
     labels: wp.array(dtype=wp.int32),
     axis: int,
     changed: wp.array(dtype=wp.int32),
+    base: int,
 ):
     """Carry the smallest label through labelled voxels along one block line, both ways."""
-    tid = wp.tid()
+    tid = wp.tid() + base
     b = tid // 64
     l = tid - b * 64
-    base = bcoord[b] * BS
+    corner = bcoord[b] * BS
+    first, st = line_start(axis, l)
     count = int(0)
     for dirn in range(2):
-        start = line_voxel(axis, wp.where(dirn == 0, -1, BS), l) + base
+        start = line_voxel(axis, wp.where(dirn == 0, -1, BS), l) + corner
         sl = slot(bmap, start[0], start[1], start[2])
         carry = LABEL_NONE
         if sl >= 0:
             carry = labels[sl]
         for q in range(BS):
-            lc = line_voxel(axis, wp.where(dirn == 0, q, BS - 1 - q), l)
-            t = b * BV + (lc[0] * BS + lc[1]) * BS + lc[2]
+            t = b * BV + first + wp.where(dirn == 0, q, BS - 1 - q) * st
             lab = labels[t]
             if lab >= 0 and carry >= 0 and carry < lab:
                 labels[t] = carry

@@ -89,7 +89,7 @@ def mc_faces(
         return
     if ntri == 0:
         return
-    base = offsets[t] - ntri  # inclusive scan
+    first = offsets[t] - ntri  # inclusive scan
     for m in range(ntri):
         for s in range(3):
             le = tri_local[start + 3 * m + s]
@@ -97,7 +97,7 @@ def mc_faces(
             idx = int(-1)
             if sl >= 0:
                 idx = edge_vert[sl * 3 + edge_offset[le, 3]]
-            faces[3 * (base + m) + s] = idx
+            faces[3 * (first + m) + s] = idx
 
 
 @wp.kernel
