@@ -165,16 +165,6 @@ def blur_lines(
         cur = nxt
 
 
-@wp.func
-def weight_read(w: wp.array(dtype=float), code: int, local: int, own: float):
-    """sparse_kernels.weight_at by block code: 0 on OUTSIDE tiles, `own` on INSIDE ones."""
-    if code >= 0:
-        return w[code * BV + local]
-    if code == TILE_INSIDE:
-        return own
-    return 0.0
-
-
 @wp.kernel
 def blur_weight_lines(
     bcoord: wp.array(dtype=wp.vec3i),
@@ -185,32 +175,40 @@ def blur_weight_lines(
     dst: wp.array(dtype=float),
     base: int,
 ):
-    """sparse_kernels.blur_weight_axis along one block line of `axis` (1 <= step <= 8)."""
+    """sparse_kernels.blur_weight_axis along one block line of `axis` (1 <= step <= 8): the
+    line and the same line of the blocks below and above are read once."""
     tid = wp.tid() + base
     b = tid // 64
-    lc = line_voxel(axis, 0, tid - b * 64)
+    first = local_index(line_voxel(axis, 0, tid - b * 64))
     st = stride(axis)
-    t0 = b * BV + local_index(lc)
     below = side_code(bmap, bcoord[b], axis, -1)
     above = side_code(bmap, bcoord[b], axis, 1)
+    cur = vec8(0.0)
+    lo = vec8(0.0)
+    hi = vec8(0.0)
     for q in range(BS):
-        t = t0 + q * st
-        own = src[t]
-        a = float(0.0)
+        cur[q] = src[b * BV + first + q * st]
+        if below >= 0:
+            lo[q] = src[below * BV + first + q * st]
+        if above >= 0:
+            hi[q] = src[above * BV + first + q * st]
+    for q in range(BS):
+        own = cur[q]
+        a = float(0.0)  # weight_at: 0 on an OUTSIDE tile, the voxel's own value on an INSIDE one
         if q >= step:
-            a = src[t - step * st]
-        else:
-            n = wp.vec3i(lc[0], lc[1], lc[2])
-            n[axis] = q - step + BS
-            a = weight_read(src, below, local_index(n), own)
+            a = cur[q - step]
+        elif below >= 0:
+            a = lo[q - step + BS]
+        elif below == TILE_INSIDE:
+            a = own
         c = float(0.0)
         if q + step < BS:
-            c = src[t + step * st]
-        else:
-            n = wp.vec3i(lc[0], lc[1], lc[2])
-            n[axis] = q + step - BS
-            c = weight_read(src, above, local_index(n), own)
-        dst[t] = 0.25 * a + 0.5 * own + 0.25 * c
+            c = cur[q + step]
+        elif above >= 0:
+            c = hi[q + step - BS]
+        elif above == TILE_INSIDE:
+            c = own
+        dst[b * BV + first + q * st] = 0.25 * a + 0.5 * own + 0.25 * c
 
 
 @wp.kernel
