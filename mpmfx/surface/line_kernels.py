@@ -221,19 +221,28 @@ def eikonal_lines(
     in_v: float,
     clip: float,
     dst: wp.array(dtype=float),
+    was: wp.array(dtype=wp.int32),
+    first: int,
+    now: wp.array(dtype=wp.int32),
     base: int,
 ):
-    """redistance_kernels.eikonal_sweep on the 8 voxels of one block line along z."""
+    """redistance_kernels.eikonal_sweep on the 8 voxels of one block line along z.
+
+    was / now: per line, 1 where the previous / this sweep changed a value. A line whose
+    neighbour lines (the 6 it reads) and itself did not change in the previous sweep would
+    compute what it holds, and with src and dst swapped every sweep dst holds the values of two
+    sweeps ago, the same ones: it is skipped (first != 0: the first sweep, nothing skipped).
+    Only the lines at the moving front work, and the result is the plain Jacobi sweep's."""
     tid = wp.tid() + base
     b = tid // 64
     l = tid - b * 64
     li = l // BS
     lj = l - li * BS
     bc = bcoord[b]
-    cxm = int(0)
-    cxp = int(0)
-    cym = int(0)
-    cyp = int(0)
+    cxm = TILE_OUTSIDE  # looked up only at the block's faces
+    cxp = TILE_OUTSIDE
+    cym = TILE_OUTSIDE
+    cyp = TILE_OUTSIDE
     if li == 0:
         cxm = side_code(bmap, bc, 0, -1)
     if li == BS - 1:
@@ -244,6 +253,22 @@ def eikonal_lines(
         cyp = side_code(bmap, bc, 1, 1)
     czm = side_code(bmap, bc, 2, -1)
     czp = side_code(bmap, bc, 2, 1)
+    if first == 0:
+        busy = was[tid] + line_flag(was, cxm, (BS - 1) * BS + lj) + line_flag(was, cxp, lj)
+        busy += line_flag(was, cym, li * BS + BS - 1) + line_flag(was, cyp, li * BS)
+        busy += line_flag(was, czm, l) + line_flag(was, czp, l)
+        if li > 0:
+            busy += was[tid - BS]
+        if li < BS - 1:
+            busy += was[tid + BS]
+        if lj > 0:
+            busy += was[tid - 1]
+        if lj < BS - 1:
+            busy += was[tid + 1]
+        if busy == 0:
+            now[tid] = 0
+            return
+    moved = int(0)
     t0 = tid * BS
     for z in range(BS):
         t = t0 + z
@@ -282,7 +307,19 @@ def eikonal_lines(
         else:
             zhi = read(src, czp, l * BS, out_v, in_v)
         a = wp.vec3(wp.min(wp.abs(xlo), wp.abs(xhi)), wp.min(wp.abs(ylo), wp.abs(yhi)), wp.min(wp.abs(zlo), wp.abs(zhi)))
-        dst[t] = eikonal_update(a, v, clip)
+        u = eikonal_update(a, v, clip)
+        dst[t] = u
+        if u != v:
+            moved = 1
+    now[tid] = moved
+
+
+@wp.func
+def line_flag(flags: wp.array(dtype=wp.int32), code: int, line: int):
+    """flags of line `line` (0..63) of the block with code `code`; 0 for a tile."""
+    if code >= 0:
+        return flags[code * 64 + line]
+    return 0
 
 
 vec8i = wp.types.vector(length=8, dtype=wp.int32)

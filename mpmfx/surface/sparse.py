@@ -433,9 +433,11 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, frozen, a])
-    for _ in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
+    was, now = (wp.empty(nvox // BS, dtype=wp.int32) for _ in range(2))  # lines changed by a sweep (CPU)
+    for sweep in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
         if _lines(a):
-            _split(wp, L.eikonal_lines, nvox // BS, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
+            _split(wp, L.eikonal_lines, nvox // BS, [bcoord, bmap, a, frozen, clip, -clip, clip, b, was, int(sweep == 0), now])
+            was, now = now, was
         else:
             _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
         a, b = b, a
