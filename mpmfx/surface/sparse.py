@@ -357,14 +357,15 @@ def _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, *, seed_depth: float) -
 def _flood(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: bool) -> int:
     nvox = phi.shape[0]
     reached = wp.empty(nvox, dtype=wp.int32)
-    _split(wp, S.seed_reached, nvox, [bcoord, bmap, phi, mark, seed_depth, int(specks), reached])
+    pending = wp.zeros(bcoord.shape[0], dtype=wp.int32)
+    _split(wp, S.seed_reached, nvox, [bcoord, bmap, phi, mark, seed_depth, int(specks), reached, pending])
     changed = wp.zeros(1, dtype=wp.int32)
     nact = bcoord.shape[0]
     rounds = 0
     while rounds < MAX_SWEEP_ROUNDS:
         changed.zero_()
         for axis in range(3):
-            _split(wp, S.sweep_reached, nact * 64, [bcoord, bmap, phi, reached, axis, changed])
+            _split(wp, S.sweep_reached, nact * 64, [bcoord, bmap, phi, reached, pending, axis, changed])
         rounds += 1
         if int(changed.numpy()[0]) == 0:
             break

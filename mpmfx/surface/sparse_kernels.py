@@ -381,12 +381,14 @@ def seed_reached(
     seed_depth: float,
     specks: int,
     reached: wp.array(dtype=wp.int32),
+    pending: wp.array(dtype=wp.int32),
     base: int,
 ):
     """Seeds of a flood fill looking for bubbles (specks == 0: every inside voxel is a seed, and
     outside voxels touching an OUTSIDE tile) or for specks (specks == 1: every outside voxel,
     inside voxels touching an INSIDE tile, and particle voxels at least `seed_depth` deep: a lone
-    particle is ~r deep at its centre, a voxel that sampling noise flips is barely below zero)."""
+    particle is ~r deep at its centre, a voxel that sampling noise flips is barely below zero).
+    pending[b] = 1 for blocks holding an unreached voxel."""
     t = wp.tid() + base
     c = voxel_of(t, bcoord)
     out = phi[t] > 0.0
@@ -405,6 +407,8 @@ def seed_reached(
             if (out and s == TILE_OUTSIDE) or ((not out) and s == TILE_INSIDE):
                 r = 1
     reached[t] = r
+    if r == 0:
+        pending[t // BV] = 1  # (zeroed before) the sweeps skip blocks with nothing left to reach
 
 
 @wp.func
@@ -435,14 +439,18 @@ def sweep_reached(
     bmap: wp.array3d(dtype=wp.int32),
     phi: wp.array(dtype=float),
     reached: wp.array(dtype=wp.int32),
+    pending: wp.array(dtype=wp.int32),
     axis: int,
     changed: wp.array(dtype=wp.int32),
     base: int,
 ):
     """Flood fill through same-sign voxels along one block line, forward then backward,
-    starting from the neighbouring block's voxel: 8 voxels of progress per launch."""
+    starting from the neighbouring block's voxel: 8 voxels of progress per launch. Blocks
+    that seeding reached entirely (pending 0) cannot change and are skipped."""
     tid = wp.tid() + base
     b = tid // 64
+    if pending[b] == 0:
+        return
     l = tid - b * 64
     corner = bcoord[b] * BS
     first, st = line_start(axis, l)
