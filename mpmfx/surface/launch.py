@@ -17,6 +17,7 @@ import os
 from concurrent.futures import ThreadPoolExecutor
 
 MAX_THREADS = 8
+CHUNKS_PER_THREAD = 4
 MIN_SPLIT = 1 << 14  # threads of a launch below which splitting costs more than it gains
 
 _pool: ThreadPoolExecutor | None = None
@@ -56,7 +57,9 @@ def launch_split(wp, kernel, dim: int, inputs: list, *, device) -> None:
     if n == 1 or dim < MIN_SPLIT:
         wp.launch(kernel, dim, inputs=[*inputs, 0], device=device)
         return
-    step = -(-dim // n)
+    # more chunks than threads: a thread that shares its core with another process takes fewer
+    # of them instead of holding the whole launch up
+    step = -(-dim // (n * CHUNKS_PER_THREAD))
     chunks = [(lo, min(step, dim - lo)) for lo in range(0, dim, step)]
     futures = [_executor(n).submit(wp.launch, kernel, size, inputs=[*inputs, lo], device=device) for lo, size in chunks]
     for f in futures:
