@@ -211,6 +211,86 @@ def blur_weight_lines(
         dst[b * BV + first + q * st] = 0.25 * a + 0.5 * own + 0.25 * c
 
 
+vec6 = wp.types.vector(length=6, dtype=wp.float32)
+vec6i = wp.types.vector(length=6, dtype=wp.int32)
+
+
+@wp.func
+def line_sides(bmap: wp.array3d(dtype=wp.int32), bc: wp.vec3i, li: int, lj: int):
+    """Codes of the blocks holding the -x, +x, -y, +y, -z, +z neighbours of line (li, lj) of
+    block bc that lie outside it (OUTSIDE where the line is not at that face)."""
+    c = vec6i(TILE_OUTSIDE)
+    if li == 0:
+        c[0] = side_code(bmap, bc, 0, -1)
+    if li == BS - 1:
+        c[1] = side_code(bmap, bc, 0, 1)
+    if lj == 0:
+        c[2] = side_code(bmap, bc, 1, -1)
+    if lj == BS - 1:
+        c[3] = side_code(bmap, bc, 1, 1)
+    c[4] = side_code(bmap, bc, 2, -1)
+    c[5] = side_code(bmap, bc, 2, 1)
+    return c
+
+
+@wp.func
+def line_neighbours(src: wp.array(dtype=float), sides: vec6i, t: int, l: int, z: int, out_v: float, in_v: float):
+    """`get` of the -x, +x, -y, +y, -z, +z neighbours of voxel t = line l's voxel z (sides from
+    line_sides)."""
+    li = l // BS
+    lj = l - li * BS
+    n = vec6(0.0)
+    if li > 0:
+        n[0] = src[t - BS * BS]
+    else:
+        n[0] = read(src, sides[0], ((BS - 1) * BS + lj) * BS + z, out_v, in_v)
+    if li < BS - 1:
+        n[1] = src[t + BS * BS]
+    else:
+        n[1] = read(src, sides[1], lj * BS + z, out_v, in_v)
+    if lj > 0:
+        n[2] = src[t - BS]
+    else:
+        n[2] = read(src, sides[2], (li * BS + BS - 1) * BS + z, out_v, in_v)
+    if lj < BS - 1:
+        n[3] = src[t + BS]
+    else:
+        n[3] = read(src, sides[3], li * BS * BS + z, out_v, in_v)
+    if z > 0:
+        n[4] = src[t - 1]
+    else:
+        n[4] = read(src, sides[4], l * BS + BS - 1, out_v, in_v)
+    if z < BS - 1:
+        n[5] = src[t + 1]
+    else:
+        n[5] = read(src, sides[5], l * BS, out_v, in_v)
+    return n
+
+
+@wp.kernel
+def renormalise_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    scale: float,
+    clip: float,
+    out: wp.array(dtype=float),
+    base: int,
+):
+    """sparse_kernels.renormalise on the 8 voxels of one block line along z."""
+    tid = wp.tid() + base
+    b = tid // 64
+    l = tid - b * 64
+    sides = line_sides(bmap, bcoord[b], l // BS, l - (l // BS) * BS)
+    for z in range(BS):
+        t = tid * BS + z
+        n = line_neighbours(phi, sides, t, l, z, out_v, in_v)
+        grad = 0.5 * wp.length(wp.vec3(n[1] - n[0], n[3] - n[2], n[5] - n[4]))
+        out[t] = wp.clamp(phi[t] / wp.max(grad, 0.05) * scale, -clip, clip)
+
+
 @wp.kernel
 def eikonal_lines(
     bcoord: wp.array(dtype=wp.vec3i),
@@ -238,25 +318,11 @@ def eikonal_lines(
     l = tid - b * 64
     li = l // BS
     lj = l - li * BS
-    bc = bcoord[b]
-    cxm = TILE_OUTSIDE  # looked up only at the block's faces
-    cxp = TILE_OUTSIDE
-    cym = TILE_OUTSIDE
-    cyp = TILE_OUTSIDE
-    if li == 0:
-        cxm = side_code(bmap, bc, 0, -1)
-    if li == BS - 1:
-        cxp = side_code(bmap, bc, 0, 1)
-    if lj == 0:
-        cym = side_code(bmap, bc, 1, -1)
-    if lj == BS - 1:
-        cyp = side_code(bmap, bc, 1, 1)
-    czm = side_code(bmap, bc, 2, -1)
-    czp = side_code(bmap, bc, 2, 1)
+    sides = line_sides(bmap, bcoord[b], li, lj)
     if first == 0:
-        busy = was[tid] + line_flag(was, cxm, (BS - 1) * BS + lj) + line_flag(was, cxp, lj)
-        busy += line_flag(was, cym, li * BS + BS - 1) + line_flag(was, cyp, li * BS)
-        busy += line_flag(was, czm, l) + line_flag(was, czp, l)
+        busy = was[tid] + line_flag(was, sides[0], (BS - 1) * BS + lj) + line_flag(was, sides[1], lj)
+        busy += line_flag(was, sides[2], li * BS + BS - 1) + line_flag(was, sides[3], li * BS)
+        busy += line_flag(was, sides[4], l) + line_flag(was, sides[5], l)
         if li > 0:
             busy += was[tid - BS]
         if li < BS - 1:
@@ -276,37 +342,8 @@ def eikonal_lines(
         if frozen[t] != 0:
             dst[t] = v
             continue
-        xlo = float(0.0)
-        xhi = float(0.0)
-        ylo = float(0.0)
-        yhi = float(0.0)
-        zlo = float(0.0)
-        zhi = float(0.0)
-        if li > 0:
-            xlo = src[t - BS * BS]
-        else:
-            xlo = read(src, cxm, ((BS - 1) * BS + lj) * BS + z, out_v, in_v)
-        if li < BS - 1:
-            xhi = src[t + BS * BS]
-        else:
-            xhi = read(src, cxp, lj * BS + z, out_v, in_v)
-        if lj > 0:
-            ylo = src[t - BS]
-        else:
-            ylo = read(src, cym, (li * BS + BS - 1) * BS + z, out_v, in_v)
-        if lj < BS - 1:
-            yhi = src[t + BS]
-        else:
-            yhi = read(src, cyp, li * BS * BS + z, out_v, in_v)
-        if z > 0:
-            zlo = src[t - 1]
-        else:
-            zlo = read(src, czm, l * BS + BS - 1, out_v, in_v)
-        if z < BS - 1:
-            zhi = src[t + 1]
-        else:
-            zhi = read(src, czp, l * BS, out_v, in_v)
-        a = wp.vec3(wp.min(wp.abs(xlo), wp.abs(xhi)), wp.min(wp.abs(ylo), wp.abs(yhi)), wp.min(wp.abs(zlo), wp.abs(zhi)))
+        n = line_neighbours(src, sides, t, l, z, out_v, in_v)
+        a = wp.vec3(wp.min(wp.abs(n[0]), wp.abs(n[1])), wp.min(wp.abs(n[2]), wp.abs(n[3])), wp.min(wp.abs(n[4]), wp.abs(n[5])))
         u = eikonal_update(a, v, clip)
         dst[t] = u
         if u != v:

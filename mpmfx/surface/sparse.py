@@ -211,7 +211,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     if params.min_feature_particles > 0 and nvox:
         _remove_small(wp, S, bcoord, bmap, phi, g, params.min_feature_particles, tiles)
     values = wp.empty_like(phi)  # renormalising keeps every sign: the topology stands
-    _split(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, grid.voxel, grid.background, values])
+    _renormalise(wp, S, bcoord, bmap, phi, tiles, grid.voxel, grid.background, values)
     tiles = (grid.background, -grid.background)
     timings["smooth"] = _lap(wp, t0)
     mesh = _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel if with_v else None, grid)
@@ -237,6 +237,16 @@ def _lines(a) -> bool:
     """Whether the kernels on `a`'s device take a block line per thread (mpmfx.surface.line_kernels:
     on the CPU, where a launch runs its threads one after another) or a voxel (on a GPU)."""
     return LINE_KERNELS_ON_CPU and a.device.is_cpu
+
+
+def _renormalise(wp, S, bcoord, bmap, phi, tiles, scale: float, clip: float, out) -> None:
+    """out = sparse_kernels.renormalise of phi (a block line per thread on the CPU)."""
+    from mpmfx.surface import line_kernels as L
+
+    if _lines(phi):
+        _split(wp, L.renormalise_lines, phi.shape[0] // BS, [bcoord, bmap, phi, *tiles, scale, clip, out])
+    else:
+        _split(wp, S.renormalise, phi.shape[0], [bcoord, bmap, phi, *tiles, scale, clip, out])
 
 
 def _split(wp, kernel, dim: int, inputs: list) -> None:
@@ -420,8 +430,8 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
 
     nvox = phi.shape[0]
     d1, d2 = wp.empty_like(phi), wp.empty_like(phi)
-    _split(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, 1.0, clip, d1])
-    _split(wp, S.renormalise, nvox, [bcoord, bmap, d1, clip, -clip, 1.0, clip, d2])
+    _renormalise(wp, S, bcoord, bmap, phi, tiles, 1.0, clip, d1)
+    _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
     _launch(wp, S.average_into, nvox, [d1, d2])
     if nvox == 0:
         return d1
