@@ -21,7 +21,7 @@ CHUNKS_PER_THREAD = 4
 MIN_SPLIT = 1 << 14  # threads of a launch below which splitting costs more than it gains
 
 _pool: ThreadPoolExecutor | None = None
-_pool_size = 0
+_pool_key = (0, 0)  # (threads, pid): a forked child must not reuse its parent's pool (no threads behind it)
 
 
 def cpu_threads() -> int:
@@ -40,17 +40,19 @@ def cpu_threads() -> int:
 
 
 def _executor(n: int) -> ThreadPoolExecutor:
-    global _pool, _pool_size
-    if _pool is None or _pool_size != n:
-        if _pool is not None:
+    global _pool, _pool_key
+    key = (n, os.getpid())
+    if _pool is None or _pool_key != key:
+        if _pool is not None and _pool_key[1] == key[1]:
             _pool.shutdown(wait=True)
-        _pool, _pool_size = ThreadPoolExecutor(n, thread_name_prefix="mpmfx-surface"), n
+        _pool, _pool_key = ThreadPoolExecutor(n, thread_name_prefix="mpmfx-surface"), key
     return _pool
 
 
 def launch_split(wp, kernel, dim: int, inputs: list, *, device) -> None:
-    """Launch `kernel` over `dim` threads with `inputs` + [base]: on a CPU device in
-    cpu_threads() chunks run concurrently, else (or when small) as one launch with base 0."""
+    """Launch `kernel` over `dim` threads with `inputs` + [base]: on a CPU device as
+    CHUNKS_PER_THREAD x cpu_threads() chunks run on cpu_threads() threads, else (or when small)
+    as one launch with base 0."""
     if dim <= 0:
         return
     n = cpu_threads() if device.is_cpu else 1

@@ -29,3 +29,13 @@ def test_cpu_line_kernels_and_threads_give_the_voxel_kernels_surface(monkeypatch
                  (lines.mesh.velocities, voxels.mesh.velocities), (lines.sparse.values, voxels.sparse.values),
                  (lines.sparse.block_ijk, voxels.sparse.block_ijk)]:
         np.testing.assert_array_equal(a, b)
+
+
+def test_a_bad_thread_count_names_the_variable(monkeypatch):
+    from mpmfx.surface.launch import cpu_threads
+
+    monkeypatch.setenv("MPMFX_SURFACE_THREADS", "two")
+    with pytest.raises(ValueError, match="MPMFX_SURFACE_THREADS='two'"):
+        cpu_threads()
+    monkeypatch.setenv("MPMFX_SURFACE_THREADS", "2")
+    assert cpu_threads() == 2
