@@ -68,17 +68,19 @@ def sweep_reached(
     bmap: wp.array3d(dtype=wp.int32),
     phi: wp.array(dtype=float),
     reached: wp.array(dtype=wp.int32),
-    pending: wp.array(dtype=wp.int32),
+    active: wp.array(dtype=wp.int32),
     axis: int,
     changed: wp.array(dtype=wp.int32),
+    moved: wp.array(dtype=wp.int32),
     base: int,
 ):
     """Flood fill through same-sign voxels along one block line, forward then backward,
-    starting from the neighbouring block's voxel: 8 voxels of progress per launch. Blocks
-    that seeding reached entirely (pending 0) cannot change and are skipped."""
+    starting from the neighbouring block's voxel: 8 voxels of progress per launch. Only
+    blocks with active[b] != 0 (see active_blocks) are swept; moved[b] = 1 where a voxel of
+    block b was reached (the next round's activity)."""
     tid = wp.tid() + base
     b = tid // 64
-    if pending[b] == 0:
+    if active[b] == 0:
         return
     l = tid - b * 64
     corner = bcoord[b] * BS
@@ -104,6 +106,37 @@ def sweep_reached(
             carry_out = out
     if count > 0:
         wp.atomic_add(changed, 0, count)
+        moved[b] = 1
+
+
+@wp.kernel
+def active_blocks(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    pending: wp.array(dtype=wp.int32),
+    moved: wp.array(dtype=wp.int32),
+    first: int,
+    active: wp.array(dtype=wp.int32),
+):
+    """active[b] = 1 for the blocks a flood round must sweep: those holding an unreached voxel
+    after seeding (pending) and, after the first round (first == 0), where the block or a face
+    neighbour reached a voxel in the previous round (moved). A voxel reached in round k can
+    only reach others through blocks swept in round k + 1, and a line sweep carries reach along
+    its whole line from either end, so the fill still ends closed, as if every block were swept."""
+    b = wp.tid()
+    a = pending[b]
+    if a != 0 and first == 0:
+        m = moved[b]
+        c = bcoord[b] * BS
+        for n in range(6):
+            o = wp.vec3i(0)
+            o[n // 2] = (2 * (n % 2) - 1) * BS
+            s = slot(bmap, c[0] + o[0], c[1] + o[1], c[2] + o[2])
+            if s >= 0:
+                m += moved[s // BV]
+        if m == 0:
+            a = 0
+    active[b] = a
 
 
 @wp.kernel
