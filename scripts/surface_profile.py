@@ -1,12 +1,16 @@
-"""Per-kernel GPU profile of the sparse surfacer (development aid): one bench row per case
+"""Per-kernel profile of the sparse surfacer (development aid): one bench row per case
 (`mpmfx.bench.surface_cases.measure`: device-resident, median of 3), then the top kernels of
 one more call.
 
     python3 scripts/surface_profile.py --count 10000000 --configs 0.6:1 0.5:2
+    python3 scripts/surface_profile.py --device cpu --count 100000 --samplings random --configs 0.6:2 0.5:5
 configs are VOXEL_H:SMOOTH_ITERS with voxel = VOXEL_H * particle spacing h, at the shipped
-particle radius (mpmfx.surface.PARTICLE_RADIUS_PER_SPACING * h).
+particle radius (mpmfx.surface.PARTICLE_RADIUS_PER_SPACING * h). On the CPU Warp's timer
+sees no kernels, so each launch is timed around the call (CPU launches are synchronous; a
+launch split across threads counts once per chunk; MPMFX_SURFACE_THREADS=1 for one each).
 """
 import argparse
+import time
 
 import warp as wp
 
@@ -31,13 +35,30 @@ for shape in args.shapes:
             row = measure(shape, args.count, sampling, device=args.device, sample=sample, repeats=3, label=cfg,
                           voxel_h=vh, smooth_iters=iters, dense_output=False)
             print(format_row(row), row["stages"], flush=True)
-            wp.timing_begin(cuda_filter=wp.TIMING_ALL)
-            surface_particles(xd, None, SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=vh * h,
-                                                      smooth_iters=iters, dense_output=False))
+            params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=vh * h, smooth_iters=iters,
+                                   dense_output=False)
             agg = {}
-            for r in wp.timing_end():
-                a = agg.setdefault(r.name.split("(")[0][:50], [0, 0.0])
-                a[0] += 1
-                a[1] += r.elapsed
+            if xd.device.is_cpu:
+                launch = wp.launch
+
+                def timed(kernel, *a, **k):
+                    t0 = time.perf_counter()
+                    launch(kernel, *a, **k)
+                    rec = agg.setdefault(kernel.key, [0, 0.0])
+                    rec[0] += 1
+                    rec[1] += 1000.0 * (time.perf_counter() - t0)
+
+                wp.launch = timed
+                try:
+                    surface_particles(xd, None, params)
+                finally:
+                    wp.launch = launch
+            else:
+                wp.timing_begin(cuda_filter=wp.TIMING_ALL)
+                surface_particles(xd, None, params)
+                for r in wp.timing_end():
+                    a = agg.setdefault(r.name.split("(")[0][:50], [0, 0.0])
+                    a[0] += 1
+                    a[1] += r.elapsed
             print("   ", "; ".join(f"{k.replace('forward kernel ', '')} {ms:.1f}ms x{c}" for k, (c, ms) in
                                  sorted(agg.items(), key=lambda kv: -kv[1][1])[:10]), flush=True)

@@ -9,7 +9,7 @@ upwind, one voxel of progress per sweep), so the smoothing that follows sees a t
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import get, voxel_of
+from mpmfx.surface.sparse_kernels import step_get, voxel_of
 
 
 @wp.kernel
@@ -22,20 +22,19 @@ def init_eikonal(
     clip: float,
     frozen: wp.array(dtype=wp.int32),
     dist: wp.array(dtype=float),
+    base: int,
 ):
     """Voxels with a 6-neighbour of the other sign keep phi (frozen = 1: their first-order
     distance to the crossing), at most the distance to the nearest crossing interpolated along
     an axis (where the field's gradient is small phi / |grad phi| can read long); the others
     start at +-clip with phi's sign."""
-    t = wp.tid()
+    t = wp.tid() + base
     c = voxel_of(t, bcoord)
     v = phi[t]
     near = float(1.0)
     cross = int(0)
     for n in range(6):
-        o = wp.vec3i(0)
-        o[n // 2] = 2 * (n % 2) - 1
-        u = get(bmap, phi, c[0] + o[0], c[1] + o[1], c[2] + o[2], out_v, in_v)
+        u = step_get(bmap, phi, t, c, n // 2, 2 * (n % 2) - 1, out_v, in_v)
         if (u > 0.0) != (v > 0.0):
             cross = 1
             near = wp.min(near, wp.abs(v) / wp.max(wp.abs(v) + wp.abs(u), 1.0e-12))
@@ -56,9 +55,10 @@ def eikonal_sweep(
     in_v: float,
     clip: float,
     dst: wp.array(dtype=float),
+    base: int,
 ):
     """One Jacobi sweep of |grad phi| = 1 (upwind, unit spacing) on |phi|, keeping each sign."""
-    t = wp.tid()
+    t = wp.tid() + base
     v = src[t]
     if frozen[t] != 0:
         dst[t] = v
@@ -66,11 +66,16 @@ def eikonal_sweep(
     c = voxel_of(t, bcoord)
     a = wp.vec3(0.0)
     for axis in range(3):
-        o = wp.vec3i(0)
-        o[axis] = 1
-        lo = wp.abs(get(bmap, src, c[0] - o[0], c[1] - o[1], c[2] - o[2], out_v, in_v))
-        hi = wp.abs(get(bmap, src, c[0] + o[0], c[1] + o[1], c[2] + o[2], out_v, in_v))
+        lo = wp.abs(step_get(bmap, src, t, c, axis, -1, out_v, in_v))
+        hi = wp.abs(step_get(bmap, src, t, c, axis, 1, out_v, in_v))
         a[axis] = wp.min(lo, hi)
+    dst[t] = eikonal_update(a, v, clip)
+
+
+@wp.func
+def eikonal_update(a: wp.vec3, v: float, clip: float):
+    """The upwind solution of |grad u| = 1 from the smaller neighbour magnitude per axis `a`,
+    at most |v| and clip, with v's sign."""
     # sort a[0] <= a[1] <= a[2]
     a0 = wp.min(a[0], wp.min(a[1], a[2]))
     a2 = wp.max(a[0], wp.max(a[1], a[2]))
@@ -82,4 +87,4 @@ def eikonal_sweep(
             s = a0 + a1 + a2
             u = (s + wp.sqrt(wp.max(s * s - 3.0 * (a0 * a0 + a1 * a1 + a2 * a2 - 1.0), 0.0))) / 3.0
     u = wp.min(wp.min(u, wp.abs(v)), clip)
-    dst[t] = wp.where(v > 0.0, u, -u)
+    return wp.where(v > 0.0, u, -u)

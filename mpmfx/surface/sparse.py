@@ -30,7 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mpmfx.surface.params import LevelSet, SparseLevelSet, SurfaceMesh, SurfaceParams, SurfaceResult, kernel_volume
+from mpmfx.surface.launch import launch_split
+from mpmfx.surface.params import SurfaceParams, SurfaceResult
 
 log = logging.getLogger(__name__)
 
@@ -48,6 +49,7 @@ ANISO_COV_EPS = 0.01  # x kernel radius^2: regularises the covariance of a flat 
 ANISO_MAX_RATIO = 4.0  # Yu & Turk's k_r: an ellipsoid's axes differ by at most this factor
 ANISO_MAX_STRETCH = 1.6  # longest axis / the isotropic kernel radius (bounds the gather's reach)
 ANISO_MIN_NEIGHBOURS = 8  # fewer neighbours within the kernel (spray) keep a round kernel; a one-layer sheet has ~15
+LINE_KERNELS_ON_CPU = True  # tests compare both paths on the CPU (tests/surface/test_line_kernels.py)
 SEED_DEPTH_SMOOTHED = 0.25  # voxels, the same after smoothing (a lone particle's blob is ~1 voxel deep then)
 
 class SparseGrid:
@@ -123,14 +125,15 @@ class DeviceSurface:
         to stats ("download_mesh", "download_leaves", "download_dense")."""
         import warp as wp
         from mpmfx.surface import sparse_mesh_kernels as M
+        from mpmfx.surface import sparse_output as O
 
         stats = dict(self.stats)
         t0 = time.perf_counter()
-        mesh = _download_mesh(wp, self.mesh, with_v=self.vel is not None, pinned=pinned)
+        mesh = O.download_mesh(wp, self.mesh, with_v=self.vel is not None, pinned=pinned)
         t1 = time.perf_counter()
-        sparse = _sparse_output(wp, M, self, params, pinned=pinned)
+        sparse = O.sparse_output(wp, M, self, params, pinned=pinned)
         t2 = time.perf_counter()
-        result = _dense_output(wp, M, self, params)
+        result = O.dense_output(wp, M, self, params)
         t3 = time.perf_counter()
         stats.update(download_mesh=round(t1 - t0, 4), download_leaves=round(t2 - t1, 4), download_dense=round(t3 - t2, 4))
         result.mesh, result.sparse, result.stats = mesh, sparse, stats
@@ -172,6 +175,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     flood-fill rounds); everything else stays on the GPU."""
     from mpmfx.surface import sparse_kernels as S
     from mpmfx.surface import sparse_mesh_kernels as M
+    from mpmfx.surface import topology_kernels as T
 
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
@@ -189,9 +193,9 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     phi, w, vel = _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid, params)
     timings["field"] = _lap(wp, t0)
     mark = wp.zeros(max(nvox, 1), dtype=wp.int32)
-    wp.launch(S.mark_particle_voxels, n, inputs=[g, bmap, mark])
+    wp.launch(T.mark_particle_voxels, n, inputs=[g, bmap, mark])
     tiles = (grid.far_vox, -grid.r_vox)  # (outside, inside) tile values of the raw field
-    steps = _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH * grid.r_vox)
+    steps = _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH * grid.r_vox)
     timings["topology"] = _lap(wp, t0)
     if params.dilate != 0.0 and nvox:
         wp.launch(S.add_scalar, nvox, inputs=[phi, -params.dilate / grid.voxel])
@@ -203,13 +207,13 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     # seal an outside pocket whose only way out ran along an inside tile (a bubble, seen on
     # random samples), so it comes before the last topology pass, not after. That pass also
     # catches what blurring did: closed thin outside tunnels (bubbles), cut inside necks (specks).
-    _launch(wp, S.match_tiles, nvox, [bcoord, bmap, phi, 1e-3])
+    _split(wp, S.match_tiles, nvox, [bcoord, bmap, phi, 1e-3])
     seed = SEED_DEPTH_SMOOTHED if params.smooth_iters > 0 else SEED_DEPTH * grid.r_vox
-    steps += _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth=seed)
+    steps += _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth=seed)
     if params.min_feature_particles > 0 and nvox:
-        _remove_small(wp, S, bcoord, bmap, phi, g, params.min_feature_particles, tiles)
+        _remove_small(wp, T, bcoord, bmap, phi, g, params.min_feature_particles, tiles)
     values = wp.empty_like(phi)  # renormalising keeps every sign: the topology stands
-    _launch(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, grid.voxel, grid.background, values])
+    _renormalise(wp, S, bcoord, bmap, phi, tiles, grid.voxel, grid.background, values)
     tiles = (grid.background, -grid.background)
     timings["smooth"] = _lap(wp, t0)
     mesh = _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel if with_v else None, grid)
@@ -229,6 +233,28 @@ def _lap(wp, t0: float) -> float:
 def _launch(wp, kernel, dim: int, inputs: list) -> None:
     if dim:
         wp.launch(kernel, dim, inputs=inputs)
+
+
+def _lines(a) -> bool:
+    """Whether the kernels on `a`'s device take a block line per thread (mpmfx.surface.line_kernels:
+    on the CPU, where a launch runs its threads one after another) or a voxel (on a GPU)."""
+    return LINE_KERNELS_ON_CPU and a.device.is_cpu
+
+
+def _renormalise(wp, S, bcoord, bmap, phi, tiles, scale: float, clip: float, out) -> None:
+    """out = sparse_kernels.renormalise of phi (a block line per thread on the CPU)."""
+    from mpmfx.surface import line_kernels as L
+
+    if _lines(phi):
+        _split(wp, L.renormalise_lines, phi.shape[0] // BS, [bcoord, bmap, phi, *tiles, scale, clip, out])
+    else:
+        _split(wp, S.renormalise, phi.shape[0], [bcoord, bmap, phi, *tiles, scale, clip, out])
+
+
+def _split(wp, kernel, dim: int, inputs: list) -> None:
+    """Launch a kernel that takes a trailing `base` on the device of inputs[0], split across
+    CPU threads on the CPU (mpmfx.surface.launch)."""
+    launch_split(wp, kernel, dim, inputs, device=inputs[0].device)
 
 
 def _scan(wp, a, *, inclusive: bool):
@@ -255,6 +281,8 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
     """The raw Zhu-Bridson field at the active voxels: (phi (voxels), kernel weight sums w,
     kernel-weighted velocity or a 1-element placeholder), isotropic or with Yu & Turk's
     ellipsoids (params.anisotropic)."""
+    from mpmfx.surface import line_kernels as L
+
     nvox = bcoord.shape[0] * BS**3
     with_v = v is not None
     va = v if with_v else wp.zeros(1, dtype=wp.vec3)
@@ -275,6 +303,9 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         wp.launch(A.gather_zhu_bridson_aniso, nvox,
                   inputs=[bcoord, cells, starts, order, g, gmat, thin, va, int(with_v), grid.gather_vox, grid.kernel_vox,
                           grid.r_vox, grid.far_vox], outputs=[phi, w, offset, vel, cov, radius])
+    elif _lines(phi):  # one thread per block line: each candidate particle fetched once per 8 voxels
+        launch_split(wp, L.gather_zhu_bridson_lines, nvox // BS, [bcoord, cells, starts, order, g, va, int(with_v),
+                     grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w, offset, vel], device=phi.device)
     else:
         wp.launch(S.gather_zhu_bridson, nvox,
                   inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
@@ -323,63 +354,74 @@ def _sweep_block_labels(wp, S, labels) -> int:
     return MAX_BLOCK_SWEEP_ROUNDS
 
 
-def _fix_topology(wp, S, bcoord, bmap, phi, mark, tiles, *, seed_depth: float) -> int:
+def _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, *, seed_depth: float) -> int:
     """Fill bubbles (outside voxels the boundary does not reach), then turn inside specks that
     hold no particle at least seed_depth deep to outside; returns the sweep rounds used.
     Bubbles first: a speck inside a bubble is then part of the body, and a speck turned outside
     joins an outside region the boundary reaches, so neither step undoes the other."""
     if phi.shape[0] == 0:
         return 0
-    rounds = _flood(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth, specks=False)
-    rounds += _flood(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth, specks=True)
+    rounds = _flood(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth, specks=False)
+    rounds += _flood(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth, specks=True)
     return rounds
 
 
-def _flood(wp, S, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: bool) -> int:
+def _flood(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: bool) -> int:
     nvox = phi.shape[0]
     reached = wp.empty(nvox, dtype=wp.int32)
-    wp.launch(S.seed_reached, nvox, inputs=[bcoord, bmap, phi, mark, seed_depth, int(specks), reached])
+    pending = wp.zeros(bcoord.shape[0], dtype=wp.int32)
+    _split(wp, T.seed_reached, nvox, [bcoord, bmap, phi, mark, seed_depth, int(specks), reached, pending])
     changed = wp.zeros(1, dtype=wp.int32)
     nact = bcoord.shape[0]
+    active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
     rounds = 0
     while rounds < MAX_SWEEP_ROUNDS:
+        # a round sweeps only blocks near what the previous round reached (all pending ones first)
+        wp.launch(T.active_blocks, nact, inputs=[bcoord, bmap, pending, was, int(rounds == 0), active])
         changed.zero_()
+        moved.zero_()
         for axis in range(3):
-            wp.launch(S.sweep_reached, nact * 64, inputs=[bcoord, bmap, phi, reached, axis, changed])
+            _split(wp, T.sweep_reached, nact * 64, [bcoord, bmap, phi, reached, active, axis, changed, moved])
         rounds += 1
+        moved, was = was, moved
         if int(changed.numpy()[0]) == 0:
             break
     else:
         log.warning("topology flood fill did not settle in %d rounds; some bubbles may remain", MAX_SWEEP_ROUNDS)
     # unreached outside voxels are bubbles (-> inside), unreached inside ones specks (-> outside)
-    wp.launch(S.flip_unreached, nvox, inputs=[phi, reached, tiles[1], tiles[0]])
+    wp.launch(T.flip_unreached, nvox, inputs=[phi, reached, tiles[1], tiles[0]])
     return rounds
 
 
-def _remove_small(wp, S, bcoord, bmap, phi, g, min_count: int, tiles) -> None:
+def _remove_small(wp, T, bcoord, bmap, phi, g, min_count: int, tiles) -> None:
     """Inside components (6-connected) holding fewer than min_count particles become outside;
     components touching an INSIDE tile are large by construction and stay."""
     nvox = phi.shape[0]
     labels = wp.empty(nvox, dtype=wp.int32)
-    wp.launch(S.init_inside_labels, nvox, inputs=[bcoord, bmap, phi, labels])
+    wp.launch(T.init_inside_labels, nvox, inputs=[bcoord, bmap, phi, labels])
     changed = wp.zeros(1, dtype=wp.int32)
     for _ in range(MAX_SWEEP_ROUNDS):
         changed.zero_()
         for axis in range(3):
-            wp.launch(S.sweep_min_labels, bcoord.shape[0] * 64, inputs=[bcoord, bmap, labels, axis, changed])
+            _split(wp, T.sweep_min_labels, bcoord.shape[0] * 64, [bcoord, bmap, labels, axis, changed])
         if int(changed.numpy()[0]) == 0:
             break
     counts = wp.zeros(nvox + 1, dtype=wp.int32)
-    wp.launch(S.count_component_particles, g.shape[0], inputs=[g, bmap, labels, counts])
-    wp.launch(S.remove_small_components, nvox, inputs=[labels, counts, min_count, tiles[0], phi])
+    wp.launch(T.count_component_particles, g.shape[0], inputs=[g, bmap, labels, counts])
+    wp.launch(T.remove_small_components, nvox, inputs=[labels, counts, min_count, tiles[0], phi])
 
 
 def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
     """The kernel weight sums blurred `passes` times along each axis (a new array)."""
+    from mpmfx.surface import line_kernels as L
+
     a, b = wp.clone(w), wp.empty_like(w)
     for _ in range(passes):
         for axis in range(3):
-            wp.launch(S.blur_weight_axis, w.shape[0], inputs=[bcoord, bmap, a, axis, NORMAL_STEP, b])
+            if _lines(w):
+                _split(wp, L.blur_weight_lines, w.shape[0] // BS, [bcoord, bmap, a, axis, NORMAL_STEP, b])
+            else:
+                _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
             a, b = b, a
     return a
 
@@ -391,10 +433,12 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     outward as far as it would move the raw field inward (0.3-0.5 % volume per pass, measured).
     Renormalising that once more flips the curvature back; the mean of the two is straight to
     second order."""
+    from mpmfx.surface import line_kernels as L
+
     nvox = phi.shape[0]
     d1, d2 = wp.empty_like(phi), wp.empty_like(phi)
-    _launch(wp, S.renormalise, nvox, [bcoord, bmap, phi, *tiles, 1.0, clip, d1])
-    _launch(wp, S.renormalise, nvox, [bcoord, bmap, d1, clip, -clip, 1.0, clip, d2])
+    _renormalise(wp, S, bcoord, bmap, phi, tiles, 1.0, clip, d1)
+    _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
     _launch(wp, S.average_into, nvox, [d1, d2])
     if nvox == 0:
         return d1
@@ -406,9 +450,14 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
 
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
-    wp.launch(R.init_eikonal, nvox, inputs=[bcoord, bmap, d1, clip, -clip, clip, frozen, a])
-    for _ in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
-        wp.launch(R.eikonal_sweep, nvox, inputs=[bcoord, bmap, a, frozen, clip, -clip, clip, b])
+    _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, frozen, a])
+    was, now = (wp.empty(nvox // BS, dtype=wp.int32) for _ in range(2))  # lines changed by a sweep (CPU)
+    for sweep in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
+        if _lines(a):
+            _split(wp, L.eikonal_lines, nvox // BS, [bcoord, bmap, a, frozen, clip, -clip, clip, b, was, int(sweep == 0), now])
+            was, now = now, was
+        else:
+            _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
         a, b = b, a
     return a
 
@@ -420,12 +469,17 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     eroding what is thinner than the blur is wide (a one-particle sheet: half thickness ~r).
     Outward it is free: that is how the dents of sample voids fill (max error 1.2 -> 0.75 h on
     the random torus at 100k; a symmetric limit kept them)."""
+    from mpmfx.surface import line_kernels as L
+
     if iters == 0:
         return dist
     phi, tmp = wp.clone(dist), wp.empty_like(dist)
     for _ in range(iters):
         for axis in range(3):
-            _launch(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
+            if _lines(phi):
+                _split(wp, L.blur_lines, phi.shape[0] // BS, [bcoord, bmap, phi, axis, *tiles, tmp])
+            else:
+                _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
             phi, tmp = tmp, phi
     _launch(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
     return phi
@@ -440,21 +494,26 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
     if nvox == 0:
         return None
     dev = values.device
-    ecount = wp.empty(nvox * 3, dtype=wp.int32)
+    # a thread per edge and per cell (GPU), or per block line along z, counting its 24 edges and 8 cells (CPU)
+    from mpmfx.surface import line_kernels as L
+    lines = _lines(values)
+    kv, kf, nv, nf = (L.mc_vertices_lines, L.mc_faces_lines, nvox // BS, nvox // BS) if lines else (
+        M.mc_vertices, M.mc_faces, nvox * 3, nvox)
+    ecount = wp.empty(nv, dtype=wp.int32)
     edge_vert = wp.empty(nvox * 3, dtype=wp.int32)
-    wp.launch(M.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
+    _split(wp, kv, nv, [bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
     eoff = _scan(wp, ecount, inclusive=True)
     tables = list(device_tables(wp, dev))
-    fcount = wp.empty(nvox, dtype=wp.int32)
-    wp.launch(M.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
+    fcount = wp.empty(nf, dtype=wp.int32)
+    _split(wp, kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
     foff = _scan(wp, fcount, inclusive=True)
     m, k = (int(a[-1:].numpy()[0]) for a in (eoff, foff))  # the two sizes: one sync each
     if m == 0 or k == 0:
         return None
     verts = wp.empty(m, dtype=wp.vec3)
-    wp.launch(M.mc_vertices, (nvox, 3), inputs=[bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
+    _split(wp, kv, nv, [bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
     faces = wp.empty(3 * k, dtype=wp.int32)
-    wp.launch(M.mc_faces, nvox, inputs=[bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
+    _split(wp, kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
     origin = wp.vec3(*grid.origin.astype(np.float32))
@@ -464,124 +523,3 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
         inputs=[bmap, values, *tiles, vel_arg, int(vel is not None), verts, origin, grid.voxel, world, normals, velocities],
     )
     return world, normals, velocities, faces
-
-
-def _to_host(wp, arrays: list, *, pinned: bool) -> list:
-    """numpy copies of device arrays (None stays None). pinned (CUDA only): page-locked host
-    buffers, every copy queued before one wait; else one synchronous copy each."""
-    if not pinned or all(a is None or a.device.is_cpu for a in arrays):
-        return [None if a is None else a.numpy() for a in arrays]
-    out = []
-    for a in arrays:
-        if a is None:
-            out.append(None)
-            continue
-        host = wp.empty(a.shape, dtype=a.dtype, device="cpu", pinned=True)
-        wp.copy(host, a)
-        out.append(host)
-    wp.synchronize()
-    return [None if h is None else h.numpy() for h in out]
-
-
-def _download_mesh(wp, mesh: tuple | None, *, with_v: bool, pinned: bool) -> SurfaceMesh:
-    if mesh is None:
-        return SurfaceMesh.empty()
-    world, normals, velocities, faces = mesh
-    # without particle velocities the vertex velocities are zeros: made here, not copied
-    world, normals, velocities, faces = _to_host(wp, [world, normals, velocities if with_v else None, faces], pinned=pinned)
-    if velocities is None:
-        velocities = np.zeros_like(world)
-    f = faces.reshape(-1, 3)
-    if f.min() < 0:  # a crossing on a tile face: match_tiles should make this impossible
-        bad = (f < 0).any(axis=1)
-        log.warning("sparse marching cubes: %d triangles touched a constant tile and were dropped", int(bad.sum()))
-        f = f[~bad]
-    return SurfaceMesh(world, f.astype(np.int32, copy=False), normals, velocities)
-
-
-def _sparse_output(wp, M, d: DeviceSurface, params: SurfaceParams, *, pinned: bool) -> SparseLevelSet:
-    """Blocks holding a voxel inside the band; blocks wholly at -background join the inside tiles,
-    wholly at +background are dropped (what OpenVDB's pruning would do). params.density adds
-    the fog density of the kept blocks."""
-    grid, nact = d.grid, d.bcoord.shape[0]
-    keep = wp.empty(max(nact, 1), dtype=wp.int32)
-    _launch(wp, M.kind_equals, nact, [d.kind, 2, keep])
-    offsets = _scan(wp, keep, inclusive=False)
-    m = int(offsets[-1:].numpy()[0] + keep[-1:].numpy()[0]) if nact else 0
-    size = m * BS**3
-    out = wp.empty(max(size, 1), dtype=float)
-    _launch(wp, M.gather_blocks, nact * BS**3, [keep, offsets, d.values, out])
-    vout = fog = None
-    if d.vel is not None:
-        vout = wp.empty(max(size, 1), dtype=wp.vec3)
-        _launch(wp, M.gather_blocks_vec, nact * BS**3, [keep, offsets, d.vel, vout])
-    if params.density:
-        fog = wp.empty(max(size, 1), dtype=float)
-        _launch(wp, M.gather_blocks, nact * BS**3, [keep, offsets, d.w, fog])
-        _launch(wp, M.scale_clamp01, size, [fog, 1.0 / _bulk_weight(d, params)])
-    values, velocity, density, kinds, bcoord, bmap = _to_host(wp, [out, vout, fog, d.kind, d.bcoord, d.bmap], pinned=pinned)
-    kinds = kinds[:nact]
-    blocks = bcoord.astype(np.int64).reshape(-1, 3)
-    inside = np.concatenate([np.argwhere(bmap == -2).astype(np.int64), blocks[kinds == 1]])
-    return SparseLevelSet(
-        block_ijk=blocks[kinds == 2] * BS + grid.ijk0,
-        values=values[:size].reshape(m, BS, BS, BS),
-        velocity=None if velocity is None else velocity[:size].reshape(m, BS, BS, BS, 3),
-        inside_ijk=inside * BS + grid.ijk0,
-        voxel_size=grid.voxel,
-        background=grid.background,
-        density=None if density is None else density[:size].reshape(m, BS, BS, BS),
-    )
-
-
-def _bulk_weight(d: DeviceSurface, params: SurfaceParams) -> float:
-    """Kernel weight sum w deep inside the material (voxel units, as w): the mean particle count
-    of blocks full of particles per block volume, times the kernel's volume integral
-    4 pi R^3 16/315 for (1 - s^2)^3. A block counts as full when it and its 26 neighbours all
-    hold particles: surrounded, it cannot straddle the surface. (The mean over all occupied
-    blocks, as _dense_output uses for its tiles, also averages half-empty surface blocks and
-    spray, so a body would read 1 well before its surface.) Only spray and sheets thinner than
-    three blocks have no full block; the occupied mean is what is left for them."""
-    counts = d.counts.numpy()
-    occupied = counts > 0
-    full = occupied.copy()
-    for axis in range(3):  # 3x3x3 erosion, one axis at a time
-        a = np.moveaxis(full, axis, 0)
-        eroded = a.copy()
-        eroded[1:] &= a[:-1]
-        eroded[:-1] &= a[1:]
-        full = np.moveaxis(eroded, 0, axis)
-    per_block = float(counts[full].mean()) if full.any() else d.n / max(int(occupied.sum()), 1)
-    kernel_vox = params.kernel_radius * params.particle_radius / d.grid.voxel
-    return per_block / BS**3 * kernel_volume(kernel_vox)
-
-
-def _dense_output(wp, M, d: DeviceSurface, params: SurfaceParams) -> SurfaceResult:
-    """Level set, velocity and density as dense arrays over the active blocks' bounding box."""
-    grid, nact, with_v = d.grid, d.bcoord.shape[0], d.vel is not None
-    if not params.dense_output or nact == 0:
-        ls = LevelSet(np.zeros((0, 0, 0), np.float32), grid.ijk0.copy(), grid.voxel, grid.background)
-        velocity = np.zeros((0, 0, 0, 3), np.float32) if with_v else None
-        return SurfaceResult(ls, SurfaceMesh.empty(), velocity, np.zeros((0, 0, 0), np.float32))
-    bc = d.bcoord.numpy()
-    blo, bhi = bc.min(axis=0), bc.max(axis=0)
-    shape = tuple(int(s) for s in (bhi - blo + 1) * BS)
-    lo = wp.vec3i(*(blo * BS).tolist())
-    bt = wp.vec3i(*blo.tolist())
-    dense = wp.empty(shape, dtype=float)
-    wp.launch(M.fill_tiles, shape, inputs=[d.bmap, bt, grid.background, -grid.background, dense])
-    wp.launch(M.densify, d.values.shape[0], inputs=[d.bcoord, d.values, lo, dense])
-    volume = kernel_volume(params.kernel_radius * params.particle_radius)
-    # INSIDE blocks were never evaluated: give them the mean number density of occupied blocks
-    occupied = float(np.count_nonzero(d.counts.numpy()) * (BS * grid.voxel) ** 3)
-    bulk_w = d.n / occupied * volume
-    wd = wp.empty(shape, dtype=float)
-    wp.launch(M.fill_tiles, shape, inputs=[d.bmap, bt, 0.0, bulk_w, wd])
-    wp.launch(M.densify, d.values.shape[0], inputs=[d.bcoord, d.w, lo, wd])
-    velocity = None
-    if with_v:
-        vd = wp.zeros(shape, dtype=wp.vec3)
-        wp.launch(M.densify_vec, d.values.shape[0], inputs=[d.bcoord, d.vel, lo, vd])
-        velocity = vd.numpy()
-    ls = LevelSet(dense.numpy(), grid.ijk0 + blo.astype(np.int64) * BS, grid.voxel, grid.background)
-    return SurfaceResult(ls, SurfaceMesh.empty(), velocity, (wd.numpy() / volume).astype(np.float32))

@@ -55,6 +55,47 @@ def get(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), i: int, j
 
 
 @wp.func
+def stride(axis: int):
+    """Data-index step of one voxel along `axis` inside a block."""
+    return wp.where(axis == 0, BS * BS, wp.where(axis == 1, BS, 1))
+
+
+@wp.func
+def step_get(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), t: int, c: wp.vec3i, axis: int, sgn: int,
+             out_v: float, in_v: float):
+    """`get` of the voxel c + sgn along `axis` (sgn = +-1), c being active voxel t: most
+    neighbours lie in the same block, read directly (no block-map lookup)."""
+    l = c[axis] % BS  # voxel indices are >= 0
+    if (sgn > 0 and l < BS - 1) or (sgn < 0 and l > 0):
+        return data[t + sgn * stride(axis)]
+    o = wp.vec3i(0)
+    o[axis] = sgn
+    return get(bmap, data, c[0] + o[0], c[1] + o[1], c[2] + o[2], out_v, in_v)
+
+
+@wp.func
+def interior(c: wp.vec3i):
+    """True when all 26 neighbours of voxel c lie in its own block."""
+    ok = True
+    for a in range(3):
+        l = c[a] % BS
+        if l == 0 or l == BS - 1:
+            ok = False
+    return ok
+
+
+@wp.func
+def in_block(c: wp.vec3i, o: wp.vec3i):
+    """True when voxel c + o lies in voxel c's block."""
+    ok = True
+    for a in range(3):
+        l = c[a] % BS + o[a]
+        if l < 0 or l >= BS:
+            ok = False
+    return ok
+
+
+@wp.func
 def cell_range(x: wp.vec3, reach: float, shape: wp.vec3i):
     """(lo, hi) gather-cell indices (CS^3 voxels each) within `reach` voxels of x, clipped."""
     lo = wp.vec3i(0)
@@ -321,48 +362,6 @@ def gather_zhu_bridson(
     write_field(t, w, dw, gw, vw, radius_vox, with_v, far_vox, phi, w_out, offset, vel)
 
 
-@wp.kernel
-def mark_particle_voxels(g: wp.array(dtype=wp.vec3), bmap: wp.array3d(dtype=wp.int32), mark: wp.array(dtype=wp.int32)):
-    """mark = 1 at the voxel nearest to each particle (seeds of genuine inside components)."""
-    p = wp.tid()
-    gp = g[p]
-    s = slot(bmap, int(wp.round(gp[0])), int(wp.round(gp[1])), int(wp.round(gp[2])))
-    if s >= 0:
-        mark[s] = 1
-
-
-@wp.kernel
-def seed_reached(
-    bcoord: wp.array(dtype=wp.vec3i),
-    bmap: wp.array3d(dtype=wp.int32),
-    phi: wp.array(dtype=float),
-    mark: wp.array(dtype=wp.int32),
-    seed_depth: float,
-    specks: int,
-    reached: wp.array(dtype=wp.int32),
-):
-    """Seeds of a flood fill looking for bubbles (specks == 0: every inside voxel is a seed, and
-    outside voxels touching an OUTSIDE tile) or for specks (specks == 1: every outside voxel,
-    inside voxels touching an INSIDE tile, and particle voxels at least `seed_depth` deep: a lone
-    particle is ~r deep at its centre, a voxel that sampling noise flips is barely below zero)."""
-    t = wp.tid()
-    c = voxel_of(t, bcoord)
-    out = phi[t] > 0.0
-    r = int(0)
-    if specks == 0 and not out:
-        r = 1
-    if specks != 0 and (out or (mark[t] != 0 and phi[t] <= -seed_depth)):
-        r = 1
-    if r == 0:
-        for n in range(6):
-            o = wp.vec3i(0)
-            o[n // 2] = 2 * (n % 2) - 1
-            s = slot(bmap, c[0] + o[0], c[1] + o[1], c[2] + o[2])
-            if (out and s == TILE_OUTSIDE) or ((not out) and s == TILE_INSIDE):
-                r = 1
-    reached[t] = r
-
-
 @wp.func
 def line_voxel(axis: int, s: int, l: int):
     """Local coordinates of step s along `axis` of line l (0..63) of a block."""
@@ -378,55 +377,11 @@ def line_voxel(axis: int, s: int, l: int):
     return c
 
 
-@wp.kernel
-def sweep_reached(
-    bcoord: wp.array(dtype=wp.vec3i),
-    bmap: wp.array3d(dtype=wp.int32),
-    phi: wp.array(dtype=float),
-    reached: wp.array(dtype=wp.int32),
-    axis: int,
-    changed: wp.array(dtype=wp.int32),
-):
-    """Flood fill through same-sign voxels along one block line, forward then backward,
-    starting from the neighbouring block's voxel: 8 voxels of progress per launch."""
-    tid = wp.tid()
-    b = tid // 64
-    l = tid - b * 64
-    base = bcoord[b] * BS
-    count = int(0)
-    for dirn in range(2):
-        start = line_voxel(axis, wp.where(dirn == 0, -1, BS), l) + base
-        sl = slot(bmap, start[0], start[1], start[2])
-        carry_r = int(0)
-        carry_out = False
-        if sl >= 0:
-            carry_r = reached[sl]
-            carry_out = phi[sl] > 0.0
-        for q in range(BS):
-            lc = line_voxel(axis, wp.where(dirn == 0, q, BS - 1 - q), l)
-            t = b * BV + (lc[0] * BS + lc[1]) * BS + lc[2]
-            out = phi[t] > 0.0
-            r = reached[t]
-            if r == 0 and carry_r != 0 and carry_out == out:
-                reached[t] = 1
-                r = 1
-                count += 1
-            carry_r = r
-            carry_out = out
-    if count > 0:
-        wp.atomic_add(changed, 0, count)
-
-
-@wp.kernel
-def flip_unreached(phi: wp.array(dtype=float), reached: wp.array(dtype=wp.int32), inside_value: float, outside_value: float):
-    """Outside voxels the boundary does not reach are bubbles (-> inside); inside voxels no
-    particle reaches are specks of a noisy field (-> outside)."""
-    t = wp.tid()
-    if reached[t] == 0:
-        if phi[t] > 0.0:
-            phi[t] = inside_value
-        else:
-            phi[t] = outside_value
+@wp.func
+def line_start(axis: int, l: int):
+    """(index within its block of line l's first voxel along `axis`, the index step along it)."""
+    c = line_voxel(axis, 0, l)
+    return (c[0] * BS + c[1]) * BS + c[2], stride(axis)
 
 
 @wp.func
@@ -444,16 +399,27 @@ def weight_at(bmap: wp.array3d(dtype=wp.int32), w: wp.array(dtype=float), t: int
 @wp.kernel
 def blur_weight_axis(
     bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float), axis: int,
-    step: int, dst: wp.array(dtype=float),
+    step: int, dst: wp.array(dtype=float), base: int,
 ):
     """dst = [1 2 1]/4 blur of the kernel weight sum along `axis` with taps `step` voxels apart
     (variance 0.5 step^2 voxel^2; tiles as in weight_at)."""
-    t = wp.tid()
+    t = wp.tid() + base
     c = voxel_of(t, bcoord)
-    o = wp.vec3i(0)
-    o[axis] = step
-    a = weight_at(bmap, src, t, c[0] - o[0], c[1] - o[1], c[2] - o[2])
-    b = weight_at(bmap, src, t, c[0] + o[0], c[1] + o[1], c[2] + o[2])
+    l = c[axis] % BS
+    a = float(0.0)
+    b = float(0.0)
+    if l >= step:  # the tap lies in the same block
+        a = src[t - step * stride(axis)]
+    else:
+        o = wp.vec3i(0)
+        o[axis] = step
+        a = weight_at(bmap, src, t, c[0] - o[0], c[1] - o[1], c[2] - o[2])
+    if l + step < BS:
+        b = src[t + step * stride(axis)]
+    else:
+        o = wp.vec3i(0)
+        o[axis] = step
+        b = weight_at(bmap, src, t, c[0] + o[0], c[1] + o[1], c[2] + o[2])
     dst[t] = 0.25 * a + 0.5 * src[t] + 0.25 * b
 
 
@@ -543,20 +509,18 @@ def renormalise(
     scale: float,
     clip: float,
     out: wp.array(dtype=float),
+    base: int,
 ):
     """out = clip(phi / |grad phi| * scale, +-clip): a signed distance near the zero level.
 
     The raw field keeps its sign (so its zero level) but its slope is not 1 (Zhu-Bridson is
     ~0.7 at the surface and 0 deep inside); dividing by the central-difference gradient
     restores distances in the band, clipping handles the flat interior."""
-    t = wp.tid()
+    t = wp.tid() + base
     c = voxel_of(t, bcoord)
-    i = c[0]
-    j = c[1]
-    k = c[2]
-    gx = get(bmap, phi, i + 1, j, k, out_v, in_v) - get(bmap, phi, i - 1, j, k, out_v, in_v)
-    gy = get(bmap, phi, i, j + 1, k, out_v, in_v) - get(bmap, phi, i, j - 1, k, out_v, in_v)
-    gz = get(bmap, phi, i, j, k + 1, out_v, in_v) - get(bmap, phi, i, j, k - 1, out_v, in_v)
+    gx = step_get(bmap, phi, t, c, 0, 1, out_v, in_v) - step_get(bmap, phi, t, c, 0, -1, out_v, in_v)
+    gy = step_get(bmap, phi, t, c, 1, 1, out_v, in_v) - step_get(bmap, phi, t, c, 1, -1, out_v, in_v)
+    gz = step_get(bmap, phi, t, c, 2, 1, out_v, in_v) - step_get(bmap, phi, t, c, 2, -1, out_v, in_v)
     grad = 0.5 * wp.length(wp.vec3(gx, gy, gz))
     out[t] = wp.clamp(phi[t] / wp.max(grad, 0.05) * scale, -clip, clip)
 
@@ -570,103 +534,31 @@ def blur_axis(
     out_v: float,
     in_v: float,
     dst: wp.array(dtype=float),
+    base: int,
 ):
-    t = wp.tid()
+    t = wp.tid() + base
     c = voxel_of(t, bcoord)
-    o = wp.vec3i(0)
-    o[axis] = 1
-    lo = c - o
-    hi = c + o
-    a = get(bmap, src, lo[0], lo[1], lo[2], out_v, in_v)
-    b = get(bmap, src, hi[0], hi[1], hi[2], out_v, in_v)
+    a = step_get(bmap, src, t, c, axis, -1, out_v, in_v)
+    b = step_get(bmap, src, t, c, axis, 1, out_v, in_v)
     dst[t] = 0.25 * a + 0.5 * src[t] + 0.25 * b
 
 
 @wp.kernel
-def match_tiles(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), eps: float):
+def match_tiles(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), eps: float,
+                base: int):
     """Give voxels next to a constant tile that tile's sign, so no zero crossing touches a tile
     (marching cubes runs only on cells whose lower corner is active)."""
-    t = wp.tid()
+    t = wp.tid() + base
     c = voxel_of(t, bcoord)
+    if interior(c):
+        return
     v = phi[t]
     for n in range(27):
-        s = slot(bmap, c[0] + n // 9 - 1, c[1] + (n // 3) % 3 - 1, c[2] + n % 3 - 1)
-        if s == TILE_OUTSIDE and v <= 0.0:
-            v = eps
-        if s == TILE_INSIDE and v > 0.0:
-            v = -eps
+        o = wp.vec3i(n // 9 - 1, (n // 3) % 3 - 1, n % 3 - 1)
+        if not in_block(c, o):  # a neighbour in c's own block is active
+            s = slot(bmap, c[0] + o[0], c[1] + o[1], c[2] + o[2])
+            if s == TILE_OUTSIDE and v <= 0.0:
+                v = eps
+            if s == TILE_INSIDE and v > 0.0:
+                v = -eps
     phi[t] = v
-
-
-@wp.kernel
-def init_inside_labels(
-    bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), labels: wp.array(dtype=wp.int32)
-):
-    """Inside voxels: own label t + 1, or 0 when touching an INSIDE tile (a big body); else -1."""
-    t = wp.tid()
-    lab = LABEL_NONE
-    if phi[t] <= 0.0:
-        lab = t + 1
-        c = voxel_of(t, bcoord)
-        for n in range(6):
-            o = wp.vec3i(0)
-            o[n // 2] = 2 * (n % 2) - 1
-            if slot(bmap, c[0] + o[0], c[1] + o[1], c[2] + o[2]) == TILE_INSIDE:
-                lab = 0
-    labels[t] = lab
-
-
-@wp.kernel
-def sweep_min_labels(
-    bcoord: wp.array(dtype=wp.vec3i),
-    bmap: wp.array3d(dtype=wp.int32),
-    labels: wp.array(dtype=wp.int32),
-    axis: int,
-    changed: wp.array(dtype=wp.int32),
-):
-    """Carry the smallest label through labelled voxels along one block line, both ways."""
-    tid = wp.tid()
-    b = tid // 64
-    l = tid - b * 64
-    base = bcoord[b] * BS
-    count = int(0)
-    for dirn in range(2):
-        start = line_voxel(axis, wp.where(dirn == 0, -1, BS), l) + base
-        sl = slot(bmap, start[0], start[1], start[2])
-        carry = LABEL_NONE
-        if sl >= 0:
-            carry = labels[sl]
-        for q in range(BS):
-            lc = line_voxel(axis, wp.where(dirn == 0, q, BS - 1 - q), l)
-            t = b * BV + (lc[0] * BS + lc[1]) * BS + lc[2]
-            lab = labels[t]
-            if lab >= 0 and carry >= 0 and carry < lab:
-                labels[t] = carry
-                lab = carry
-                count += 1
-            carry = lab
-    if count > 0:
-        wp.atomic_add(changed, 0, count)
-
-
-@wp.kernel
-def count_component_particles(
-    g: wp.array(dtype=wp.vec3), bmap: wp.array3d(dtype=wp.int32), labels: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32)
-):
-    p = wp.tid()
-    gp = g[p]
-    s = slot(bmap, int(wp.round(gp[0])), int(wp.round(gp[1])), int(wp.round(gp[2])))
-    if s >= 0:
-        lab = labels[s]
-        if lab > 0:
-            wp.atomic_add(counts, lab, 1)
-
-
-@wp.kernel
-def remove_small_components(
-    labels: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), min_count: int, outside_value: float, phi: wp.array(dtype=float)
-):
-    t = wp.tid()
-    lab = labels[t]
-    if lab > 0 and counts[lab] < min_count:
-        phi[t] = outside_value

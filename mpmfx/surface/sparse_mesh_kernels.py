@@ -7,7 +7,7 @@ it shares the block layout and accessors of :mod:`mpmfx.surface.sparse_kernels`.
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, get, slot, voxel_of
+from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, get, slot, step_get, voxel_of
 
 
 @wp.kernel
@@ -22,15 +22,16 @@ def mc_vertices(
     counts: wp.array(dtype=wp.int32),
     edge_vert: wp.array(dtype=wp.int32),
     verts: wp.array(dtype=wp.vec3),
+    base: int,
 ):
-    """One thread per (active voxel, axis): a vertex where phi changes sign along the edge."""
-    t, axis = wp.tid()
+    """One thread per (active voxel, axis), e = voxel * 3 + axis: a vertex where phi changes
+    sign along the edge."""
+    e = wp.tid() + base
+    t = e // 3
+    axis = e - t * 3
     c = voxel_of(t, bcoord)
-    o = wp.vec3i(0)
-    o[axis] = 1
     a = phi[t]
-    b = get(bmap, phi, c[0] + o[0], c[1] + o[1], c[2] + o[2], out_v, in_v)
-    e = t * 3 + axis
+    b = step_get(bmap, phi, t, c, axis, 1, out_v, in_v)
     crossing = (a >= 0.0) != (b >= 0.0)
     if count_only != 0:
         counts[e] = wp.where(crossing, 1, 0)
@@ -61,10 +62,12 @@ def mc_faces(
     count_only: int,
     counts: wp.array(dtype=wp.int32),
     faces: wp.array(dtype=wp.int32),
+    base: int,
 ):
     """Triangles of the cell whose lower corner is active voxel t (warp.geometry's tables)."""
-    t = wp.tid()
+    t = wp.tid() + base
     c = voxel_of(t, bcoord)
+    inner = c[0] % BS < BS - 1 and c[1] % BS < BS - 1 and c[2] % BS < BS - 1  # all 8 corners in t's block
     code = int(0)
     for n in range(8):
         # corner order of warp.geometry: (0,0,0) (1,0,0) (1,1,0) (0,1,0), then z + 1
@@ -72,7 +75,12 @@ def mc_faces(
         dx = wp.where(q == 1 or q == 2, 1, 0)
         dy = wp.where(q >= 2, 1, 0)
         dz = n // 4
-        if get(bmap, phi, c[0] + dx, c[1] + dy, c[2] + dz, out_v, in_v) >= 0.0:
+        val = float(0.0)
+        if inner:
+            val = phi[t + (dx * BS + dy) * BS + dz]
+        else:
+            val = get(bmap, phi, c[0] + dx, c[1] + dy, c[2] + dz, out_v, in_v)
+        if val >= 0.0:
             code += 1 << n
     start = tri_range[code]
     ntri = (tri_range[code + 1] - start) // 3
@@ -81,7 +89,7 @@ def mc_faces(
         return
     if ntri == 0:
         return
-    base = offsets[t] - ntri  # inclusive scan
+    first = offsets[t] - ntri  # inclusive scan
     for m in range(ntri):
         for s in range(3):
             le = tri_local[start + 3 * m + s]
@@ -89,7 +97,7 @@ def mc_faces(
             idx = int(-1)
             if sl >= 0:
                 idx = edge_vert[sl * 3 + edge_offset[le, 3]]
-            faces[3 * (base + m) + s] = idx
+            faces[3 * (first + m) + s] = idx
 
 
 @wp.kernel

@@ -1,0 +1,138 @@
+"""Host copies of the sparse surfacer's result (:class:`mpmfx.surface.sparse.DeviceSurface`):
+the mesh, the level set as OpenVDB-style leaves (with velocity and fog density) and the
+optional dense arrays. Split from :mod:`mpmfx.surface.sparse` to keep each module small.
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from mpmfx.surface.params import LevelSet, SparseLevelSet, SurfaceMesh, SurfaceParams, SurfaceResult, kernel_volume
+from mpmfx.surface.sparse import BS, DeviceSurface
+from mpmfx.surface.sparse import _launch as launch
+from mpmfx.surface.sparse import _scan as scan
+
+log = logging.getLogger(__name__)
+
+
+def to_host(wp, arrays: list, *, pinned: bool) -> list:
+    """numpy copies of device arrays (None stays None). pinned (CUDA only): page-locked host
+    buffers, every copy queued before one wait; else one synchronous copy each."""
+    if not pinned or all(a is None or a.device.is_cpu for a in arrays):
+        return [None if a is None else a.numpy() for a in arrays]
+    out = []
+    for a in arrays:
+        if a is None:
+            out.append(None)
+            continue
+        host = wp.empty(a.shape, dtype=a.dtype, device="cpu", pinned=True)
+        wp.copy(host, a)
+        out.append(host)
+    wp.synchronize()
+    return [None if h is None else h.numpy() for h in out]
+
+
+def download_mesh(wp, mesh: tuple | None, *, with_v: bool, pinned: bool) -> SurfaceMesh:
+    if mesh is None:
+        return SurfaceMesh.empty()
+    world, normals, velocities, faces = mesh
+    # without particle velocities the vertex velocities are zeros: made here, not copied
+    world, normals, velocities, faces = to_host(wp, [world, normals, velocities if with_v else None, faces], pinned=pinned)
+    if velocities is None:
+        velocities = np.zeros_like(world)
+    f = faces.reshape(-1, 3)
+    if f.min() < 0:  # a crossing on a tile face: match_tiles should make this impossible
+        bad = (f < 0).any(axis=1)
+        log.warning("sparse marching cubes: %d triangles touched a constant tile and were dropped", int(bad.sum()))
+        f = f[~bad]
+    return SurfaceMesh(world, f.astype(np.int32, copy=False), normals, velocities)
+
+
+def sparse_output(wp, M, d: DeviceSurface, params: SurfaceParams, *, pinned: bool) -> SparseLevelSet:
+    """Blocks holding a voxel inside the band; blocks wholly at -background join the inside tiles,
+    wholly at +background are dropped (what OpenVDB's pruning would do). params.density adds
+    the fog density of the kept blocks."""
+    grid, nact = d.grid, d.bcoord.shape[0]
+    keep = wp.empty(max(nact, 1), dtype=wp.int32)
+    launch(wp, M.kind_equals, nact, [d.kind, 2, keep])
+    offsets = scan(wp, keep, inclusive=False)
+    m = int(offsets[-1:].numpy()[0] + keep[-1:].numpy()[0]) if nact else 0
+    size = m * BS**3
+    out = wp.empty(max(size, 1), dtype=float)
+    launch(wp, M.gather_blocks, nact * BS**3, [keep, offsets, d.values, out])
+    vout = fog = None
+    if d.vel is not None:
+        vout = wp.empty(max(size, 1), dtype=wp.vec3)
+        launch(wp, M.gather_blocks_vec, nact * BS**3, [keep, offsets, d.vel, vout])
+    if params.density:
+        fog = wp.empty(max(size, 1), dtype=float)
+        launch(wp, M.gather_blocks, nact * BS**3, [keep, offsets, d.w, fog])
+        launch(wp, M.scale_clamp01, size, [fog, 1.0 / bulk_weight(d, params)])
+    values, velocity, density, kinds, bcoord, bmap = to_host(wp, [out, vout, fog, d.kind, d.bcoord, d.bmap], pinned=pinned)
+    kinds = kinds[:nact]
+    blocks = bcoord.astype(np.int64).reshape(-1, 3)
+    inside = np.concatenate([np.argwhere(bmap == -2).astype(np.int64), blocks[kinds == 1]])
+    return SparseLevelSet(
+        block_ijk=blocks[kinds == 2] * BS + grid.ijk0,
+        values=values[:size].reshape(m, BS, BS, BS),
+        velocity=None if velocity is None else velocity[:size].reshape(m, BS, BS, BS, 3),
+        inside_ijk=inside * BS + grid.ijk0,
+        voxel_size=grid.voxel,
+        background=grid.background,
+        density=None if density is None else density[:size].reshape(m, BS, BS, BS),
+    )
+
+
+def bulk_weight(d: DeviceSurface, params: SurfaceParams) -> float:
+    """Kernel weight sum w deep inside the material (voxel units, as w): the mean particle count
+    of blocks full of particles per block volume, times the kernel's volume integral
+    4 pi R^3 16/315 for (1 - s^2)^3. A block counts as full when it and its 26 neighbours all
+    hold particles: surrounded, it cannot straddle the surface. (The mean over all occupied
+    blocks, as _dense_output uses for its tiles, also averages half-empty surface blocks and
+    spray, so a body would read 1 well before its surface.) Only spray and sheets thinner than
+    three blocks have no full block; the occupied mean is what is left for them."""
+    counts = d.counts.numpy()
+    occupied = counts > 0
+    full = occupied.copy()
+    for axis in range(3):  # 3x3x3 erosion, one axis at a time
+        a = np.moveaxis(full, axis, 0)
+        eroded = a.copy()
+        eroded[1:] &= a[:-1]
+        eroded[:-1] &= a[1:]
+        full = np.moveaxis(eroded, 0, axis)
+    per_block = float(counts[full].mean()) if full.any() else d.n / max(int(occupied.sum()), 1)
+    kernel_vox = params.kernel_radius * params.particle_radius / d.grid.voxel
+    return per_block / BS**3 * kernel_volume(kernel_vox)
+
+
+def dense_output(wp, M, d: DeviceSurface, params: SurfaceParams) -> SurfaceResult:
+    """Level set, velocity and density as dense arrays over the active blocks' bounding box."""
+    grid, nact, with_v = d.grid, d.bcoord.shape[0], d.vel is not None
+    if not params.dense_output or nact == 0:
+        ls = LevelSet(np.zeros((0, 0, 0), np.float32), grid.ijk0.copy(), grid.voxel, grid.background)
+        velocity = np.zeros((0, 0, 0, 3), np.float32) if with_v else None
+        return SurfaceResult(ls, SurfaceMesh.empty(), velocity, np.zeros((0, 0, 0), np.float32))
+    bc = d.bcoord.numpy()
+    blo, bhi = bc.min(axis=0), bc.max(axis=0)
+    shape = tuple(int(s) for s in (bhi - blo + 1) * BS)
+    lo = wp.vec3i(*(blo * BS).tolist())
+    bt = wp.vec3i(*blo.tolist())
+    dense = wp.empty(shape, dtype=float)
+    wp.launch(M.fill_tiles, shape, inputs=[d.bmap, bt, grid.background, -grid.background, dense])
+    wp.launch(M.densify, d.values.shape[0], inputs=[d.bcoord, d.values, lo, dense])
+    volume = kernel_volume(params.kernel_radius * params.particle_radius)
+    # INSIDE blocks were never evaluated: give them the mean number density of occupied blocks
+    occupied = float(np.count_nonzero(d.counts.numpy()) * (BS * grid.voxel) ** 3)
+    bulk_w = d.n / occupied * volume
+    wd = wp.empty(shape, dtype=float)
+    wp.launch(M.fill_tiles, shape, inputs=[d.bmap, bt, 0.0, bulk_w, wd])
+    wp.launch(M.densify, d.values.shape[0], inputs=[d.bcoord, d.w, lo, wd])
+    velocity = None
+    if with_v:
+        vd = wp.zeros(shape, dtype=wp.vec3)
+        wp.launch(M.densify_vec, d.values.shape[0], inputs=[d.bcoord, d.vel, lo, vd])
+        velocity = vd.numpy()
+    ls = LevelSet(dense.numpy(), grid.ijk0 + blo.astype(np.int64) * BS, grid.voxel, grid.background)
+    return SurfaceResult(ls, SurfaceMesh.empty(), velocity, (wd.numpy() / volume).astype(np.float32))

@@ -1,0 +1,41 @@
+"""The CPU path (mpmfx.surface.line_kernels: a block line per thread, launches split across CPU
+threads) surfaces exactly as the voxel kernels a GPU runs: same mesh, same leaves."""
+
+import numpy as np
+import pytest
+
+from mpmfx.bench.surface_cases import sample_shape
+from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_particles
+
+pytest.importorskip("warp")
+
+
+@pytest.mark.parametrize("voxel_h, iters", [(0.6, 2), (0.5, 5)])
+def test_cpu_line_kernels_and_threads_give_the_voxel_kernels_surface(monkeypatch, voxel_h, iters):
+    import mpmfx.surface.sparse as sparse
+
+    x, h = sample_shape("torus", 6000, "random")
+    v = np.random.default_rng(1).normal(size=x.shape).astype(np.float32)
+    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel_h * h, smooth_iters=iters,
+                           min_feature_particles=8, dense_output=False)
+    monkeypatch.setenv("MPMFX_SURFACE_THREADS", "3")  # more chunks than cores: any split must agree
+    monkeypatch.setattr("mpmfx.surface.launch.MIN_SPLIT", 64)
+    lines = surface_particles(x, v, params, device="cpu")
+    monkeypatch.setattr(sparse, "LINE_KERNELS_ON_CPU", False)
+    monkeypatch.setenv("MPMFX_SURFACE_THREADS", "1")
+    voxels = surface_particles(x, v, params, device="cpu")
+    assert len(lines.mesh.faces) > 1000
+    for a, b in [(lines.mesh.vertices, voxels.mesh.vertices), (lines.mesh.faces, voxels.mesh.faces),
+                 (lines.mesh.velocities, voxels.mesh.velocities), (lines.sparse.values, voxels.sparse.values),
+                 (lines.sparse.block_ijk, voxels.sparse.block_ijk)]:
+        np.testing.assert_array_equal(a, b)
+
+
+def test_a_bad_thread_count_names_the_variable(monkeypatch):
+    from mpmfx.surface.launch import cpu_threads
+
+    monkeypatch.setenv("MPMFX_SURFACE_THREADS", "two")
+    with pytest.raises(ValueError, match="MPMFX_SURFACE_THREADS='two'"):
+        cpu_threads()
+    monkeypatch.setenv("MPMFX_SURFACE_THREADS", "2")
+    assert cpu_threads() == 2
