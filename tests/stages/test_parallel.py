@@ -39,6 +39,15 @@ def cluster():
         yield ex
 
 
+def test_workers_share_the_cores_for_the_surfacers_threads(cluster):
+    import os
+
+    from mpmfx.surface.launch import cpu_threads
+    cores = len(os.sched_getaffinity(0))
+    threads = cluster.client().run(cpu_threads)  # worker address -> its split
+    assert sorted(threads.values()) == [max(1, cores // 2)] * 2
+
+
 def _cache_with_simulation(reference, cache: Path) -> Path:
     """A fresh cache holding only the reference's voxelise and simulate entries."""
     shot, entries = reference
