@@ -5,6 +5,7 @@ surfaces for the trip back (scripts/hero_codec.py: lossy-compact meshes, split u
 
     python3 scripts/hero_gpu.py                      # on the GPU: both hero shots, outputs to $OUT
     python3 scripts/hero_gpu.py --smoke --device cpu # CPU size (grid 32, few frames): tests the path
+    python3 scripts/hero_gpu.py --no-pack            # the stage times only (no surfaces brought back)
 
 Imports numpy, warp and mpmfx only (and what the stages import: pydantic, tqdm, trimesh). Writes
 $OUT/hero_times.json (per shot: particles, grid, frames, substeps, seconds per stage, mesh sizes,
