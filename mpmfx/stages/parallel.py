@@ -85,6 +85,11 @@ class Frames:
                                 f"processes (1 = serial), or unset it") from None
         if workers is not None and workers < 1:
             raise ShotError(f"--workers / ${WORKERS_ENV} = {workers}: give at least 1 (1 = serial)")
+        from mpmfx.surface.launch import cpu_threads  # (no Warp import) its setting, checked before any stage runs
+        try:
+            cpu_threads()
+        except ValueError as exc:
+            raise ShotError(f"${exc}, or unset it") from None
         self.workers = workers
         self._client = self._cluster = None
 

@@ -166,3 +166,13 @@ def test_a_bad_worker_count_is_bad_input_not_a_traceback(tiny_shot, tmp_path, mo
     monkeypatch.setenv("MPMFX_WORKERS", "two")
     assert main(["run", str(tiny_shot), "--cache", str(tmp_path / "cache"), "--until", "voxelise"]) == 2
     assert "$MPMFX_WORKERS = 'two'" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("value, fix", [("two", "whole number"), ("0", "at least 1")])
+def test_a_bad_surfacer_thread_count_is_bad_input_not_a_traceback(tiny_shot, tmp_path, monkeypatch, capsys, value,
+                                                                  fix):
+    from mpmfx.cli import main
+    monkeypatch.setenv("MPMFX_SURFACE_THREADS", value)
+    assert main(["run", str(tiny_shot), "--cache", str(tmp_path / "cache"), "--until", "voxelise"]) == 2
+    err = capsys.readouterr().err
+    assert f"$MPMFX_SURFACE_THREADS='{value}'" in err and fix in err and "Traceback" not in err
