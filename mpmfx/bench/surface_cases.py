@@ -377,32 +377,50 @@ SHEET_COUNTS = {"quick": 20_000, "full": 1_000_000}
 """Particles in the thin-sheet case: CPU-sized for --quick, GPU-sized for the full run."""
 
 
+RUN_ERRORS = (RuntimeError, MemoryError, ValueError)  # a method failing at run time: reported, no row
+
+
+class Table(list):
+    """A bench table's rows, each printed with `fmt` as it comes when `echo` (header first)."""
+
+    def __init__(self, header: str, fmt: Callable[[dict], str], *, echo: bool = True):
+        super().__init__()
+        self.fmt, self.echo = fmt, echo
+        if echo:
+            print(header, flush=True)
+
+    def emit(self, row: dict) -> None:
+        self.append(row)
+        if self.echo:
+            print(self.fmt(row), flush=True)
+
+    def attempt(self, what: str, make: Callable[[], dict]) -> None:
+        """emit(make()), or say that `what` failed and add no row (one failing peer must not
+        lose the rest of the table)."""
+        try:
+            row = make()
+        except RUN_ERRORS as exc:
+            print(f"{what} failed, no row: {exc}", flush=True)
+            return
+        self.emit(row)
+
+
 def bench_sheet(count: int, device: str | None = None, *, peers: Sequence[str] = (), echo: bool = True) -> list[dict]:
     """The thin-sheet case (a disc one spacing thick, lattice and random) with each of our
     settings, isotropic and anisotropic, and each peer on the same particles (`measure_sheet_peer`;
     one that fails at run time is reported and left out): pieces, holes, open edges, thickness
     error, time."""
     measure_sheet(500, "random", label="fast", device=device, anisotropic=True)  # compile
-    rows = []
-    if echo:
-        print(SHEET_HEADER, flush=True)
-
-    def emit(row: dict) -> None:
-        row["count"] = count
-        rows.append(row)
-        if echo:
-            print(format_sheet_row(row), flush=True)
-
+    rows = Table(SHEET_HEADER, format_sheet_row, echo=echo)
     for sampling in ("lattice", "random"):
         for label in OURS:
             for aniso in (False, True):
-                emit(measure_sheet(count, sampling, label=label, device=device, anisotropic=aniso))
+                rows.emit({**measure_sheet(count, sampling, label=label, device=device, anisotropic=aniso),
+                           "count": count})
         for name in peers:
-            try:
-                emit(measure_sheet_peer(name, count, sampling, device=device))
-            except (RuntimeError, MemoryError, ValueError) as exc:
-                print(f"sheet {sampling} {count}: peer {name} failed, no row: {exc}", flush=True)
-    return rows
+            rows.attempt(f"sheet {sampling} {count}: peer {name}",
+                         lambda: {**measure_sheet_peer(name, count, sampling, device=device), "count": count})
+    return list(rows)
 
 
 SHEET_HEADER = (f"{'shape':7} {'sampling':8} {'n':>8} {'method':34} {'time s':>7} {'pieces':>6} {'holes':>6} {'open':>5} "

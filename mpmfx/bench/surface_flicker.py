@@ -24,7 +24,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from mpmfx.bench.surface_cases import BOX_HALF, MOVE_STEP, OURS, REST_NOISE, mesh_stats, sample_shape
+from mpmfx.bench.surface_cases import (BOX_HALF, MOVE_STEP, OURS, REST_NOISE, RUN_ERRORS, Table, mesh_stats,
+                                       sample_shape)
 from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_particles
 
 FLICKER_COUNT = 20_000
@@ -212,19 +213,15 @@ def bench_flicker(count: int = FLICKER_COUNT, device: str | None = None, *, peer
     surface_particles(xs[0][:500], None, SurfaceParams(h), device=device)  # compile
     methods = [(f"mpmfx {label}", ours(label, h, device)) for label in OURS]
     methods += [(name, peer(name, h, device)) for name in peers]
-    out = []
-    if echo:
-        print(FLICKER_HEADER, flush=True)
+    out = Table(FLICKER_HEADER, format_flicker_row, echo=echo)
     for method, run in methods:
         try:
             rows, _ = flicker_run(run, xs, h, step)
-        except (RuntimeError, MemoryError, ValueError) as exc:
+        except RUN_ERRORS as exc:
             print(f"flicker: {method} failed, no row: {exc}", flush=True)
             continue
-        out.append(summarise(method, rows, len(xs[0]), h))
-        if echo:
-            print(format_flicker_row(out[-1]), flush=True)
-    return out
+        out.emit(summarise(method, rows, len(xs[0]), h))
+    return list(out)
 
 
 FLICKER_HEADER = (f"{'case':18} {'n':>7} {'method':16} {'s/frame':>7} {'jitter/h':>8} {'p99/h':>6} {'turn deg':>8} "

@@ -135,27 +135,17 @@ def bench_splash(device: str | None = None, *, peers: Sequence[str] = (), echo: 
                  asset: str | Path = SPLASH_ASSET) -> list[dict]:
     """The splash frame with ours isotropic and anisotropic and each peer (a failing peer is
     reported and left out); prints SPLASH_HEADER rows when `echo`."""
+    from mpmfx.bench.surface_cases import Table
     from mpmfx.surface import SurfaceParams, surface_particles
 
     x, h = load_splash(asset)
     surface_particles(x[:500], None, SurfaceParams(h, anisotropic=True), device=device)  # compile
-    rows: list[dict] = []
-    if echo:
-        print(SPLASH_HEADER, flush=True)
-
-    def emit(row: dict) -> None:
-        rows.append(row)
-        if echo:
-            print(format_splash_row(row), flush=True)
-
+    rows = Table(SPLASH_HEADER, format_splash_row, echo=echo)
     for aniso in (False, True):
-        emit(measure_splash(x, h, anisotropic=aniso, device=device))
+        rows.emit(measure_splash(x, h, anisotropic=aniso, device=device))
     for name in peers:
-        try:
-            emit(measure_splash_peer(name, x, h, device=device))
-        except (RuntimeError, MemoryError, ValueError) as exc:
-            print(f"splash frame: peer {name} failed, no row: {exc}", flush=True)
-    return rows
+        rows.attempt(f"splash frame: peer {name}", lambda: measure_splash_peer(name, x, h, device=device))
+    return list(rows)
 
 
 SPLASH_HEADER = (f"{'frame':16} {'n':>7} {'method':22} {'time s':>7} {'pieces':>6} {'>=8h3':>5} {'holes':>6} "
