@@ -1,8 +1,8 @@
-"""The binned P2G on a GPU: (1) it against the reference, deterministic and fast, over a
-few hundred substeps; (2) its kernels one by one beside the reference P2G; (3) the paths
-through advance() back to back. One table each; rows also under $OUT (or renders/bench).
+"""The brick P2G on a GPU: (1) it against the reference, deterministic and fast, over a
+few hundred substeps; (2) their kernels one by one beside the
+reference P2G; (3) the paths through advance() back to back. One table each; rows also under $OUT (or renders/bench).
 
-    python3 scripts/p2g_gpu.py [grid ...]        (default 128 256)
+    python3 scripts/p2g_gpu.py [grid ...] [--skip agreement|kernels|paths ...]   (grids: 128 256)
 """
 import json
 import os
@@ -20,32 +20,34 @@ OUT = os.environ.get("OUT", "renders/bench")
 
 
 def agreement(grid_n=32, frames=6):
-    """Max |binned - reference| over x, v after `frames` frames, Mushy and Water, both modes."""
+    """Max |sorted P2G - reference| over x, v, F after `frames` frames, Mushy and Water, both modes."""
     rows = []
     for name in ("Mushy", "Water"):
         for det in (True, False):
             res = []
-            for binned in (False, True):
+            for p2g in ("reference", "brick"):
                 mats, parts, _ = scene(name, grid_n)
                 s = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=det), device="cuda", stepper="device")
-                s._device_advance.binned = binned
+                s._device_advance.p2g = p2g
                 st = s.init_state(parts)
                 subs = sum(s.advance(st, f / 24, (f + 1) / 24).substeps for f in range(frames))
                 res.append((s.state_to_numpy(st), subs))
-            (a, na), (b, nb) = res
-            rows.append({"scene": name, "det": int(det), "substeps_ref": na, "substeps_binned": nb,
-                         "max_dx": float(np.abs(a["x"] - b["x"]).max()), "max_dv": float(np.abs(a["v"] - b["v"]).max()),
-                         "max_dF": float(np.abs(a["F"] - b["F"]).max()) if "F" in a else 0.0})
+            (a, na) = res[0]
+            for p2g, (b, nb) in zip(("brick",), res[1:]):
+                rows.append({"scene": name, "det": int(det), "p2g": p2g, "substeps_ref": na, "substeps": nb,
+                             "max_dx": float(np.abs(a["x"] - b["x"]).max()),
+                             "max_dv": float(np.abs(a["v"] - b["v"]).max()),
+                             "max_dF": float(np.abs(a["F"] - b["F"]).max()) if "F" in a else 0.0})
     print_table(rows, list(rows[0]))
     return rows
 
 
-def kernels(name, grid_n, det, binned, sort1=False):
+def kernels(name, grid_n, det, p2g, sort1=False):
     """Device ms per substep of each P2G kernel over one advance (graphs off)."""
     mats, parts, _ = scene(name, grid_n)
     s = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=det), device="cuda", stepper="device")
     da = s._device_advance
-    da.binned, da.sort_every_substep, da.graphs = binned, sort1, False
+    da.p2g, da.sort_every_substep, da.graphs = p2g, sort1, False
     st = s.init_state(parts)
     span = 32 * s.config.cfl * s.config.dx / max(m.wave_speed() for m in mats)
     s.advance(st, 0.0, span)
@@ -58,7 +60,7 @@ def kernels(name, grid_n, det, binned, sort1=False):
     for r in res:
         nm = r.name.split("(")[0].split(" ")[-1][:40]
         ms[nm] = ms.get(nm, 0.0) + r.elapsed / k
-    row = {"scene": name, "grid_n": grid_n, "det": int(det), "binned": int(binned), "sort1": int(sort1),
+    row = {"scene": name, "grid_n": grid_n, "det": int(det), "p2g": p2g, "sort1": int(sort1),
            "substeps": k, "n": st.n}
     row.update({kk: round(v, 3) for kk, v in sorted(ms.items(), key=lambda kv: -kv[1])[:12]})
     print(json.dumps(row), flush=True)
@@ -66,28 +68,32 @@ def kernels(name, grid_n, det, binned, sort1=False):
 
 
 def main():
-    grids = [int(g) for g in sys.argv[1:]] or [128, 256]
+    args = sys.argv[1:]
+    skip = set(args[args.index("--skip") + 1:]) if "--skip" in args else set()
+    args = args[:args.index("--skip")] if "--skip" in args else args
+    grids = [int(g) for g in args] or [128, 256]
     os.makedirs(OUT, exist_ok=True)
     wp.init()
     print(wp.get_device("cuda").name)
     t0 = time.time()
-    ag = agreement()
+    ag = agreement() if "agreement" not in skip else []
     print(f"agreement {time.time() - t0:.0f} s", flush=True)
     ks = []
-    for g in grids:
+    for g in grids if "kernels" not in skip else ():
         for name in ("Mushy", "Water"):
-            ks.append(kernels(name, g, False, False))
-            ks.append(kernels(name, g, False, True))
+            for p2g in ("reference", "brick"):
+                ks.append(kernels(name, g, False, p2g))
     print(f"kernels {time.time() - t0:.0f} s", flush=True)
     bw = copy_bandwidth(None)
     rows = []
-    for g in grids:
+    for g in grids if "paths" not in skip else ():
         for name in ("Mushy", "Water"):
-            for det, path in ((False, "device-unbinned"), (False, "device-binned"), (False, "device-binned-sort1"),
-                              (True, "device-unbinned"), (True, "device-binned")):
+            for det, path in ((False, "device-unbinned"), (False, "device"), (False, "device-sort1"),
+                              (True, "device-unbinned"), (True, "device")):
                 rows.append(safe_case(name, g, det, None, bw, substeps=50, path=path))
                 print_table(rows[-1:], COLS)
-    print_table(rows, COLS)
+    if rows:
+        print_table(rows, COLS)
     print(f"total {time.time() - t0:.0f} s", flush=True)
     with open(os.path.join(OUT, "p2g_gpu.json"), "w") as f:
         json.dump({"agreement": ag, "kernels": ks, "paths": rows}, f, indent=1, default=str)

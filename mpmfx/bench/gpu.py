@@ -102,16 +102,15 @@ def traffic(solver, state) -> tuple[int, int, int]:
     const = [state.mass, state.volume, state.material, state.body, state.field_id]
     part = _bytes(cur) + _bytes(state.nxt.arrays()) + _bytes(const)
     da = solver._device_advance
-    binned = solver.stepper == "device" and da.binned and da._binner is not None
-    if binned:  # the binned P2G's scratch, and what it moves: keys, order, payload out and in, runs
-        # (its sort, once a chunk of up to 32 substeps, is left out)
-        part += da._binner.nbytes()
+    brick = solver.stepper == "device" and da.p2g == "brick" and da._brick is not None
+    if brick:  # the brick P2G's scratch (its sort, once a chunk of up to 32 substeps, is left out)
+        part += da._brick.nbytes()
     grid_arrays = [solver._grid_m, solver._grid_mv, solver._grid_fixed, solver._grid_v, solver._grid_normal]
     grid = _bytes(grid_arrays)
     acc = _bytes([solver._grid_fixed] if solver.config.deterministic else [solver._grid_m, solver._grid_mv])
     moved = (_bytes(cur) + _bytes(const) - state.body.capacity) + 2 * _bytes(cur) + 3 * acc + 2 * solver._grid_v.capacity
-    if binned:
-        moved += 2 * 80 * state.n + 3 * 4 * state.n + 2 * 4 * state.n + 20 * state.n
+    if brick:  # the brick P2G reads the particles' order once
+        moved += 4 * state.n
     return part, grid, moved
 
 
@@ -132,7 +131,7 @@ def _phase_split(solver, state, t: float, span: float) -> tuple[dict, float]:
         name = r.name.lower()
         key = ("g2p" if "g2p" in name else "grid" if "grid_update" in name else "clear" if "memset" in name
                else None if ("begin" in name or "end" in name or "report" in name or "sum_rows" in name)
-               else "p2g")  # p2g, and the binned P2G's keys, sort, payload, scan, starts, scatter
+               else "p2g")  # p2g, and the brick P2G's keys, sort, scan, segments, scatter
         if key:
             ms[key] += r.elapsed
     k = max(1, report.substeps + report.rejected_substeps)
@@ -142,10 +141,10 @@ def _phase_split(solver, state, t: float, span: float) -> tuple[dict, float]:
 def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: float, *, substeps: int = SUBSTEPS,
              path: str = "device") -> dict:
     """One scene through advance(). path: "device" (the default stepper), "device-nograph"
-    (same, CUDA graphs off), "device-binned" / "device-unbinned" (same, binned P2G forced
-    on / off; by default it is on, on a GPU), "device-binned-sort1" (binned,
-    re-sorted every substep, not once a chunk) or "host" (the reference loop and kernels:
-    statistics read every substep)."""
+    (same, CUDA graphs off), "device-unbinned" (same, with the reference P2G instead of the
+    brick P2G, the default on a GPU), "device-sort1" (the brick P2G re-sorted every substep,
+    not once a chunk) or "host" (the reference loop and kernels: statistics read every
+    substep)."""
     import warp as wp
 
     from mpmfx.mpm import Solver, SolverConfig
@@ -153,10 +152,10 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     cfg = SolverConfig(grid_n=grid_n, deterministic=deterministic)
     solver = Solver(mats, cfg, colliders=colliders, device=device, stepper="host" if path == "host" else "device")
     solver._device_advance.graphs = path != "device-nograph"
-    if path.startswith("device-binned"):
-        solver._device_advance.binned = not solver.flags.multi_field
-    solver._device_advance.sort_every_substep = path == "device-binned-sort1"
-    solver._device_advance.binned &= path != "device-unbinned"
+    da = solver._device_advance
+    if path == "device-unbinned":  # (multi-field scenes and the CPU have only the reference P2G)
+        da.p2g = "reference"
+    da.sort_every_substep = path == "device-sort1"
     state = solver.init_state(parts)
     c = max(m.wave_speed() for m in mats)
     span = substeps * cfg.cfl * cfg.dx / c  # ~substeps CFL substeps at rest
@@ -242,7 +241,8 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
     # the levers, back to back in this run: the reference host loop, and no CUDA graphs
     levers = (("Mushy", "host", False), ("Water", "host", False), ("Mushy", "device-nograph", False),
               ("Mushy", "device-unbinned", False), ("Water", "device-unbinned", False),
-              ("Mushy", "device-unbinned", True), ("Mushy", "device-binned-sort1", False), ("Mushy", "host", True))
+              ("Mushy", "device-unbinned", True), ("Mushy", "device-sort1", False),
+              ("Mushy", "host", True))
     for g in sizes:
         for name, path, det in levers:
             if name in MATERIALS:

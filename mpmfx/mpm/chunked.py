@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from .colliders import ColliderKeys, pack_colliders
-from .p2g_binned import BinnedP2G
+from .p2g_brick import BrickP2G
 from .slots import Clock, Count, Status
 from .stepper import CHUNKS, StepperParams, make_clock_kernels, pose_colliders, wave_table, WaveParams
 
@@ -43,13 +43,14 @@ class DeviceAdvance:
         # keyframes on the device: the chunk poses the colliders itself (no host round trip)
         self.keys = ColliderKeys(solver.colliders, solver.device) if solver.colliders else None
         self.graphs = True  # capture chunks in CUDA graphs (off: launch each kernel; for measuring)
-        # binned P2G (p2g_binned.py) on a GPU, where it was measured faster (H100, both modes;
-        # fast: snow 1.07 -> 1.95 G/s at 19M particles, 1.06 -> 1.43 at 2.4M; water 1.16 -> 2.30
-        # and 1.13 -> 1.64); on the CPU its extra passes cost more than the atomics it saves (37k
-        # particles, one core: water 28.8 -> 46.6 ms a substep), so there the reference P2G
-        self.binned = not solver.flags.multi_field and solver.device.is_cuda
-        self._binner = None
-        self.sort_every_substep = False  # the binned P2G re-sorts at chunk starts only (on: for measuring)
+        # P2G: "brick" (p2g_brick.py) on a GPU, measured 3-4x faster there than the reference
+        # (H100, 19M particles, both modes); "reference" (p2g.py) everywhere else: on the CPU
+        # a sorted P2G's extra passes cost more than the atomics it saves (37k particles, one
+        # core, the earlier binned P2G: water 28.8 -> 46.6 ms a substep), and multi-field
+        # scenes scatter mass gradients the brick P2G does not
+        self.p2g = "brick" if not solver.flags.multi_field and solver.device.is_cuda else "reference"
+        self._brick = None
+        self.sort_every_substep = False  # the brick P2G re-sorts at chunk starts only (on: for measuring)
         self._graphs: dict = {}
         self._graph_state = None  # the State the cached graphs point into (kept alive with them)
 
@@ -66,7 +67,7 @@ class DeviceAdvance:
                     self.sp, self.clk, k_.times, k_.translations, k_.rotations, k_.offsets, k_.counts,
                     s._colliders_dev])
             s._phases(state, bufs[i % 2], bufs[1 - i % 2], 0.0, device_clock=True,
-                      binned=self._binner if self.binned else None, resort=i == 0 or self.sort_every_substep)
+                      brick=self._brick if self.p2g == "brick" else None, resort=i == 0 or self.sort_every_substep)
             wp.launch(self.end, dim=1, device=dev, inputs=[self.sp, self.waves, self.clk, s._sub, s._stats,
                                                              s._counts, self.last_bad])
 
@@ -78,7 +79,7 @@ class DeviceAdvance:
         if self._graph_state is not state:
             self._graphs.clear()
             self._graph_state = state
-        key = (k, id(state.cur), self.s._grid_v.ptr, state.n_fields, self.s._q_mass, self.binned, id(self._binner),
+        key = (k, id(state.cur), self.s._grid_v.ptr, state.n_fields, self.s._q_mass, self.p2g, id(self._brick),
                self.sort_every_substep)
         graph = self._graphs.get(key)
         if graph is None:
@@ -122,8 +123,8 @@ class DeviceAdvance:
         s, cfg = self.s, self.s.config
         wall0 = time.perf_counter()
         s._last_bad = None
-        if self.binned and (self._binner is None or self._binner.n != state.n):
-            self._binner = BinnedP2G(s.flags, state.n, s.device)  # before any capture: it allocates
+        if self.p2g == "brick" and (self._brick is None or self._brick.n != state.n):
+            self._brick = BrickP2G(s.flags, state.n, s.device)  # before any capture: it allocates
         self._upload(state, t0, t1)
         if self.keys is not None:  # the fields no substep changes (kind, shape, friction, ...)
             s._colliders_dev.assign(pack_colliders(s.colliders, t0, t0, 1.0))

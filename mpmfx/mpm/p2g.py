@@ -68,7 +68,7 @@ def to_fixed(value: float, quantum_inv: float) -> wp.int64:
 def make_particle_affine(flags: SceneFlags):
     """The MLS affine term of one particle (guide §4.4), specialised like make_p2g:
     -dt V0 (4 / dx^2) tau + m C, with tau the Kirchhoff stress of its mode. Shared by the
-    reference P2G and the binned one (p2g_binned.py) so both scatter the same numbers."""
+    reference P2G and the brick one (p2g_brick.py) so both scatter the same numbers."""
     has_solid = flags.solid
     has_water = flags.water
 

@@ -269,11 +269,11 @@ class Solver:
         self._phases(state, state.cur, state.nxt, dt, device_clock=False)
 
     def _phases(self, state: State, cur: ParticleBuffers, nxt: ParticleBuffers, dt: float, *,
-                device_clock: bool, binned=None, resort: bool = False) -> None:
+                device_clock: bool, brick=None, resort: bool = False) -> None:
         """Launch the four phases reading `cur`, writing `nxt`. device_clock: the kernels take
         dt (and the dt-dependent factors) from self._sub instead of `dt` (stepper.py);
-        binned: a p2g_binned.BinnedP2G to scatter with (device clock only), else the reference P2G;
-        resort: the binned P2G re-sorts its particle order first."""
+        brick: a p2g_brick.BrickP2G to scatter with (device clock only), else the reference P2G;
+        resort: the brick P2G re-sorts its particle order first."""
         cfg = self.config
         inv_dx = float(cfg.grid_n)
         nn = cfg.grid_n + 1
@@ -286,8 +286,8 @@ class Solver:
         pp.inv_dx, pp.dt, pp.nodes = inv_dx, float(dt), nn
         pp.deterministic = int(cfg.deterministic)
         pp.q_mass_inv, pp.q_mom_inv = 1.0 / self._q_mass, 1.0 / self._q_mom
-        if binned is not None:
-            binned.launch(pp, state, cur, self._materials_dev, self._grid_m, self._grid_mv, self._grid_fixed, self._sub,
+        if brick is not None:
+            brick.launch(pp, state, cur, self._materials_dev, self._grid_m, self._grid_mv, self._grid_fixed, self._sub,
                          sort=resort)
         else:
             wp.launch(p2g, dim=state.n, device=self.device, inputs=[

@@ -16,7 +16,7 @@ buffer parity); the host reads the clock once per chunk. A rejected substep stop
 and the next chunk retries it at half dt from the same state, exactly as the host loop does,
 so the dt sequence and the particles are the same as the reference: bit-identical on the CPU
 and, measured on an H100 (snow and water, deterministic mode, 300 substeps), on CUDA too
-(with the reference P2G; the binned one differs in the last bits there, see p2g_binned.py).
+(with the reference P2G; the brick one differs in the last bits there, see p2g_brick.py).
 """
 
 from __future__ import annotations

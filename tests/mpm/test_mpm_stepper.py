@@ -1,7 +1,7 @@
 """The device stepper (chunks of substeps decided on the device, stepper.py / chunked.py, with
-the binned P2G of p2g_binned.py) against the reference host loop and reference P2G, over a
+the brick P2G of p2g_brick.py) against the reference host loop and reference P2G, over a
 few hundred substeps on the CPU: deterministic mode bit for bit (the same substeps,
-rejections and particles; on CUDA the binned P2G differs in the last bits, see its module); fast mode sums each node's float contributions in another order, so there the
+rejections and particles; on CUDA the brick P2G differs in the last bits, see its module); fast mode sums each node's float contributions in another order, so there the
 same substeps and positions within 1e-4 domain units (1/600 of a cell), velocities within
 1e-3 domain/s."""
 
@@ -43,7 +43,8 @@ def _run(stepper, mats, parts, cfg, frames):
     colliders = _colliders() if "time_scale" in cfg else ()
     solver = Solver([preset(m) for m in mats], SolverConfig(grid_n=16, **cfg), colliders=colliders, device="cpu",
                     stepper=stepper)
-    solver._device_advance.binned = not solver.flags.multi_field  # the binned P2G in fast mode too
+    if not solver.flags.multi_field:  # the GPU's default P2G (the brick one), in fast mode too
+        solver._device_advance.p2g = "brick"
     state = solver.init_state(parts)
     reports = [solver.advance(state, f / 24, (f + 1) / 24) for f in range(frames)]
     return solver.state_to_numpy(state), reports, state.clock

@@ -1,4 +1,4 @@
-"""The binned P2G (p2g_binned.py) scatters the reference P2G's grid whatever order its
+"""The brick P2G (p2g_brick.py) scatters the reference P2G's grid whatever order its
 particles are in: freshly sorted, stale (the particles moved across cells since the sort, as
 between the sorts at chunk starts), or shuffled. Deterministic mode bit for bit (fixed-point
 sums do not depend on the order); fast mode within float rounding. A missed or doubled
@@ -9,7 +9,7 @@ import pytest
 
 from tests.mpm.mpm_helpers import block, concat
 from mpmfx.mpm import Solver, SolverConfig, preset
-from mpmfx.mpm.p2g_binned import BinnedP2G
+from mpmfx.mpm.p2g_brick import BrickP2G
 from mpmfx.mpm.stepper import SubstepDev
 
 GRID = 16
@@ -29,18 +29,18 @@ def _scene(deterministic: bool):
     return solver, state, rng
 
 
-def _grid(solver, state, binner=None, *, sort=False) -> np.ndarray:
-    solver._phases(state, state.cur, state.nxt, 0.0, device_clock=True, binned=binner, resort=sort)
+def _grid(solver, state, brick=None, *, sort=False) -> np.ndarray:
+    solver._phases(state, state.cur, state.nxt, 0.0, device_clock=True, brick=brick, resort=sort)
     if solver.config.deterministic:
         return solver._grid_fixed.numpy().copy()  # on the CPU numpy() is a view
     return np.concatenate([solver._grid_m.numpy()[..., None], solver._grid_mv.numpy()], -1)
 
 
 @pytest.mark.parametrize("deterministic", [True, False])
-def test_binned_p2g_matches_the_reference_in_any_particle_order(deterministic):
+def test_brick_p2g_matches_the_reference_in_any_particle_order(deterministic):
     solver, state, rng = _scene(deterministic)
-    binner = BinnedP2G(solver.flags, state.n, solver.device)
-    _grid(solver, state, binner, sort=True)  # sorted by the positions below, then they move
+    brick = BrickP2G(solver.flags, state.n, solver.device)
+    _grid(solver, state, brick, sort=True)  # sorted by the positions below, then they move
     x = state.cur.x.numpy()
     moved = x + rng.uniform(-1.0, 1.0, x.shape).astype(np.float32) / GRID
     cell = lambda y: np.floor(y * GRID - 0.5)  # noqa: E731 (the stencil's base node)
@@ -48,10 +48,11 @@ def test_binned_p2g_matches_the_reference_in_any_particle_order(deterministic):
     state.cur.x.assign(moved)
     ref = _grid(solver, state)
     assert ref[..., 0].sum() > 0
-    stale = _grid(solver, state, binner)
-    shuffled = BinnedP2G(solver.flags, state.n, solver.device)
+    stale = _grid(solver, state, brick)
+    shuffled = BrickP2G(solver.flags, state.n, solver.device)
+    _grid(solver, state, shuffled, sort=True)  # then the order no longer matches its keys and segments
     shuffled.idx.assign(np.tile(rng.permutation(state.n).astype(np.int32), 2))
-    for out in (stale, _grid(solver, state, shuffled), _grid(solver, state, binner, sort=True)):
+    for out in (stale, _grid(solver, state, shuffled), _grid(solver, state, brick, sort=True)):
         if deterministic:
             np.testing.assert_array_equal(out, ref)
         else:

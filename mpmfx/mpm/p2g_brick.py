@@ -1,0 +1,444 @@
+"""Phase 2, by brick: P2G summed in shared memory, one global add per node a brick touches.
+
+The reference P2G (p2g.py) adds each particle's 27 x 4 contributions to the grid with
+global atomics (14.4 ms a substep for 19M particles on an H100). Here the particles are kept
+in brick order (a brick: 4^3 stencil corner nodes) and one CUDA block scatters a brick:
+
+    1. at the first substep of a chunk (stepper.py) the particles' order `idx` is
+       radix-sorted by brick, then by corner node inside it, and the slot ranges of equal
+       bricks (segments) are found; the other substeps of the chunk keep both (particles
+       move a fraction of a cell per substep);
+    2. per substep, per segment, one block zeroes a window of 8^3 nodes in shared memory
+       (the brick's 4^3 corners, one node of slack below and above, and the stencil's reach);
+    3. in rounds of 128 consecutive slots (coalesced reads) each thread computes one
+       particle's mass, momentum, MLS affine term and fx (the reference's numbers:
+       `particle_affine`, the same expressions) and parks them in shared memory;
+    4. nine threads per run of parked particles sharing a stencil (one per stencil row) sum
+       the run's contributions to their three nodes in registers and add each sum to the
+       window once per channel: ~8x fewer shared atomics than one per particle;
+    5. the block adds each touched window node to the grid, one global atomic per channel
+       (~8x fewer than the runs would need).
+    A particle that left the window since the sort (more than one cell out of its brick)
+    adds to the grid directly, as the reference does: slower, never lost.
+
+Measured on an H100 (19.4M particles, grid 256, fast mode, ms a substep for the whole
+P2G; the sort once a chunk left out): water 3.6, snow 4.5, against the reference's 14.5 /
+14.4 and the binned P2G it replaced, 6.1 / 6.2 (runs of particles sharing a stencil, one
+global atomic per run, node and channel, fed by a payload pass; p2g_binned.py before
+commit 00bd0e9, where its own dropped variants are listed). Dropped on the way: each thread adding
+its own particle to the window (same-address shared atomics serialise: 15.1 ms with
+consecutive particles a warp, 7.5 with a warp's particles ~2 cells apart, 6.4 parked first),
+blocks of 192 or 256 threads (5.0 ms: 128 registers a thread limit a multiprocessor to 512).
+
+Deterministic mode sums the reference's fixed-point contributions (integers: order-free) in
+an int64 window, so replays are bit-identical; against the reference the last bits differ on
+CUDA, where the compiler contracts multiply-adds differently (measured: same substep counts,
+max |dx| 8.8e-7 domain after 681 water substeps at grid 32), and not at all on the CPU.
+Extra device memory: 28 bytes a particle (keys and order double-buffered for the sort 16,
+flags / offsets / segment starts 12); no payload array.
+
+On the CPU the same kernel runs with one thread a block (the shared arrays are static ones
+and the block's phases run in sequence), so the tests check the segments, the window test,
+the runs and the fallback there; only the barriers and the warp vote are CUDA's own.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import numpy as np
+import warp as wp
+
+from .constitutive import MaterialParams, bspline_weights
+from .p2g import P2GParams, make_particle_affine, to_fixed
+from .state import SceneFlags
+from .stepper import SubstepDev
+
+__all__ = ["BrickP2G"]
+
+BRICK = 4  # corner nodes per brick and axis (a key's low 6 bits)
+WIN = 8  # window nodes per axis: BRICK + 1 slack below + 1 above + the stencil's 2
+WIN_NODES = WIN * WIN * WIN
+BLOCK_CUDA = 128  # threads a block on CUDA, and slots parked a round
+MAX_BLOCKS = 1 << 15  # blocks at most; each walks segments block, block + MAX_BLOCKS, ...
+PARKED = 16  # floats a parked particle: m, m v (3), affine (9), fx (3)
+NO_KEY = wp.constant(0x7FFFFFFF)  # tracers and removed particles: sorted last, never scattered
+vec12l = wp.types.vector(length=12, dtype=wp.int64)  # deterministic sums of a run's row: node k, channel c at 4 k + c
+
+# Shared arrays live in native functions (static, so every call in a block reaches the same
+# memory); each function owns its arrays. On the CPU (one thread a block) they are plain
+# static arrays and the barriers vanish.
+#
+# The window: 4 channel planes (mass, momentum x, y, z) of WIN_NODES nodes; ops: 0 zero,
+# 1 add, 2 read, 3 barrier (channel planes: the threads of a run add one channel at a time,
+# to nodes 8 and 64 words apart, which interleaved channels would crowd onto fewer banks).
+_WINDOW = """
+#if defined(__CUDA_ARCH__)
+__shared__ {T} win[4 * {N}];
+#else
+static {T} win[4 * {N}];
+#endif
+if (op == 0) {{ win[e] = 0; }}
+else if (op == 1) {{
+#if defined(__CUDA_ARCH__)
+    atomicAdd(({A}*)&win[e], ({A})value);
+#else
+    win[e] += value;
+#endif
+}}
+else if (op == 3) {{
+#if defined(__CUDA_ARCH__)
+    __syncthreads();
+#endif
+}}
+return win[e];
+"""
+
+# The parked particles of a round: PARKED planes of floats, and each slot's window code
+# (corner node inside the window, or -2: nothing parked); ops: 1 write, 2 read a float,
+# 4 write, 5 read a code.
+_PARK = """
+#if defined(__CUDA_ARCH__)
+__shared__ float park[{F} * {B}];
+__shared__ int park_code[{B}];
+#else
+static float park[{F} * {B}];
+static int park_code[{B}];
+#endif
+if (op == 1) {{ park[e] = value; }}
+else if (op == 2) {{ return park[e]; }}
+else if (op == 4) {{ park_code[e] = (int)value; }}
+else if (op == 5) {{ return (float)park_code[e]; }}
+return 0.0f;
+"""
+
+# The runs of a round: op 1, called by every thread of the block with e = 1 where a run
+# starts, returns the number of run starts before this thread << 16 | the block's total (a
+# warp vote and the warps' counts); op 2 writes run_start[e] = value, op 3 reads it.
+_RUNS = """
+#if defined(__CUDA_ARCH__)
+__shared__ int warp_total[32];
+__shared__ int run_start[{B}];
+if (op == 1) {{
+    unsigned mask = __ballot_sync(0xffffffffu, e != 0);
+    int w = lane >> 5, l = lane & 31;
+    if (l == 0) warp_total[w] = __popc(mask);
+    __syncthreads();
+    int before = 0, total = 0;
+    for (int i = 0; i < (nthreads + 31) / 32; ++i) {{ if (i < w) before += warp_total[i]; total += warp_total[i]; }}
+    __syncthreads();
+    return ((before + __popc(mask & ((1u << l) - 1u))) << 16) | total;
+}}
+#else
+static int run_start[{B}];
+if (op == 1) {{ return e != 0 ? 1 : 0; }}
+#endif
+if (op == 2) {{ run_start[e] = value; }}
+else if (op == 3) {{ return run_start[e]; }}
+return 0;
+"""
+
+
+@wp.func_native(_WINDOW.format(T="float", A="float", N=WIN_NODES))
+def window_f(op: int, e: int, value: float) -> float: ...
+
+
+@wp.func_native(_WINDOW.format(T="long long", A="unsigned long long", N=WIN_NODES))
+def window_q(op: int, e: int, value: wp.int64) -> wp.int64: ...
+
+
+@wp.func_native(_PARK.format(F=PARKED, B=BLOCK_CUDA))
+def park(op: int, e: int, value: float) -> float: ...
+
+
+@wp.func_native(_RUNS.format(B=BLOCK_CUDA))
+def runs(op: int, e: int, value: int, lane: int, nthreads: int) -> int: ...
+
+
+@wp.func
+def base_node(xp: wp.vec3, inv_dx: float) -> wp.vec3i:
+    """The corner node of a particle's stencil, as the reference P2G computes it."""
+    xg = xp * inv_dx
+    return wp.vec3i(int(wp.floor(xg[0] - 0.5)), int(wp.floor(xg[1] - 0.5)), int(wp.floor(xg[2] - 0.5)))
+
+
+@wp.kernel(enable_backward=False)
+def _brick_keys(pp: P2GParams, x: wp.array(dtype=wp.vec3), alive: wp.array(dtype=wp.int32),
+                mass: wp.array(dtype=float), idx: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.int32),
+                sub: wp.array(dtype=SubstepDev)):
+    s = wp.tid()
+    if sub[0].active == 0:
+        return
+    p = idx[s]
+    if alive[p] == 0 or mass[p] == 0.0:
+        keys[s] = NO_KEY
+        return
+    b = wp.max(base_node(x[p], pp.inv_dx), wp.vec3i(0))  # >= 0 inside the domain; keys stay non-negative
+    nb = (pp.nodes + BRICK - 1) // BRICK
+    brick = ((b[0] // BRICK) * nb + b[1] // BRICK) * nb + b[2] // BRICK
+    keys[s] = brick * 64 + ((b[0] % BRICK) * BRICK + b[1] % BRICK) * BRICK + b[2] % BRICK
+
+
+@wp.kernel(enable_backward=False)
+def _seg_flags(keys: wp.array(dtype=wp.int32), flag: wp.array(dtype=wp.int32), sub: wp.array(dtype=SubstepDev)):
+    s = wp.tid()
+    if sub[0].active == 0:
+        return
+    k = keys[s]
+    f = int(0)
+    if k != NO_KEY and (s == 0 or keys[s - 1] // 64 != k // 64):
+        f = 1
+    flag[s] = f
+
+
+@wp.kernel(enable_backward=False)
+def _seg_starts(keys: wp.array(dtype=wp.int32), flag: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.int32),
+                n: int, start: wp.array(dtype=wp.int32), n_seg: wp.array(dtype=wp.int32),
+                sub: wp.array(dtype=SubstepDev)):
+    """start[i]: the first slot of segment i; start[n_seg]: one past the last sorted particle
+    (the dead ones sort last, NO_KEY)."""
+    s = wp.tid()
+    if sub[0].active == 0:
+        return
+    if flag[s] != 0:
+        start[pos[s]] = s
+    valid = keys[s] != NO_KEY
+    if valid and (s == n - 1 or keys[s + 1] == NO_KEY):
+        start[pos[s] + flag[s]] = s + 1
+        n_seg[0] = pos[s] + flag[s]
+    if s == 0 and not valid:
+        n_seg[0] = 0
+
+
+@functools.lru_cache(maxsize=None)
+def make_brick_scatter(flags: SceneFlags, deterministic: bool):
+    """The scatter kernel for the scene's materials, fast (float window) or deterministic
+    (int64 window; one kernel each, so each declares only its own window)."""
+    particle_affine = make_particle_affine(flags)
+    det = deterministic
+
+    @wp.func
+    def sync():
+        """A block barrier (the window's own function, so no second window is declared)."""
+        if wp.static(det):
+            window_q(3, 0, wp.int64(0))
+        else:
+            window_f(3, 0, 0.0)
+
+    @wp.func
+    def add_to_grid(pp: P2GParams, m: float, mv: wp.vec3, aff: wp.mat33, fx: wp.vec3, b: wp.vec3i,
+                    grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
+                    grid_fixed: wp.array4d(dtype=wp.int64)):
+        """A particle outside its window: its 27 x 4 contributions straight to the grid, as the
+        reference adds them (p2g.py)."""
+        dx = 1.0 / pp.inv_dx
+        W = bspline_weights(fx)
+        for i in range(3):
+            for j in range(3):
+                for k in range(3):
+                    w = W[i, 0] * W[j, 1] * W[k, 2]
+                    dpos = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
+                    mom = w * (mv + aff * dpos)
+                    if wp.static(det):
+                        wp.atomic_add(grid_fixed, b[0] + i, b[1] + j, b[2] + k, 0, to_fixed(w * m, pp.q_mass_inv))
+                        for c in range(3):
+                            wp.atomic_add(grid_fixed, b[0] + i, b[1] + j, b[2] + k, 1 + c,
+                                          to_fixed(mom[c], pp.q_mom_inv))
+                    else:
+                        wp.atomic_add(grid_m, b[0] + i, b[1] + j, b[2] + k, w * m)
+                        wp.atomic_add(grid_mv, b[0] + i, b[1] + j, b[2] + k, mom)
+
+    @wp.func
+    def add_run(pp: P2GParams, u0: int, n_park: int, i: int, j: int):
+        """Row (i, j) of the stencil of the parked run starting at slot u0: the run's
+        contributions to its three nodes (the reference's numbers, particle by particle),
+        summed, then added to the window once a node and channel."""
+        dx = 1.0 / pp.inv_dx
+        code = int(park(5, u0, 0.0))
+        m_sum = wp.vec3(0.0)  # per node k = 0, 1, 2
+        mv0 = wp.vec3(0.0)
+        mv1 = wp.vec3(0.0)
+        mv2 = wp.vec3(0.0)
+        q = vec12l()  # deterministic: node k, channel c at 4 k + c
+        u = u0
+        while u < n_park:
+            if int(park(5, u, 0.0)) != code:
+                break
+            m = park(2, u, 0.0)
+            mv = wp.vec3(park(2, BLOCK_CUDA + u, 0.0), park(2, 2 * BLOCK_CUDA + u, 0.0), park(2, 3 * BLOCK_CUDA + u, 0.0))
+            fx = wp.vec3(park(2, 13 * BLOCK_CUDA + u, 0.0), park(2, 14 * BLOCK_CUDA + u, 0.0),
+                         park(2, 15 * BLOCK_CUDA + u, 0.0))
+            aff = wp.mat33()
+            for c in range(3):
+                for d in range(3):
+                    aff[c, d] = park(2, (4 + 3 * c + d) * BLOCK_CUDA + u, 0.0)
+            W = bspline_weights(fx)
+            for k in range(3):
+                w = W[i, 0] * W[j, 1] * W[k, 2]
+                dpos = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
+                mom = w * (mv + aff * dpos)
+                if wp.static(det):
+                    q[4 * k] = q[4 * k] + to_fixed(w * m, pp.q_mass_inv)
+                    for c in range(3):
+                        q[4 * k + 1 + c] = q[4 * k + 1 + c] + to_fixed(mom[c], pp.q_mom_inv)
+                else:
+                    m_sum[k] = m_sum[k] + w * m
+                    if k == 0:
+                        mv0 += mom
+                    elif k == 1:
+                        mv1 += mom
+                    else:
+                        mv2 += mom
+            u += 1
+        e = ((code // (WIN * WIN) + i) * WIN + (code // WIN) % WIN + j) * WIN + code % WIN
+        for k in range(3):
+            if wp.static(det):
+                for c in range(4):
+                    window_q(1, c * WIN_NODES + e + k, q[4 * k + c])
+            else:
+                window_f(1, e + k, m_sum[k])
+        if wp.static(not det):
+            for c in range(3):
+                window_f(1, (1 + c) * WIN_NODES + e, mv0[c])
+                window_f(1, (1 + c) * WIN_NODES + e + 1, mv1[c])
+                window_f(1, (1 + c) * WIN_NODES + e + 2, mv2[c])
+
+    @wp.func
+    def flush(e: int, origin: wp.vec3i, nn: int, grid_m: wp.array3d(dtype=float),
+              grid_mv: wp.array3d(dtype=wp.vec3), grid_fixed: wp.array4d(dtype=wp.int64)):
+        """Window node e to the grid, one atomic a channel, if anything landed there."""
+        gi = origin[0] + e // (WIN * WIN)
+        gj = origin[1] + (e // WIN) % WIN
+        gk = origin[2] + e % WIN
+        if gi >= 0 and gj >= 0 and gk >= 0 and gi < nn and gj < nn and gk < nn:
+            if wp.static(det):
+                for c in range(4):
+                    qv = window_q(2, c * WIN_NODES + e, wp.int64(0))
+                    if qv != wp.int64(0):
+                        wp.atomic_add(grid_fixed, gi, gj, gk, c, qv)
+            else:
+                wm = window_f(2, e, 0.0)
+                if wm != 0.0:
+                    wp.atomic_add(grid_m, gi, gj, gk, wm)
+                    wp.atomic_add(grid_mv, gi, gj, gk, wp.vec3(window_f(2, WIN_NODES + e, 0.0),
+                                                               window_f(2, 2 * WIN_NODES + e, 0.0),
+                                                               window_f(2, 3 * WIN_NODES + e, 0.0)))
+
+    @wp.kernel(enable_backward=False, module=flags.key + ("_brick_det" if det else "_brick"))
+    def scatter(pp: P2GParams, keys: wp.array(dtype=wp.int32), start: wp.array(dtype=wp.int32),
+                n_seg: wp.array(dtype=wp.int32), block: int, n_blocks: int, idx: wp.array(dtype=wp.int32),
+                x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
+                F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
+                alive: wp.array(dtype=wp.int32), mass: wp.array(dtype=float), volume: wp.array(dtype=float),
+                material: wp.array(dtype=wp.int32), materials: wp.array(dtype=MaterialParams),
+                grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
+                grid_fixed: wp.array4d(dtype=wp.int64), sub: wp.array(dtype=SubstepDev)):
+        t = wp.tid()
+        if sub[0].active == 0:
+            return  # the whole launch: every thread of a block returns together
+        pp.dt = sub[0].dt
+        lane = t % block
+        nn = pp.nodes
+        nb = (nn + BRICK - 1) // BRICK
+        n_park = wp.min(block, BLOCK_CUDA)
+        seg = t // block
+        while seg < n_seg[0]:  # the same count for every thread of a block: barriers stay uniform
+            for ez in range(lane, 4 * WIN_NODES, block):
+                if wp.static(det):
+                    window_q(0, ez, wp.int64(0))
+                else:
+                    window_f(0, ez, 0.0)
+            sync()
+            s0 = start[seg]
+            n_here = start[seg + 1] - s0
+            brick = keys[s0] // 64
+            origin = wp.vec3i((brick // (nb * nb)) * BRICK - 1, ((brick // nb) % nb) * BRICK - 1,
+                              (brick % nb) * BRICK - 1)
+            for r0 in range(0, n_here, n_park):
+                # park: one particle a thread, consecutive slots
+                code = -2
+                if lane < n_park and r0 + lane < n_here:
+                    p = idx[s0 + r0 + lane]
+                    m = mass[p]
+                    if alive[p] != 0 and m != 0.0:
+                        aff = particle_affine(pp, materials[material[p]], F, J, Jp, C, volume, p, m)
+                        mv = m * v[p]
+                        xg = x[p] * pp.inv_dx
+                        b = base_node(x[p], pp.inv_dx)
+                        fx = xg - wp.vec3(float(b[0]), float(b[1]), float(b[2]))
+                        loc = b - origin
+                        if wp.min(loc) >= 0 and wp.max(loc) <= WIN - 3:
+                            code = (loc[0] * WIN + loc[1]) * WIN + loc[2]
+                            park(1, lane, m)
+                            for c in range(3):
+                                park(1, (1 + c) * BLOCK_CUDA + lane, mv[c])
+                                park(1, (13 + c) * BLOCK_CUDA + lane, fx[c])
+                                for d in range(3):
+                                    park(1, (4 + 3 * c + d) * BLOCK_CUDA + lane, aff[c, d])
+                        else:
+                            add_to_grid(pp, m, mv, aff, fx, b, grid_m, grid_mv, grid_fixed)
+                if lane < n_park:
+                    park(4, lane, float(code))
+                sync()
+                # runs: a parked slot whose left neighbour has another corner node starts one
+                first = 0
+                if code >= 0:
+                    if lane == 0:
+                        first = 1
+                    elif int(park(5, lane - 1, 0.0)) != code:
+                        first = 1
+                packed = runs(1, first, 0, lane, block)
+                if first != 0:
+                    runs(2, packed >> 16, lane, lane, block)
+                sync()
+                for task in range(lane, 9 * (packed & 0xFFFF), block):
+                    add_run(pp, runs(3, task // 9, 0, lane, block), n_park, (task % 9) // 3, task % 3)
+                sync()  # the parked slots are read before the next round writes them
+            for e in range(lane, WIN_NODES, block):
+                flush(e, origin, nn, grid_m, grid_mv, grid_fixed)
+            sync()  # every read of the window done before the next segment zeroes it
+            seg += n_blocks
+
+    return scatter
+
+
+class BrickP2G:
+    """The brick P2G's scratch buffers for one particle count, the particles' order and
+    segments, and its launches."""
+
+    def __init__(self, flags: SceneFlags, n: int, device):
+        self.n, self.device, self.flags = n, device, flags
+        self.block = BLOCK_CUDA if device.is_cuda else 1
+        self.max_blocks = MAX_BLOCKS
+        self.sorted = False
+        with wp.ScopedDevice(device):
+            self.keys = wp.empty(2 * n, dtype=wp.int32)  # radix_sort_pairs sorts in double buffers
+            self.idx = wp.array(np.tile(np.arange(n, dtype=np.int32), 2))  # slot -> particle
+            self.flag = wp.empty(n, dtype=wp.int32)
+            self.pos = wp.empty(n, dtype=wp.int32)
+            self.start = wp.empty(n + 1, dtype=wp.int32)
+            self.n_seg = wp.zeros(1, dtype=wp.int32)
+
+    def launch(self, pp: P2GParams, state, cur, materials, grid_m, grid_mv, grid_fixed, sub, *, sort: bool) -> None:
+        """Scatter `cur` onto the grid; sort: re-sort the particles' order and segments first
+        (always before the first scatter)."""
+        n, dev = self.n, self.device
+        if sort or not self.sorted:
+            wp.launch(_brick_keys, dim=n, device=dev, inputs=[pp, cur.x, cur.alive, state.mass, self.idx, self.keys,
+                                                               sub])
+            wp.utils.radix_sort_pairs(self.keys, self.idx, n)
+            wp.launch(_seg_flags, dim=n, device=dev, inputs=[self.keys, self.flag, sub])
+            wp.utils.array_scan(self.flag, self.pos, inclusive=False)
+            wp.launch(_seg_starts, dim=n, device=dev, inputs=[self.keys, self.flag, self.pos, n, self.start,
+                                                               self.n_seg, sub])
+            self.sorted = True
+        nb = -(-pp.nodes // BRICK)
+        blocks = max(1, min(n, nb ** 3, self.max_blocks))
+        scatter = make_brick_scatter(self.flags, bool(pp.deterministic))
+        wp.launch(scatter, dim=blocks * self.block, block_dim=self.block, device=dev, inputs=[
+            pp, self.keys, self.start, self.n_seg, self.block, blocks, self.idx, cur.x, cur.v, cur.C, cur.F, cur.J,
+            cur.Jp, cur.alive, state.mass, state.volume, state.material, materials, grid_m, grid_mv, grid_fixed,
+            sub])
+
+    def nbytes(self) -> int:
+        return int(sum(a.capacity for a in (self.keys, self.idx, self.flag, self.pos, self.start)))
