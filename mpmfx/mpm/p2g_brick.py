@@ -22,13 +22,17 @@ in brick order (a brick: 4^3 stencil corner nodes) and one CUDA block scatters a
     adds to the grid directly, as the reference does: slower, never lost.
 
 Measured on an H100 (19.4M particles, grid 256, fast mode, ms a substep for the whole
-P2G; the sort once a chunk left out): water 3.6, snow 4.5, against the reference's 14.5 /
+P2G; the sort once a chunk left out): water 2.7, snow 3.4, against the reference's 14.5 /
 14.4 and the binned P2G it replaced, 6.1 / 6.2 (runs of particles sharing a stencil, one
 global atomic per run, node and channel, fed by a payload pass; p2g_binned.py before
 commit 00bd0e9, where its own dropped variants are listed). Dropped on the way: each thread adding
 its own particle to the window (same-address shared atomics serialise: 15.1 ms with
 consecutive particles a warp, 7.5 with a warp's particles ~2 cells apart, 6.4 parked first),
-blocks of 192 or 256 threads (5.0 ms: 128 registers a thread limit a multiprocessor to 512).
+blocks of 192 or 256 threads (5.0 ms: the 128 registers a thread the compiler takes left a
+multiprocessor 512 threads). Capping registers (MAX_REGISTERS) let more blocks in: water /
+snow 3.6 / 4.5 ms at 128 (no cap), 3.0 / 3.8 at 80, 2.7 / 3.4 at 64, 2.7 / 3.3 at 56, 2.8 /
+3.3 at 48 (deterministic: 5.2 / 6.0, 4.7 / 5.5, 4.4 / 5.2, 4.6 / 5.3, 5.1 / 5.8); the same cap
+on G2P made it slower (water 1.49 -> 1.77 ms at 64).
 
 Deterministic mode sums the reference's fixed-point contributions (integers: order-free) in
 an int64 window, so replays are bit-identical; against the reference the last bits differ on
@@ -60,6 +64,7 @@ BRICK = 4  # corner nodes per brick and axis (a key's low 6 bits)
 WIN = 8  # window nodes per axis: BRICK + 1 slack below + 1 above + the stencil's 2
 WIN_NODES = WIN * WIN * WIN
 BLOCK_CUDA = 128  # threads a block on CUDA, and slots parked a round
+MAX_REGISTERS = 64  # a thread's registers (the compiler takes 128 unbounded: see the docstring)
 MAX_BLOCKS = 1 << 15  # blocks at most; each walks segments block, block + MAX_BLOCKS, ...
 PARKED = 16  # floats a parked particle: m, m v (3), affine (9), fx (3)
 NO_KEY = wp.constant(0x7FFFFFFF)  # tracers and removed particles: sorted last, never scattered
@@ -324,7 +329,8 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                                                                window_f(2, 2 * WIN_NODES + e, 0.0),
                                                                window_f(2, 3 * WIN_NODES + e, 0.0)))
 
-    @wp.kernel(enable_backward=False, module=flags.key + ("_brick_det" if det else "_brick"))
+    @wp.kernel(enable_backward=False, module=flags.key + ("_brick_det" if det else "_brick"),
+               cuda_max_registers=MAX_REGISTERS)
     def scatter(pp: P2GParams, keys: wp.array(dtype=wp.int32), start: wp.array(dtype=wp.int32),
                 n_seg: wp.array(dtype=wp.int32), block: int, n_blocks: int, idx: wp.array(dtype=wp.int32),
                 x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
