@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from .colliders import ColliderKeys, pack_colliders
-from .p2g_brick import BrickP2G
+from .p2g_brick import BrickP2G, fits_brick_keys
 from .slots import Clock, Count, Status
 from .stepper import CHUNKS, StepperParams, make_clock_kernels, pose_colliders, wave_table, WaveParams
 
@@ -47,8 +47,10 @@ class DeviceAdvance:
         # (H100, 19M particles, both modes); "reference" (p2g.py) everywhere else: on the CPU
         # a sorted P2G's extra passes cost more than the atomics it saves (37k particles, one
         # core, the earlier binned P2G: water 28.8 -> 46.6 ms a substep), and multi-field
-        # scenes scatter mass gradients the brick P2G does not
-        self.p2g = "brick" if not solver.flags.multi_field and solver.device.is_cuda else "reference"
+        # scenes scatter mass gradients the brick P2G does not; grids past ~1286 cells an axis
+        # would overflow its int32 sort keys
+        brick = not solver.flags.multi_field and solver.device.is_cuda and fits_brick_keys(cfg.grid_n + 1)
+        self.p2g = "brick" if brick else "reference"
         self._brick = None
         self.sort_every_substep = False  # the brick P2G re-sorts at chunk starts only (on: for measuring)
         self._graphs: dict = {}

@@ -58,7 +58,7 @@ from .p2g import P2GParams, make_particle_affine, to_fixed
 from .state import SceneFlags
 from .stepper import SubstepDev
 
-__all__ = ["BrickP2G"]
+__all__ = ["BrickP2G", "fits_brick_keys"]
 
 BRICK = 4  # corner nodes per brick and axis (a key's low 6 bits)
 WIN = 8  # window nodes per axis: BRICK + 1 slack below + 1 above + the stencil's 2
@@ -158,6 +158,11 @@ def park(op: int, e: int, value: float) -> float: ...
 
 @wp.func_native(_RUNS.format(B=BLOCK_CUDA))
 def runs(op: int, e: int, value: int, lane: int, nthreads: int) -> int: ...
+
+
+def fits_brick_keys(nodes: int) -> bool:
+    """Whether a grid of `nodes` per axis keeps the sort keys (brick * 64 + corner) in int32."""
+    return (-(-nodes // BRICK)) ** 3 * 64 < NO_KEY
 
 
 @wp.func
