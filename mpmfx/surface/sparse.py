@@ -2,7 +2,8 @@
 
 1. blocks: particles are binned into blocks of 8^3 voxels (count, radix sort by block);
    a block is OUTSIDE (no particle within the kernel reach), INSIDE (it and its neighbours
-   within the kernel support all hold particles: the field there is deep inside), or ACTIVE.
+   are at least half full: the surface is farther than the kernel and the blur reach, see
+   _dense_rule), or ACTIVE.
    OUTSIDE blocks the grid boundary does not reach (large voids) become INSIDE.
 2. field: Zhu-Bridson phi at each voxel of ACTIVE blocks, GATHERED from the particles of the
    blocks within the kernel support (no atomics);
@@ -97,19 +98,21 @@ def _dense_rule(grid: SparseGrid, params: SurfaceParams) -> tuple[int, int]:
     """(dense_reach blocks, dense_min particles): a block is INSIDE when every block within
     dense_reach holds at least dense_min particles (sparse_kernels.classify_blocks).
 
-    An INSIDE block stands for the deep interior: its voxels read the constant tile values (raw
-    field -r, distance -grid.wide), which is right only where the surface is farther away than
-    the kernel's reach and the blur's (smooth_iters voxels). dense_min is DENSE_FILL of the
-    particles a block holds at the nominal spacing (particle_radius / PARTICLE_RADIUS_PER_SPACING,
-    what the pipeline passes): a neighbour block cut by a flat face holds that many only when at
-    least half of it lies inside, so the surface stays BS / 2 voxels outside an INSIDE block, and
-    each further ring of dense blocks adds BS voxels. The last voxel of the blur's reach weighs
-    4^-smooth_iters and the kernel's outermost voxel little, hence the "- 1". The old rule (a
-    quarter of a packing at spacing 2 r, ~15 % of a block) let a block 1-3 voxels inside a face
-    be INSIDE: the blur then read -wide there and pushed patches of the face a voxel (0.5 h)
-    outward, depending on where the face cut its block (1M random box, "fine": x faces +0.19 /
-    +0.11 h, mean error 0.137 -> 0.119 h with this rule; README)."""
-    depth = max(grid.gather_vox, float(params.smooth_iters)) - 1.0  # voxels the surface must stay away
+    An INSIDE block stands for the deep interior: its voxels read constant tile values (raw
+    field -r, distance -grid.wide), which is right only where the surface lies farther away
+    than the kernel's reach and the blur's (smooth_iters voxels). dense_min is DENSE_FILL of
+    the particles a block holds at the nominal spacing (particle_radius /
+    PARTICLE_RADIUS_PER_SPACING, what the pipeline passes): a neighbour block cut by a flat
+    face holds that many only when half of it lies inside, so the surface stays BS / 2 voxels
+    outside an INSIDE block; each further ring of dense blocks adds BS voxels. The last voxel
+    of the blur's reach weighs 4^-smooth_iters and the kernel's outermost one little: "- 1".
+    The old rule (a quarter of a packing at spacing 2 r: a block ~15 % full) let blocks 1-3
+    voxels under a face be INSIDE; the blur read -wide there and pushed patches of the face a
+    voxel (0.5 h) outward, wherever the face cut its block so (random box, "fine": 10M 0.147
+    -> 0.117 h mean error, 1M 0.137 -> 0.119 h; 2-core CPU, the H100's numbers to the digit)."""
+    # voxels the surface must stay away; the kernel's reach across the surface is the round
+    # kernel's (anisotropic ones are short across it, long only along it)
+    depth = max(grid.kernel_vox, float(params.smooth_iters)) - 1.0
     reach = 1 + max(0, int(math.ceil((depth - BS / 2) / BS)))
     spacing = params.particle_radius / PARTICLE_RADIUS_PER_SPACING
     full = (BS * grid.voxel / spacing) ** 3
