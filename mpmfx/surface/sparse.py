@@ -51,7 +51,7 @@ ANISO_MAX_RATIO = 4.0  # Yu & Turk's k_r: an ellipsoid's axes differ by at most 
 ANISO_MAX_STRETCH = 1.6  # longest axis / the isotropic kernel radius (bounds the gather's reach)
 ANISO_MIN_NEIGHBOURS = 8  # fewer neighbours within the kernel (spray) keep a round kernel; a one-layer sheet has ~15
 LINE_KERNELS_ON_CPU = True  # tests compare both paths on the CPU (tests/surface/test_line_kernels.py)
-DENSE_FILL = 0.5  # of a block's particles at the nominal spacing: a neighbour this full keeps INSIDE blocks deep (_dense_rule)
+MAX_DENSE_FILL = 0.5  # of a full block's particles: the most the INSIDE rule asks of a neighbour (_dense_rule)
 SEED_DEPTH_SMOOTHED = 0.25  # voxels, the same after smoothing (a lone particle's blob is ~1 voxel deep then)
 
 class SparseGrid:
@@ -99,24 +99,27 @@ def _dense_rule(grid: SparseGrid, params: SurfaceParams) -> tuple[int, int]:
     dense_reach holds at least dense_min particles (sparse_kernels.classify_blocks).
 
     An INSIDE block stands for the deep interior: its voxels read constant tile values (raw
-    field -r, distance -grid.wide), which is right only where the surface lies farther away
-    than the kernel's reach and the blur's (smooth_iters voxels). dense_min is DENSE_FILL of
-    the particles a block holds at the nominal spacing (particle_radius /
-    PARTICLE_RADIUS_PER_SPACING, what the pipeline passes): a neighbour block cut by a flat
-    face holds that many only when half of it lies inside, so the surface stays BS / 2 voxels
-    outside an INSIDE block; each further ring of dense blocks adds BS voxels. The last voxel
-    of the blur's reach weighs 4^-smooth_iters and the kernel's outermost one little: "- 1".
+    field -r, distance -grid.wide), which is right only where the surface lies at least
+    `depth` voxels away: the kernel's reach and the blur's (smooth_iters voxels), less one
+    voxel (the blur's last tap weighs 4^-smooth_iters, the kernel's outermost voxel little).
+    A block cut by a flat face holds the fraction of the particles of a full block (at the
+    nominal spacing particle_radius / PARTICLE_RADIUS_PER_SPACING, what the pipeline passes)
+    that lies inside the face. So with dense_reach rings of neighbours each holding fill x a
+    full block, the surface lies at least (dense_reach - 1 + fill) BS voxels outside an INSIDE
+    block (an outer ring could not be dense if an inner one were cut). fill is at most
+    MAX_DENSE_FILL: a fuller threshold would catch interior blocks by their count noise.
     The old rule (a quarter of a packing at spacing 2 r: a block ~15 % full) let blocks 1-3
     voxels under a face be INSIDE; the blur read -wide there and pushed patches of the face a
     voxel (0.5 h) outward, wherever the face cut its block so (random box, "fine": 10M 0.147
     -> 0.117 h mean error, 1M 0.137 -> 0.119 h; 2-core CPU, the H100's numbers to the digit)."""
-    # voxels the surface must stay away; the kernel's reach across the surface is the round
-    # kernel's (anisotropic ones are short across it, long only along it)
+    # the kernel's reach across the surface is the round kernel's (anisotropic kernels are
+    # short across it, long only along it)
     depth = max(grid.kernel_vox, float(params.smooth_iters)) - 1.0
-    reach = 1 + max(0, int(math.ceil((depth - BS / 2) / BS)))
+    reach = 1 + max(0, int(math.ceil((depth - MAX_DENSE_FILL * BS) / BS)))
+    fill = min(max((depth - (reach - 1) * BS) / BS, 1.0 / BS), MAX_DENSE_FILL)
     spacing = params.particle_radius / PARTICLE_RADIUS_PER_SPACING
     full = (BS * grid.voxel / spacing) ** 3
-    return reach, max(1, int(math.ceil(DENSE_FILL * full)))
+    return reach, max(1, int(math.ceil(fill * full)))
 
 
 @dataclass
