@@ -12,6 +12,7 @@ import warp as wp
 BS = wp.constant(8)  # block edge in voxels
 CS = wp.constant(4)  # edge of the cells particles are binned in for the field gather, voxels
 BV = wp.constant(512)  # voxels per block
+COUNT_NUDGE = wp.constant(0.01)  # voxels: float32 rounding of grid coordinates up to ~1e5 voxels (count_blocks)
 TILE_OUTSIDE = wp.constant(-1)
 TILE_INSIDE = wp.constant(-2)
 TILE_ACTIVE = wp.constant(-3)  # before compaction
@@ -168,13 +169,22 @@ def count_blocks(
     order: wp.array(dtype=wp.int32),
 ):
     """Particles per block and per gather cell (CS^3 voxels); keys[p] = linear cell index of
-    particle p, order[p] = p (to sort)."""
+    particle p, order[p] = p (to sort).
+
+    The block counts judge how full a block is (classify_blocks), so a particle within
+    COUNT_NUDGE voxels below a block face counts for the block above: a lattice plane lying on a
+    block face (x = k h, as lattices laid from 0 do) would otherwise split between the blocks by
+    float rounding, 3 and 5 layers instead of 4 and 4 (measured: +74 % active blocks)."""
     p = wp.tid()
     gp = g[p]
     ci = int(wp.floor(gp[0])) // CS
     cj = int(wp.floor(gp[1])) // CS
     ck = int(wp.floor(gp[2])) // CS
-    wp.atomic_add(counts, ci // (BS // CS), cj // (BS // CS), ck // (BS // CS), 1)
+    bi = int(wp.floor(gp[0] + COUNT_NUDGE)) // BS
+    bj = int(wp.floor(gp[1] + COUNT_NUDGE)) // BS
+    bk = int(wp.floor(gp[2] + COUNT_NUDGE)) // BS
+    # the grid's margin blocks hold no particle, so bi .. bk stay inside it
+    wp.atomic_add(counts, bi, bj, bk, 1)
     wp.atomic_add(cells, ci, cj, ck, 1)
     keys[p] = (ci * cells.shape[1] + cj) * cells.shape[2] + ck
     order[p] = p

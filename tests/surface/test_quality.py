@@ -5,7 +5,7 @@ sheet of water stays one closed sheet with anisotropic kernels."""
 import numpy as np
 import pytest
 
-from mpmfx.bench.surface_cases import OURS, measure_sheet, mesh_stats, sample_shape, shape_sdf
+from mpmfx.bench.surface_cases import BOX_HALF, OURS, measure_sheet, mesh_stats, sample_shape, shape_sdf
 from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_particles
 
 pytest.importorskip("warp")
@@ -41,3 +41,24 @@ def test_thin_random_sheet_stays_one_sheet_with_anisotropic_kernels():
 def test_anisotropic_must_be_a_bool():
     with pytest.raises(ValueError, match="SurfaceParams.anisotropic"):
         SurfaceParams(0.01, anisotropic="yes")
+
+
+@pytest.mark.parametrize("fill", [1.5, 6.0])
+def test_a_random_box_face_lands_on_the_face_wherever_it_cuts_its_block(fill):
+    # the shot setting, 20k uniformly random particles in the bench's box, shifted along x so
+    # that the +x face cuts its 8^3-voxel block `fill` voxels from the block's inner side. An
+    # INSIDE tile 1-3 voxels under the face used to push patches of it a voxel (0.5 h) outward
+    # (measured +0.18 h at fill 1.5 against +0.04 h at fill 6; now +0.04 h at both)
+    x, h = sample_shape("box", 20_000, "random")
+    setting = dict(OURS["fine"])
+    voxel = setting.pop("voxel_h") * h
+    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel, dense_output=False, **setting)
+    face = BOX_HALF[0] / voxel  # the +x face in voxel index units (blocks start at multiples of 8)
+    shift = (8.0 * np.ceil(face / 8.0) - 8.0 + fill - face) * voxel
+    x[:, 0] += shift
+    v = surface_particles(x, None, params, device="cpu").mesh.vertices.astype(np.float64)
+    v[:, 0] -= shift
+    on_face = (v[:, 0] > 0) & np.all(np.abs(v[:, 1:]) < BOX_HALF[1:] - 4 * h, axis=1)
+    height = (v[on_face, 0] - BOX_HALF[0]) / h
+    assert on_face.sum() > 500
+    assert abs(height.mean()) < 0.1, f"+x face at {height.mean():+.3f} h (block fill {fill} voxels)"
