@@ -230,6 +230,8 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
         tiles = (tiles[0] - params.dilate / grid.voxel, tiles[1])
     dist = _distance(wp, S, bcoord, bmap, phi, tiles, grid.wide)
     tiles = (grid.wide, -grid.wide)
+    if params.close_voids > 0.0 and params.smooth_iters > 0 and nvox:
+        dist = _close_voids(wp, S, bcoord, bmap, dist, params.close_voids / grid.voxel, grid.wide)
     phi = _smooth(wp, S, bcoord, bmap, dist, params.smooth_iters, tiles, limit=SMOOTH_LIMIT * grid.r_vox)
     # marching cubes needs no crossing on a tile face; giving voxels next to a tile its sign can
     # seal an outside pocket whose only way out ran along an inside tile (a bubble, seen on
@@ -461,8 +463,6 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     outward as far as it would move the raw field inward (0.3-0.5 % volume per pass, measured).
     Renormalising that once more flips the curvature back; the mean of the two is straight to
     second order."""
-    from mpmfx.surface import line_kernels as L
-
     nvox = phi.shape[0]
     d1, d2 = wp.empty_like(phi), wp.empty_like(phi)
     _renormalise(wp, S, bcoord, bmap, phi, tiles, 1.0, clip, d1)
@@ -474,11 +474,21 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     # renormalised values there are no distance either): keep the voxels next to the crossing,
     # recompute the rest of the band from them (|grad phi| = 1). Without it each blur pass that
     # reached the flat part moved lattice surfaces outward (sphere +0.08 h at five passes).
+    return _redistance(wp, bcoord, bmap, d1, clip)
+
+
+def _redistance(wp, bcoord, bmap, phi, clip: float):
+    """phi's zero level with a distance around it (a new array, voxels, clipped to +-clip): the
+    voxels next to the crossing keep theirs (capped at the crossing interpolated along an axis),
+    the rest of the band comes from Jacobi sweeps of |grad phi| = 1 (redistance_kernels; on the
+    CPU the same sweeps by block lines, line_kernels.eikonal_lines)."""
+    from mpmfx.surface import line_kernels as L
     from mpmfx.surface import redistance_kernels as R
 
+    nvox = phi.shape[0]
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
-    _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, frozen, a])
+    _split(wp, R.init_eikonal, nvox, [bcoord, bmap, phi, clip, -clip, clip, frozen, a])
     was, now = (wp.empty(nvox // BS, dtype=wp.int32) for _ in range(2))  # lines changed by a sweep (CPU)
     for sweep in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
         if _lines(a):
@@ -488,6 +498,19 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
             _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
         a, b = b, a
     return a
+
+
+def _close_voids(wp, S, bcoord, bmap, dist, rho: float, clip: float):
+    """The morphological closing of the inside of the distance `dist` (voxels, +-clip) by a ball
+    of radius rho voxels, as a distance (a new array): grown by rho, redistanced, shrunk by rho.
+    Dents a ball of radius rho cannot enter from outside (the voids of random samples) fill;
+    convex edges stay as they are, where the blur that follows fills dents only while it rounds
+    them (SurfaceParams.close_voids; README "Closing the sample voids")."""
+    grown = wp.clone(dist)
+    _launch(wp, S.add_scalar, grown.shape[0], [grown, -rho])
+    closed = _redistance(wp, bcoord, bmap, grown, clip + rho)
+    _launch(wp, S.add_clamp, closed.shape[0], [closed, rho, clip])
+    return closed
 
 
 def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):

@@ -510,6 +510,13 @@ def add_scalar(a: wp.array(dtype=float), value: float):
 
 
 @wp.kernel
+def add_clamp(a: wp.array(dtype=float), value: float, clip: float):
+    """a = clamp(a + value, -clip, clip)."""
+    t = wp.tid()
+    a[t] = wp.clamp(a[t] + value, -clip, clip)
+
+
+@wp.kernel
 def renormalise(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
