@@ -10,14 +10,14 @@ from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_pa
 pytest.importorskip("warp")
 
 
-@pytest.mark.parametrize("voxel_h, iters", [(0.6, 2), (0.5, 5)])
-def test_cpu_line_kernels_and_threads_give_the_voxel_kernels_surface(monkeypatch, voxel_h, iters):
+@pytest.mark.parametrize("voxel_h, iters, close", [(0.6, 2, 0.0), (0.5, 5, 0.0), (0.6, 2, 1.0)])
+def test_cpu_line_kernels_and_threads_give_the_voxel_kernels_surface(monkeypatch, voxel_h, iters, close):
     import mpmfx.surface.sparse as sparse
 
     x, h = sample_shape("torus", 6000, "random")
     v = np.random.default_rng(1).normal(size=x.shape).astype(np.float32)
     params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel_h * h, smooth_iters=iters,
-                           min_feature_particles=8, dense_output=False)
+                           min_feature_particles=8, dense_output=False, close_voids=close * h)
     monkeypatch.setenv("MPMFX_SURFACE_THREADS", "3")  # more chunks than cores: any split must agree
     monkeypatch.setattr("mpmfx.surface.launch.MIN_SPLIT", 64)
     lines = surface_particles(x, v, params, device="cpu")

@@ -62,3 +62,29 @@ def test_a_random_box_face_lands_on_the_face_wherever_it_cuts_its_block(fill):
     height = (v[on_face, 0] - BOX_HALF[0]) / h
     assert on_face.sum() > 500
     assert abs(height.mean()) < 0.1, f"+x face at {height.mean():+.3f} h (block fill {fill} voxels)"
+
+
+def test_closing_the_voids_brings_random_surfaces_closer_without_growing_them():
+    # SurfaceParams.close_voids = one spacing, "fast", 20k random sphere: a ball rolled over the
+    # outside fills the dents of sample voids before the blur (README "Closing the sample voids");
+    # measured 0.126 -> 0.109 h mean, 0.78 -> 0.57 h max, volume -0.6 -> -0.5 %
+    x, h = sample_shape("sphere", 20_000, "random")
+    setting = dict(OURS["fast"])
+    voxel = setting.pop("voxel_h") * h
+    rows = []
+    for close in (0.0, h):
+        params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel, dense_output=False, close_voids=close,
+                               **setting)
+        mesh = surface_particles(x, None, params, device="cpu").mesh
+        err = np.abs(shape_sdf("sphere")[0](mesh.vertices.astype(np.float64))) / h
+        volume, pieces = mesh_stats(mesh.vertices, mesh.faces)
+        rows.append((err.mean(), err.max(), volume / shape_sdf("sphere")[1] - 1.0, pieces))
+    (mean0, max0, _, _), (mean1, max1, vol1, pieces1) = rows
+    assert mean1 < mean0 - 0.005, f"mean vertex error {mean0:.4f} -> {mean1:.4f} h"
+    assert max1 <= max0, f"max vertex error {max0:.3f} -> {max1:.3f} h"
+    assert pieces1 == 1 and abs(vol1) < 0.01, (pieces1, vol1)
+
+
+def test_close_voids_must_be_a_non_negative_length():
+    with pytest.raises(ValueError, match="close_voids"):
+        SurfaceParams(0.01, close_voids=-0.01)
