@@ -49,6 +49,7 @@ ANISO_COV_EPS = 0.01  # x kernel radius^2: regularises the covariance of a flat 
 ANISO_MAX_RATIO = 4.0  # Yu & Turk's k_r: an ellipsoid's axes differ by at most this factor
 ANISO_MAX_STRETCH = 1.6  # longest axis / the isotropic kernel radius (bounds the gather's reach)
 ANISO_MIN_NEIGHBOURS = 8  # fewer neighbours within the kernel (spray) keep a round kernel; a one-layer sheet has ~15
+GATHER_BLOCKS = True  # the CPU gather: a block per thread (else a line)
 LINE_KERNELS_ON_CPU = True  # tests compare both paths on the CPU (tests/surface/test_line_kernels.py)
 SEED_DEPTH_SMOOTHED = 0.25  # voxels, the same after smoothing (a lone particle's blob is ~1 voxel deep then)
 
@@ -207,7 +208,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     # seal an outside pocket whose only way out ran along an inside tile (a bubble, seen on
     # random samples), so it comes before the last topology pass, not after. That pass also
     # catches what blurring did: closed thin outside tunnels (bubbles), cut inside necks (specks).
-    _split(wp, S.match_tiles, nvox, [bcoord, bmap, phi, 1e-3])
+    _by_lines(wp, S.match_tiles, "match_tiles_lines", nvox, [bcoord, bmap, phi, 1e-3])
     seed = SEED_DEPTH_SMOOTHED if params.smooth_iters > 0 else SEED_DEPTH * grid.r_vox
     steps += _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth=seed)
     if params.min_feature_particles > 0 and nvox:
@@ -249,6 +250,17 @@ def _renormalise(wp, S, bcoord, bmap, phi, tiles, scale: float, clip: float, out
         _split(wp, L.renormalise_lines, phi.shape[0] // BS, [bcoord, bmap, phi, *tiles, scale, clip, out])
     else:
         _split(wp, S.renormalise, phi.shape[0], [bcoord, bmap, phi, *tiles, scale, clip, out])
+
+
+def _by_lines(wp, kernel, line_kernel: str, nvox: int, inputs: list) -> None:
+    """Launch a voxel kernel (nvox threads), or on the CPU its line_kernels twin of that name
+    (nvox / 8 threads)."""
+    from mpmfx.surface import line_kernels as L
+
+    if _lines(inputs[2]):
+        _split(wp, getattr(L, line_kernel), nvox // BS, inputs)
+    else:
+        _split(wp, kernel, nvox, inputs)
 
 
 def _split(wp, kernel, dim: int, inputs: list) -> None:
@@ -303,6 +315,10 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         wp.launch(A.gather_zhu_bridson_aniso, nvox,
                   inputs=[bcoord, cells, starts, order, g, gmat, thin, va, int(with_v), grid.gather_vox, grid.kernel_vox,
                           grid.r_vox, grid.far_vox], outputs=[phi, w, offset, vel, cov, radius])
+    elif _lines(phi) and GATHER_BLOCKS:  # one thread per block: each candidate particle fetched once per block
+        launch_split(wp, L.gather_zhu_bridson_blocks, bcoord.shape[0], [bcoord, cells, starts, order, g, va, int(with_v),
+                     grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w, offset, vel, wp.empty(nvox, dtype=wp.vec3)],
+                     device=phi.device, min_split=1)
     elif _lines(phi):  # one thread per block line: each candidate particle fetched once per 8 voxels
         launch_split(wp, L.gather_zhu_bridson_lines, nvox // BS, [bcoord, cells, starts, order, g, va, int(with_v),
                      grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w, offset, vel], device=phi.device)
@@ -370,7 +386,7 @@ def _flood(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: 
     nvox = phi.shape[0]
     reached = wp.empty(nvox, dtype=wp.int32)
     pending = wp.zeros(bcoord.shape[0], dtype=wp.int32)
-    _split(wp, T.seed_reached, nvox, [bcoord, bmap, phi, mark, seed_depth, int(specks), reached, pending])
+    _by_lines(wp, T.seed_reached, "seed_reached_lines", nvox, [bcoord, bmap, phi, mark, seed_depth, int(specks), reached, pending])
     changed = wp.zeros(1, dtype=wp.int32)
     nact = bcoord.shape[0]
     active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
@@ -433,24 +449,27 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     outward as far as it would move the raw field inward (0.3-0.5 % volume per pass, measured).
     Renormalising that once more flips the curvature back; the mean of the two is straight to
     second order."""
-    from mpmfx.surface import line_kernels as L
+    from mpmfx.surface import line_redistance_kernels as L
+    from mpmfx.surface import redistance_kernels as R
 
     nvox = phi.shape[0]
     d1, d2 = wp.empty_like(phi), wp.empty_like(phi)
     _renormalise(wp, S, bcoord, bmap, phi, tiles, 1.0, clip, d1)
-    _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
-    _launch(wp, S.average_into, nvox, [d1, d2])
     if nvox == 0:
         return d1
     # the raw field is a distance only near its zero level (it flattens to -r inside, and the
     # renormalised values there are no distance either): keep the voxels next to the crossing,
     # recompute the rest of the band from them (|grad phi| = 1). Without it each blur pass that
     # reached the flat part moved lattice surfaces outward (sphere +0.08 h at five passes).
-    from mpmfx.surface import redistance_kernels as R
-
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
-    _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, frozen, a])
+    if _lines(phi):  # the second renormalise and the average only where init_eikonal reads them
+        _split(wp, L.crossing_average_lines, nvox // BS, [bcoord, bmap, d1, clip, frozen, d2])
+        _split(wp, L.init_eikonal_lines, nvox // BS, [bcoord, bmap, d2, clip, frozen, a])
+    else:
+        _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
+        _launch(wp, S.average_into, nvox, [d1, d2])
+        _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, frozen, a])
     was, now = (wp.empty(nvox // BS, dtype=wp.int32) for _ in range(2))  # lines changed by a sweep (CPU)
     for sweep in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
         if _lines(a):
@@ -495,7 +514,7 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
         return None
     dev = values.device
     # a thread per edge and per cell (GPU), or per block line along z, counting its 24 edges and 8 cells (CPU)
-    from mpmfx.surface import line_kernels as L
+    from mpmfx.surface import line_mesh_kernels as L
     lines = _lines(values)
     kv, kf, nv, nf = (L.mc_vertices_lines, L.mc_faces_lines, nvox // BS, nvox // BS) if lines else (
         M.mc_vertices, M.mc_faces, nvox * 3, nvox)
