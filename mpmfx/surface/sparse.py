@@ -434,8 +434,8 @@ def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
     a, b = wp.clone(w), wp.empty_like(w)
     for _ in range(passes):
         for axis in range(3):
-            if _lines(w):
-                _split(wp, L.blur_weight_lines, w.shape[0] // BS, [bcoord, bmap, a, axis, NORMAL_STEP, b])
+            if _lines(w) and NORMAL_STEP == 2:  # the line kernel is written out for step 2
+                _split(wp, L.blur_weight_lines, w.shape[0] // BS, [bcoord, bmap, a, axis, b])
             else:
                 _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
             a, b = b, a
