@@ -83,27 +83,36 @@ def init_eikonal_lines(
     clip: float,
     frozen: wp.array(dtype=wp.int32),
     dist: wp.array(dtype=float),
+    dist2: wp.array(dtype=float),
+    changed: wp.array(dtype=wp.int32),
     base: int,
 ):
     """redistance_kernels.init_eikonal (tiles +-clip) on one block line along z, frozen given
-    (crossing_average_lines)."""
+    (crossing_average_lines), into both buffers of the sweeps (dist, dist2). changed[line]:
+    bit z set where voxel z is frozen. A voxel that neither is nor touches a frozen one holds
+    +-clip, as do all its neighbours (tiles too), and a sweep leaves it at +-clip: for the
+    first sweep (eikonal_lines) the frozen voxels are the ones that changed."""
     tid = wp.tid() + base
     b = tid // 64
     l = tid - b * 64
     sides = line_sides(bmap, bcoord[b], l // BS, l - (l // BS) * BS)
+    fz = int(0)
     for z in range(BS):
         t = tid * BS + z
         v = phi[t]
+        d = wp.where(v > 0.0, clip, -clip)
         if frozen[t] != 0:
+            fz = fz | (1 << z)
             n = line_neighbours(phi, sides, t, l, z, clip, -clip)
             near = float(1.0)
             for q in range(6):
                 u = n[q]
                 if (u > 0.0) != (v > 0.0):
                     near = wp.min(near, wp.abs(v) / wp.max(wp.abs(v) + wp.abs(u), 1.0e-12))
-            dist[t] = wp.where(v > 0.0, wp.min(wp.abs(v), near), -wp.min(wp.abs(v), near))
-        else:
-            dist[t] = wp.where(v > 0.0, clip, -clip)
+            d = wp.where(v > 0.0, wp.min(wp.abs(v), near), -wp.min(wp.abs(v), near))
+        dist[t] = d
+        dist2[t] = d
+    changed[tid] = fz
 
 
 @wp.kernel
@@ -117,50 +126,48 @@ def eikonal_lines(
     clip: float,
     dst: wp.array(dtype=float),
     was: wp.array(dtype=wp.int32),
-    first: int,
     now: wp.array(dtype=wp.int32),
     base: int,
 ):
     """redistance_kernels.eikonal_sweep on the 8 voxels of one block line along z.
 
-    was / now: per line, 1 where the previous / this sweep changed a value. A line whose
-    neighbour lines (the 6 it reads) and itself did not change in the previous sweep would
-    compute what it holds, and with src and dst swapped every sweep dst holds the values of two
-    sweeps ago, the same ones: it is skipped (first != 0: the first sweep, nothing skipped).
-    Only the lines at the moving front work, and the result is the plain Jacobi sweep's."""
+    was / now: per line, bit z set where the previous / this sweep changed voxel z (before the
+    first sweep: the frozen voxels, see init_eikonal_lines). A voxel whose 6 neighbours and
+    itself did not change in the previous sweep would compute what it holds, and with src and
+    dst swapped every sweep dst holds the values of two sweeps ago, the same ones: it is
+    skipped. Only the voxels at the moving front work, and the result is the plain Jacobi
+    sweep's."""
     tid = wp.tid() + base
     b = tid // 64
     l = tid - b * 64
     li = l // BS
     lj = l - li * BS
     sides = line_sides(bmap, bcoord[b], li, lj)
-    if first == 0:
-        busy = was[tid] + line_flag(was, sides[0], (BS - 1) * BS + lj) + line_flag(was, sides[1], lj)
-        busy += line_flag(was, sides[2], li * BS + BS - 1) + line_flag(was, sides[3], li * BS)
-        busy += line_flag(was, sides[4], l) + line_flag(was, sides[5], l)
-        if li > 0:
-            busy += was[tid - BS]
-        if li < BS - 1:
-            busy += was[tid + BS]
-        if lj > 0:
-            busy += was[tid - 1]
-        if lj < BS - 1:
-            busy += was[tid + 1]
-        if busy == 0:
-            now[tid] = 0
-            return
     t0 = tid * BS
-    own = vec8(0.0)
-    fz = int(0)  # bit z: voxel z is frozen
+    fz = int(0)  # bit z: voxel z is frozen (keeps its value)
     for z in range(BS):
-        own[z] = src[t0 + z]
         if frozen[t0 + z] != 0:
             fz = fz | (1 << z)
-    if fz == 255:
-        for z in range(BS):
-            dst[t0 + z] = own[z]
+    mine = was[tid]
+    need = mine | (mine << 1) | (mine >> 1)
+    need = need | line_flag(was, sides[0], (BS - 1) * BS + lj) | line_flag(was, sides[1], lj)
+    need = need | line_flag(was, sides[2], li * BS + BS - 1) | line_flag(was, sides[3], li * BS)
+    need = need | ((line_flag(was, sides[4], l) >> (BS - 1)) & 1) | ((line_flag(was, sides[5], l) & 1) << (BS - 1))
+    if li > 0:
+        need = need | was[tid - BS]
+    if li < BS - 1:
+        need = need | was[tid + BS]
+    if lj > 0:
+        need = need | was[tid - 1]
+    if lj < BS - 1:
+        need = need | was[tid + 1]
+    need = need & (~fz) & 255
+    if need == 0:
         now[tid] = 0
         return
+    own = vec8(0.0)
+    for z in range(BS):
+        own[z] = src[t0 + z]
     xm = side_line(src, wp.where(li > 0, 1, 0), t0, -BS * BS, sides[0], ((BS - 1) * BS + lj) * BS, out_v, in_v)
     xp = side_line(src, wp.where(li < BS - 1, 1, 0), t0, BS * BS, sides[1], lj * BS, out_v, in_v)
     ym = side_line(src, wp.where(lj > 0, 1, 0), t0, -BS, sides[2], (li * BS + BS - 1) * BS, out_v, in_v)
@@ -169,19 +176,17 @@ def eikonal_lines(
     zp = read(src, sides[5], l * BS, out_v, in_v)
     moved = int(0)
     for z in range(BS):
-        v = own[z]
-        if (fz >> z) & 1 != 0:
-            dst[t0 + z] = v
-            continue
-        lo = zm
-        if z > 0:
-            lo = own[z - 1]
-        hi = zp
-        if z < BS - 1:
-            hi = own[z + 1]
-        a = wp.vec3(wp.min(wp.abs(xm[z]), wp.abs(xp[z])), wp.min(wp.abs(ym[z]), wp.abs(yp[z])), wp.min(wp.abs(lo), wp.abs(hi)))
-        u = eikonal_update(a, v, clip)
-        dst[t0 + z] = u
-        if u != v:
-            moved = 1
+        if (need >> z) & 1 != 0:
+            v = own[z]
+            lo = zm
+            if z > 0:
+                lo = own[z - 1]
+            hi = zp
+            if z < BS - 1:
+                hi = own[z + 1]
+            a = wp.vec3(wp.min(wp.abs(xm[z]), wp.abs(xp[z])), wp.min(wp.abs(ym[z]), wp.abs(yp[z])), wp.min(wp.abs(lo), wp.abs(hi)))
+            u = eikonal_update(a, v, clip)
+            dst[t0 + z] = u
+            if u != v:
+                moved = moved | (1 << z)
     now[tid] = moved

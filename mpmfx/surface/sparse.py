@@ -463,17 +463,17 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     # reached the flat part moved lattice surfaces outward (sphere +0.08 h at five passes).
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
+    was, now = (wp.empty(nvox // BS, dtype=wp.int32) for _ in range(2))  # voxels changed by a sweep (CPU)
     if _lines(phi):  # the second renormalise and the average only where init_eikonal reads them
         _split(wp, L.crossing_average_lines, nvox // BS, [bcoord, bmap, d1, clip, frozen, d2])
-        _split(wp, L.init_eikonal_lines, nvox // BS, [bcoord, bmap, d2, clip, frozen, a])
+        _split(wp, L.init_eikonal_lines, nvox // BS, [bcoord, bmap, d2, clip, frozen, a, b, was])
     else:
         _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
         _launch(wp, S.average_into, nvox, [d1, d2])
         _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, frozen, a])
-    was, now = (wp.empty(nvox // BS, dtype=wp.int32) for _ in range(2))  # lines changed by a sweep (CPU)
     for sweep in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
         if _lines(a):
-            _split(wp, L.eikonal_lines, nvox // BS, [bcoord, bmap, a, frozen, clip, -clip, clip, b, was, int(sweep == 0), now])
+            _split(wp, L.eikonal_lines, nvox // BS, [bcoord, bmap, a, frozen, clip, -clip, clip, b, was, now])
             was, now = now, was
         else:
             _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
