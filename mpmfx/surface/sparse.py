@@ -383,6 +383,8 @@ def _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, *, seed_depth: float) -
 
 
 def _flood(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: bool) -> int:
+    if _lines(phi):
+        return _flood_bits(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth, specks=specks)
     nvox = phi.shape[0]
     reached = wp.empty(nvox, dtype=wp.int32)
     pending = wp.zeros(bcoord.shape[0], dtype=wp.int32)
@@ -406,6 +408,34 @@ def _flood(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: 
         log.warning("topology flood fill did not settle in %d rounds; some bubbles may remain", MAX_SWEEP_ROUNDS)
     # unreached outside voxels are bubbles (-> inside), unreached inside ones specks (-> outside)
     wp.launch(T.flip_unreached, nvox, inputs=[phi, reached, tiles[1], tiles[0]])
+    return rounds
+
+
+def _flood_bits(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: bool) -> int:
+    """_flood on the CPU: bit words, a block per thread filled to its fixpoint each round
+    (mpmfx.surface.bitfill_kernels); the same fill."""
+    from mpmfx.surface import bitfill_kernels as F
+
+    nact = bcoord.shape[0]
+    sign, reached = wp.empty(nact * BS, dtype=wp.uint64), wp.empty(nact * BS, dtype=wp.uint64)
+    pending = wp.empty(nact, dtype=wp.int32)
+    blocks = {"device": phi.device, "min_split": 1}  # a block per thread: few threads, much work each
+    launch_split(wp, F.seed_bits, nact, [bcoord, bmap, phi, mark, seed_depth, int(specks), sign, reached, pending], **blocks)
+    changed = wp.zeros(1, dtype=wp.int32)
+    active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
+    rounds = 0
+    while rounds < MAX_SWEEP_ROUNDS:
+        wp.launch(T.active_blocks, nact, inputs=[bcoord, bmap, pending, was, int(rounds == 0), active])
+        changed.zero_()
+        moved.zero_()
+        launch_split(wp, F.flood_bits, nact, [bcoord, bmap, sign, reached, active, changed, moved], **blocks)
+        rounds += 1
+        moved, was = was, moved
+        if int(changed.numpy()[0]) == 0:
+            break
+    else:
+        log.warning("topology flood fill did not settle in %d rounds; some bubbles may remain", MAX_SWEEP_ROUNDS)
+    _split(wp, F.flip_unreached_bits, nact * BS, [reached, tiles[1], tiles[0], phi])
     return rounds
 
 
