@@ -194,7 +194,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     phi, w, vel = _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid, params)
     timings["field"] = _lap(wp, t0)
     mark = wp.zeros(max(nvox, 1), dtype=wp.int32)
-    wp.launch(T.mark_particle_voxels, n, inputs=[g, bmap, mark])
+    _split(wp, T.mark_particle_voxels, n, [g, bmap, mark])  # writes 1s: any interleaving agrees
     tiles = (grid.far_vox, -grid.r_vox)  # (outside, inside) tile values of the raw field
     steps = _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH * grid.r_vox)
     timings["topology"] = _lap(wp, t0)
@@ -328,8 +328,7 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
                   outputs=[phi, w, offset, vel])
     if grid.normal_passes > 0:
         wide = _blur_weights(wp, S, bcoord, bmap, w, grid.normal_passes)
-        wp.launch(S.project_on_wide_normal, nvox,
-                  inputs=[bcoord, bmap, wide, w, offset, grid.r_vox, grid.far_vox, int(aniso), cov, ANISO_NORMAL_ITERS,
+        _split(wp, S.project_on_wide_normal, nvox, [bcoord, bmap, wide, w, offset, grid.r_vox, grid.far_vox, int(aniso), cov, ANISO_NORMAL_ITERS,
                           ANISO_COV_EPS * grid.kernel_vox**2, radius, phi])
     return phi, w, vel
 
@@ -337,7 +336,7 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
 def _classify(wp, S, g, counts, grid: SparseGrid):
     """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates)."""
     near = wp.zeros(grid.nblocks, dtype=wp.int32)
-    wp.launch(S.mark_near_blocks, g.shape[0], inputs=[g, grid.reach_vox, near])
+    _split(wp, S.mark_near_blocks, g.shape[0], [g, grid.reach_vox, near])  # writes 1s: any interleaving agrees
     state = wp.empty(grid.nblocks, dtype=wp.int32)
     wp.launch(S.classify_blocks, grid.nblocks, inputs=[counts, near, grid.dense_reach, grid.dense_min, state])
     labels = wp.empty(grid.nblocks, dtype=wp.int32)
@@ -444,7 +443,7 @@ def _remove_small(wp, T, bcoord, bmap, phi, g, min_count: int, tiles) -> None:
     components touching an INSIDE tile are large by construction and stay."""
     nvox = phi.shape[0]
     labels = wp.empty(nvox, dtype=wp.int32)
-    wp.launch(T.init_inside_labels, nvox, inputs=[bcoord, bmap, phi, labels])
+    _split(wp, T.init_inside_labels, nvox, [bcoord, bmap, phi, labels])
     changed = wp.zeros(1, dtype=wp.int32)
     for _ in range(MAX_SWEEP_ROUNDS):
         changed.zero_()
@@ -454,7 +453,7 @@ def _remove_small(wp, T, bcoord, bmap, phi, g, min_count: int, tiles) -> None:
             break
     counts = wp.zeros(nvox + 1, dtype=wp.int32)
     wp.launch(T.count_component_particles, g.shape[0], inputs=[g, bmap, labels, counts])
-    wp.launch(T.remove_small_components, nvox, inputs=[labels, counts, min_count, tiles[0], phi])
+    _split(wp, T.remove_small_components, nvox, [labels, counts, min_count, tiles[0], phi])
 
 
 def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
@@ -530,7 +529,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
             else:
                 _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
             phi, tmp = tmp, phi
-    _launch(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
+    _split(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
     return phi
 
 
