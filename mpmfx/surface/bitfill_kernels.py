@@ -16,7 +16,7 @@ round, and a round in which no block changed read only final words.
 import warp as wp
 
 from mpmfx.surface.line_kernels import side_code
-from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE
+from mpmfx.surface.sparse_kernels import BS, BV, LABEL_NONE, TILE_INSIDE, TILE_OUTSIDE
 
 vec8u = wp.types.vector(length=8, dtype=wp.uint64)
 ALL = wp.constant(wp.uint64(0xFFFFFFFFFFFFFFFF))
@@ -49,14 +49,15 @@ def seed_bits(
     phi: wp.array(dtype=float),
     mark: wp.array(dtype=wp.int32),
     seed_depth: float,
-    specks: int,
+    seeds: int,
     sign: wp.array(dtype=wp.uint64),
     reached: wp.array(dtype=wp.uint64),
     pending: wp.array(dtype=wp.int32),
     base: int,
 ):
-    """topology_kernels.seed_reached for one block, as bit words; pending[b] = 1 where a voxel
-    is left to reach."""
+    """topology_kernels.seed_reached for one block, as bit words (seeds 0: bubbles, 1:
+    specks, as its `specks`; 2: bodies, every outside voxel and the inside ones next to an
+    INSIDE tile, see small_labels); pending[b] = 1 where a voxel is left to reach."""
     b = wp.tid() + base
     bc = bcoord[b]
     left = int(0)
@@ -76,9 +77,11 @@ def seed_bits(
             p = phi[t]
             out = p > 0.0
             rr = int(0)
-            if specks == 0 and not out:
+            if seeds == 0 and not out:
                 rr = 1
-            if specks != 0 and (out or (mark[t] != 0 and p <= -seed_depth)):
+            if seeds == 1 and (out or (mark[t] != 0 and p <= -seed_depth)):
+                rr = 1
+            if seeds == 2 and out:
                 rr = 1
             if rr == 0:  # an outside voxel next to an OUTSIDE tile, an inside one next to an INSIDE tile
                 want = wp.where(out, TILE_OUTSIDE, TILE_INSIDE)
@@ -201,3 +204,25 @@ def flip_unreached_bits(reached: wp.array(dtype=wp.uint64), inside_value: float,
                 phi[t] = inside_value
             else:
                 phi[t] = outside_value
+
+
+@wp.kernel
+def labels_from_bits(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), labels: wp.array(dtype=wp.int32),
+                     pending: wp.array(dtype=wp.int32), base: int):
+    """Labels of topology_kernels.init_inside_labels after a fill from the bodies (seeds 2) for
+    the 64 voxels of word w: outside -1, reached inside 0 (connected to an INSIDE tile: the
+    label the min-label sweeps would end at), the other inside voxels their own t + 1;
+    pending[block] = 1 (zeroed before) where such a voxel is."""
+    w = wp.tid() + base
+    s = sign[w]
+    left = (~reached[w]) & (~s)
+    for q in range(BS * BS):
+        t = w * BS * BS + q
+        lab = LABEL_NONE
+        if ((s >> wp.uint64(q)) & wp.uint64(1)) == wp.uint64(0):
+            lab = 0
+            if ((left >> wp.uint64(q)) & wp.uint64(1)) != wp.uint64(0):
+                lab = t + 1
+        labels[t] = lab
+    if left != wp.uint64(0):
+        pending[w // BS] = 1

@@ -212,7 +212,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     seed = SEED_DEPTH_SMOOTHED if params.smooth_iters > 0 else SEED_DEPTH * grid.r_vox
     steps += _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth=seed)
     if params.min_feature_particles > 0 and nvox:
-        _remove_small(wp, T, bcoord, bmap, phi, g, params.min_feature_particles, tiles)
+        _remove_small(wp, T, bcoord, bmap, phi, g, mark, params.min_feature_particles, tiles)
     values = wp.empty_like(phi)  # renormalising keeps every sign: the topology stands
     _renormalise(wp, S, bcoord, bmap, phi, tiles, grid.voxel, grid.background, values)
     tiles = (grid.background, -grid.background)
@@ -382,8 +382,12 @@ def _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, *, seed_depth: float) -
 
 
 def _flood(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: bool) -> int:
-    if _lines(phi):
-        return _flood_bits(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth, specks=specks)
+    if _lines(phi):  # bit words, a block per thread filled to its fixpoint each round (CPU)
+        from mpmfx.surface import topology_cpu as C
+
+        _, reached, rounds = C.flood_bits(wp, T, bcoord, bmap, phi, mark, seed_depth, "specks" if specks else "bubbles")
+        C.flip_unreached(wp, reached, phi, tiles)
+        return rounds
     nvox = phi.shape[0]
     reached = wp.empty(nvox, dtype=wp.int32)
     pending = wp.zeros(bcoord.shape[0], dtype=wp.int32)
@@ -410,47 +414,25 @@ def _flood(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: 
     return rounds
 
 
-def _flood_bits(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: bool) -> int:
-    """_flood on the CPU: bit words, a block per thread filled to its fixpoint each round
-    (mpmfx.surface.bitfill_kernels); the same fill."""
-    from mpmfx.surface import bitfill_kernels as F
-
-    nact = bcoord.shape[0]
-    sign, reached = wp.empty(nact * BS, dtype=wp.uint64), wp.empty(nact * BS, dtype=wp.uint64)
-    pending = wp.empty(nact, dtype=wp.int32)
-    blocks = {"device": phi.device, "min_split": 1}  # a block per thread: few threads, much work each
-    launch_split(wp, F.seed_bits, nact, [bcoord, bmap, phi, mark, seed_depth, int(specks), sign, reached, pending], **blocks)
-    changed = wp.zeros(1, dtype=wp.int32)
-    active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
-    rounds = 0
-    while rounds < MAX_SWEEP_ROUNDS:
-        wp.launch(T.active_blocks, nact, inputs=[bcoord, bmap, pending, was, int(rounds == 0), active])
-        changed.zero_()
-        moved.zero_()
-        launch_split(wp, F.flood_bits, nact, [bcoord, bmap, sign, reached, active, changed, moved], **blocks)
-        rounds += 1
-        moved, was = was, moved
-        if int(changed.numpy()[0]) == 0:
-            break
-    else:
-        log.warning("topology flood fill did not settle in %d rounds; some bubbles may remain", MAX_SWEEP_ROUNDS)
-    _split(wp, F.flip_unreached_bits, nact * BS, [reached, tiles[1], tiles[0], phi])
-    return rounds
-
-
-def _remove_small(wp, T, bcoord, bmap, phi, g, min_count: int, tiles) -> None:
+def _remove_small(wp, T, bcoord, bmap, phi, g, mark, min_count: int, tiles) -> None:
     """Inside components (6-connected) holding fewer than min_count particles become outside;
     components touching an INSIDE tile are large by construction and stay."""
     nvox = phi.shape[0]
-    labels = wp.empty(nvox, dtype=wp.int32)
-    _split(wp, T.init_inside_labels, nvox, [bcoord, bmap, phi, labels])
-    changed = wp.zeros(1, dtype=wp.int32)
-    for _ in range(MAX_SWEEP_ROUNDS):
-        changed.zero_()
-        for axis in range(3):
-            _split(wp, T.sweep_min_labels, bcoord.shape[0] * 64, [bcoord, bmap, labels, axis, changed])
-        if int(changed.numpy()[0]) == 0:
-            break
+    if _lines(phi):
+        from mpmfx.surface import topology_cpu as C
+
+        labels = C.small_labels(wp, T, bcoord, bmap, phi, mark)
+    else:
+        labels = wp.empty(nvox, dtype=wp.int32)
+        _split(wp, T.init_inside_labels, nvox, [bcoord, bmap, phi, labels])
+        every = wp.full(bcoord.shape[0], 1, dtype=wp.int32)
+        changed = wp.zeros(1, dtype=wp.int32)
+        for _ in range(MAX_SWEEP_ROUNDS):
+            changed.zero_()
+            for axis in range(3):
+                _split(wp, T.sweep_min_labels, bcoord.shape[0] * 64, [bcoord, bmap, labels, every, axis, changed])
+            if int(changed.numpy()[0]) == 0:
+                break
     counts = wp.zeros(nvox + 1, dtype=wp.int32)
     wp.launch(T.count_component_particles, g.shape[0], inputs=[g, bmap, labels, counts])
     _split(wp, T.remove_small_components, nvox, [labels, counts, min_count, tiles[0], phi])

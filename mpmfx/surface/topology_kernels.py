@@ -176,13 +176,17 @@ def sweep_min_labels(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
     labels: wp.array(dtype=wp.int32),
+    active: wp.array(dtype=wp.int32),
     axis: int,
     changed: wp.array(dtype=wp.int32),
     base: int,
 ):
-    """Carry the smallest label through labelled voxels along one block line, both ways."""
+    """Carry the smallest label through labelled voxels along one block line, both ways
+    (blocks with active[b] != 0)."""
     tid = wp.tid() + base
     b = tid // 64
+    if active[b] == 0:
+        return
     l = tid - b * 64
     corner = bcoord[b] * BS
     first, st = line_start(axis, l)
