@@ -1,104 +1,23 @@
-"""Warp kernels of the sparse surfacer that work on a line of 8 voxels per thread: the CPU path.
+"""Warp kernels of the sparse surfacer's CPU path: a block of 8^3 voxels per thread, worked
+through as 64 lines of 8 voxels.
 
 Warp's CPU backend runs a launch's threads one after another on one core, so there what
-counts is the work per voxel, not the thread count. The field gather of
-:mod:`mpmfx.surface.sparse_kernels` visits each candidate particle once per voxel; here one
-thread takes the 8 voxels of a block line along z, visits each candidate particle of the line
-once and tests it against the 8 voxels (measured 100k random sphere, CPU: ~3x fewer particle
-fetches). Per voxel the same particles are summed in the same order with the same arithmetic,
-so the field is the same as the voxel kernel's (tests/surface/test_line_kernels.py).
+counts is the work per voxel, not the thread count: the GPU's layout (a thread per voxel) pays
+there for what a GPU hides (index arithmetic, a block-map lookup per neighbour read). Here the
+neighbour blocks are looked up once per block, a line's neighbour lines are read once, and the
+field gather fetches each candidate particle once per block (~20x fewer fetches than once per
+line). Every voxel gets the same arithmetic in the same order as in the voxel kernels, so the
+results are theirs bit for bit (tests/surface/test_line_kernels.py).
 
 `base`: the first thread's index, so a launch can be split into chunks run on several CPU
-threads (Warp's CPU launches release the GIL; mpmfx.surface.sparse._launch).
+threads (Warp's CPU launches release the GIL; mpmfx.surface.launch).
 """
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, CS, TILE_INSIDE, TILE_OUTSIDE, line_voxel, slot, stride, write_field
+from mpmfx.surface.sparse_kernels import BS, BV, CS, TILE_INSIDE, TILE_OUTSIDE, line_voxel, stride, write_field
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
-mat83 = wp.types.matrix(shape=(8, 3), dtype=wp.float32)
-
-
-@wp.func
-def row3(m: mat83, q: int):
-    return wp.vec3(m[q, 0], m[q, 1], m[q, 2])
-
-
-@wp.kernel
-def gather_zhu_bridson_lines(
-    bcoord: wp.array(dtype=wp.vec3i),
-    cells: wp.array3d(dtype=wp.int32),
-    starts: wp.array(dtype=wp.int32),
-    order: wp.array(dtype=wp.int32),
-    g: wp.array(dtype=wp.vec3),
-    v: wp.array(dtype=wp.vec3),
-    with_v: int,
-    reach: float,
-    radius_vox: float,
-    far_vox: float,
-    phi: wp.array(dtype=float),
-    w_out: wp.array(dtype=float),
-    offset: wp.array(dtype=wp.vec3),
-    vel: wp.array(dtype=wp.vec3),
-    base: int,
-):
-    """sparse_kernels.gather_zhu_bridson for the 8 voxels (i, j, k0 .. k0 + 7) of one block line
-    (thread = block * 64 + line): the cells within reach of the whole line are visited once."""
-    tid = wp.tid() + base
-    b = tid // 64
-    l = tid - b * 64
-    c = bcoord[b] * BS
-    i = c[0] + l // BS
-    j = c[1] + l % BS
-    k0 = c[2]
-    r2 = reach * reach
-    shape = wp.vec3i(cells.shape[0], cells.shape[1], cells.shape[2])
-    lo = wp.vec3i(0)
-    hi = wp.vec3i(0)
-    ends = wp.vec3(float(i), float(j), float(k0 + BS - 1))
-    start = wp.vec3(float(i), float(j), float(k0))
-    for a in range(3):
-        lo[a] = wp.max(int(wp.floor((start[a] - reach) / float(CS))), 0)
-        hi[a] = wp.min(int(wp.floor((ends[a] + reach) / float(CS))), shape[a] - 1)
-    w = vec8(0.0)
-    dw = mat83(0.0)
-    gw = mat83(0.0)
-    vw = mat83(0.0)
-    for bi in range(lo[0], hi[0] + 1):
-        for bj in range(lo[1], hi[1] + 1):
-            for bk in range(lo[2], hi[2] + 1):
-                cnt = cells[bi, bj, bk]
-                if cnt > 0:
-                    s = starts[(bi * shape[1] + bj) * shape[2] + bk]
-                    for q in range(s, s + cnt):
-                        p = order[q]
-                        gp = g[p]
-                        dx = gp[0] - float(i)
-                        dy = gp[1] - float(j)
-                        dxy = dx * dx + dy * dy
-                        if dxy < r2:
-                            for z in range(BS):
-                                dz = gp[2] - float(k0 + z)
-                                d2 = dxy + dz * dz
-                                if d2 < r2:
-                                    d = wp.vec3(dx, dy, dz)
-                                    u = 1.0 - d2 / r2
-                                    wk = u * u * u
-                                    w[z] = w[z] + wk
-                                    e = wk * d
-                                    f = (u * u) * d
-                                    for a in range(3):
-                                        dw[z, a] = dw[z, a] + e[a]
-                                        gw[z, a] = gw[z, a] + f[a]
-                                    if with_v != 0:
-                                        vp = wk * v[p]
-                                        for a in range(3):
-                                            vw[z, a] = vw[z, a] + vp[a]
-    for z in range(BS):
-        write_field(tid * BS + z, w[z], row3(dw, z), row3(gw, z), row3(vw, z), radius_vox, with_v, far_vox, phi, w_out,
-                    offset, vel)
-
 
 
 @wp.kernel
@@ -233,25 +152,24 @@ def blur_lines(
     dst: wp.array(dtype=float),
     base: int,
 ):
-    """sparse_kernels.blur_axis along one block line of `axis` (thread = block * 64 + line)."""
-    tid = wp.tid() + base
-    b = tid // 64
-    lc = line_voxel(axis, 0, tid - b * 64)
+    """sparse_kernels.blur_axis along the 64 block lines of `axis` of one block (thread = block)."""
+    b = wp.tid() + base
     st = stride(axis)
-    t0 = b * BV + local_index(lc)
-    first = wp.vec3i(lc[0], lc[1], lc[2])
-    first[axis] = BS - 1  # the voxel before the line, in the block below
-    last = wp.vec3i(lc[0], lc[1], lc[2])  # the voxel after it, in the block above (local 0)
-    prev = read(src, side_code(bmap, bcoord[b], axis, -1), local_index(first), out_v, in_v)
-    after = read(src, side_code(bmap, bcoord[b], axis, 1), local_index(last), out_v, in_v)
-    cur = src[t0]
-    for q in range(BS):
-        nxt = after
-        if q < BS - 1:
-            nxt = src[t0 + (q + 1) * st]
-        dst[t0 + q * st] = 0.25 * prev + 0.5 * cur + 0.25 * nxt
-        prev = cur
-        cur = nxt
+    below = side_code(bmap, bcoord[b], axis, -1)
+    above = side_code(bmap, bcoord[b], axis, 1)
+    for l in range(64):
+        f = local_index(line_voxel(axis, 0, l))
+        t0 = b * BV + f
+        prev = read(src, below, f + (BS - 1) * st, out_v, in_v)  # the voxel before the line, in the block below
+        after = read(src, above, f, out_v, in_v)  # the voxel after it, in the block above
+        cur = src[t0]
+        for q in range(BS):
+            nxt = after
+            if q < BS - 1:
+                nxt = src[t0 + (q + 1) * st]
+            dst[t0 + q * st] = 0.25 * prev + 0.5 * cur + 0.25 * nxt
+            prev = cur
+            cur = nxt
 
 
 @wp.kernel
@@ -263,48 +181,48 @@ def blur_weight_lines(
     dst: wp.array(dtype=float),
     base: int,
 ):
-    """sparse_kernels.blur_weight_axis with step 2 along one block line of `axis`: the line and
-    the 2 voxels of the lines below and above it reaches read once, every index a constant
-    (25 % less time than a loop over a variable step)."""
-    tid = wp.tid() + base
-    b = tid // 64
-    first = local_index(line_voxel(axis, 0, tid - b * 64))
+    """sparse_kernels.blur_weight_axis with step 2 along the 64 block lines of `axis` of one
+    block (thread = block): a line and the 2 voxels of the lines below and above it reaches
+    are read once, every index a constant (25 % less time than a loop over a variable step)."""
+    b = wp.tid() + base
     st = stride(axis)
     below = side_code(bmap, bcoord[b], axis, -1)
     above = side_code(bmap, bcoord[b], axis, 1)
-    t0 = b * BV + first
-    c0 = src[t0]
-    c1 = src[t0 + st]
-    c2 = src[t0 + 2 * st]
-    c3 = src[t0 + 3 * st]
-    c4 = src[t0 + 4 * st]
-    c5 = src[t0 + 5 * st]
-    c6 = src[t0 + 6 * st]
-    c7 = src[t0 + 7 * st]
-    l6 = float(0.0)  # weight_at: 0 on an OUTSIDE tile, the voxel's own value on an INSIDE one
-    l7 = float(0.0)
-    h0 = float(0.0)
-    h1 = float(0.0)
-    if below >= 0:
-        l6 = src[below * BV + first + 6 * st]
-        l7 = src[below * BV + first + 7 * st]
-    elif below == TILE_INSIDE:
-        l6 = c0
-        l7 = c1
-    if above >= 0:
-        h0 = src[above * BV + first]
-        h1 = src[above * BV + first + st]
-    elif above == TILE_INSIDE:
-        h0 = c6
-        h1 = c7
-    dst[t0] = 0.25 * l6 + 0.5 * c0 + 0.25 * c2
-    dst[t0 + st] = 0.25 * l7 + 0.5 * c1 + 0.25 * c3
-    dst[t0 + 2 * st] = 0.25 * c0 + 0.5 * c2 + 0.25 * c4
-    dst[t0 + 3 * st] = 0.25 * c1 + 0.5 * c3 + 0.25 * c5
-    dst[t0 + 4 * st] = 0.25 * c2 + 0.5 * c4 + 0.25 * c6
-    dst[t0 + 5 * st] = 0.25 * c3 + 0.5 * c5 + 0.25 * c7
-    dst[t0 + 6 * st] = 0.25 * c4 + 0.5 * c6 + 0.25 * h0
-    dst[t0 + 7 * st] = 0.25 * c5 + 0.5 * c7 + 0.25 * h1
+    for l in range(64):
+        first = local_index(line_voxel(axis, 0, l))
+        t0 = b * BV + first
+        c0 = src[t0]
+        c1 = src[t0 + st]
+        c2 = src[t0 + 2 * st]
+        c3 = src[t0 + 3 * st]
+        c4 = src[t0 + 4 * st]
+        c5 = src[t0 + 5 * st]
+        c6 = src[t0 + 6 * st]
+        c7 = src[t0 + 7 * st]
+        l6 = float(0.0)  # weight_at: 0 on an OUTSIDE tile, the voxel's own value on an INSIDE one
+        l7 = float(0.0)
+        h0 = float(0.0)
+        h1 = float(0.0)
+        if below >= 0:
+            l6 = src[below * BV + first + 6 * st]
+            l7 = src[below * BV + first + 7 * st]
+        elif below == TILE_INSIDE:
+            l6 = c0
+            l7 = c1
+        if above >= 0:
+            h0 = src[above * BV + first]
+            h1 = src[above * BV + first + st]
+        elif above == TILE_INSIDE:
+            h0 = c6
+            h1 = c7
+        dst[t0] = 0.25 * l6 + 0.5 * c0 + 0.25 * c2
+        dst[t0 + st] = 0.25 * l7 + 0.5 * c1 + 0.25 * c3
+        dst[t0 + 2 * st] = 0.25 * c0 + 0.5 * c2 + 0.25 * c4
+        dst[t0 + 3 * st] = 0.25 * c1 + 0.5 * c3 + 0.25 * c5
+        dst[t0 + 4 * st] = 0.25 * c2 + 0.5 * c4 + 0.25 * c6
+        dst[t0 + 5 * st] = 0.25 * c3 + 0.5 * c5 + 0.25 * c7
+        dst[t0 + 6 * st] = 0.25 * c4 + 0.5 * c6 + 0.25 * h0
+        dst[t0 + 7 * st] = 0.25 * c5 + 0.5 * c7 + 0.25 * h1
 
 
 vec6 = wp.types.vector(length=6, dtype=wp.float32)
@@ -312,20 +230,30 @@ vec6i = wp.types.vector(length=6, dtype=wp.int32)
 
 
 @wp.func
-def line_sides(bmap: wp.array3d(dtype=wp.int32), bc: wp.vec3i, li: int, lj: int):
-    """Codes of the blocks holding the -x, +x, -y, +y, -z, +z neighbours of line (li, lj) of
-    block bc that lie outside it (OUTSIDE where the line is not at that face)."""
+def block_faces(bmap: wp.array3d(dtype=wp.int32), bc: wp.vec3i):
+    """Codes of the -x, +x, -y, +y, -z, +z face neighbours of block bc (side_code)."""
+    c = vec6i(0)
+    for n in range(6):
+        c[n] = side_code(bmap, bc, n // 2, 2 * (n % 2) - 1)
+    return c
+
+
+@wp.func
+def line_sides(faces: vec6i, li: int, lj: int):
+    """Codes of the blocks holding the -x, +x, -y, +y, -z, +z neighbours of line (li, lj) of a
+    block with face codes `faces` (block_faces) that lie outside it (OUTSIDE where the line is
+    not at that face)."""
     c = vec6i(TILE_OUTSIDE)
     if li == 0:
-        c[0] = side_code(bmap, bc, 0, -1)
+        c[0] = faces[0]
     if li == BS - 1:
-        c[1] = side_code(bmap, bc, 0, 1)
+        c[1] = faces[1]
     if lj == 0:
-        c[2] = side_code(bmap, bc, 1, -1)
+        c[2] = faces[2]
     if lj == BS - 1:
-        c[3] = side_code(bmap, bc, 1, 1)
-    c[4] = side_code(bmap, bc, 2, -1)
-    c[5] = side_code(bmap, bc, 2, 1)
+        c[3] = faces[3]
+    c[4] = faces[4]
+    c[5] = faces[5]
     return c
 
 
@@ -375,16 +303,17 @@ def renormalise_lines(
     out: wp.array(dtype=float),
     base: int,
 ):
-    """sparse_kernels.renormalise on the 8 voxels of one block line along z."""
-    tid = wp.tid() + base
-    b = tid // 64
-    l = tid - b * 64
-    sides = line_sides(bmap, bcoord[b], l // BS, l - (l // BS) * BS)
-    for z in range(BS):
-        t = tid * BS + z
-        n = line_neighbours(phi, sides, t, l, z, out_v, in_v)
-        grad = 0.5 * wp.length(wp.vec3(n[1] - n[0], n[3] - n[2], n[5] - n[4]))
-        out[t] = wp.clamp(phi[t] / wp.max(grad, 0.05) * scale, -clip, clip)
+    """sparse_kernels.renormalise on the 64 lines along z of one block (thread = block)."""
+    b = wp.tid() + base
+    faces = block_faces(bmap, bcoord[b])
+    for l in range(64):
+        tid = b * 64 + l
+        sides = line_sides(faces, l // BS, l - (l // BS) * BS)
+        for z in range(BS):
+            t = tid * BS + z
+            n = line_neighbours(phi, sides, t, l, z, out_v, in_v)
+            grad = 0.5 * wp.length(wp.vec3(n[1] - n[0], n[3] - n[2], n[5] - n[4]))
+            out[t] = wp.clamp(phi[t] / wp.max(grad, 0.05) * scale, -clip, clip)
 
 
 vec27i = wp.types.vector(length=27, dtype=wp.int32)
@@ -393,87 +322,47 @@ vec27i = wp.types.vector(length=27, dtype=wp.int32)
 @wp.kernel
 def match_tiles_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
                       eps: float, base: int):
-    """sparse_kernels.match_tiles on the 8 voxels of one block line along z: the codes of the
-    neighbour blocks the line touches are looked up once, and a line with no tile among them
-    has nothing to do. The 27 neighbours are visited in match_tiles' order (a voxel next to
-    both kinds of tile ends as match_tiles leaves it)."""
-    tid = wp.tid() + base
-    b = tid // 64
-    l = tid - b * 64
-    li = l // BS
-    lj = l - li * BS
+    """sparse_kernels.match_tiles on one block (thread = block): the codes of its 26 neighbour
+    blocks are looked up once, and a block with no tile among them has nothing to do. The 27
+    neighbours of a voxel are visited in match_tiles' order (a voxel next to both kinds of
+    tile ends as match_tiles leaves it)."""
+    b = wp.tid() + base
     bc = bcoord[b]
-    codes = vec27i(0)  # block offset (ox, oy, oz) at (ox + 1) * 9 + (oy + 1) * 3 + oz + 1; 0 = not touched
+    codes = vec27i(0)  # block offset (ox, oy, oz) at (ox + 1) * 9 + (oy + 1) * 3 + oz + 1; itself 0
     tile = int(0)
-    for ox in range(wp.where(li == 0, -1, 0), wp.where(li == BS - 1, 2, 1)):
-        for oy in range(wp.where(lj == 0, -1, 0), wp.where(lj == BS - 1, 2, 1)):
-            for oz in range(-1, 2):
-                if ox != 0 or oy != 0 or oz != 0:
-                    code = block_code(bmap, wp.vec3i(bc[0] + ox, bc[1] + oy, bc[2] + oz))
-                    codes[(ox + 1) * 9 + (oy + 1) * 3 + oz + 1] = code
-                    if code < 0:
-                        tile = 1
+    for n in range(27):
+        if n != 13:
+            code = block_code(bmap, wp.vec3i(bc[0] + n // 9 - 1, bc[1] + (n // 3) % 3 - 1, bc[2] + n % 3 - 1))
+            codes[n] = code
+            if code < 0:
+                tile = 1
     if tile == 0:
         return
-    edge = li == 0 or li == BS - 1 or lj == 0 or lj == BS - 1
-    for z in range(BS):
-        if edge or z == 0 or z == BS - 1:  # interior voxels have no tile neighbour
-            t = tid * BS + z
-            v = phi[t]
-            for n in range(27):
-                # the block offset of neighbour (n // 9 - 1, n // 3 % 3 - 1, n % 3 - 1): -1, 0 or 1 per axis
-                bx = (li + n // 9 - 1 + BS) // BS - 1
-                by = (lj + (n // 3) % 3 - 1 + BS) // BS - 1
-                bz = (z + n % 3 - 1 + BS) // BS - 1
-                if bx != 0 or by != 0 or bz != 0:
-                    s = codes[(bx + 1) * 9 + (by + 1) * 3 + bz + 1]
-                    if s == TILE_OUTSIDE and v <= 0.0:
-                        v = eps
-                    if s == TILE_INSIDE and v > 0.0:
-                        v = -eps
-            phi[t] = v
-
-
-@wp.kernel
-def seed_reached_lines(
-    bcoord: wp.array(dtype=wp.vec3i),
-    bmap: wp.array3d(dtype=wp.int32),
-    phi: wp.array(dtype=float),
-    mark: wp.array(dtype=wp.int32),
-    seed_depth: float,
-    specks: int,
-    reached: wp.array(dtype=wp.int32),
-    pending: wp.array(dtype=wp.int32),
-    base: int,
-):
-    """topology_kernels.seed_reached on the 8 voxels of one block line along z (the neighbour
-    blocks looked up once per line)."""
-    tid = wp.tid() + base
-    b = tid // 64
-    l = tid - b * 64
-    li = l // BS
-    lj = l - li * BS
-    sides = line_sides(bmap, bcoord[b], li, lj)  # an entry counts only where the line is at that face
-    left = int(0)
-    for z in range(BS):
-        t = tid * BS + z
-        p = phi[t]
-        out = p > 0.0
-        r = int(0)
-        if specks == 0 and not out:
-            r = 1
-        if specks != 0 and (out or (mark[t] != 0 and p <= -seed_depth)):
-            r = 1
-        if r == 0:  # an outside voxel next to an OUTSIDE tile, an inside one next to an INSIDE tile
-            want = wp.where(out, TILE_OUTSIDE, TILE_INSIDE)
-            if (li == 0 and sides[0] == want) or (li == BS - 1 and sides[1] == want):
-                r = 1
-            if (lj == 0 and sides[2] == want) or (lj == BS - 1 and sides[3] == want):
-                r = 1
-            if (z == 0 and sides[4] == want) or (z == BS - 1 and sides[5] == want):
-                r = 1
-        reached[t] = r
-        if r == 0:
-            left = 1
-    if left != 0:
-        pending[b] = 1  # (zeroed before) the sweeps skip blocks with nothing left to reach
+    for l in range(64):
+        li = l // BS
+        lj = l - li * BS
+        near = int(0)  # a tile among the blocks this line's voxels touch
+        for ox in range(wp.where(li == 0, -1, 0), wp.where(li == BS - 1, 2, 1)):
+            for oy in range(wp.where(lj == 0, -1, 0), wp.where(lj == BS - 1, 2, 1)):
+                for oz in range(-1, 2):
+                    if codes[(ox + 1) * 9 + (oy + 1) * 3 + oz + 1] < 0:
+                        near = 1
+        if near == 0:
+            continue
+        edge = li == 0 or li == BS - 1 or lj == 0 or lj == BS - 1
+        for z in range(BS):
+            if edge or z == 0 or z == BS - 1:  # interior voxels have no tile neighbour
+                t = (b * 64 + l) * BS + z
+                v = phi[t]
+                for n in range(27):
+                    # the block offset of neighbour (n // 9 - 1, n // 3 % 3 - 1, n % 3 - 1): -1, 0 or 1 per axis
+                    bx = (li + n // 9 - 1 + BS) // BS - 1
+                    by = (lj + (n // 3) % 3 - 1 + BS) // BS - 1
+                    bz = (z + n % 3 - 1 + BS) // BS - 1
+                    if bx != 0 or by != 0 or bz != 0:
+                        s = codes[(bx + 1) * 9 + (by + 1) * 3 + bz + 1]
+                        if s == TILE_OUTSIDE and v <= 0.0:
+                            v = eps
+                        if s == TILE_INSIDE and v > 0.0:
+                            v = -eps
+                phi[t] = v

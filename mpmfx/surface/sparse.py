@@ -49,7 +49,6 @@ ANISO_COV_EPS = 0.01  # x kernel radius^2: regularises the covariance of a flat 
 ANISO_MAX_RATIO = 4.0  # Yu & Turk's k_r: an ellipsoid's axes differ by at most this factor
 ANISO_MAX_STRETCH = 1.6  # longest axis / the isotropic kernel radius (bounds the gather's reach)
 ANISO_MIN_NEIGHBOURS = 8  # fewer neighbours within the kernel (spray) keep a round kernel; a one-layer sheet has ~15
-GATHER_BLOCKS = True  # the CPU gather: a block per thread (else a line)
 LINE_KERNELS_ON_CPU = True  # tests compare both paths on the CPU (tests/surface/test_line_kernels.py)
 SEED_DEPTH_SMOOTHED = 0.25  # voxels, the same after smoothing (a lone particle's blob is ~1 voxel deep then)
 
@@ -208,7 +207,12 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     # seal an outside pocket whose only way out ran along an inside tile (a bubble, seen on
     # random samples), so it comes before the last topology pass, not after. That pass also
     # catches what blurring did: closed thin outside tunnels (bubbles), cut inside necks (specks).
-    _by_lines(wp, S.match_tiles, "match_tiles_lines", nvox, [bcoord, bmap, phi, 1e-3])
+    if _lines(phi):
+        from mpmfx.surface import line_kernels as L
+
+        _blocks(wp, L.match_tiles_lines, [bcoord, bmap, phi, 1e-3])
+    else:
+        _split(wp, S.match_tiles, nvox, [bcoord, bmap, phi, 1e-3])
     seed = SEED_DEPTH_SMOOTHED if params.smooth_iters > 0 else SEED_DEPTH * grid.r_vox
     steps += _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth=seed)
     if params.min_feature_particles > 0 and nvox:
@@ -247,20 +251,15 @@ def _renormalise(wp, S, bcoord, bmap, phi, tiles, scale: float, clip: float, out
     from mpmfx.surface import line_kernels as L
 
     if _lines(phi):
-        _split(wp, L.renormalise_lines, phi.shape[0] // BS, [bcoord, bmap, phi, *tiles, scale, clip, out])
+        _blocks(wp, L.renormalise_lines, [bcoord, bmap, phi, *tiles, scale, clip, out])
     else:
         _split(wp, S.renormalise, phi.shape[0], [bcoord, bmap, phi, *tiles, scale, clip, out])
 
 
-def _by_lines(wp, kernel, line_kernel: str, nvox: int, inputs: list) -> None:
-    """Launch a voxel kernel (nvox threads), or on the CPU its line_kernels twin of that name
-    (nvox / 8 threads)."""
-    from mpmfx.surface import line_kernels as L
-
-    if _lines(inputs[2]):
-        _split(wp, getattr(L, line_kernel), nvox // BS, inputs)
-    else:
-        _split(wp, kernel, nvox, inputs)
+def _blocks(wp, kernel, inputs: list) -> None:
+    """Launch a CPU-path kernel that takes a block per thread (inputs[0]: bcoord, the active
+    blocks), split across CPU threads however few the blocks."""
+    launch_split(wp, kernel, inputs[0].shape[0], inputs, device=inputs[0].device, min_split=1)
 
 
 def _split(wp, kernel, dim: int, inputs: list) -> None:
@@ -315,13 +314,9 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         wp.launch(A.gather_zhu_bridson_aniso, nvox,
                   inputs=[bcoord, cells, starts, order, g, gmat, thin, va, int(with_v), grid.gather_vox, grid.kernel_vox,
                           grid.r_vox, grid.far_vox], outputs=[phi, w, offset, vel, cov, radius])
-    elif _lines(phi) and GATHER_BLOCKS:  # one thread per block: each candidate particle fetched once per block
-        launch_split(wp, L.gather_zhu_bridson_blocks, bcoord.shape[0], [bcoord, cells, starts, order, g, va, int(with_v),
-                     grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w, offset, vel, wp.empty(nvox, dtype=wp.vec3)],
-                     device=phi.device, min_split=1)
-    elif _lines(phi):  # one thread per block line: each candidate particle fetched once per 8 voxels
-        launch_split(wp, L.gather_zhu_bridson_lines, nvox // BS, [bcoord, cells, starts, order, g, va, int(with_v),
-                     grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w, offset, vel], device=phi.device)
+    elif _lines(phi):  # one thread per block: each candidate particle fetched once per block
+        _blocks(wp, L.gather_zhu_bridson_blocks, [bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox,
+                                                  grid.r_vox, grid.far_vox, phi, w, offset, vel, wp.empty(nvox, dtype=wp.vec3)])
     else:
         wp.launch(S.gather_zhu_bridson, nvox,
                   inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
@@ -391,7 +386,7 @@ def _flood(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: 
     nvox = phi.shape[0]
     reached = wp.empty(nvox, dtype=wp.int32)
     pending = wp.zeros(bcoord.shape[0], dtype=wp.int32)
-    _by_lines(wp, T.seed_reached, "seed_reached_lines", nvox, [bcoord, bmap, phi, mark, seed_depth, int(specks), reached, pending])
+    _split(wp, T.seed_reached, nvox, [bcoord, bmap, phi, mark, seed_depth, int(specks), reached, pending])
     changed = wp.zeros(1, dtype=wp.int32)
     nact = bcoord.shape[0]
     active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
@@ -446,7 +441,7 @@ def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
     for _ in range(passes):
         for axis in range(3):
             if _lines(w) and NORMAL_STEP == 2:  # the line kernel is written out for step 2
-                _split(wp, L.blur_weight_lines, w.shape[0] // BS, [bcoord, bmap, a, axis, b])
+                _blocks(wp, L.blur_weight_lines, [bcoord, bmap, a, axis, b])
             else:
                 _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
             a, b = b, a
@@ -476,15 +471,15 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     was, now = (wp.empty(nvox // BS, dtype=wp.int32) for _ in range(2))  # voxels changed by a sweep (CPU)
     if _lines(phi):  # the second renormalise and the average only where init_eikonal reads them
-        _split(wp, L.crossing_average_lines, nvox // BS, [bcoord, bmap, d1, clip, frozen, d2])
-        _split(wp, L.init_eikonal_lines, nvox // BS, [bcoord, bmap, d2, clip, frozen, a, b, was])
+        _blocks(wp, L.crossing_average_lines, [bcoord, bmap, d1, clip, frozen, d2])
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, frozen, a, b, was])
     else:
         _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
         _launch(wp, S.average_into, nvox, [d1, d2])
         _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, frozen, a])
     for sweep in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
         if _lines(a):
-            _split(wp, L.eikonal_lines, nvox // BS, [bcoord, bmap, a, frozen, clip, -clip, clip, b, was, now])
+            _blocks(wp, L.eikonal_lines, [bcoord, bmap, a, frozen, clip, -clip, clip, b, was, now])
             was, now = now, was
         else:
             _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
@@ -507,7 +502,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     for _ in range(iters):
         for axis in range(3):
             if _lines(phi):
-                _split(wp, L.blur_lines, phi.shape[0] // BS, [bcoord, bmap, phi, axis, *tiles, tmp])
+                _blocks(wp, L.blur_lines, [bcoord, bmap, phi, axis, *tiles, tmp])
             else:
                 _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
             phi, tmp = tmp, phi
@@ -524,26 +519,35 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
     if nvox == 0:
         return None
     dev = values.device
-    # a thread per edge and per cell (GPU), or per block line along z, counting its 24 edges and 8 cells (CPU)
+    # a thread per edge and per cell (GPU), or per block (CPU), counted per edge and cell (GPU) or
+    # per block line along z (its 24 edges and 8 cells)
     from mpmfx.surface import line_mesh_kernels as L
-    lines = _lines(values)
-    kv, kf, nv, nf = (L.mc_vertices_lines, L.mc_faces_lines, nvox // BS, nvox // BS) if lines else (
-        M.mc_vertices, M.mc_faces, nvox * 3, nvox)
+
+    if _lines(values):
+        kv, kf, nv, nf = L.mc_vertices_lines, L.mc_faces_lines, nvox // BS, nvox // BS
+
+        def run(kernel, dim, inputs):
+            _blocks(wp, kernel, inputs)
+    else:
+        kv, kf, nv, nf = M.mc_vertices, M.mc_faces, nvox * 3, nvox
+
+        def run(kernel, dim, inputs):
+            _split(wp, kernel, dim, inputs)
     ecount = wp.empty(nv, dtype=wp.int32)
     edge_vert = wp.empty(nvox * 3, dtype=wp.int32)
-    _split(wp, kv, nv, [bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
+    run(kv, nv, [bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
     eoff = _scan(wp, ecount, inclusive=True)
     tables = list(device_tables(wp, dev))
     fcount = wp.empty(nf, dtype=wp.int32)
-    _split(wp, kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
+    run(kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
     foff = _scan(wp, fcount, inclusive=True)
     m, k = (int(a[-1:].numpy()[0]) for a in (eoff, foff))  # the two sizes: one sync each
     if m == 0 or k == 0:
         return None
     verts = wp.empty(m, dtype=wp.vec3)
-    _split(wp, kv, nv, [bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
+    run(kv, nv, [bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
     faces = wp.empty(3 * k, dtype=wp.int32)
-    _split(wp, kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
+    run(kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
     origin = wp.vec3(*grid.origin.astype(np.float32))
