@@ -42,6 +42,25 @@ def face_mask(axis: int, side: int):
     return m
 
 
+@wp.func
+def tile_face(code: int, axis: int, side: int):
+    """face_mask(axis, side) where `code` is a tile, else 0."""
+    m = wp.uint64(0)
+    if code < 0:
+        m = face_mask(axis, side)
+    return m
+
+
+@wp.func
+def by_tile(code: int, face: wp.uint64, out_face: wp.uint64, inside_face: wp.uint64):
+    """(out_face, inside_face) with `face` added to the one of tile `code` (none if active)."""
+    if code == TILE_OUTSIDE:
+        return out_face | face, inside_face
+    if code == TILE_INSIDE:
+        return out_face, inside_face | face
+    return out_face, inside_face
+
+
 @wp.kernel
 def seed_bits(
     bcoord: wp.array(dtype=wp.vec3i),
@@ -71,8 +90,6 @@ def seed_bits(
         s = wp.uint64(0)
         r = wp.uint64(0)
         for q in range(BS * BS):  # q = y * 8 + z
-            y = q // BS
-            z = q - y * BS
             t = b * BV + x * BS * BS + q
             p = phi[t]
             out = p > 0.0
@@ -83,16 +100,27 @@ def seed_bits(
                 rr = 1
             if seeds == 2 and out:
                 rr = 1
-            if rr == 0:  # an outside voxel next to an OUTSIDE tile, an inside one next to an INSIDE tile
-                want = wp.where(out, TILE_OUTSIDE, TILE_INSIDE)
-                if (x == 0 and xm == want) or (x == BS - 1 and xp == want) or (y == 0 and ym == want):
-                    rr = 1
-                if (y == BS - 1 and yp == want) or (z == 0 and zm == want) or (z == BS - 1 and zp == want):
-                    rr = 1
             if out:
                 s = s | bit(q)
             if rr != 0:
                 r = r | bit(q)
+        # an outside voxel next to an OUTSIDE tile, an inside one next to an INSIDE tile
+        face = wp.uint64(0)
+        if (x == 0 and xm < 0) or (x == BS - 1 and xp < 0):
+            face = ALL
+        face = face | tile_face(ym, 1, 0) | tile_face(yp, 1, 1) | tile_face(zm, 2, 0) | tile_face(zp, 2, 1)
+        if face != wp.uint64(0):
+            out_face = wp.uint64(0)
+            inside_face = wp.uint64(0)
+            if x == 0:
+                out_face, inside_face = by_tile(xm, ALL, out_face, inside_face)
+            if x == BS - 1:
+                out_face, inside_face = by_tile(xp, ALL, out_face, inside_face)
+            out_face, inside_face = by_tile(ym, face_mask(1, 0), out_face, inside_face)
+            out_face, inside_face = by_tile(yp, face_mask(1, 1), out_face, inside_face)
+            out_face, inside_face = by_tile(zm, face_mask(2, 0), out_face, inside_face)
+            out_face, inside_face = by_tile(zp, face_mask(2, 1), out_face, inside_face)
+            r = r | (out_face & s) | (inside_face & (~s))
         sign[b * BS + x] = s
         reached[b * BS + x] = r
         if r != ALL:

@@ -366,3 +366,37 @@ def match_tiles_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=w
                         if s == TILE_INSIDE and v > 0.0:
                             v = -eps
                 phi[t] = v
+
+
+@wp.kernel
+def project_on_wide_normal_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    wide: wp.array(dtype=float),
+    w: wp.array(dtype=float),
+    offset: wp.array(dtype=wp.vec3),
+    radius_vox: float,
+    far_vox: float,
+    phi: wp.array(dtype=float),
+    base: int,
+):
+    """sparse_kernels.project_on_wide_normal (isotropic kernels) on one block (thread = block),
+    the neighbour blocks looked up once (weight_at: 0 on an OUTSIDE tile, the voxel's own value
+    on an INSIDE one)."""
+    b = wp.tid() + base
+    faces = block_faces(bmap, bcoord[b])
+    for l in range(64):
+        sides = line_sides(faces, l // BS, l - (l // BS) * BS)
+        for z in range(BS):
+            t = (b * 64 + l) * BS + z
+            if w[t] <= 0.0:
+                phi[t] = far_vox
+                continue
+            n = line_neighbours(wide, sides, t, l, z, 0.0, wide[t])
+            g = wp.vec3(n[1] - n[0], n[3] - n[2], n[5] - n[4])
+            d = offset[t]
+            dist = wp.length(d)
+            gl = wp.length(g)
+            if gl > 0.0:
+                dist = -wp.dot(d, g) / gl  # g points inward (towards the particles)
+            phi[t] = dist - radius_vox

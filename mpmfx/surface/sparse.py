@@ -323,6 +323,9 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
                   outputs=[phi, w, offset, vel])
     if grid.normal_passes > 0:
         wide = _blur_weights(wp, S, bcoord, bmap, w, grid.normal_passes)
+        if _lines(phi) and not aniso:
+            _blocks(wp, L.project_on_wide_normal_lines, [bcoord, bmap, wide, w, offset, grid.r_vox, grid.far_vox, phi])
+            return phi, w, vel
         _split(wp, S.project_on_wide_normal, nvox, [bcoord, bmap, wide, w, offset, grid.r_vox, grid.far_vox, int(aniso), cov, ANISO_NORMAL_ITERS,
                           ANISO_COV_EPS * grid.kernel_vox**2, radius, phi])
     return phi, w, vel

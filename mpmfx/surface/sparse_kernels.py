@@ -194,14 +194,15 @@ def mark_near_blocks(g: wp.array(dtype=wp.vec3), reach: float, near: wp.array3d(
     for bi in range(lo[0], hi[0] + 1):
         for bj in range(lo[1], hi[1] + 1):
             for bk in range(lo[2], hi[2] + 1):
-                b = wp.vec3i(bi, bj, bk)
-                d2 = float(0.0)
-                for a in range(3):
-                    # distance from the particle to the block's voxel span [8 b, 8 b + 7]
-                    e = wp.max(wp.max(float(b[a] * BS) - gp[a], gp[a] - float(b[a] * BS + BS - 1)), 0.0)
-                    d2 += e * e
-                if d2 <= r2 and near[bi, bj, bk] == 0:
-                    near[bi, bj, bk] = 1
+                if near[bi, bj, bk] == 0:  # most blocks are marked already by a particle before
+                    b = wp.vec3i(bi, bj, bk)
+                    d2 = float(0.0)
+                    for a in range(3):
+                        # distance from the particle to the block's voxel span [8 b, 8 b + 7]
+                        e = wp.max(wp.max(float(b[a] * BS) - gp[a], gp[a] - float(b[a] * BS + BS - 1)), 0.0)
+                        d2 += e * e
+                    if d2 <= r2:
+                        near[bi, bj, bk] = 1
 
 
 @wp.kernel
