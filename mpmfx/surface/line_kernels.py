@@ -25,7 +25,6 @@ def gather_zhu_bridson_blocks(
     bcoord: wp.array(dtype=wp.vec3i),
     cells: wp.array3d(dtype=wp.int32),
     starts: wp.array(dtype=wp.int32),
-    order: wp.array(dtype=wp.int32),
     g: wp.array(dtype=wp.vec3),
     v: wp.array(dtype=wp.vec3),
     with_v: int,
@@ -45,7 +44,9 @@ def gather_zhu_bridson_blocks(
     block's last step turns them into the field). A voxel's contributing particles all lie in
     the cells within reach of the voxel, which are a subset of the block's visited in the same
     (cell, then slot) order, so each voxel sums the same particles in the same order with the
-    same arithmetic as the voxel kernel: the same field bit for bit. ~20x fewer particle
+    same arithmetic as the voxel kernel: the same field bit for bit. g and v are in the sorted
+    order (g[q] = the positions' [order[q]], sorted_copy): the fetches run through memory in
+    order instead of jumping. ~20x fewer particle
     fetches than a voxel line per thread (the visits, not the arithmetic, were 2/3 of its time)."""
     b = wp.tid() + base
     c = bcoord[b] * BS
@@ -70,8 +71,7 @@ def gather_zhu_bridson_blocks(
                 if cnt > 0:
                     s = starts[(bi * shape[1] + bj) * shape[2] + bk]
                     for q in range(s, s + cnt):
-                        p = order[q]
-                        gp = g[p]
+                        gp = g[q]
                         # the voxels within reach (one more each side: the exact test decides)
                         i0 = wp.max(int(wp.floor(gp[0] - reach)), c[0])
                         i1 = wp.min(int(wp.floor(gp[0] + reach)) + 1, c[0] + BS - 1)
@@ -81,7 +81,7 @@ def gather_zhu_bridson_blocks(
                         k1 = wp.min(int(wp.floor(gp[2] + reach)) + 1, c[2] + BS - 1)
                         vp = wp.vec3(0.0)
                         if with_v != 0:
-                            vp = v[p]
+                            vp = v[q]
                         for i in range(i0, i1 + 1):
                             dx = gp[0] - float(i)
                             for j in range(j0, j1 + 1):
@@ -400,3 +400,10 @@ def project_on_wide_normal_lines(
             if gl > 0.0:
                 dist = -wp.dot(d, g) / gl  # g points inward (towards the particles)
             phi[t] = dist - radius_vox
+
+
+@wp.kernel
+def sorted_copy(src: wp.array(dtype=wp.vec3), order: wp.array(dtype=wp.int32), dst: wp.array(dtype=wp.vec3), base: int):
+    """dst[q] = src[order[q]]."""
+    q = wp.tid() + base
+    dst[q] = src[order[q]]

@@ -314,8 +314,13 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         wp.launch(A.gather_zhu_bridson_aniso, nvox,
                   inputs=[bcoord, cells, starts, order, g, gmat, thin, va, int(with_v), grid.gather_vox, grid.kernel_vox,
                           grid.r_vox, grid.far_vox], outputs=[phi, w, offset, vel, cov, radius])
-    elif _lines(phi):  # one thread per block: each candidate particle fetched once per block
-        _blocks(wp, L.gather_zhu_bridson_blocks, [bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox,
+    elif _lines(phi):  # one thread per block: each candidate particle fetched once per block, in memory order
+        n = g.shape[0]
+        gs, vs = wp.empty(n, dtype=wp.vec3), wp.empty(n if with_v else 1, dtype=wp.vec3)
+        _split(wp, L.sorted_copy, n, [g, order, gs])
+        if with_v:
+            _split(wp, L.sorted_copy, n, [v, order, vs])
+        _blocks(wp, L.gather_zhu_bridson_blocks, [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox,
                                                   grid.r_vox, grid.far_vox, phi, w, offset, vel, wp.empty(nvox, dtype=wp.vec3)])
     else:
         wp.launch(S.gather_zhu_bridson, nvox,
