@@ -5,8 +5,7 @@ Warp's CPU backend runs a launch's threads one after another on one core, so the
 counts is the work per voxel, not the thread count: the GPU's layout (a thread per voxel) pays
 there for what a GPU hides (index arithmetic, a block-map lookup per neighbour read). Here the
 neighbour blocks are looked up once per block, a line's neighbour lines are read once, and the
-field gather fetches each candidate particle once per block (~20x fewer fetches than once per
-line). Every voxel gets the same arithmetic in the same order as in the voxel kernels, so the
+field gather fetches each candidate particle once per block, not once per line of it. Every voxel gets the same arithmetic in the same order as in the voxel kernels, so the
 results are theirs bit for bit (tests/surface/test_line_kernels.py).
 
 `base`: the first thread's index, so a launch can be split into chunks run on several CPU
@@ -46,8 +45,9 @@ def gather_zhu_bridson_blocks(
     (cell, then slot) order, so each voxel sums the same particles in the same order with the
     same arithmetic as the voxel kernel: the same field bit for bit. g and v are in the sorted
     order (g[q] = the positions' [order[q]], sorted_copy): the fetches run through memory in
-    order instead of jumping. ~20x fewer particle
-    fetches than a voxel line per thread (the visits, not the arithmetic, were 2/3 of its time)."""
+    order instead of jumping. A line per thread fetched each candidate once per line (64 per
+    block; the visits, not the arithmetic, were 2/3 of its time): 419 -> 268 ms at 100k random
+    "fine", one thread."""
     b = wp.tid() + base
     c = bcoord[b] * BS
     t0 = b * BV
