@@ -10,11 +10,10 @@ from __future__ import annotations
 import logging
 
 from mpmfx.surface.launch import launch_split
+from mpmfx.surface.sparse import BS, MAX_SWEEP_ROUNDS
 
 log = logging.getLogger(__name__)
 
-BS = 8
-MAX_ROUNDS = 1024
 SEEDS = {"bubbles": 0, "specks": 1, "bodies": 2}  # bitfill_kernels.seed_bits' modes
 
 
@@ -32,7 +31,7 @@ def flood_bits(wp, T, bcoord, bmap, phi, mark, seed_depth: float, seeds: str):
     changed = wp.zeros(1, dtype=wp.int32)
     active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
     rounds = 0
-    while rounds < MAX_ROUNDS:
+    while rounds < MAX_SWEEP_ROUNDS:
         wp.launch(T.active_blocks, nact, inputs=[bcoord, bmap, pending, was, int(rounds == 0), active])
         changed.zero_()
         moved.zero_()
@@ -42,7 +41,7 @@ def flood_bits(wp, T, bcoord, bmap, phi, mark, seed_depth: float, seeds: str):
         if int(changed.numpy()[0]) == 0:
             break
     else:
-        log.warning("topology flood fill did not settle in %d rounds; some bubbles may remain", MAX_ROUNDS)
+        log.warning("topology flood fill did not settle in %d rounds; some bubbles may remain", MAX_SWEEP_ROUNDS)
     return sign, reached, rounds
 
 
@@ -67,7 +66,7 @@ def small_labels(wp, T, bcoord, bmap, phi, mark):
     pending = wp.zeros(bcoord.shape[0], dtype=wp.int32)
     launch_split(wp, F.labels_from_bits, sign.shape[0], [sign, reached, labels, pending], device=phi.device)
     changed = wp.zeros(1, dtype=wp.int32)
-    for _ in range(MAX_ROUNDS):
+    for _ in range(MAX_SWEEP_ROUNDS):
         changed.zero_()
         for axis in range(3):
             launch_split(wp, T.sweep_min_labels, bcoord.shape[0] * 64, [bcoord, bmap, labels, pending, axis, changed],
