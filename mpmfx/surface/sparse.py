@@ -559,9 +559,6 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
     origin = wp.vec3(*grid.origin.astype(np.float32))
-    wp.launch(
-        M.sample_vertices,
-        m,
-        inputs=[bmap, values, *tiles, vel_arg, int(vel is not None), verts, origin, grid.voxel, world, normals, velocities],
-    )
+    _split(wp, M.sample_vertices, m, [bmap, values, *tiles, vel_arg, int(vel is not None), verts, origin, grid.voxel,
+                                      world, normals, velocities])
     return world, normals, velocities, faces
