@@ -49,14 +49,15 @@ def _executor(n: int) -> ThreadPoolExecutor:
     return _pool
 
 
-def launch_split(wp, kernel, dim: int, inputs: list, *, device) -> None:
+def launch_split(wp, kernel, dim: int, inputs: list, *, device, min_split: int | None = None) -> None:
     """Launch `kernel` over `dim` threads with `inputs` + [base]: on a CPU device as
     CHUNKS_PER_THREAD x cpu_threads() chunks run on cpu_threads() threads, else (or when small)
-    as one launch with base 0."""
+    as one launch with base 0 (also below min_split threads: a kernel whose threads do much
+    work, such as a block each, passes a smaller one)."""
     if dim <= 0:
         return
     n = cpu_threads() if device.is_cpu else 1
-    if n == 1 or dim < MIN_SPLIT:
+    if n == 1 or dim < (MIN_SPLIT if min_split is None else min_split):
         wp.launch(kernel, dim, inputs=[*inputs, 0], device=device)
         return
     # more chunks than threads: a thread that shares its core with another process takes fewer

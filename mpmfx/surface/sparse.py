@@ -221,7 +221,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     phi, w, vel = _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid, params)
     timings["field"] = _lap(wp, t0)
     mark = wp.zeros(max(nvox, 1), dtype=wp.int32)
-    wp.launch(T.mark_particle_voxels, n, inputs=[g, bmap, mark])
+    _split(wp, T.mark_particle_voxels, n, [g, bmap, mark])  # writes 1s: any interleaving agrees
     tiles = (grid.far_vox, -grid.r_vox)  # (outside, inside) tile values of the raw field
     steps = _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH * grid.r_vox)
     timings["topology"] = _lap(wp, t0)
@@ -237,11 +237,16 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     # seal an outside pocket whose only way out ran along an inside tile (a bubble, seen on
     # random samples), so it comes before the last topology pass, not after. That pass also
     # catches what blurring did: closed thin outside tunnels (bubbles), cut inside necks (specks).
-    _split(wp, S.match_tiles, nvox, [bcoord, bmap, phi, 1e-3])
+    if _lines(phi):
+        from mpmfx.surface import line_kernels as L
+
+        _blocks(wp, L.match_tiles_lines, [bcoord, bmap, phi, 1e-3])
+    else:
+        _split(wp, S.match_tiles, nvox, [bcoord, bmap, phi, 1e-3])
     seed = SEED_DEPTH_SMOOTHED if params.smooth_iters > 0 else SEED_DEPTH * grid.r_vox
     steps += _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth=seed)
     if params.min_feature_particles > 0 and nvox:
-        _remove_small(wp, T, bcoord, bmap, phi, g, params.min_feature_particles, tiles)
+        _remove_small(wp, T, bcoord, bmap, phi, g, mark, params.min_feature_particles, tiles)
     values = wp.empty_like(phi)  # renormalising keeps every sign: the topology stands
     _renormalise(wp, S, bcoord, bmap, phi, tiles, grid.voxel, grid.background, values)
     tiles = (grid.background, -grid.background)
@@ -276,9 +281,15 @@ def _renormalise(wp, S, bcoord, bmap, phi, tiles, scale: float, clip: float, out
     from mpmfx.surface import line_kernels as L
 
     if _lines(phi):
-        _split(wp, L.renormalise_lines, phi.shape[0] // BS, [bcoord, bmap, phi, *tiles, scale, clip, out])
+        _blocks(wp, L.renormalise_lines, [bcoord, bmap, phi, *tiles, scale, clip, out])
     else:
         _split(wp, S.renormalise, phi.shape[0], [bcoord, bmap, phi, *tiles, scale, clip, out])
+
+
+def _blocks(wp, kernel, inputs: list) -> None:
+    """Launch a CPU-path kernel that takes a block per thread (inputs[0]: bcoord, the active
+    blocks), split across CPU threads however few the blocks."""
+    launch_split(wp, kernel, inputs[0].shape[0], inputs, device=inputs[0].device, min_split=1)
 
 
 def _split(wp, kernel, dim: int, inputs: list) -> None:
@@ -333,17 +344,24 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         wp.launch(A.gather_zhu_bridson_aniso, nvox,
                   inputs=[bcoord, cells, starts, order, g, gmat, thin, va, int(with_v), grid.gather_vox, grid.kernel_vox,
                           grid.r_vox, grid.far_vox], outputs=[phi, w, offset, vel, cov, radius])
-    elif _lines(phi):  # one thread per block line: each candidate particle fetched once per 8 voxels
-        launch_split(wp, L.gather_zhu_bridson_lines, nvox // BS, [bcoord, cells, starts, order, g, va, int(with_v),
-                     grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w, offset, vel], device=phi.device)
+    elif _lines(phi):  # one thread per block: each candidate particle fetched once per block, in memory order
+        n = g.shape[0]
+        gs, vs = wp.empty(n, dtype=wp.vec3), wp.empty(n if with_v else 1, dtype=wp.vec3)
+        _split(wp, L.sorted_copy, n, [g, order, gs])
+        if with_v:
+            _split(wp, L.sorted_copy, n, [v, order, vs])
+        _blocks(wp, L.gather_zhu_bridson_blocks, [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox,
+                                                  grid.r_vox, grid.far_vox, phi, w, offset, vel, wp.empty(nvox, dtype=wp.vec3)])
     else:
         wp.launch(S.gather_zhu_bridson, nvox,
                   inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
                   outputs=[phi, w, offset, vel])
     if grid.normal_passes > 0:
         wide = _blur_weights(wp, S, bcoord, bmap, w, grid.normal_passes)
-        wp.launch(S.project_on_wide_normal, nvox,
-                  inputs=[bcoord, bmap, wide, w, offset, grid.r_vox, grid.far_vox, int(aniso), cov, ANISO_NORMAL_ITERS,
+        if _lines(phi) and not aniso:
+            _blocks(wp, L.project_on_wide_normal_lines, [bcoord, bmap, wide, w, offset, grid.r_vox, grid.far_vox, phi])
+            return phi, w, vel
+        _split(wp, S.project_on_wide_normal, nvox, [bcoord, bmap, wide, w, offset, grid.r_vox, grid.far_vox, int(aniso), cov, ANISO_NORMAL_ITERS,
                           ANISO_COV_EPS * grid.kernel_vox**2, radius, phi])
     return phi, w, vel
 
@@ -351,7 +369,7 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
 def _classify(wp, S, g, counts, grid: SparseGrid):
     """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates)."""
     near = wp.zeros(grid.nblocks, dtype=wp.int32)
-    wp.launch(S.mark_near_blocks, g.shape[0], inputs=[g, grid.reach_vox, near])
+    _split(wp, S.mark_near_blocks, g.shape[0], [g, grid.reach_vox, near])  # writes 1s: any interleaving agrees
     state = wp.empty(grid.nblocks, dtype=wp.int32)
     wp.launch(S.classify_blocks, grid.nblocks, inputs=[counts, near, grid.dense_reach, grid.dense_min, state])
     labels = wp.empty(grid.nblocks, dtype=wp.int32)
@@ -397,6 +415,12 @@ def _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, *, seed_depth: float) -
 
 
 def _flood(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: bool) -> int:
+    if _lines(phi):  # bit words, a block per thread filled to its fixpoint each round (CPU)
+        from mpmfx.surface import topology_cpu as C
+
+        _, reached, rounds = C.flood_bits(wp, T, bcoord, bmap, phi, mark, seed_depth, "specks" if specks else "bubbles")
+        C.flip_unreached(wp, reached, phi, tiles)
+        return rounds
     nvox = phi.shape[0]
     reached = wp.empty(nvox, dtype=wp.int32)
     pending = wp.zeros(bcoord.shape[0], dtype=wp.int32)
@@ -423,22 +447,28 @@ def _flood(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: 
     return rounds
 
 
-def _remove_small(wp, T, bcoord, bmap, phi, g, min_count: int, tiles) -> None:
+def _remove_small(wp, T, bcoord, bmap, phi, g, mark, min_count: int, tiles) -> None:
     """Inside components (6-connected) holding fewer than min_count particles become outside;
     components touching an INSIDE tile are large by construction and stay."""
     nvox = phi.shape[0]
-    labels = wp.empty(nvox, dtype=wp.int32)
-    wp.launch(T.init_inside_labels, nvox, inputs=[bcoord, bmap, phi, labels])
-    changed = wp.zeros(1, dtype=wp.int32)
-    for _ in range(MAX_SWEEP_ROUNDS):
-        changed.zero_()
-        for axis in range(3):
-            _split(wp, T.sweep_min_labels, bcoord.shape[0] * 64, [bcoord, bmap, labels, axis, changed])
-        if int(changed.numpy()[0]) == 0:
-            break
+    if _lines(phi):
+        from mpmfx.surface import topology_cpu as C
+
+        labels = C.small_labels(wp, T, bcoord, bmap, phi, mark)
+    else:
+        labels = wp.empty(nvox, dtype=wp.int32)
+        _split(wp, T.init_inside_labels, nvox, [bcoord, bmap, phi, labels])
+        every = wp.full(bcoord.shape[0], 1, dtype=wp.int32)
+        changed = wp.zeros(1, dtype=wp.int32)
+        for _ in range(MAX_SWEEP_ROUNDS):
+            changed.zero_()
+            for axis in range(3):
+                _split(wp, T.sweep_min_labels, bcoord.shape[0] * 64, [bcoord, bmap, labels, every, axis, changed])
+            if int(changed.numpy()[0]) == 0:
+                break
     counts = wp.zeros(nvox + 1, dtype=wp.int32)
     wp.launch(T.count_component_particles, g.shape[0], inputs=[g, bmap, labels, counts])
-    wp.launch(T.remove_small_components, nvox, inputs=[labels, counts, min_count, tiles[0], phi])
+    _split(wp, T.remove_small_components, nvox, [labels, counts, min_count, tiles[0], phi])
 
 
 def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
@@ -448,8 +478,8 @@ def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
     a, b = wp.clone(w), wp.empty_like(w)
     for _ in range(passes):
         for axis in range(3):
-            if _lines(w):
-                _split(wp, L.blur_weight_lines, w.shape[0] // BS, [bcoord, bmap, a, axis, NORMAL_STEP, b])
+            if _lines(w) and NORMAL_STEP == 2:  # the line kernel is written out for step 2
+                _blocks(wp, L.blur_weight_lines, [bcoord, bmap, a, axis, b])
             else:
                 _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
             a, b = b, a
@@ -463,36 +493,59 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     outward as far as it would move the raw field inward (0.3-0.5 % volume per pass, measured).
     Renormalising that once more flips the curvature back; the mean of the two is straight to
     second order."""
+    from mpmfx.surface import line_redistance_kernels as L
+    from mpmfx.surface import redistance_kernels as R
+
     nvox = phi.shape[0]
     d1, d2 = wp.empty_like(phi), wp.empty_like(phi)
     _renormalise(wp, S, bcoord, bmap, phi, tiles, 1.0, clip, d1)
-    _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
-    _launch(wp, S.average_into, nvox, [d1, d2])
     if nvox == 0:
         return d1
     # the raw field is a distance only near its zero level (it flattens to -r inside, and the
     # renormalised values there are no distance either): keep the voxels next to the crossing,
     # recompute the rest of the band from them (|grad phi| = 1). Without it each blur pass that
     # reached the flat part moved lattice surfaces outward (sphere +0.08 h at five passes).
-    return _redistance(wp, bcoord, bmap, d1, clip)
+    frozen = wp.empty(nvox, dtype=wp.int32)
+    a, b = wp.empty_like(phi), wp.empty_like(phi)
+    was = wp.empty(nvox // BS, dtype=wp.int32)  # voxels changed by a sweep (CPU)
+    if _lines(phi):  # the second renormalise and the average only where init_eikonal reads them
+        _blocks(wp, L.crossing_average_lines, [bcoord, bmap, d1, clip, frozen, d2])
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, frozen, a, b, was])
+    else:
+        _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
+        _launch(wp, S.average_into, nvox, [d1, d2])
+        _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, frozen, a])
+    return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip)
 
 
 def _redistance(wp, bcoord, bmap, phi, clip: float):
     """phi's zero level with a distance around it (a new array, voxels, clipped to +-clip): the
     voxels next to the crossing keep theirs (capped at the crossing interpolated along an axis),
-    the rest of the band comes from Jacobi sweeps of |grad phi| = 1 (redistance_kernels; on the
-    CPU the same sweeps by block lines, line_kernels.eikonal_lines)."""
-    from mpmfx.surface import line_kernels as L
+    the rest of the band comes from the Eikonal sweeps, as in _distance (tiles read +-clip)."""
+    from mpmfx.surface import line_redistance_kernels as L
     from mpmfx.surface import redistance_kernels as R
 
     nvox = phi.shape[0]
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
+    was = wp.empty(nvox // BS, dtype=wp.int32)
     _split(wp, R.init_eikonal, nvox, [bcoord, bmap, phi, clip, -clip, clip, frozen, a])
-    was, now = (wp.empty(nvox // BS, dtype=wp.int32) for _ in range(2))  # lines changed by a sweep (CPU)
+    if _lines(phi):  # the same values again, with both sweep buffers and the changed bits the line sweeps start from
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, frozen, a, b, was])
+    return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip)
+
+
+def _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip: float):
+    """Jacobi sweeps of |grad phi| = 1 from the initial distance a (b: the second buffer; on the
+    CPU a copy of a, `was` the voxels init set), one voxel of progress per sweep, until clip."""
+    from mpmfx.surface import line_redistance_kernels as L
+    from mpmfx.surface import redistance_kernels as R
+
+    nvox = a.shape[0]
+    now = wp.empty(nvox // BS, dtype=wp.int32)
     for sweep in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
         if _lines(a):
-            _split(wp, L.eikonal_lines, nvox // BS, [bcoord, bmap, a, frozen, clip, -clip, clip, b, was, int(sweep == 0), now])
+            _blocks(wp, L.eikonal_lines, [bcoord, bmap, a, frozen, clip, -clip, clip, b, was, now])
             was, now = now, was
         else:
             _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
@@ -528,11 +581,11 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     for _ in range(iters):
         for axis in range(3):
             if _lines(phi):
-                _split(wp, L.blur_lines, phi.shape[0] // BS, [bcoord, bmap, phi, axis, *tiles, tmp])
+                _blocks(wp, L.blur_lines, [bcoord, bmap, phi, axis, *tiles, tmp])
             else:
                 _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
             phi, tmp = tmp, phi
-    _launch(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
+    _split(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
     return phi
 
 
@@ -545,32 +598,38 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
     if nvox == 0:
         return None
     dev = values.device
-    # a thread per edge and per cell (GPU), or per block line along z, counting its 24 edges and 8 cells (CPU)
-    from mpmfx.surface import line_kernels as L
-    lines = _lines(values)
-    kv, kf, nv, nf = (L.mc_vertices_lines, L.mc_faces_lines, nvox // BS, nvox // BS) if lines else (
-        M.mc_vertices, M.mc_faces, nvox * 3, nvox)
+    # a thread per edge and per cell (GPU), or per block (CPU), counted per edge and cell (GPU) or
+    # per block line along z (its 24 edges and 8 cells)
+    from mpmfx.surface import line_mesh_kernels as L
+
+    if _lines(values):
+        kv, kf, nv, nf = L.mc_vertices_lines, L.mc_faces_lines, nvox // BS, nvox // BS
+
+        def run(kernel, dim, inputs):
+            _blocks(wp, kernel, inputs)
+    else:
+        kv, kf, nv, nf = M.mc_vertices, M.mc_faces, nvox * 3, nvox
+
+        def run(kernel, dim, inputs):
+            _split(wp, kernel, dim, inputs)
     ecount = wp.empty(nv, dtype=wp.int32)
     edge_vert = wp.empty(nvox * 3, dtype=wp.int32)
-    _split(wp, kv, nv, [bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
+    run(kv, nv, [bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
     eoff = _scan(wp, ecount, inclusive=True)
     tables = list(device_tables(wp, dev))
     fcount = wp.empty(nf, dtype=wp.int32)
-    _split(wp, kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
+    run(kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
     foff = _scan(wp, fcount, inclusive=True)
     m, k = (int(a[-1:].numpy()[0]) for a in (eoff, foff))  # the two sizes: one sync each
     if m == 0 or k == 0:
         return None
     verts = wp.empty(m, dtype=wp.vec3)
-    _split(wp, kv, nv, [bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
+    run(kv, nv, [bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
     faces = wp.empty(3 * k, dtype=wp.int32)
-    _split(wp, kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
+    run(kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
     origin = wp.vec3(*grid.origin.astype(np.float32))
-    wp.launch(
-        M.sample_vertices,
-        m,
-        inputs=[bmap, values, *tiles, vel_arg, int(vel is not None), verts, origin, grid.voxel, world, normals, velocities],
-    )
+    _split(wp, M.sample_vertices, m, [bmap, values, *tiles, vel_arg, int(vel is not None), verts, origin, grid.voxel,
+                                      world, normals, velocities])
     return world, normals, velocities, faces

@@ -191,9 +191,9 @@ def count_blocks(
 
 
 @wp.kernel
-def mark_near_blocks(g: wp.array(dtype=wp.vec3), reach: float, near: wp.array3d(dtype=wp.int32)):
+def mark_near_blocks(g: wp.array(dtype=wp.vec3), reach: float, near: wp.array3d(dtype=wp.int32), base: int):
     """near = 1 on blocks with a voxel within `reach` voxels of a particle (box distance)."""
-    p = wp.tid()
+    p = wp.tid() + base
     gp = g[p]
     lo = wp.vec3i(0)
     hi = wp.vec3i(0)
@@ -204,14 +204,15 @@ def mark_near_blocks(g: wp.array(dtype=wp.vec3), reach: float, near: wp.array3d(
     for bi in range(lo[0], hi[0] + 1):
         for bj in range(lo[1], hi[1] + 1):
             for bk in range(lo[2], hi[2] + 1):
-                b = wp.vec3i(bi, bj, bk)
-                d2 = float(0.0)
-                for a in range(3):
-                    # distance from the particle to the block's voxel span [8 b, 8 b + 7]
-                    e = wp.max(wp.max(float(b[a] * BS) - gp[a], gp[a] - float(b[a] * BS + BS - 1)), 0.0)
-                    d2 += e * e
-                if d2 <= r2 and near[bi, bj, bk] == 0:
-                    near[bi, bj, bk] = 1
+                if near[bi, bj, bk] == 0:  # most blocks are marked already by a particle before
+                    b = wp.vec3i(bi, bj, bk)
+                    d2 = float(0.0)
+                    for a in range(3):
+                        # distance from the particle to the block's voxel span [8 b, 8 b + 7]
+                        e = wp.max(wp.max(float(b[a] * BS) - gp[a], gp[a] - float(b[a] * BS + BS - 1)), 0.0)
+                        d2 += e * e
+                    if d2 <= r2:
+                        near[bi, bj, bk] = 1
 
 
 @wp.kernel
@@ -448,6 +449,7 @@ def project_on_wide_normal(
     cov_eps: float,
     radius: wp.array(dtype=float),
     phi: wp.array(dtype=float),
+    base: int,
 ):
     """phi = -(x - xbar) . n - r with n = -grad(wide) / |grad(wide)|, `wide` the kernel weight sum
     blurred to a wider kernel. The normal of the kernel itself is estimated from the same
@@ -461,7 +463,7 @@ def project_on_wide_normal(
     gradient across the sheet, so the wide normal lies in the sheet, and projecting xbar's
     sideways offset on it opened holes (88 in the bench's random sheet); the thinnest axis is
     the sheet's normal there, and the surface's normal on bodies."""
-    t = wp.tid()
+    t = wp.tid() + base
     if w[t] <= 0.0:
         phi[t] = far_vox
         return
@@ -489,10 +491,10 @@ def project_on_wide_normal(
 
 
 @wp.kernel
-def limit_inward(a: wp.array(dtype=float), ref: wp.array(dtype=float), delta: float):
+def limit_inward(a: wp.array(dtype=float), ref: wp.array(dtype=float), delta: float, base: int):
     """a = min(a, ref + delta): the level set a (signed distance, negative inside) lies at most
     delta inside ref's."""
-    t = wp.tid()
+    t = wp.tid() + base
     a[t] = wp.min(a[t], ref[t] + delta)
 
 

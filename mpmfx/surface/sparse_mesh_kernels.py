@@ -114,9 +114,10 @@ def sample_vertices(
     world: wp.array(dtype=wp.vec3),
     normals: wp.array(dtype=wp.vec3),
     velocities: wp.array(dtype=wp.vec3),
+    base: int,
 ):
     """World position, outward normal (trilinear gradient) and trilinear velocity per vertex."""
-    t = wp.tid()
+    t = wp.tid() + base
     g = verts[t]
     c = wp.vec3i(int(wp.floor(g[0])), int(wp.floor(g[1])), int(wp.floor(g[2])))
     f = g - wp.vec3(float(c[0]), float(c[1]), float(c[2]))

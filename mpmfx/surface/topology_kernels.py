@@ -14,9 +14,10 @@ from mpmfx.surface.sparse_kernels import (BS, BV, LABEL_NONE, TILE_INSIDE, TILE_
 
 
 @wp.kernel
-def mark_particle_voxels(g: wp.array(dtype=wp.vec3), bmap: wp.array3d(dtype=wp.int32), mark: wp.array(dtype=wp.int32)):
+def mark_particle_voxels(g: wp.array(dtype=wp.vec3), bmap: wp.array3d(dtype=wp.int32), mark: wp.array(dtype=wp.int32),
+                         base: int):
     """mark = 1 at the voxel nearest to each particle (seeds of genuine inside components)."""
-    p = wp.tid()
+    p = wp.tid() + base
     gp = g[p]
     s = slot(bmap, int(wp.round(gp[0])), int(wp.round(gp[1])), int(wp.round(gp[2])))
     if s >= 0:
@@ -153,10 +154,11 @@ def flip_unreached(phi: wp.array(dtype=float), reached: wp.array(dtype=wp.int32)
 
 @wp.kernel
 def init_inside_labels(
-    bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), labels: wp.array(dtype=wp.int32)
+    bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), labels: wp.array(dtype=wp.int32),
+    base: int,
 ):
     """Inside voxels: own label t + 1, or 0 when touching an INSIDE tile (a big body); else -1."""
-    t = wp.tid()
+    t = wp.tid() + base
     lab = LABEL_NONE
     if phi[t] <= 0.0:
         lab = t + 1
@@ -174,13 +176,17 @@ def sweep_min_labels(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
     labels: wp.array(dtype=wp.int32),
+    active: wp.array(dtype=wp.int32),
     axis: int,
     changed: wp.array(dtype=wp.int32),
     base: int,
 ):
-    """Carry the smallest label through labelled voxels along one block line, both ways."""
+    """Carry the smallest label through labelled voxels along one block line, both ways
+    (blocks with active[b] != 0)."""
     tid = wp.tid() + base
     b = tid // 64
+    if active[b] == 0:
+        return
     l = tid - b * 64
     corner = bcoord[b] * BS
     first, st = line_start(axis, l)
@@ -218,9 +224,10 @@ def count_component_particles(
 
 @wp.kernel
 def remove_small_components(
-    labels: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), min_count: int, outside_value: float, phi: wp.array(dtype=float)
+    labels: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), min_count: int, outside_value: float, phi: wp.array(dtype=float),
+    base: int,
 ):
-    t = wp.tid()
+    t = wp.tid() + base
     lab = labels[t]
     if lab > 0 and counts[lab] < min_count:
         phi[t] = outside_value

@@ -1,5 +1,6 @@
-"""The CPU path (mpmfx.surface.line_kernels: a block line per thread, launches split across CPU
-threads) surfaces exactly as the voxel kernels a GPU runs: same mesh, same leaves."""
+"""The CPU path (mpmfx.surface.line_kernels and its siblings: a block per thread, the topology
+fills on bit words, launches split across CPU threads) surfaces exactly as the voxel kernels a
+GPU runs: same mesh, same leaves."""
 
 import numpy as np
 import pytest
@@ -10,11 +11,14 @@ from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_pa
 pytest.importorskip("warp")
 
 
-@pytest.mark.parametrize("voxel_h, iters, close", [(0.6, 2, 0.0), (0.5, 5, 0.0), (0.6, 2, 1.0)])
-def test_cpu_line_kernels_and_threads_give_the_voxel_kernels_surface(monkeypatch, voxel_h, iters, close):
+# the box holds INSIDE tiles (the bodies' fill, tile neighbours in every stencil), the torus none;
+# close_voids runs one more redistance (sparse._close_voids)
+@pytest.mark.parametrize("shape, count, voxel_h, iters, close", [("torus", 6000, 0.6, 2, 0.0), ("torus", 6000, 0.5, 5, 0.0),
+                                                                 ("box", 8000, 0.5, 5, 0.0), ("torus", 6000, 0.6, 2, 1.0)])
+def test_cpu_line_kernels_and_threads_give_the_voxel_kernels_surface(monkeypatch, shape, count, voxel_h, iters, close):
     import mpmfx.surface.sparse as sparse
 
-    x, h = sample_shape("torus", 6000, "random")
+    x, h = sample_shape(shape, count, "random")
     v = np.random.default_rng(1).normal(size=x.shape).astype(np.float32)
     params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel_h * h, smooth_iters=iters,
                            min_feature_particles=8, dense_output=False, close_voids=close * h)

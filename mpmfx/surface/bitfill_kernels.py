@@ -1,0 +1,256 @@
+"""The topology flood fill on bit masks, a block per thread: the CPU path of
+:mod:`mpmfx.surface.topology_kernels` (seed_reached, sweep_reached, flip_unreached).
+
+A block's 512 voxels are 8 words of 64 bits, word x (the local x index) holding bit y * 8 + z:
+`sign` (phi > 0) and `reached`. A thread takes one block, lets its reached voxels spread to
+6-neighbours of the same sign inside the block until nothing changes (a few dozen word
+operations per step instead of a voxel at a time), after first taking in the reached voxels
+of the face neighbours in active blocks. Rounds repeat over the blocks near those that
+changed until none does. The fill is the same closed set as the line sweeps' (the seeds'
+components among same-sign active voxels, 6-connected), so the flipped voxels are the same;
+only the round count (a statistic) differs. Threads on several CPU cores read a neighbour's
+words while it may be writing them: reach only grows, a stale read is made up in the next
+round, and a round in which no block changed read only final words.
+"""
+
+import warp as wp
+
+from mpmfx.surface.line_kernels import side_code
+from mpmfx.surface.sparse_kernels import BS, BV, LABEL_NONE, TILE_INSIDE, TILE_OUTSIDE
+
+vec8u = wp.types.vector(length=8, dtype=wp.uint64)
+ALL = wp.constant(wp.uint64(0xFFFFFFFFFFFFFFFF))
+Z_LOW = wp.constant(wp.uint64(0x7F7F7F7F7F7F7F7F))  # bit z of each y group, z = 0..6 (z + 1 in the group)
+Z_FIRST = wp.constant(wp.uint64(0x0101010101010101))  # z = 0 of each y group
+Y_LOW = wp.constant(wp.uint64(0x00FFFFFFFFFFFFFF))  # y groups 0..6
+BYTE = wp.constant(wp.uint64(0xFF))
+
+
+@wp.func
+def bit(q: int):
+    return wp.uint64(1) << wp.uint64(q)
+
+
+@wp.func
+def face_mask(axis: int, side: int):
+    """Bits of a word on the block face `axis` (1: y, 2: z) at side 0 (low) or 1 (high)."""
+    m = wp.uint64(0)
+    if axis == 1:
+        m = BYTE << wp.uint64(56 * side)
+    else:
+        m = Z_FIRST << wp.uint64(7 * side)
+    return m
+
+
+@wp.func
+def tile_face(code: int, axis: int, side: int):
+    """face_mask(axis, side) where `code` is a tile, else 0."""
+    m = wp.uint64(0)
+    if code < 0:
+        m = face_mask(axis, side)
+    return m
+
+
+@wp.func
+def by_tile(code: int, face: wp.uint64, out_face: wp.uint64, inside_face: wp.uint64):
+    """(out_face, inside_face) with `face` added to the one of tile `code` (none if active)."""
+    if code == TILE_OUTSIDE:
+        return out_face | face, inside_face
+    if code == TILE_INSIDE:
+        return out_face, inside_face | face
+    return out_face, inside_face
+
+
+@wp.kernel
+def seed_bits(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    mark: wp.array(dtype=wp.int32),
+    seed_depth: float,
+    seeds: int,
+    sign: wp.array(dtype=wp.uint64),
+    reached: wp.array(dtype=wp.uint64),
+    pending: wp.array(dtype=wp.int32),
+    base: int,
+):
+    """topology_kernels.seed_reached for one block, as bit words (seeds 0: bubbles, 1:
+    specks, as its `specks`; 2: bodies, every outside voxel and the inside ones next to an
+    INSIDE tile, see small_labels); pending[b] = 1 where a voxel is left to reach."""
+    b = wp.tid() + base
+    bc = bcoord[b]
+    left = int(0)
+    xm = side_code(bmap, bc, 0, -1)
+    xp = side_code(bmap, bc, 0, 1)
+    ym = side_code(bmap, bc, 1, -1)
+    yp = side_code(bmap, bc, 1, 1)
+    zm = side_code(bmap, bc, 2, -1)
+    zp = side_code(bmap, bc, 2, 1)
+    for x in range(BS):
+        s = wp.uint64(0)
+        r = wp.uint64(0)
+        for q in range(BS * BS):  # q = y * 8 + z
+            t = b * BV + x * BS * BS + q
+            p = phi[t]
+            out = p > 0.0
+            rr = int(0)
+            if seeds == 0 and not out:
+                rr = 1
+            if seeds == 1 and (out or (mark[t] != 0 and p <= -seed_depth)):
+                rr = 1
+            if seeds == 2 and out:
+                rr = 1
+            if out:
+                s = s | bit(q)
+            if rr != 0:
+                r = r | bit(q)
+        # an outside voxel next to an OUTSIDE tile, an inside one next to an INSIDE tile
+        face = wp.uint64(0)
+        if (x == 0 and xm < 0) or (x == BS - 1 and xp < 0):
+            face = ALL
+        face = face | tile_face(ym, 1, 0) | tile_face(yp, 1, 1) | tile_face(zm, 2, 0) | tile_face(zp, 2, 1)
+        if face != wp.uint64(0):
+            out_face = wp.uint64(0)
+            inside_face = wp.uint64(0)
+            if x == 0:
+                out_face, inside_face = by_tile(xm, ALL, out_face, inside_face)
+            if x == BS - 1:
+                out_face, inside_face = by_tile(xp, ALL, out_face, inside_face)
+            out_face, inside_face = by_tile(ym, face_mask(1, 0), out_face, inside_face)
+            out_face, inside_face = by_tile(yp, face_mask(1, 1), out_face, inside_face)
+            out_face, inside_face = by_tile(zm, face_mask(2, 0), out_face, inside_face)
+            out_face, inside_face = by_tile(zp, face_mask(2, 1), out_face, inside_face)
+            r = r | (out_face & s) | (inside_face & (~s))
+        sign[b * BS + x] = s
+        reached[b * BS + x] = r
+        if r != ALL:
+            left = 1
+    pending[b] = left
+
+
+@wp.func
+def take_face(own: wp.uint64, own_sign: wp.uint64, nr: wp.uint64, ns: wp.uint64, face: wp.uint64):
+    """own with the face bits whose neighbour across the face (nr, ns: its reached and sign
+    bits moved onto own's face positions) is reached and of the same sign."""
+    return own | (nr & (~(ns ^ own_sign)) & face)
+
+
+@wp.kernel
+def flood_bits(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    sign: wp.array(dtype=wp.uint64),
+    reached: wp.array(dtype=wp.uint64),
+    active: wp.array(dtype=wp.int32),
+    changed: wp.array(dtype=wp.int32),
+    moved: wp.array(dtype=wp.int32),
+    base: int,
+):
+    """One round for block b (if active[b]): take in the reached face voxels of the 6
+    neighbour blocks (active ones; tiles pass nothing, as in sweep_reached), spread to the
+    fixpoint inside the block; moved[b] = 1 and changed += 1 where a voxel was reached."""
+    b = wp.tid() + base
+    if active[b] == 0:
+        return
+    bc = bcoord[b]
+    s = vec8u(wp.uint64(0))
+    r = vec8u(wp.uint64(0))
+    for x in range(BS):
+        s[x] = sign[b * BS + x]
+        r[x] = reached[b * BS + x]
+    n = side_code(bmap, bc, 0, -1)
+    if n >= 0:
+        r[0] = take_face(r[0], s[0], reached[n * BS + BS - 1], sign[n * BS + BS - 1], ALL)
+    n = side_code(bmap, bc, 0, 1)
+    if n >= 0:
+        r[BS - 1] = take_face(r[BS - 1], s[BS - 1], reached[n * BS], sign[n * BS], ALL)
+    for axis in range(1, 3):
+        for side in range(2):
+            n = side_code(bmap, bc, axis, 2 * side - 1)
+            if n >= 0:
+                # the neighbour's opposite face moved onto this block's face
+                sh = wp.uint64(wp.where(axis == 1, 56, 7))
+                for x in range(BS):
+                    nr = reached[n * BS + x]
+                    ns = sign[n * BS + x]
+                    if side == 0:
+                        nr = nr >> sh
+                        ns = ns >> sh
+                    else:
+                        nr = nr << sh
+                        ns = ns << sh
+                    r[x] = take_face(r[x], s[x], nr, ns, face_mask(axis, side))
+    grow = int(1)
+    while grow != 0:
+        grow = int(0)
+        for x in range(BS):  # along z and y inside each word
+            ez = (~(s[x] ^ (s[x] >> wp.uint64(1)))) & Z_LOW  # bit q: voxels q and q + 1 (z) share a sign
+            ey = (~(s[x] ^ (s[x] >> wp.uint64(8)))) & Y_LOW  # voxels q and q + 8 (y)
+            w = r[x]
+            more = int(1)
+            while more != 0:
+                v = w | ((w & ez) << wp.uint64(1)) | ((w >> wp.uint64(1)) & ez) | ((w & ey) << wp.uint64(8)) | (
+                    (w >> wp.uint64(8)) & ey)
+                more = wp.where(v != w, 1, 0)
+                w = v
+            r[x] = w
+        for x in range(BS - 1):  # along x, up then down
+            ex = ~(s[x] ^ s[x + 1])
+            v = r[x + 1] | (r[x] & ex)
+            if v != r[x + 1]:
+                r[x + 1] = v
+                grow = int(1)
+        for k in range(BS - 1):
+            x = BS - 2 - k
+            ex = ~(s[x] ^ s[x + 1])
+            v = r[x] | (r[x + 1] & ex)
+            if v != r[x]:
+                r[x] = v
+                grow = int(1)
+    any_new = int(0)
+    for x in range(BS):
+        if r[x] != reached[b * BS + x]:  # only this thread writes block b's words
+            reached[b * BS + x] = r[x]
+            any_new = 1
+    if any_new != 0:
+        moved[b] = 1
+        wp.atomic_add(changed, 0, 1)
+
+
+@wp.kernel
+def flip_unreached_bits(reached: wp.array(dtype=wp.uint64), inside_value: float, outside_value: float,
+                        phi: wp.array(dtype=float), base: int):
+    """topology_kernels.flip_unreached for the 64 voxels of word w (thread = block * 8 + x)."""
+    w = wp.tid() + base
+    r = reached[w]
+    if r == ALL:
+        return
+    for q in range(BS * BS):
+        if ((r >> wp.uint64(q)) & wp.uint64(1)) == wp.uint64(0):
+            t = w * BS * BS + q
+            if phi[t] > 0.0:
+                phi[t] = inside_value
+            else:
+                phi[t] = outside_value
+
+
+@wp.kernel
+def labels_from_bits(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), labels: wp.array(dtype=wp.int32),
+                     pending: wp.array(dtype=wp.int32), base: int):
+    """Labels of topology_kernels.init_inside_labels after a fill from the bodies (seeds 2) for
+    the 64 voxels of word w: outside -1, reached inside 0 (connected to an INSIDE tile: the
+    label the min-label sweeps would end at), the other inside voxels their own t + 1;
+    pending[block] = 1 (zeroed before) where such a voxel is."""
+    w = wp.tid() + base
+    s = sign[w]
+    left = (~reached[w]) & (~s)
+    for q in range(BS * BS):
+        t = w * BS * BS + q
+        lab = LABEL_NONE
+        if ((s >> wp.uint64(q)) & wp.uint64(1)) == wp.uint64(0):
+            lab = 0
+            if ((left >> wp.uint64(q)) & wp.uint64(1)) != wp.uint64(0):
+                lab = t + 1
+        labels[t] = lab
+    if left != wp.uint64(0):
+        pending[w // BS] = 1

@@ -1,0 +1,187 @@
+"""Marching cubes a block per thread (its 64 lines along z in turn): the CPU path of :mod:`mpmfx.surface.sparse_mesh_kernels`.
+
+A line along z of block b owns the 24 edges (voxel * 3 + axis) and the 8 cells (lower corner)
+of its voxels. Each needs the values of at most 4 voxel columns (the line and its +x, +y, +xy
+neighbours, up to z + 8), so these are read once per line (36 reads instead of 64 per cell
+sweep) and their signs kept as 9-bit masks: counting is bit arithmetic, and a line whose
+columns all share one sign has nothing to do. The same vertices and triangles come out in the
+same order as the voxel kernels' (tests/surface/test_line_kernels.py).
+"""
+
+import warp as wp
+
+from mpmfx.surface.line_kernels import block_code, read
+from mpmfx.surface.sparse_kernels import BS, slot
+
+vec9 = wp.types.vector(length=9, dtype=wp.float32)
+vec8i = wp.types.vector(length=8, dtype=wp.int32)
+ALL = wp.constant(511)  # 9 sign bits set
+
+
+@wp.func
+def corner_blocks(bmap: wp.array3d(dtype=wp.int32), b: int, bc: wp.vec3i):
+    """Codes of block bc (index 0, active index b) and its 7 upper neighbours: index
+    ox * 4 + oy * 2 + oz for the block bc + (ox, oy, oz), as block_code gives them."""
+    codes = vec8i(0)
+    for n in range(8):
+        if n == 0:
+            codes[n] = b
+        else:
+            codes[n] = block_code(bmap, wp.vec3i(bc[0] + n // 4, bc[1] + (n // 2) % 2, bc[2] + n % 2))
+    return codes
+
+
+@wp.func
+def column(phi: wp.array(dtype=float), codes: vec8i, x: int, y: int, out_v: float, in_v: float):
+    """Values at local (x, y, z), z = 0..8, of the block of codes[0] (x, y in 0..8)."""
+    ox = x // BS
+    oy = y // BS
+    lxy = ((x - ox * BS) * BS + (y - oy * BS)) * BS
+    lo = codes[ox * 4 + oy * 2]
+    col = vec9(0.0)
+    if lo >= 0:
+        for z in range(BS):
+            col[z] = phi[lo * 512 + lxy + z]
+    else:
+        for z in range(BS):
+            col[z] = read(phi, lo, 0, out_v, in_v)
+    col[BS] = read(phi, codes[ox * 4 + oy * 2 + 1], lxy, out_v, in_v)
+    return col
+
+
+@wp.func
+def sign_mask(col: vec9):
+    """Bit z set where col[z] >= 0 (the corner sign marching cubes uses)."""
+    m = int(0)
+    for z in range(BS + 1):
+        if col[z] >= 0.0:
+            m = m | (1 << z)
+    return m
+
+
+@wp.func
+def bit_count(m: int):
+    n = int(0)
+    for z in range(BS + 1):
+        n += (m >> z) & 1
+    return n
+
+
+@wp.kernel
+def mc_vertices_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    offsets: wp.array(dtype=wp.int32),
+    count_only: int,
+    counts: wp.array(dtype=wp.int32),
+    edge_vert: wp.array(dtype=wp.int32),
+    verts: wp.array(dtype=wp.vec3),
+    base: int,
+):
+    """sparse_mesh_kernels.mc_vertices for the 24 edges (voxel * 3 + axis) of each of the 64
+    lines along z of one block (thread = block), counted per line (counts[line]; offsets:
+    their inclusive scan): the same vertices in the same order. Unlike mc_vertices, edges
+    without a vertex keep whatever edge_vert held: mc_faces_lines reads only crossing edges."""
+    b = wp.tid() + base
+    bc = bcoord[b]
+    codes = corner_blocks(bmap, b, bc)
+    for l in range(64):
+        tid = b * 64 + l
+        if count_only == 0 and counts[tid] == 0:
+            continue  # no vertex (and edge_vert is read only at crossing edges: no -1 to write)
+        li = l // BS
+        lj = l - li * BS
+        own = column(phi, codes, li, lj, out_v, in_v)
+        cx = column(phi, codes, li + 1, lj, out_v, in_v)
+        cy = column(phi, codes, li, lj + 1, out_v, in_v)
+        m0 = sign_mask(own)
+        low = (1 << BS) - 1
+        ex = (m0 ^ sign_mask(cx)) & low  # bit z: edge (voxel z, axis 0) crosses
+        ey = (m0 ^ sign_mask(cy)) & low
+        ez = (m0 ^ (m0 >> 1)) & low
+        if count_only != 0:
+            counts[tid] = bit_count(ex) + bit_count(ey) + bit_count(ez)
+            continue
+        idx = offsets[tid] - counts[tid]
+        for z in range(BS):
+            t = tid * BS + z
+            a = own[z]
+            for axis in range(3):
+                v = own[z + 1]
+                hit = (ez >> z) & 1
+                if axis == 0:
+                    v = cx[z]
+                    hit = (ex >> z) & 1
+                elif axis == 1:
+                    v = cy[z]
+                    hit = (ey >> z) & 1
+                if hit != 0:
+                    edge_vert[t * 3 + axis] = idx
+                    p = wp.vec3(float(bc[0] * BS + li), float(bc[1] * BS + lj), float(bc[2] * BS + z))
+                    p[axis] = p[axis] + wp.clamp(a / (a - v), 0.0, 1.0)
+                    verts[idx] = p
+                    idx += 1
+
+
+@wp.kernel
+def mc_faces_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    edge_vert: wp.array(dtype=wp.int32),
+    tri_range: wp.array(dtype=wp.int32),
+    tri_local: wp.array(dtype=wp.int32),
+    edge_offset: wp.array2d(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    count_only: int,
+    counts: wp.array(dtype=wp.int32),
+    faces: wp.array(dtype=wp.int32),
+    base: int,
+):
+    """sparse_mesh_kernels.mc_faces for the 8 cells of each of the 64 lines along z of one
+    block (thread = block), counted per line: the same triangles in the same order."""
+    b = wp.tid() + base
+    bc = bcoord[b]
+    codes = corner_blocks(bmap, b, bc)
+    for l in range(64):
+        tid = b * 64 + l
+        if count_only == 0 and counts[tid] == 0:
+            continue
+        li = l // BS
+        lj = l - li * BS
+        # corner order of warp.geometry: (0,0,0) (1,0,0) (1,1,0) (0,1,0), then z + 1
+        m0 = sign_mask(column(phi, codes, li, lj, out_v, in_v))
+        m1 = sign_mask(column(phi, codes, li + 1, lj, out_v, in_v))
+        m2 = sign_mask(column(phi, codes, li + 1, lj + 1, out_v, in_v))
+        m3 = sign_mask(column(phi, codes, li, lj + 1, out_v, in_v))
+        if (m0 & m1 & m2 & m3) == ALL or (m0 | m1 | m2 | m3) == 0:  # one sign: no triangle
+            counts[tid] = 0  # (count pass; the write pass skipped the line above)
+            continue
+        first = int(0)
+        if count_only == 0:
+            first = offsets[tid] - counts[tid]
+        total = int(0)
+        for z in range(BS):
+            lowz = ((m0 >> z) & 1) | (((m1 >> z) & 1) << 1) | (((m2 >> z) & 1) << 2) | (((m3 >> z) & 1) << 3)
+            z1 = z + 1
+            code = lowz | (((m0 >> z1) & 1) << 4) | (((m1 >> z1) & 1) << 5) | (((m2 >> z1) & 1) << 6) | (((m3 >> z1) & 1) << 7)
+            start = tri_range[code]
+            ntri = (tri_range[code + 1] - start) // 3
+            if count_only == 0:
+                c = wp.vec3i(bc[0] * BS + li, bc[1] * BS + lj, bc[2] * BS + z)
+                for m in range(ntri):
+                    for s in range(3):
+                        le = tri_local[start + 3 * m + s]
+                        sl = slot(bmap, c[0] + edge_offset[le, 0], c[1] + edge_offset[le, 1], c[2] + edge_offset[le, 2])
+                        idx = int(-1)
+                        if sl >= 0:
+                            idx = edge_vert[sl * 3 + edge_offset[le, 3]]
+                        faces[3 * (first + total + m) + s] = idx
+            total += ntri
+        if count_only != 0:
+            counts[tid] = total

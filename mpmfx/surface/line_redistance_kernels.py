@@ -1,0 +1,196 @@
+"""Redistancing a block per thread (its 64 lines along z in turn): the CPU path of :mod:`mpmfx.surface.redistance_kernels`
+and of the renormalise / average steps before it (mpmfx.surface.sparse._distance).
+
+Each kernel does per voxel what the voxel kernels do, with the same arithmetic; the line's
+neighbour lines are read once into registers instead of through a block-map lookup per voxel.
+"""
+
+import warp as wp
+
+from mpmfx.surface.line_kernels import block_faces, line_neighbours, line_sides, read, vec8
+from mpmfx.surface.redistance_kernels import eikonal_update
+from mpmfx.surface.sparse_kernels import BS, BV
+
+
+@wp.func
+def line_flag(flags: wp.array(dtype=wp.int32), code: int, line: int):
+    """flags of line `line` (0..63) of the block with code `code`; 0 for a tile."""
+    if code >= 0:
+        return flags[code * 64 + line]
+    return 0
+
+
+@wp.func
+def side_line(src: wp.array(dtype=float), inside: int, t0: int, step: int, code: int, local: int, out_v: float, in_v: float):
+    """The 8 values (z = 0..7) of a neighbour line: at t0 + step in the same block when inside
+    != 0, else line `local` (its first voxel's index in the block) of the block with code `code`."""
+    n = vec8(0.0)
+    if inside != 0:
+        for z in range(BS):
+            n[z] = src[t0 + step + z]
+    elif code >= 0:
+        for z in range(BS):
+            n[z] = src[code * BV + local + z]
+    else:
+        v = read(src, code, 0, out_v, in_v)
+        for z in range(BS):
+            n[z] = v
+    return n
+
+
+@wp.kernel
+def crossing_average_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    d1: wp.array(dtype=float),
+    clip: float,
+    frozen: wp.array(dtype=wp.int32),
+    out: wp.array(dtype=float),
+    base: int,
+):
+    """The second renormalise and the average of _distance, only where init_eikonal keeps a
+    value: frozen = 1 at voxels with a 6-neighbour of the other sign (tiles +-clip), where
+    out = (d1 + renormalise(d1)) / 2 as sparse_kernels.renormalise and average_into give it;
+    elsewhere out = d1. Renormalising keeps each sign, so the crossings are d1's, and
+    init_eikonal reads values only at crossing voxels (its own and its other-sign neighbours';
+    elsewhere only the sign)."""
+    b = wp.tid() + base
+    faces = block_faces(bmap, bcoord[b])
+    for l in range(64):
+        tid = b * 64 + l
+        sides = line_sides(faces, l // BS, l - (l // BS) * BS)
+        for z in range(BS):
+            t = tid * BS + z
+            v = d1[t]
+            n = line_neighbours(d1, sides, t, l, z, clip, -clip)
+            cross = int(0)
+            for q in range(6):
+                if (n[q] > 0.0) != (v > 0.0):
+                    cross = 1
+            frozen[t] = cross
+            if cross != 0:
+                grad = 0.5 * wp.length(wp.vec3(n[1] - n[0], n[3] - n[2], n[5] - n[4]))
+                d2 = wp.clamp(v / wp.max(grad, 0.05) * 1.0, -clip, clip)
+                out[t] = 0.5 * (v + d2)
+            else:
+                out[t] = v
+
+
+@wp.kernel
+def init_eikonal_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    clip: float,
+    frozen: wp.array(dtype=wp.int32),
+    dist: wp.array(dtype=float),
+    dist2: wp.array(dtype=float),
+    changed: wp.array(dtype=wp.int32),
+    base: int,
+):
+    """redistance_kernels.init_eikonal (tiles +-clip) on one block (thread = block), frozen given
+    (crossing_average_lines), into both buffers of the sweeps (dist, dist2). changed[line]:
+    bit z set where voxel z is frozen. A voxel that neither is nor touches a frozen one holds
+    +-clip, as do all its neighbours (tiles too), and a sweep leaves it at +-clip: for the
+    first sweep (eikonal_lines) the frozen voxels are the ones that changed."""
+    b = wp.tid() + base
+    faces = block_faces(bmap, bcoord[b])
+    for l in range(64):
+        tid = b * 64 + l
+        sides = line_sides(faces, l // BS, l - (l // BS) * BS)
+        fz = int(0)
+        for z in range(BS):
+            t = tid * BS + z
+            v = phi[t]
+            d = wp.where(v > 0.0, clip, -clip)
+            if frozen[t] != 0:
+                fz = fz | (1 << z)
+                n = line_neighbours(phi, sides, t, l, z, clip, -clip)
+                near = float(1.0)
+                for q in range(6):
+                    u = n[q]
+                    if (u > 0.0) != (v > 0.0):
+                        near = wp.min(near, wp.abs(v) / wp.max(wp.abs(v) + wp.abs(u), 1.0e-12))
+                d = wp.where(v > 0.0, wp.min(wp.abs(v), near), -wp.min(wp.abs(v), near))
+            dist[t] = d
+            dist2[t] = d
+        changed[tid] = fz
+
+
+@wp.kernel
+def eikonal_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    src: wp.array(dtype=float),
+    frozen: wp.array(dtype=wp.int32),
+    out_v: float,
+    in_v: float,
+    clip: float,
+    dst: wp.array(dtype=float),
+    was: wp.array(dtype=wp.int32),
+    now: wp.array(dtype=wp.int32),
+    base: int,
+):
+    """redistance_kernels.eikonal_sweep on the 64 lines along z of one block (thread = block).
+
+    was / now: per line, bit z set where the previous / this sweep changed voxel z (before the
+    first sweep: the frozen voxels, see init_eikonal_lines). A voxel whose 6 neighbours and
+    itself did not change in the previous sweep would compute what it holds, and with src and
+    dst swapped every sweep dst holds the values of two sweeps ago, the same ones: it is
+    skipped. Only the voxels at the moving front work, and the result is the plain Jacobi
+    sweep's."""
+    b = wp.tid() + base
+    faces = block_faces(bmap, bcoord[b])
+    for l in range(64):
+        tid = b * 64 + l
+        li = l // BS
+        lj = l - li * BS
+        sides = line_sides(faces, li, lj)
+        t0 = tid * BS
+        fz = int(0)  # bit z: voxel z is frozen (keeps its value)
+        for z in range(BS):
+            if frozen[t0 + z] != 0:
+                fz = fz | (1 << z)
+        mine = was[tid]
+        need = mine | (mine << 1) | (mine >> 1)
+        need = need | line_flag(was, sides[0], (BS - 1) * BS + lj) | line_flag(was, sides[1], lj)
+        need = need | line_flag(was, sides[2], li * BS + BS - 1) | line_flag(was, sides[3], li * BS)
+        need = need | ((line_flag(was, sides[4], l) >> (BS - 1)) & 1) | ((line_flag(was, sides[5], l) & 1) << (BS - 1))
+        if li > 0:
+            need = need | was[tid - BS]
+        if li < BS - 1:
+            need = need | was[tid + BS]
+        if lj > 0:
+            need = need | was[tid - 1]
+        if lj < BS - 1:
+            need = need | was[tid + 1]
+        need = need & (~fz) & 255
+        if need == 0:
+            now[tid] = 0
+            continue
+        own = vec8(0.0)
+        for z in range(BS):
+            own[z] = src[t0 + z]
+        xm = side_line(src, wp.where(li > 0, 1, 0), t0, -BS * BS, sides[0], ((BS - 1) * BS + lj) * BS, out_v, in_v)
+        xp = side_line(src, wp.where(li < BS - 1, 1, 0), t0, BS * BS, sides[1], lj * BS, out_v, in_v)
+        ym = side_line(src, wp.where(lj > 0, 1, 0), t0, -BS, sides[2], (li * BS + BS - 1) * BS, out_v, in_v)
+        yp = side_line(src, wp.where(lj < BS - 1, 1, 0), t0, BS, sides[3], li * BS * BS, out_v, in_v)
+        zm = read(src, sides[4], l * BS + BS - 1, out_v, in_v)
+        zp = read(src, sides[5], l * BS, out_v, in_v)
+        moved = int(0)
+        for z in range(BS):
+            if (need >> z) & 1 != 0:
+                v = own[z]
+                lo = zm
+                if z > 0:
+                    lo = own[z - 1]
+                hi = zp
+                if z < BS - 1:
+                    hi = own[z + 1]
+                a = wp.vec3(wp.min(wp.abs(xm[z]), wp.abs(xp[z])), wp.min(wp.abs(ym[z]), wp.abs(yp[z])),
+                            wp.min(wp.abs(lo), wp.abs(hi)))
+                u = eikonal_update(a, v, clip)
+                dst[t0 + z] = u
+                if u != v:
+                    moved = moved | (1 << z)
+        now[tid] = moved

@@ -1,0 +1,76 @@
+"""Host side of the CPU topology pass (mpmfx.surface.bitfill_kernels): the flood fills of
+mpmfx.surface.sparse._flood and the component labels of _remove_small, on bit words.
+
+Same results as the voxel-line sweeps a GPU runs (the same closed fills, the same labels
+where they matter), fewer launches and less work per voxel.
+"""
+
+from __future__ import annotations
+
+import logging
+
+from mpmfx.surface.launch import launch_split
+from mpmfx.surface.sparse import BS, MAX_SWEEP_ROUNDS
+
+log = logging.getLogger(__name__)
+
+SEEDS = {"bubbles": 0, "specks": 1, "bodies": 2}  # bitfill_kernels.seed_bits' modes
+
+
+def flood_bits(wp, T, bcoord, bmap, phi, mark, seed_depth: float, seeds: str):
+    """(sign, reached, rounds): bit words of a block each (8 per block) after filling from
+    the `seeds` (SEEDS) through same-sign active voxels, a block per thread per round, over
+    the blocks near those that changed in the previous round (T.active_blocks)."""
+    from mpmfx.surface import bitfill_kernels as F
+
+    nact = bcoord.shape[0]
+    sign, reached = wp.empty(nact * BS, dtype=wp.uint64), wp.empty(nact * BS, dtype=wp.uint64)
+    pending = wp.empty(nact, dtype=wp.int32)
+    blocks = {"device": phi.device, "min_split": 1}  # a block per thread: few threads, much work each
+    launch_split(wp, F.seed_bits, nact, [bcoord, bmap, phi, mark, seed_depth, SEEDS[seeds], sign, reached, pending], **blocks)
+    changed = wp.zeros(1, dtype=wp.int32)
+    active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
+    rounds = 0
+    while rounds < MAX_SWEEP_ROUNDS:
+        wp.launch(T.active_blocks, nact, inputs=[bcoord, bmap, pending, was, int(rounds == 0), active])
+        changed.zero_()
+        moved.zero_()
+        launch_split(wp, F.flood_bits, nact, [bcoord, bmap, sign, reached, active, changed, moved], **blocks)
+        rounds += 1
+        moved, was = was, moved
+        if int(changed.numpy()[0]) == 0:
+            break
+    else:
+        log.warning("topology flood fill did not settle in %d rounds; some bubbles may remain", MAX_SWEEP_ROUNDS)
+    return sign, reached, rounds
+
+
+def flip_unreached(wp, reached, phi, tiles) -> None:
+    """topology_kernels.flip_unreached from the bit words: unreached outside voxels -> tiles[1]
+    (inside), unreached inside ones -> tiles[0]."""
+    from mpmfx.surface import bitfill_kernels as F
+
+    launch_split(wp, F.flip_unreached_bits, reached.shape[0], [reached, tiles[1], tiles[0], phi], device=phi.device)
+
+
+def small_labels(wp, T, bcoord, bmap, phi, mark):
+    """The component labels of sparse._remove_small (int32 per voxel): a fill from the inside
+    voxels next to an INSIDE tile gives the components the min-label sweeps would label 0 at
+    once; the sweeps then run only over the blocks holding other inside voxels (the small
+    components, few), and label those as the sweeps over every block would."""
+    from mpmfx.surface import bitfill_kernels as F
+
+    nvox = phi.shape[0]
+    sign, reached, _ = flood_bits(wp, T, bcoord, bmap, phi, mark, 0.0, "bodies")
+    labels = wp.empty(nvox, dtype=wp.int32)
+    pending = wp.zeros(bcoord.shape[0], dtype=wp.int32)
+    launch_split(wp, F.labels_from_bits, sign.shape[0], [sign, reached, labels, pending], device=phi.device)
+    changed = wp.zeros(1, dtype=wp.int32)
+    for _ in range(MAX_SWEEP_ROUNDS):
+        changed.zero_()
+        for axis in range(3):
+            launch_split(wp, T.sweep_min_labels, bcoord.shape[0] * 64, [bcoord, bmap, labels, pending, axis, changed],
+                         device=phi.device)
+        if int(changed.numpy()[0]) == 0:
+            break
+    return labels
