@@ -7,6 +7,7 @@ vertices depends on the voxel phase: near phase 0 marching cubes puts many verti
 on the voxel plane). README: "Where a flat face cuts its block".
 
     python3 scripts/surface_box_faces.py --counts 100000 1000000 --device cpu
+    python3 scripts/surface_box_faces.py --counts 1000000 --close-voids 1   # SurfaceParams.close_voids = 1 h
 """
 import argparse
 
@@ -26,16 +27,17 @@ def edge_distance(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return edge, np.linalg.norm(q, axis=1)
 
 
-def report(count: int, label: str, device: str, seed: int) -> None:
+def report(count: int, label: str, device: str, seed: int, close_voids: float = 0.0) -> None:
     x, h = sample_shape("box", count, "random", seed=seed)
     setting = dict(OURS[label])
     voxel = setting.pop("voxel_h") * h
-    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel, dense_output=False, **setting)
+    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel, dense_output=False,
+                           close_voids=close_voids * h, **setting)
     v = surface_particles(x, None, params, device=device).mesh.vertices.astype(np.float64)
     q = np.abs(v) - BOX_HALF
     err = (np.linalg.norm(np.maximum(q, 0.0), axis=1) + np.minimum(q.max(axis=1), 0.0)) / h
     edge, corner = (d / h for d in edge_distance(v))
-    print(f"random box, {len(x)} particles, {label}: mean |e| {np.abs(err).mean():.4f} h, max {np.abs(err).max():.3f} h, "
+    print(f"random box, {len(x)} particles, {label}, close_voids {close_voids:g} h: mean |e| {np.abs(err).mean():.4f} h, max {np.abs(err).max():.3f} h, "
           f"signed {err.mean():+.4f} h")
     classes = {"face, > 5 h from an edge": edge > 5, "face, 3-5 h": (edge > 3) & (edge <= 5),
                "edge, 1-3 h": (edge > 1) & (edge <= 3) & (corner > 3), "edge, < 1 h": (edge <= 1) & (corner > 3),
@@ -63,10 +65,11 @@ def main() -> None:
     ap.add_argument("--labels", nargs="+", default=list(OURS), choices=list(OURS))
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--close-voids", type=float, default=0.0, help="SurfaceParams.close_voids in particle spacings (0 = off)")
     args = ap.parse_args()
     for count in args.counts:
         for label in args.labels:
-            report(count, label, args.device, args.seed)
+            report(count, label, args.device, args.seed, args.close_voids)
 
 
 if __name__ == "__main__":
