@@ -159,6 +159,9 @@ class Surface(_Section):
     dilate: Real = Field(0.0, description="Offset (m): + dilates, - erodes.")
     min_feature_particles: Int = Field(8, ge=0, description="Blobs of fewer particles are removed (specks).")
     group: SurfaceGroup = Field(SurfaceGroup.MATERIAL, description="One surface per material, per object, or one.")
+    close_voids: Real = Field(0.0, ge=0, description="Radius (m) of a ball rolled over the surface before smoothing: "
+                                                    "fills the dents of sparse particles without rounding edges (~ the "
+                                                    "particle spacing; 0 = off; slower, and flat lattice faces fill in).")
     anisotropic: Bool = Field(False, description="Yu & Turk anisotropic kernels: thin sheets of water stay sheets "
                                                  "(no holes); slower, and sharp box edges round off more.")
     density: Bool = Field(False, description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "

@@ -126,6 +126,24 @@ def test_cli_status_and_clean(first_run, capsys):
     assert "render    missing" in capsys.readouterr().out.replace("  ", "  ")
 
 
+def test_close_voids_is_a_surface_knob(first_run, tmp_path, capsys):
+    """surface.close_voids reaches the surfacer (the closing changes the mesh, only surface
+    re-runs); a negative radius is a config error naming the field."""
+    from mpmfx.cli import main
+    from mpmfx.io.frames import SurfaceFrame
+    shot, cache, first = first_run
+    h = mpmfx.load_shot(shot, cache_root=cache, quiet=True).shot.particle_spacing
+    run = mpmfx.load_shot(shot, overrides=[f"surface.close_voids={h}"], cache_root=cache, quiet=True)
+    results = run.run(until="surface")
+    assert _states(results) == {"voxelise": "cached", "simulate": "cached", "surface": "ran"}
+    before = SurfaceFrame.read(first[2].entry / "frames" / "0003.npz").groups["Elastic"].vertices
+    after = SurfaceFrame.read(results[2].entry / "frames" / "0003.npz").groups["Elastic"].vertices
+    assert len(after) > 0 and (len(after) != len(before) or not np.array_equal(after, before))
+    assert main(["run", str(shot), "--set", "surface.close_voids=-1", "--cache", str(tmp_path / "c")]) == 2
+    assert "surface.close_voids" in capsys.readouterr().err
+    assert not (tmp_path / "c").exists()
+
+
 def test_cli_bad_config_exit_2(tmp_path, capsys):
     from mpmfx.cli import main
     shot = write_tiny_shot(tmp_path, extra="\n[solver]\n")  # duplicate table: invalid TOML
