@@ -420,7 +420,6 @@ class BrickP2G:
     def __init__(self, flags: SceneFlags, n: int, device):
         self.n, self.device, self.flags = n, device, flags
         self.block = BLOCK_CUDA if device.is_cuda else 1
-        self.max_blocks = MAX_BLOCKS
         self.sorted = False
         with wp.ScopedDevice(device):
             self.keys = wp.empty(2 * n, dtype=wp.int32)  # radix_sort_pairs sorts in double buffers
@@ -444,7 +443,7 @@ class BrickP2G:
                                                                self.n_seg, sub])
             self.sorted = True
         nb = -(-pp.nodes // BRICK)
-        blocks = max(1, min(n, nb ** 3, self.max_blocks))
+        blocks = max(1, min(n, nb ** 3, MAX_BLOCKS))
         scatter = make_brick_scatter(self.flags, bool(pp.deterministic))
         wp.launch(scatter, dim=blocks * self.block, block_dim=self.block, device=dev, inputs=[
             pp, self.keys, self.start, self.n_seg, self.block, blocks, self.idx, cur.x, cur.v, cur.C, cur.F, cur.J,
