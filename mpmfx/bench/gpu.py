@@ -129,7 +129,8 @@ def _phase_split(solver, state, t: float, span: float) -> tuple[dict, float]:
     ms = {"clear": 0.0, "p2g": 0.0, "grid": 0.0, "g2p": 0.0}
     for r in results:
         name = r.name.lower()
-        key = ("g2p" if "g2p" in name else "grid" if "grid_update" in name else "clear" if "memset" in name
+        key = ("g2p" if "g2p" in name else "grid" if "grid_update" in name
+               else "clear" if "memset" in name or "clear" in name
                else None if ("begin" in name or "end" in name or "report" in name or "sum_rows" in name)
                else "p2g")  # p2g, and the brick P2G's keys, sort, scan, segments, scatter
         if key:

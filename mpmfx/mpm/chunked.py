@@ -126,7 +126,7 @@ class DeviceAdvance:
         wall0 = time.perf_counter()
         s._last_bad = None
         if self.p2g == "brick" and (self._brick is None or self._brick.n != state.n):
-            self._brick = BrickP2G(s.flags, state.n, s.device)  # before any capture: it allocates
+            self._brick = BrickP2G(s.flags, state.n, s.device, nodes=cfg.grid_n + 1)  # before any capture: it allocates
         self._upload(state, t0, t1)
         if self.keys is not None:  # the fields no substep changes (kind, shape, friction, ...)
             s._colliders_dev.assign(pack_colliders(s.colliders, t0, t0, 1.0))

@@ -1,15 +1,29 @@
 """Phase 1 — clear the grid: mass and momentum accumulators to zero (guide §3).
 
 The grid is scratch memory: nothing on it survives a substep. A device memset does the
-job, so this phase compiles no kernel.
+job, unless the last P2G marked the node bricks it touched (the brick P2G, inside a chunk):
+then only those are zeroed, since a shot's grid is mostly empty space (measured on an H100,
+hero_dam, 3.4M particles on a 257^3-node grid: the memset took 0.17 ms of a 3.2 ms substep).
 """
 
 from __future__ import annotations
 
+import warp as wp
 
-def clear_grid(grid_m, grid_mv, grid_normal, grid_fixed, *, deterministic: bool, multi_field: bool) -> None:
+from .p2g_brick import BRICK, marked_node
+
+
+def clear_grid(grid_m, grid_mv, grid_normal, grid_fixed, *, deterministic: bool, multi_field: bool,
+               marks=None, nb: int = 0) -> None:
     """Zero the accumulators P2G is about to write (float or fixed-point ones; the mass
-    gradients too in multi-field mode)."""
+    gradients too in multi-field mode). marks: per node brick (nb^3, int32), 1 where the last
+    P2G wrote; given, only those bricks are zeroed, and the marks are reset for the next P2G."""
+    if marks is not None:
+        nn = grid_fixed.shape[0] if deterministic else grid_m.shape[0]
+        wp.launch(_clear_marked, dim=marks.shape[0] * BRICK**3, device=marks.device,
+                  inputs=[marks, nb, nn, int(deterministic), grid_m, grid_mv, grid_fixed])
+        marks.zero_()
+        return
     if deterministic:
         grid_fixed.zero_()
         return
@@ -17,3 +31,19 @@ def clear_grid(grid_m, grid_mv, grid_normal, grid_fixed, *, deterministic: bool,
     grid_mv.zero_()
     if multi_field:
         grid_normal.zero_()
+
+
+@wp.kernel(enable_backward=False)
+def _clear_marked(marks: wp.array(dtype=wp.int32), nb: int, nodes: int, deterministic: int,
+                  grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
+                  grid_fixed: wp.array4d(dtype=wp.int64)):
+    node = marked_node(marks, wp.tid(), nb, nodes)
+    i, j, k = node[0], node[1], node[2]
+    if i < 0:
+        return
+    if deterministic != 0:
+        for c in range(grid_fixed.shape[3]):
+            grid_fixed[i, j, k, c] = wp.int64(0)
+    else:
+        grid_m[i, j, k] = 0.0
+        grid_mv[i, j, k] = wp.vec3(0.0)

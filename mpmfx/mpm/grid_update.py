@@ -18,6 +18,7 @@ import functools
 import warp as wp
 
 from .colliders import ColliderParams, apply_collider
+from .p2g_brick import BRICK, marked_node
 from .slots import Count, WallCode
 from .stepper import SubstepDev
 
@@ -132,10 +133,48 @@ def field_contact(v: wp.vec3, v_cm: wp.vec3, normal_in: wp.vec3, mu: float) -> w
     return v_cm + dvt
 
 
+@wp.func
+def update_node(gp: GridParams, grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
+                grid_normal: wp.array3d(dtype=wp.vec3), grid_fixed: wp.array4d(dtype=wp.int64),
+                colliders: wp.array(dtype=ColliderParams), sdf: wp.array(dtype=float),
+                grid_v: wp.array3d(dtype=wp.vec3), counts: wp.array(dtype=wp.int32), i: int, j: int, k: int):
+    """Node (i, j, k) of every field: velocity from momentum, gravity, damping, field contact,
+    colliders, walls."""
+    m_tot = float(0.0)
+    p_tot = wp.vec3(0.0)
+    grad_tot = wp.vec3(0.0)
+    if gp.n_fields > 1:
+        for f in range(gp.n_fields):
+            m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, f * gp.nodes + i, j, k)
+            m_tot += m
+            p_tot += m * v
+            grad_tot += mass_gradient(gp, grid_normal, grid_fixed, f * gp.nodes + i, j, k)
+    xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
+    for f in range(gp.n_fields):
+        fi = f * gp.nodes + i
+        m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, fi, j, k)
+        if m > 0.0:
+            if m < m_tot * (1.0 - 1.0e-6):  # another field shares this node
+                g = mass_gradient(gp, grid_normal, grid_fixed, fi, j, k)
+                # own gradient minus the others': for two fields the normals are exactly
+                # opposite, so the contact impulses cancel and momentum is conserved
+                v = field_contact(v, p_tot / m_tot, 2.0 * g - grad_tot, gp.contact_friction)
+            for c in range(gp.num_colliders):
+                v = apply_collider(colliders[c], sdf, xn, v, 0.5 * gp.dx)
+            v = apply_walls(v, wp.vec3i(i, j, k), gp)
+            if not wp.isfinite(v):
+                wp.atomic_add(counts, Count.GRID_NONFINITE, 1)
+                v = wp.vec3(0.0)  # the substep is rejected anyway; keep G2P finite
+        grid_v[fi, j, k] = v
+
+
 @functools.lru_cache(maxsize=None)
-def make_grid_update(*, device_clock: bool = False):
-    """The grid-update kernel; device_clock as in p2g.make_p2g."""
-    module = "mpmfx_mpm_grid_dev" if device_clock else __name__
+def make_grid_update(*, device_clock: bool = False, sparse: bool = False):
+    """The grid-update kernel; device_clock as in p2g.make_p2g. sparse: launched over the
+    node bricks (BRICK^3 threads each, `marks` order), it updates only those `marks` flags
+    (the brick P2G's, p2g_brick.py): G2P reads no other node, and the others' velocities are
+    left as they were. Otherwise launched over the nodes (3D)."""
+    module = ("mpmfx_mpm_grid_dev" if device_clock else __name__) + ("_sparse" if sparse else "")
 
     @wp.kernel(enable_backward=False, module=module)
     def grid_update(
@@ -148,40 +187,22 @@ def make_grid_update(*, device_clock: bool = False):
         sdf: wp.array(dtype=float),
         grid_v: wp.array3d(dtype=wp.vec3),
         counts: wp.array(dtype=wp.int32),
+        marks: wp.array(dtype=wp.int32),
         sub: wp.array(dtype=SubstepDev),
     ):
-        i, j, k = wp.tid()
         if wp.static(device_clock):
             if sub[0].active == 0:
                 return
             gp.dt = sub[0].dt
             gp.damping_factor = sub[0].damping_factor
-        m_tot = float(0.0)
-        p_tot = wp.vec3(0.0)
-        grad_tot = wp.vec3(0.0)
-        if gp.n_fields > 1:
-            for f in range(gp.n_fields):
-                m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, f * gp.nodes + i, j, k)
-                m_tot += m
-                p_tot += m * v
-                grad_tot += mass_gradient(gp, grid_normal, grid_fixed, f * gp.nodes + i, j, k)
-        xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
-        for f in range(gp.n_fields):
-            fi = f * gp.nodes + i
-            m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, fi, j, k)
-            if m > 0.0:
-                if m < m_tot * (1.0 - 1.0e-6):  # another field shares this node
-                    g = mass_gradient(gp, grid_normal, grid_fixed, fi, j, k)
-                    # own gradient minus the others': for two fields the normals are exactly
-                    # opposite, so the contact impulses cancel and momentum is conserved
-                    v = field_contact(v, p_tot / m_tot, 2.0 * g - grad_tot, gp.contact_friction)
-                for c in range(gp.num_colliders):
-                    v = apply_collider(colliders[c], sdf, xn, v, 0.5 * gp.dx)
-                v = apply_walls(v, wp.vec3i(i, j, k), gp)
-                if not wp.isfinite(v):
-                    wp.atomic_add(counts, Count.GRID_NONFINITE, 1)
-                    v = wp.vec3(0.0)  # the substep is rejected anyway; keep G2P finite
-            grid_v[fi, j, k] = v
+        if wp.static(sparse):
+            node = marked_node(marks, wp.tid(), (gp.nodes + BRICK - 1) // BRICK, gp.nodes)
+            if node[0] >= 0:
+                update_node(gp, grid_m, grid_mv, grid_normal, grid_fixed, colliders, sdf, grid_v, counts,
+                            node[0], node[1], node[2])
+        else:
+            i, j, k = wp.tid()
+            update_node(gp, grid_m, grid_mv, grid_normal, grid_fixed, colliders, sdf, grid_v, counts, i, j, k)
 
     return grid_update
 

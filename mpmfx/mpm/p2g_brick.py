@@ -172,6 +172,38 @@ def base_node(xp: wp.vec3, inv_dx: float) -> wp.vec3i:
     return wp.vec3i(int(wp.floor(xg[0] - 0.5)), int(wp.floor(xg[1] - 0.5)), int(wp.floor(xg[2] - 0.5)))
 
 
+@wp.func
+def node_brick(i: int, j: int, k: int, nb: int) -> int:
+    """The brick (BRICK^3 nodes, nb a grid axis) holding grid node (i, j, k): the unit of the
+    node marks that keep the clear and the grid update to the nodes a scatter touched."""
+    return ((i // BRICK) * nb + j // BRICK) * nb + k // BRICK
+
+
+@wp.func
+def marked_node(marks: wp.array(dtype=wp.int32), t: int, nb: int, nodes: int) -> wp.vec3i:
+    """The node of thread t of a launch of BRICK^3 threads a node brick (`marks` order), or
+    (-1, -1, -1) where its brick is unmarked or it lies past the last node. A brick's threads
+    share one mark, so a warp leaves an empty brick at once."""
+    b = t // (BRICK * BRICK * BRICK)
+    if marks[b] == 0:
+        return wp.vec3i(-1)
+    q = t % (BRICK * BRICK * BRICK)
+    node = wp.vec3i((b // (nb * nb)) * BRICK + q // (BRICK * BRICK), ((b // nb) % nb) * BRICK + (q // BRICK) % BRICK,
+                    (b % nb) * BRICK + q % BRICK)
+    if wp.max(node) >= nodes:
+        return wp.vec3i(-1)
+    return node
+
+
+@wp.func
+def mark_window(marks: wp.array(dtype=wp.int32), brick: int, nb: int, q: int):
+    """Mark node brick q (0..26) of the 3^3 around `brick`: together they hold every node of
+    its window (origin one node below the brick, WIN nodes an axis)."""
+    b = wp.vec3i(brick // (nb * nb) + q // 9 - 1, (brick // nb) % nb + (q // 3) % 3 - 1, brick % nb + q % 3 - 1)
+    if wp.min(b) >= 0 and wp.max(b) < nb:
+        marks[(b[0] * nb + b[1]) * nb + b[2]] = 1
+
+
 @wp.kernel(enable_backward=False)
 def _brick_keys(pp: P2GParams, x: wp.array(dtype=wp.vec3), alive: wp.array(dtype=wp.int32),
                 mass: wp.array(dtype=float), idx: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.int32),
@@ -238,10 +270,13 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
     @wp.func
     def add_to_grid(pp: P2GParams, m: float, mv: wp.vec3, aff: wp.mat33, fx: wp.vec3, b: wp.vec3i,
                     grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
-                    grid_fixed: wp.array4d(dtype=wp.int64)):
+                    grid_fixed: wp.array4d(dtype=wp.int64), marks: wp.array(dtype=wp.int32)):
         """A particle outside its window: its 27 x 4 contributions straight to the grid, as the
-        reference adds them (p2g.py)."""
+        reference adds them (p2g.py), marking the node bricks of its stencil's corners."""
         dx = 1.0 / pp.inv_dx
+        nb = (pp.nodes + BRICK - 1) // BRICK
+        for q in range(8):
+            marks[node_brick(b[0] + 2 * (q // 4), b[1] + 2 * ((q // 2) % 2), b[2] + 2 * (q % 2), nb)] = 1
         W = bspline_weights(fx)
         for i in range(3):
             for j in range(3):
@@ -343,7 +378,8 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                 alive: wp.array(dtype=wp.int32), mass: wp.array(dtype=float), volume: wp.array(dtype=float),
                 material: wp.array(dtype=wp.int32), materials: wp.array(dtype=MaterialParams),
                 grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
-                grid_fixed: wp.array4d(dtype=wp.int64), sub: wp.array(dtype=SubstepDev)):
+                grid_fixed: wp.array4d(dtype=wp.int64), marks: wp.array(dtype=wp.int32),
+                sub: wp.array(dtype=SubstepDev)):
         t = wp.tid()
         if sub[0].active == 0:
             return  # the whole launch: every thread of a block returns together
@@ -387,7 +423,7 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                                 for d in range(3):
                                     park(1, (4 + 3 * c + d) * BLOCK_CUDA + lane, aff[c, d])
                         else:
-                            add_to_grid(pp, m, mv, aff, fx, b, grid_m, grid_mv, grid_fixed)
+                            add_to_grid(pp, m, mv, aff, fx, b, grid_m, grid_mv, grid_fixed, marks)
                 if lane < n_park:
                     park(4, lane, float(code))
                 sync()
@@ -407,6 +443,8 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                 sync()  # the parked slots are read before the next round writes them
             for e in range(lane, WIN_NODES, block):
                 flush(e, origin, nn, grid_m, grid_mv, grid_fixed)
+            for q in range(lane, 27, block):
+                mark_window(marks, brick, nb, q)
             sync()  # every read of the window done before the next segment zeroes it
             seg += n_blocks
 
@@ -417,11 +455,16 @@ class BrickP2G:
     """The brick P2G's scratch buffers for one particle count, the particles' order and
     segments, and its launches."""
 
-    def __init__(self, flags: SceneFlags, n: int, device):
+    def __init__(self, flags: SceneFlags, n: int, device, *, nodes: int):
+        """n: particles; nodes: grid nodes an axis (grid_n + 1)."""
         self.n, self.device, self.flags = n, device, flags
         self.block = BLOCK_CUDA if device.is_cuda else 1
         self.sorted = False
+        self.nb = -(-nodes // BRICK)
         with wp.ScopedDevice(device):
+            # node bricks the last scatter touched (its windows and fallbacks): the next substep
+            # clears only those, and the grid update skips the rest (a shot's grid is mostly empty)
+            self.marks = wp.ones(self.nb**3, dtype=wp.int32)
             self.keys = wp.empty(2 * n, dtype=wp.int32)  # radix_sort_pairs sorts in double buffers
             self.idx = wp.array(np.tile(np.arange(n, dtype=np.int32), 2))  # slot -> particle
             self.flag = wp.empty(n, dtype=wp.int32)
@@ -448,7 +491,7 @@ class BrickP2G:
         wp.launch(scatter, dim=blocks * self.block, block_dim=self.block, device=dev, inputs=[
             pp, self.keys, self.start, self.n_seg, self.block, blocks, self.idx, cur.x, cur.v, cur.C, cur.F, cur.J,
             cur.Jp, cur.alive, state.mass, state.volume, state.material, materials, grid_m, grid_mv, grid_fixed,
-            sub])
+            self.marks, sub])
 
     def nbytes(self) -> int:
-        return int(sum(a.capacity for a in (self.keys, self.idx, self.flag, self.pos, self.start)))
+        return int(sum(a.capacity for a in (self.keys, self.idx, self.flag, self.pos, self.start, self.marks)))

@@ -29,6 +29,7 @@ from .g2p import G2PParams, make_g2p
 from .grid_update import GridParams, make_grid_update
 from .materials import Material, Mode
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
+from .p2g_brick import BRICK
 from .chunked import DeviceAdvance
 from .stepper import SubstepDev, report_sums, sum_partials
 from .slots import REJECTING, Count, Stat
@@ -135,6 +136,7 @@ class Solver:
         self.stepper = stepper
         self._energy = make_energy(self.flags)
         self._n_fields = 0
+        self._grid_writer = None  # the brick P2G that wrote the grid last (its marks are valid), if one did
         self._allocate_grid(1)
         with wp.ScopedDevice(self.device):
             self._materials_dev = wp.array([pack_material(m) for m in self.materials], dtype=MaterialParams)
@@ -156,6 +158,7 @@ class Solver:
         if n_fields == self._n_fields:
             return
         self._n_fields = n_fields
+        self._grid_writer = None
         nn = self.config.grid_n + 1  # nodes at i * dx, i = 0..grid_n
         det, multi = self.config.deterministic, self.flags.multi_field
         full = (n_fields * nn, nn, nn)
@@ -278,9 +281,15 @@ class Solver:
         inv_dx = float(cfg.grid_n)
         nn = cfg.grid_n + 1
         p2g, g2p, grid = self._kernels[device_clock]
-        # 1 · clear
+        # 1 · clear: with the brick P2G, only the node bricks its last scatter marked, unless a
+        # chunk starts (or another P2G wrote last): then all of it, once every ~32 substeps
+        sparse = brick is not None and not resort and self._grid_writer is brick
         clear_grid(self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
-                   deterministic=cfg.deterministic, multi_field=self.flags.multi_field)
+                   deterministic=cfg.deterministic, multi_field=self.flags.multi_field,
+                   marks=brick.marks if sparse else None, nb=brick.nb if sparse else 0)
+        if brick is not None and not sparse:
+            brick.marks.zero_()
+        self._grid_writer = brick
         # 2 · P2G
         pp = P2GParams()
         pp.inv_dx, pp.dt, pp.nodes = inv_dx, float(dt), nn
@@ -294,10 +303,14 @@ class Solver:
                 pp, cur.x, cur.v, cur.C, cur.F, cur.J, cur.Jp, cur.alive, state.mass, state.volume,
                 state.material, state.field_id, self._materials_dev,
                 self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed, self._sub])
-        # 3 · grid update
-        wp.launch(grid, dim=(nn, nn, nn), device=self.device, inputs=[
+        # 3 · grid update (with the brick P2G: only the node bricks it marked)
+        dim = (nn, nn, nn)
+        if brick is not None:
+            grid, dim = make_grid_update(device_clock=device_clock, sparse=True), brick.marks.shape[0] * BRICK**3
+        wp.launch(grid, dim=dim, device=self.device, inputs=[
             self._grid_params(dt, state.n_fields), self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
-            self._colliders_dev, self._sdf, self._grid_v, self._counts, self._sub])
+            self._colliders_dev, self._sdf, self._grid_v, self._counts,
+            brick.marks if brick is not None else self._counts, self._sub])
         # 4 · G2P
         gp = G2PParams()
         gp.dt, gp.inv_dx = float(dt), inv_dx

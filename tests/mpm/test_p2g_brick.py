@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from tests.mpm.mpm_helpers import block, concat
-from mpmfx.mpm import Solver, SolverConfig, preset
+from mpmfx.mpm import Particles, Solver, SolverConfig, preset
 from mpmfx.mpm.p2g_brick import BrickP2G
 from mpmfx.mpm.stepper import SubstepDev
 
@@ -39,7 +39,7 @@ def _grid(solver, state, brick=None, *, sort=False) -> np.ndarray:
 @pytest.mark.parametrize("deterministic", [True, False])
 def test_brick_p2g_matches_the_reference_in_any_particle_order(deterministic):
     solver, state, rng = _scene(deterministic)
-    brick = BrickP2G(solver.flags, state.n, solver.device)
+    brick = BrickP2G(solver.flags, state.n, solver.device, nodes=GRID + 1)
     _grid(solver, state, brick, sort=True)  # sorted by the positions below, then they move
     x = state.cur.x.numpy()
     moved = x + rng.uniform(-1.0, 1.0, x.shape).astype(np.float32) / GRID
@@ -49,7 +49,7 @@ def test_brick_p2g_matches_the_reference_in_any_particle_order(deterministic):
     ref = _grid(solver, state)
     assert ref[..., 0].sum() > 0
     stale = _grid(solver, state, brick)
-    shuffled = BrickP2G(solver.flags, state.n, solver.device)
+    shuffled = BrickP2G(solver.flags, state.n, solver.device, nodes=GRID + 1)
     _grid(solver, state, shuffled, sort=True)  # then the order no longer matches its keys and segments
     shuffled.idx.assign(np.tile(rng.permutation(state.n).astype(np.int32), 2))
     for out in (stale, _grid(solver, state, shuffled), _grid(solver, state, brick, sort=True)):
@@ -57,3 +57,54 @@ def test_brick_p2g_matches_the_reference_in_any_particle_order(deterministic):
             np.testing.assert_array_equal(out, ref)
         else:
             np.testing.assert_allclose(out, ref, rtol=1e-5, atol=1e-6 * np.abs(ref).max())
+
+
+SPARSE_GRID = 64
+
+
+def _sparse_scene():
+    """A few hundred particles strewn through the domain: most bricks' neighbours are empty,
+    so a window's marks are all that covers the nodes its particles reach."""
+    solver = Solver([preset("Water"), preset("Mushy")], SolverConfig(grid_n=SPARSE_GRID), device="cpu",
+                    stepper="device")
+    rng = np.random.default_rng(5)
+    n = 100
+    parts = Particles(x=rng.uniform(0.15, 0.85, (n, 3)).astype(np.float32),
+                      v=rng.normal(0.0, 0.5, (n, 3)).astype(np.float32),
+                      volume=np.full(n, SPARSE_GRID ** -3.0 / 8, np.float32),
+                      material=(np.arange(n) % 2).astype(np.int32), body=np.zeros(n, np.int32))
+    state = solver.init_state(parts)
+    sub = SubstepDev()
+    sub.dt, sub.damping_factor, sub.affine_keep, sub.active = 1e-4, 1.0, 1.0, 1
+    solver._sub.assign([sub])
+    return solver, state, rng
+
+
+def test_substeps_after_the_first_clear_and_update_only_the_marked_node_bricks():
+    """Inside a chunk the brick P2G's node marks stand in for the whole grid: the clear zeroes
+    only the bricks the last scatter touched and the grid update skips the rest. The marks
+    must cover every node holding mass, and G2P must read the same velocities as with the
+    dense phases, or particles would pick up the last substep's stale grid."""
+    solver, state, rng = _sparse_scene()
+    brick = BrickP2G(solver.flags, state.n, solver.device, nodes=SPARSE_GRID + 1)
+    _grid(solver, state, brick, sort=True)  # a chunk's first substep: all of the grid cleared
+    x = state.cur.x.numpy()
+    state.cur.x.assign(x + rng.uniform(-1.0, 1.0, x.shape).astype(np.float32) / SPARSE_GRID)
+    sparse = _grid(solver, state, brick)  # the next substep: cleared by the first one's marks
+    nxt = {k: a.numpy().copy() for k, a in zip("xvC", (state.nxt.x, state.nxt.v, state.nxt.C))}
+    marks = brick.marks.numpy().reshape((brick.nb,) * 3)
+    assert 0 < marks.sum() < marks.size // 2  # sparse: most bricks are left out
+    held = np.argwhere(sparse[..., 0] != 0) // 4
+    assert marks[tuple(held.T)].all()
+
+    ref_solver, ref_state, _ = _sparse_scene()  # the dense reference phases at the same positions
+    ref_state.cur.x.assign(state.cur.x.numpy())
+    ref = _grid(ref_solver, ref_state)
+    np.testing.assert_array_equal(sparse, ref)
+    for k, a in zip("xvC", (ref_state.nxt.x, ref_state.nxt.v, ref_state.nxt.C)):
+        np.testing.assert_array_equal(nxt[k], a.numpy(), err_msg=k)
+    # shuffled: every particle outside its window adds to the grid directly and marks its own
+    # stencil's bricks; the substep after clears by those marks
+    brick.idx.assign(np.tile(rng.permutation(state.n).astype(np.int32), 2))
+    for _ in range(2):
+        np.testing.assert_array_equal(_grid(solver, state, brick), ref)
