@@ -41,6 +41,7 @@ def segments(solver, state) -> dict:
             "p10_p50_p90": [int(v) for v in np.percentile(sizes, [10, 50, 90])], "max_per_seg": int(sizes.max()),
             "segs_under_64": int((sizes < 64).sum()), "mean_run": float(len(valid) / max(1, runs)),
             "fallback_now": int(out.sum()),
+            "marked_bricks": int(br.marks.numpy().sum()), "bricks": int(br.nb**3),
             "memory_coherence": float(np.mean(np.abs(np.diff(idx[: start[-1]].astype(np.int64))) == 1))}
 
 

@@ -134,6 +134,20 @@ def field_contact(v: wp.vec3, v_cm: wp.vec3, normal_in: wp.vec3, mu: float) -> w
 
 
 @wp.func
+def boundaries(gp: GridParams, colliders: wp.array(dtype=ColliderParams), sdf: wp.array(dtype=float),
+               counts: wp.array(dtype=wp.int32), v: wp.vec3, i: int, j: int, k: int) -> wp.vec3:
+    """A node's velocity after the colliders and the walls (zero, and counted, if not finite)."""
+    xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
+    for c in range(gp.num_colliders):
+        v = apply_collider(colliders[c], sdf, xn, v, 0.5 * gp.dx)
+    v = apply_walls(v, wp.vec3i(i, j, k), gp)
+    if not wp.isfinite(v):
+        wp.atomic_add(counts, Count.GRID_NONFINITE, 1)
+        v = wp.vec3(0.0)  # the substep is rejected anyway; keep G2P finite
+    return v
+
+
+@wp.func
 def update_node(gp: GridParams, grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
                 grid_normal: wp.array3d(dtype=wp.vec3), grid_fixed: wp.array4d(dtype=wp.int64),
                 colliders: wp.array(dtype=ColliderParams), sdf: wp.array(dtype=float),
@@ -149,7 +163,6 @@ def update_node(gp: GridParams, grid_m: wp.array3d(dtype=float), grid_mv: wp.arr
             m_tot += m
             p_tot += m * v
             grad_tot += mass_gradient(gp, grid_normal, grid_fixed, f * gp.nodes + i, j, k)
-    xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
     for f in range(gp.n_fields):
         fi = f * gp.nodes + i
         m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, fi, j, k)
@@ -159,12 +172,7 @@ def update_node(gp: GridParams, grid_m: wp.array3d(dtype=float), grid_mv: wp.arr
                 # own gradient minus the others': for two fields the normals are exactly
                 # opposite, so the contact impulses cancel and momentum is conserved
                 v = field_contact(v, p_tot / m_tot, 2.0 * g - grad_tot, gp.contact_friction)
-            for c in range(gp.num_colliders):
-                v = apply_collider(colliders[c], sdf, xn, v, 0.5 * gp.dx)
-            v = apply_walls(v, wp.vec3i(i, j, k), gp)
-            if not wp.isfinite(v):
-                wp.atomic_add(counts, Count.GRID_NONFINITE, 1)
-                v = wp.vec3(0.0)  # the substep is rejected anyway; keep G2P finite
+            v = boundaries(gp, colliders, sdf, counts, v, i, j, k)
         grid_v[fi, j, k] = v
 
 
@@ -195,11 +203,13 @@ def make_grid_update(*, device_clock: bool = False, sparse: bool = False):
                 return
             gp.dt = sub[0].dt
             gp.damping_factor = sub[0].damping_factor
-        if wp.static(sparse):
+        if wp.static(sparse):  # (one field: the brick P2G has no multi-field mode)
             node = marked_node(marks, wp.tid(), (gp.nodes + BRICK - 1) // BRICK, gp.nodes)
             if node[0] >= 0:
-                update_node(gp, grid_m, grid_mv, grid_normal, grid_fixed, colliders, sdf, grid_v, counts,
-                            node[0], node[1], node[2])
+                m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, node[0], node[1], node[2])
+                if m > 0.0:
+                    v = boundaries(gp, colliders, sdf, counts, v, node[0], node[1], node[2])
+                grid_v[node[0], node[1], node[2]] = v
         else:
             i, j, k = wp.tid()
             update_node(gp, grid_m, grid_mv, grid_normal, grid_fixed, colliders, sdf, grid_v, counts, i, j, k)

@@ -34,10 +34,13 @@ snow 3.6 / 4.5 ms at 128 (no cap), 3.0 / 3.8 at 80, 2.7 / 3.4 at 64, 2.7 / 3.3 a
 3.3 at 48 (deterministic: 5.2 / 6.0, 4.7 / 5.5, 4.4 / 5.2, 4.6 / 5.3, 5.1 / 5.8); the same cap
 on G2P made it slower (water 1.49 -> 1.77 ms at 64).
 
-Deterministic mode sums the reference's fixed-point contributions (integers: order-free) in
-an int64 window, so replays are bit-identical; against the reference the last bits differ on
-CUDA, where the compiler contracts multiply-adds differently (measured: same substep counts,
-max |dx| 8.8e-7 domain after 681 water substeps at grid 32), and not at all on the CPU.
+Deterministic mode rounds each run's row sums to the reference's fixed point and adds them
+in an int64 window (integers: order-free). A run's float sums are deterministic: its
+particles are summed in slot order, and the sort starts from particle order each time, so
+ties keep particle order whatever happened before (a run resumed from a checkpoint sums as
+the first did). So replays are bit-identical, while against the reference (which rounds each
+particle's contribution) a node differs by about a quantum a particle of its runs: rounding
+the sums instead is ~8x fewer float-to-int64 conversions and int64 registers.
 Extra device memory: 28 bytes a particle (keys and order double-buffered for the sort 16,
 flags / offsets / segment starts 12); no payload array.
 
@@ -68,7 +71,6 @@ MAX_REGISTERS = 64  # a thread's registers (the compiler takes 128 unbounded: se
 MAX_BLOCKS = 1 << 15  # blocks at most; each walks segments block, block + MAX_BLOCKS, ...
 PARKED = 16  # floats a parked particle: m, m v (3), affine (9), fx (3)
 NO_KEY = wp.constant(0x7FFFFFFF)  # tracers and removed particles: sorted last, never scattered
-vec12l = wp.types.vector(length=12, dtype=wp.int64)  # deterministic sums of a run's row: node k, channel c at 4 k + c
 
 # Shared arrays live in native functions (static, so every call in a block reaches the same
 # memory); each function owns its arrays. On the CPU (one thread a block) they are plain
@@ -208,10 +210,13 @@ def mark_window(marks: wp.array(dtype=wp.int32), brick: int, nb: int, q: int):
 def _brick_keys(pp: P2GParams, x: wp.array(dtype=wp.vec3), alive: wp.array(dtype=wp.int32),
                 mass: wp.array(dtype=float), idx: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.int32),
                 sub: wp.array(dtype=SubstepDev)):
-    s = wp.tid()
+    p = wp.tid()
     if sub[0].active == 0:
         return
-    p = idx[s]
+    # the sort starts from particle order, so equal keys keep it: the order inside a run, and
+    # so a run's float sums, depend on the particles alone (a resumed run sums as the first did)
+    idx[p] = p
+    s = p
     if alive[p] == 0 or mass[p] == 0.0:
         keys[s] = NO_KEY
         return
@@ -297,14 +302,14 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
     def add_run(pp: P2GParams, u0: int, n_park: int, i: int, j: int):
         """Row (i, j) of the stencil of the parked run starting at slot u0: the run's
         contributions to its three nodes (the reference's numbers, particle by particle),
-        summed, then added to the window once a node and channel."""
+        summed in slot order, then added to the window once a node and channel (deterministic:
+        each sum rounded to fixed point, see the module docstring)."""
         dx = 1.0 / pp.inv_dx
         code = int(park(5, u0, 0.0))
         m_sum = wp.vec3(0.0)  # per node k = 0, 1, 2
         mv0 = wp.vec3(0.0)
         mv1 = wp.vec3(0.0)
         mv2 = wp.vec3(0.0)
-        q = vec12l()  # deterministic: node k, channel c at 4 k + c
         u = u0
         while u < n_park:
             if int(park(5, u, 0.0)) != code:
@@ -322,27 +327,25 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                 w = W[i, 0] * W[j, 1] * W[k, 2]
                 dpos = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
                 mom = w * (mv + aff * dpos)
-                if wp.static(det):
-                    q[4 * k] = q[4 * k] + to_fixed(w * m, pp.q_mass_inv)
-                    for c in range(3):
-                        q[4 * k + 1 + c] = q[4 * k + 1 + c] + to_fixed(mom[c], pp.q_mom_inv)
+                m_sum[k] = m_sum[k] + w * m
+                if k == 0:
+                    mv0 += mom
+                elif k == 1:
+                    mv1 += mom
                 else:
-                    m_sum[k] = m_sum[k] + w * m
-                    if k == 0:
-                        mv0 += mom
-                    elif k == 1:
-                        mv1 += mom
-                    else:
-                        mv2 += mom
+                    mv2 += mom
             u += 1
         e = ((code // (WIN * WIN) + i) * WIN + (code // WIN) % WIN + j) * WIN + code % WIN
-        for k in range(3):
-            if wp.static(det):
-                for c in range(4):
-                    window_q(1, c * WIN_NODES + e + k, q[4 * k + c])
-            else:
+        if wp.static(det):
+            for k in range(3):
+                window_q(1, e + k, to_fixed(m_sum[k], pp.q_mass_inv))
+            for c in range(3):
+                window_q(1, (1 + c) * WIN_NODES + e, to_fixed(mv0[c], pp.q_mom_inv))
+                window_q(1, (1 + c) * WIN_NODES + e + 1, to_fixed(mv1[c], pp.q_mom_inv))
+                window_q(1, (1 + c) * WIN_NODES + e + 2, to_fixed(mv2[c], pp.q_mom_inv))
+        else:
+            for k in range(3):
                 window_f(1, e + k, m_sum[k])
-        if wp.static(not det):
             for c in range(3):
                 window_f(1, (1 + c) * WIN_NODES + e, mv0[c])
                 window_f(1, (1 + c) * WIN_NODES + e + 1, mv1[c])

@@ -1,9 +1,10 @@
-"""The device stepper (chunks of substeps decided on the device, stepper.py / chunked.py, with
-the brick P2G of p2g_brick.py) against the reference host loop and reference P2G, over a
-few hundred substeps on the CPU: deterministic mode bit for bit (the same substeps,
-rejections and particles; on CUDA the brick P2G differs in the last bits, see its module); fast mode sums each node's float contributions in another order, so there the
-same substeps and positions within 1e-4 domain units (1/600 of a cell), velocities within
-1e-3 domain/s."""
+"""The device stepper (chunks of substeps decided on the device, stepper.py / chunked.py)
+against the reference host loop, over a few hundred substeps on the CPU. Deterministic mode,
+with the host loop's P2G: bit for bit (the same substeps, rejections and particles). With the
+brick P2G of p2g_brick.py (the GPU's), which sums each node's contributions in another order
+(fast mode) or rounds each run's sums to fixed point (deterministic mode): the same substeps,
+positions within 1e-4 domain units (1/600 of a cell), velocities within 1e-3 domain/s, and in
+deterministic mode bit-identical replays and resumes."""
 
 import numpy as np
 import pytest
@@ -39,12 +40,18 @@ def _colliders():
     return [box, sphere]
 
 
-def _run(stepper, mats, parts, cfg, frames):
+def _solver(stepper, mats, cfg, p2g):
     colliders = _colliders() if "time_scale" in cfg else ()
     solver = Solver([preset(m) for m in mats], SolverConfig(grid_n=16, **cfg), colliders=colliders, device="cpu",
                     stepper=stepper)
-    if not solver.flags.multi_field:  # the GPU's default P2G (the brick one), in fast mode too
-        solver._device_advance.p2g = "brick"
+    if not solver.flags.multi_field:
+        solver._device_advance.p2g = p2g
+    return solver
+
+
+def _run(stepper, mats, parts, cfg, frames, *, p2g="brick"):
+    """p2g: "brick" (the GPU's default) or "reference" (the CPU's)."""
+    solver = _solver(stepper, mats, cfg, p2g)
     state = solver.init_state(parts)
     reports = [solver.advance(state, f / 24, (f + 1) / 24) for f in range(frames)]
     return solver.state_to_numpy(state), reports, state.clock
@@ -54,7 +61,10 @@ def _run(stepper, mats, parts, cfg, frames):
 def test_device_stepper_matches_the_host_loop_bit_for_bit(case):
     mats, make, cfg, frames = CASES[case]
     ref, ref_reports, ref_clock = _run("host", mats, make(), cfg, frames)
-    out, reports, clock = _run("device", mats, make(), cfg, frames)
+    # deterministic: the stepper's own logic, with the host loop's P2G; fast: the brick P2G
+    # (its deterministic mode rounds per run: test_brick_p2g_deterministic_mode below)
+    out, reports, clock = _run("device", mats, make(), cfg, frames,
+                               p2g="brick" if cfg.get("deterministic") is False else "reference")
     assert sum(r.substeps for r in reports) >= 50
     if case == "rejections":
         assert sum(r.rejected_substeps for r in reports) > 0
@@ -84,3 +94,37 @@ def test_device_stepper_raises_the_host_loops_errors():
                 solver.advance(state, 0.0, 1 / 24)
             msgs.append(str(err.value))
         assert msgs[0] == msgs[1]
+
+
+def test_brick_p2g_deterministic_mode_replays_and_resumes_bit_identically():
+    """The brick P2G rounds each run's sums to fixed point, so its deterministic mode is not
+    the reference's bits: close to the host loop as fast mode is, and bit-identical with
+    itself, run again or resumed from a checkpoint (whatever order the particles were in
+    before: a run's order is particle order). On the CPU a block parks one particle at a
+    time, so runs are single particles there; scripts/p2g_gpu.py checks replay and resume
+    with real runs on a GPU."""
+    mats, make_block, cfg, _ = CASES["water+snow, deterministic"]
+
+    def make():  # stirred: particles change corner nodes, so the runs' make-up keeps changing
+        parts = make_block()
+        parts.v[:] = np.random.default_rng(7).normal(0.0, 0.5, parts.v.shape)
+        return parts
+
+    ref, ref_reports, _ = _run("host", mats, make(), cfg, 4)
+    out, reports, clock = _run("device", mats, make(), cfg, 4)
+    assert [r.substeps for r in reports] == [r.substeps for r in ref_reports]
+    np.testing.assert_allclose(out["x"], ref["x"], rtol=0, atol=1e-4)
+    np.testing.assert_allclose(out["v"], ref["v"], rtol=0, atol=1e-3)
+    again, _, clock2 = _run("device", mats, make(), cfg, 4)
+    solver = _solver("device", mats, cfg, "brick")
+    state = solver.init_state(make())
+    for f in range(2):
+        solver.advance(state, f / 24, (f + 1) / 24)
+    resumed = _solver("device", mats, cfg, "brick")
+    state2, _ = resumed.restore(solver.checkpoint(state, 2 / 24))
+    for f in (2, 3):
+        resumed.advance(state2, f / 24, (f + 1) / 24)
+    for key in ref:
+        np.testing.assert_array_equal(again[key], out[key], err_msg=key)
+        np.testing.assert_array_equal(resumed.state_to_numpy(state2)[key], out[key], err_msg=key)
+    assert clock == clock2
