@@ -1,0 +1,113 @@
+"""Timing probes (not product paths), on the GPU:
+
+1. where the brick P2G's deterministic mode loses time against the fast one, on hero_dam:
+   after two frames with the shipped kernel, each variant swaps one piece of the int64 window
+   for a cheaper, WRONG one for one timed quarter frame (only its time is read): 32-bit shared
+   atomics, plain (racy) adds, no global flush;
+2. G2P of snow (Mushy, grid 128) under register caps (the compiler takes 128 a thread).
+
+    python3 scripts/kernel_probe.py --out $OUT
+"""
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+
+sys.path[:0] = [str(Path(__file__).resolve().parent)]
+
+
+SMOKE = ["domain.grid_n=32", "domain.origin=[-1.0, -0.1875, -1.0]"] if "--smoke" in sys.argv else []
+DEVICE = "cpu" if "--smoke" in sys.argv else "cuda"
+
+
+import warp as wp  # noqa: E402
+
+import mpmfx.mpm.p2g_brick as pb  # noqa: E402
+
+_Q = dict(T="long long", A="unsigned long long", N=pb.WIN_NODES)
+_ATOM32 = pb._WINDOW.replace("atomicAdd(({A}*)&win[e], ({A})value);",
+                             "atomicAdd((unsigned int*)&win[e], (unsigned int)value);")
+_PLAIN = pb._WINDOW.replace("atomicAdd(({A}*)&win[e], ({A})value);", "win[e] += value;")
+_NOFLUSH = pb._WINDOW.replace("return win[e];", "return op == 2 ? 0 : win[e];")
+
+
+@wp.func_native(_ATOM32.format(**_Q))
+def window_q_atom32(op: int, e: int, value: wp.int64) -> wp.int64: ...
+
+
+@wp.func_native(_PLAIN.format(**_Q))
+def window_q_plain(op: int, e: int, value: wp.int64) -> wp.int64: ...
+
+
+@wp.func_native(_NOFLUSH.format(**_Q))
+def window_q_noflush(op: int, e: int, value: wp.int64) -> wp.int64: ...
+
+
+def g2p_caps(grid_n: int = 128) -> list[dict]:
+    """G2P ms a substep, Mushy block of mpmfx bench gpu, under register caps."""
+    import mpmfx.mpm.g2p as g2p_mod
+    from mpmfx.bench.gpu import scene
+    from mpmfx.mpm import Solver, SolverConfig
+    from shot_profile import kernel_split
+    kernel, rows = wp.kernel, []
+    for cap in (None, 96, 80, 72):
+        def capped(*a, **kw):
+            def deco(f):
+                if f.__name__ != "g2p":
+                    return kernel(*a, **kw)(f)
+                extra = {"cuda_max_registers": cap} if cap is not None else {}
+                return kernel(*a, **{**kw, **extra, "module": kw["module"] + f"_cap{cap}"})(f)
+            return deco
+        g2p_mod.wp.kernel = capped
+        g2p_mod.make_g2p.cache_clear()
+        try:
+            mats, parts, _ = scene("Mushy", grid_n)
+            solver = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=False), device=DEVICE)
+        finally:
+            g2p_mod.wp.kernel = kernel
+        state = solver.init_state(parts)
+        span = 32 * solver.config.cfl * solver.config.dx / max(m.wave_speed() for m in mats)
+        solver.advance(state, 0.0, span)
+        ms, rep = kernel_split(solver, state, span, 2 * span)
+        k = max(1, rep.substeps + rep.rejected_substeps)
+        rows.append({"probe": "g2p cap", "variant": str(cap), "n": state.n,
+                     "g2p_ms": sum(v for n, v in ms.items() if "g2p" in n) / k,
+                     "total_ms": sum(ms.values()) / k})
+        print(json.dumps(rows[-1]), flush=True)
+    return rows
+
+
+def main() -> int:
+    wp.config.quiet = True
+    from p2g_shot import p2g_ms
+    from shot_profile import build
+    variants = {"int64 window (as shipped)": pb.window_q, "32-bit shared atomics": window_q_atom32,
+                "plain (racy) int64 adds": window_q_plain,
+                "no global flush (reads 0)": window_q_noflush}
+    rows = []
+    solver, state, shot = build("hero_dam", SMOKE, Path("/tmp/p2g_shot_cache"), DEVICE)
+    solver._device_advance.p2g = "brick"
+    for f in range(2):
+        solver.advance(state, f / 24, (f + 1) / 24)
+    data, t = solver.checkpoint(state, 2 / 24), 2 / 24
+    for name, fn in variants.items():
+        pb.window_q = fn
+        pb.make_brick_scatter.cache_clear()
+        st, _ = solver.restore(data)
+        solver._device_advance._brick = None
+        try:  # ~10 substeps: the wrong variants may blow the state up soon after
+            ms = p2g_ms(solver, st, t, t + 5e-4)
+        except Exception as err:  # noqa: BLE001 (reported)
+            ms = repr(err)[:120]
+        rows.append({"probe": "det window", "variant": name, "scatter_ms": ms})
+        print(json.dumps(rows[-1]), flush=True)
+    pb.window_q = variants["int64 window (as shipped)"]
+    rows += g2p_caps(16 if SMOKE else 128)
+    Path(os.environ.get("OUT", ".")).joinpath("kernel_probe.json").write_text(json.dumps(rows, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
