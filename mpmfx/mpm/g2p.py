@@ -26,9 +26,7 @@ from .slots import Count, Stat
 from .state import SceneFlags
 from .stepper import SubstepDev
 
-
-
-G2P_MAX_REGISTERS = 80
+G2P_MAX_REGISTERS = 80  # see make_g2p
 
 
 @wp.struct

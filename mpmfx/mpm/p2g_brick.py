@@ -220,14 +220,12 @@ def _brick_keys(pp: P2GParams, x: wp.array(dtype=wp.vec3), alive: wp.array(dtype
     # the sort starts from particle order, so equal keys keep it: the order inside a run, and
     # so a run's float sums, depend on the particles alone (a resumed run sums as the first did)
     idx[p] = p
-    s = p
     if alive[p] == 0 or mass[p] == 0.0:
-        keys[s] = NO_KEY
+        keys[p] = NO_KEY
         return
     b = wp.max(base_node(x[p], pp.inv_dx), wp.vec3i(0))  # >= 0 inside the domain; keys stay non-negative
-    nb = (pp.nodes + BRICK - 1) // BRICK
-    brick = ((b[0] // BRICK) * nb + b[1] // BRICK) * nb + b[2] // BRICK
-    keys[s] = brick * 64 + ((b[0] % BRICK) * BRICK + b[1] % BRICK) * BRICK + b[2] % BRICK
+    brick = node_brick(b[0], b[1], b[2], (pp.nodes + BRICK - 1) // BRICK)
+    keys[p] = brick * 64 + ((b[0] % BRICK) * BRICK + b[1] % BRICK) * BRICK + b[2] % BRICK
 
 
 @wp.kernel(enable_backward=False)
