@@ -71,8 +71,10 @@ class SolverConfig:
         dt_max, dt_min: bounds on the substep, seconds. A substep that has to go below
             dt_min raises SimulationError.
         max_substeps_per_frame: SimulationError past this many substeps in one advance().
-        deterministic: P2G in fixed-point integer atomics so a replay is bit-identical
-            (guide §10.1); see `mpmfx.mpm.p2g` for range and resolution.
+        deterministic: P2G in fixed-point integer atomics so a replay (or a resume from a
+            checkpoint) is bit-identical on the same device (guide §10.1); see `mpmfx.mpm.p2g`
+            for range and resolution. A GPU's brick P2G rounds each run of particles' sums,
+            the CPU's reference P2G each particle's, so CPU and GPU runs differ in the last bits.
         multi_field: one velocity field per body (Particles.body), so separate bodies collide
             and part instead of fusing (guide §9.3); costs one grid per body (at most 8).
         contact_friction: Coulomb mu between bodies in multi-field mode.
