@@ -519,6 +519,16 @@ def add_clamp(a: wp.array(dtype=float), value: float, clip: float):
 
 
 @wp.kernel
+def gate_closing(closed: wp.array(dtype=float), dist: wp.array(dtype=float), gate: float):
+    """closed = dist wherever the closing filled the distance by no more than gate voxels
+    (dist - closed <= gate: a lattice face's uniform shift, or an edge it eroded numerically);
+    closed elsewhere (the voids it fills). sparse._close_voids."""
+    t = wp.tid()
+    if dist[t] - closed[t] <= gate:
+        closed[t] = dist[t]
+
+
+@wp.kernel
 def renormalise(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
