@@ -53,7 +53,7 @@ ANISO_MIN_NEIGHBOURS = 8  # fewer neighbours within the kernel (spray) keep a ro
 LINE_KERNELS_ON_CPU = True  # tests compare both paths on the CPU (tests/surface/test_line_kernels.py)
 MAX_DENSE_FILL = 0.5  # of a full block's particles: the most the INSIDE rule asks of a neighbour (_dense_rule)
 SEED_DEPTH_SMOOTHED = 0.25  # voxels, the same after smoothing (a lone particle's blob is ~1 voxel deep then)
-CLOSE_GATE = 0.1  # x the closing radius: the least fill the closing keeps (_close_voids); flat lattice faces move 0.03-0.05 of it
+CLOSE_GATE = (0.06, 0.12)  # x the closing radius: fills the closing drops / keeps in full (_close_voids); it shifts flat lattice faces 0.03-0.05
 
 class SparseGrid:
     """Block grid aligned to multiples of 8 voxels (OpenVDB leaf alignment), with empty margins.
@@ -566,19 +566,20 @@ def _close_voids(wp, S, bcoord, bmap, dist, rho: float, clip: float):
     Dents a ball of radius rho cannot enter from outside (the voids of random samples) fill;
     convex edges stay as they are, where the blur that follows fills dents only while it rounds
     them (SurfaceParams.close_voids; README "Closing the sample voids").
-    Only where the closing fills by more than CLOSE_GATE x rho: on the grid, grow-redistance-
+    Only where the closing fills by more than CLOSE_GATE[0] x rho (in full from CLOSE_GATE[1] x
+    rho, a ramp between so that a fill growing between frames does not jump): on the grid, grow-redistance-
     shrink is not the identity on a flat face. It moved a lattice box's faces out uniformly
     by 0.03 h ("fine") to 0.05 h ("fast") at rho = h (the raw field's own dimples are 0.008 h on a
     cubic lattice's (100) face, 0.03 h on (110)), and it eroded convex edges by up to 0.2 h
     (dist - closed down to -0.46 voxel), which made the lattice box 0.023 -> 0.034 h ("fast").
     The voids it should fill move the distance 0.2-1.5 h. Gated, the lattice rows stay as
     without the closing and random samples keep most of its gain (100k "fast" sphere
-    0.121 -> 0.114 h; 2-core CPU; the gate anywhere in 0.06-0.15 rho gives the same to 0.002 h)."""
+    0.121 -> 0.114 h; 2-core CPU; a step gate anywhere in 0.06-0.15 rho gives the same to 0.002 h)."""
     grown = wp.clone(dist)
     _launch(wp, S.add_scalar, grown.shape[0], [grown, -rho])
     closed = _redistance(wp, bcoord, bmap, grown, clip + rho)
     _launch(wp, S.add_clamp, closed.shape[0], [closed, rho, clip])
-    _launch(wp, S.gate_closing, closed.shape[0], [closed, dist, CLOSE_GATE * rho])
+    _launch(wp, S.gate_closing, closed.shape[0], [closed, dist, CLOSE_GATE[0] * rho, CLOSE_GATE[1] * rho])
     return closed
 
 
