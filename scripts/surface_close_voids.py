@@ -3,8 +3,11 @@ particle spacings), on the bench's shapes, random and lattice, "fast" and "fine"
 p99 vertex error (h), volume error, pieces, seconds of the whole call (a first call compiles).
 Prints one table and writes surface_close_voids.csv under --out. Imports numpy, warp and mpmfx.
 
-    python3 scripts/surface_close_voids.py --counts 1000000 10000000 --device cuda --out $OUT
-    python3 scripts/surface_close_voids.py --counts 100000 --device cpu --out /tmp/close   # 2-core CPU: ~1 min
+    PYTHONPATH=. python3 scripts/surface_close_voids.py --counts 1000000 10000000 --device cuda --out $OUT
+    PYTHONPATH=. python3 scripts/surface_close_voids.py --counts 100000 --device cpu --out /tmp/close   # 2-core CPU: ~1 min
+
+PYTHONPATH=. (from the repository root): a script's own folder comes first on sys.path, so
+without it an installed mpmfx elsewhere would be measured instead of this checkout.
 """
 import argparse
 import csv
