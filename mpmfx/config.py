@@ -161,7 +161,7 @@ class Surface(_Section):
     group: SurfaceGroup = Field(SurfaceGroup.MATERIAL, description="One surface per material, per object, or one.")
     close_voids: Real = Field(0.0, ge=0, description="Radius (m) of a ball rolled over the surface before smoothing: "
                                                     "fills the dents of sparse particles without rounding edges (~ the "
-                                                    "particle spacing; 0 = off; slower, and flat lattice faces fill in).")
+                                                    "particle spacing; 0 = off; slower, random sheets get thicker).")
     anisotropic: Bool = Field(False, description="Yu & Turk anisotropic kernels: thin sheets of water stay sheets "
                                                  "(no holes); slower, and sharp box edges round off more.")
     density: Bool = Field(False, description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "

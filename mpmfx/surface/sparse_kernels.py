@@ -519,6 +519,18 @@ def add_clamp(a: wp.array(dtype=float), value: float, clip: float):
 
 
 @wp.kernel
+def gate_closing(closed: wp.array(dtype=float), dist: wp.array(dtype=float), lo: float, hi: float):
+    """Keep the closing's fill dist - closed only where it is deeper than lo voxels (a lattice
+    face's uniform shift, an edge it eroded numerically: dist kept), in full from hi voxels
+    (the voids it fills), in part in between (no jump as a fill grows past lo between frames).
+    sparse._close_voids."""
+    t = wp.tid()
+    fill = dist[t] - closed[t]
+    w = wp.clamp((fill - lo) / wp.max(hi - lo, 1e-6), 0.0, 1.0)
+    closed[t] = dist[t] - w * fill
+
+
+@wp.kernel
 def renormalise(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
