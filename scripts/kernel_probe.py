@@ -105,7 +105,9 @@ def main() -> int:
         print(json.dumps(rows[-1]), flush=True)
     pb.window_q = variants["int64 window (as shipped)"]
     rows += g2p_caps(16 if SMOKE else 128)
-    Path(os.environ.get("OUT", ".")).joinpath("kernel_probe.json").write_text(json.dumps(rows, indent=1))
+    out = Path(os.environ.get("OUT", "profile_out"))  # as shot_profile.py / p2g_shot.py
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "kernel_probe.json").write_text(json.dumps(rows, indent=1))
     return 0
 
 
