@@ -14,15 +14,14 @@ from .p2g_brick import BRICK, marked_node
 
 
 def clear_grid(grid_m, grid_mv, grid_normal, grid_fixed, *, deterministic: bool, multi_field: bool,
-               marks=None, nb: int = 0) -> None:
+               marks=None) -> None:
     """Zero the accumulators P2G is about to write (float or fixed-point ones; the mass
-    gradients too in multi-field mode). marks: per node brick (nb^3, int32), 1 where the last
-    P2G wrote; given, only those bricks are zeroed, and the marks are reset for the next P2G."""
+    gradients too in multi-field mode). marks: per node brick (p2g_brick.node_brick order,
+    int32), 1 where the last P2G wrote; given, only those bricks are zeroed."""
     if marks is not None:
         nn = grid_fixed.shape[0] if deterministic else grid_m.shape[0]
         wp.launch(_clear_marked, dim=marks.shape[0] * BRICK**3, device=marks.device,
-                  inputs=[marks, nb, nn, int(deterministic), grid_m, grid_mv, grid_fixed])
-        marks.zero_()
+                  inputs=[marks, -(-nn // BRICK), nn, int(deterministic), grid_m, grid_mv, grid_fixed])
         return
     if deterministic:
         grid_fixed.zero_()

@@ -490,8 +490,7 @@ class BrickP2G:
             wp.launch(_seg_starts, dim=n, device=dev, inputs=[self.keys, self.flag, self.pos, n, self.start,
                                                                self.n_seg, sub])
             self.sorted = True
-        nb = -(-pp.nodes // BRICK)
-        blocks = max(1, min(n, nb ** 3, MAX_BLOCKS))
+        blocks = max(1, min(n, self.nb ** 3, MAX_BLOCKS))
         scatter = make_brick_scatter(self.flags, bool(pp.deterministic))
         wp.launch(scatter, dim=blocks * self.block, block_dim=self.block, device=dev, inputs=[
             pp, self.keys, self.start, self.n_seg, self.block, blocks, self.idx, cur.x, cur.v, cur.C, cur.F, cur.J,

@@ -286,9 +286,9 @@ class Solver:
         sparse = brick is not None and not resort and self._grid_writer is brick
         clear_grid(self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
                    deterministic=cfg.deterministic, multi_field=self.flags.multi_field,
-                   marks=brick.marks if sparse else None, nb=brick.nb if sparse else 0)
-        if brick is not None and not sparse:
-            brick.marks.zero_()
+                   marks=brick.marks if sparse else None)
+        if brick is not None:
+            brick.marks.zero_()  # the scatter below marks what it writes
         self._grid_writer = brick
         # 2 · P2G
         pp = P2GParams()

@@ -15,6 +15,13 @@ from mpmfx.mpm.stepper import SubstepDev
 GRID = 16
 
 
+def _set_substep(solver):
+    """The device clock's substep (dt 1e-4 s) that _phases(device_clock=True) reads."""
+    sub = SubstepDev()
+    sub.dt, sub.damping_factor, sub.affine_keep, sub.active = 1e-4, 1.0, 1.0, 1
+    solver._sub.assign([sub])
+
+
 def _scene(deterministic: bool):
     solver = Solver([preset("Water"), preset("Mushy")], SolverConfig(grid_n=GRID, deterministic=deterministic),
                     device="cpu", stepper="device")
@@ -23,9 +30,7 @@ def _scene(deterministic: bool):
     rng = np.random.default_rng(3)
     parts.v[:] = rng.normal(0.0, 0.5, parts.v.shape)
     state = solver.init_state(parts)
-    sub = SubstepDev()
-    sub.dt, sub.damping_factor, sub.affine_keep, sub.active = 1e-4, 1.0, 1.0, 1
-    solver._sub.assign([sub])
+    _set_substep(solver)
     return solver, state, rng
 
 
@@ -77,9 +82,7 @@ def _sparse_scene():
                       volume=np.full(n, SPARSE_GRID ** -3.0 / 8, np.float32),
                       material=(np.arange(n) % 2).astype(np.int32), body=np.zeros(n, np.int32))
     state = solver.init_state(parts)
-    sub = SubstepDev()
-    sub.dt, sub.damping_factor, sub.affine_keep, sub.active = 1e-4, 1.0, 1.0, 1
-    solver._sub.assign([sub])
+    _set_substep(solver)
     return solver, state, rng
 
 
