@@ -58,7 +58,7 @@ def kernels(name, grid_n, det, p2g, sort1=False):
     mats, parts, _ = scene(name, grid_n)
     s = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=det), device="cuda", stepper="device")
     da = s._device_advance
-    da.p2g, da.sort_every_substep, da.graphs = p2g, sort1, False
+    da.p2g, da.sort_every, da.graphs = p2g, int(sort1), False
     st = s.init_state(parts)
     span = 32 * s.config.cfl * s.config.dx / max(m.wave_speed() for m in mats)
     s.advance(st, 0.0, span)

@@ -156,7 +156,7 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     da = solver._device_advance
     if path == "device-unbinned":  # (multi-field scenes and the CPU have only the reference P2G)
         da.p2g = "reference"
-    da.sort_every_substep = path == "device-sort1"
+    da.sort_every = int(path == "device-sort1")
     state = solver.init_state(parts)
     c = max(m.wave_speed() for m in mats)
     span = substeps * cfg.cfl * cfg.dx / c  # ~substeps CFL substeps at rest

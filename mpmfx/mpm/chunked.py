@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from .colliders import ColliderKeys, pack_colliders
-from .p2g_brick import BrickP2G, fits_brick_keys
+from .p2g_brick import BrickP2G, fits_brick_keys, sort_cadence
 from .slots import Clock, Count, Status
 from .stepper import CHUNKS, StepperParams, make_clock_kernels, pose_colliders, wave_table, WaveParams
 
@@ -52,12 +52,12 @@ class DeviceAdvance:
         brick = not solver.flags.multi_field and solver.device.is_cuda and fits_brick_keys(cfg.grid_n + 1)
         self.p2g = "brick" if brick else "reference"
         self._brick = None
-        self.sort_every_substep = False  # the brick P2G re-sorts at chunk starts only (on: for measuring)
+        self.sort_every = 0  # 0: re-sort as the particles move (sort_cadence); k > 0: every k substeps (measuring)
         self._graphs: dict = {}
         self._graph_state = None  # the State the cached graphs point into (kept alive with them)
 
     # ------------------------------------------------------------------ one chunk
-    def _launch_chunk(self, state, k: int) -> None:
+    def _launch_chunk(self, state, k: int, every: int) -> None:
         s, dev = self.s, self.s.device
         bufs = (state.cur, state.nxt)
         for i in range(k):
@@ -69,24 +69,26 @@ class DeviceAdvance:
                     self.sp, self.clk, k_.times, k_.translations, k_.rotations, k_.offsets, k_.counts,
                     s._colliders_dev])
             s._phases(state, bufs[i % 2], bufs[1 - i % 2], 0.0, device_clock=True,
-                      brick=self._brick if self.p2g == "brick" else None, resort=i == 0 or self.sort_every_substep)
+                      brick=self._brick if self.p2g == "brick" else None, chunk_start=i == 0,
+                      resort=i % every == 0)
             wp.launch(self.end, dim=1, device=dev, inputs=[self.sp, self.waves, self.clk, s._sub, s._stats,
                                                              s._counts, self.last_bad])
 
-    def _chunk(self, state, k: int) -> None:
-        """k substeps starting from state.cur; on CUDA replayed from a captured graph."""
+    def _chunk(self, state, k: int, every: int) -> None:
+        """k substeps starting from state.cur, the brick P2G re-sorting every `every` (and at
+        the first); on CUDA replayed from a captured graph."""
         if not (self.s.device.is_cuda and self.graphs):
-            self._launch_chunk(state, k)
+            self._launch_chunk(state, k, every)
             return
         if self._graph_state is not state:
             self._graphs.clear()
             self._graph_state = state
         key = (k, id(state.cur), self.s._grid_v.ptr, state.n_fields, self.s._q_mass, self.p2g, id(self._brick),
-               self.sort_every_substep)
+               every)
         graph = self._graphs.get(key)
         if graph is None:
             with wp.ScopedCapture(device=self.s.device) as cap:
-                self._launch_chunk(state, k)
+                self._launch_chunk(state, k, every)
             graph = self._graphs[key] = cap.graph
         wp.capture_launch(graph)
 
@@ -121,6 +123,13 @@ class DeviceAdvance:
         want = math.ceil(remaining / dt) if dt > 0 else CHUNKS[-1]
         return max((k for k in CHUNKS if k <= want), default=CHUNKS[0])
 
+    def _sort_every(self, c: np.ndarray, dt_guess: float) -> int:
+        """The next chunk's substeps between the brick P2G's sorts (p2g_brick.sort_cadence)."""
+        if self.sort_every or self.p2g != "brick":
+            return self.sort_every or CHUNKS[-1]
+        dt = c[Clock.DT_CFL] if c[Clock.DT_CFL] > 0 else dt_guess
+        return sort_cadence(float(c[Clock.MAX_SPEED]), float(dt), self.s.config.dx, CHUNKS[-1])
+
     def run(self, state, t0: float, t1: float):
         s, cfg = self.s, self.s.config
         wall0 = time.perf_counter()
@@ -136,7 +145,8 @@ class DeviceAdvance:
                 c[Clock.STATUS] = Status.RUNNING
                 self.clk.assign(c)
             before = c[Clock.N_SUB]
-            self._chunk(state, self._chunk_length(c, s._cfl_dt(state.clock)))  # first chunk: the host's CFL dt
+            dt_guess = s._cfl_dt(state.clock)  # the first chunk's: the host's CFL dt
+            self._chunk(state, self._chunk_length(c, dt_guess), self._sort_every(c, dt_guess))
             c = self.clk.numpy()
             if int(c[Clock.N_SUB] - before) % 2:
                 state.swap()

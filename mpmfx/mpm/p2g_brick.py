@@ -4,10 +4,10 @@ The reference P2G (p2g.py) adds each particle's 27 x 4 contributions to the grid
 global atomics (14.4 ms a substep for 19M particles on an H100). Here the particles are kept
 in brick order (a brick: 4^3 stencil corner nodes) and one CUDA block scatters a brick:
 
-    1. at the first substep of a chunk (stepper.py) the particles' order `idx` is
-       radix-sorted by brick, then by corner node inside it, and the slot ranges of equal
-       bricks (segments) are found; the other substeps of the chunk keep both (particles
-       move a fraction of a cell per substep);
+    1. at the first substep of a chunk (chunked.py), and then every few substeps as the
+       particles move (sort_cadence), the particles' order `idx` is radix-sorted by brick,
+       then by corner node inside it, and the slot ranges of equal bricks (segments) are
+       found; the substeps between keep both (particles move a fraction of a cell a substep);
     2. per substep, per segment, one block zeroes a window of 8^3 nodes in shared memory
        (the brick's 4^3 corners, one node of slack below and above, and the stencil's reach);
     3. in rounds of 128 consecutive slots (coalesced reads) each thread computes one
@@ -65,7 +65,7 @@ from .p2g import P2GParams, make_particle_affine, to_fixed
 from .state import SceneFlags
 from .stepper import SubstepDev
 
-__all__ = ["BrickP2G", "fits_brick_keys"]
+__all__ = ["BrickP2G", "fits_brick_keys", "sort_cadence"]
 
 BRICK = 4  # corner nodes per brick and axis (a key's low 6 bits)
 WIN = 8  # window nodes per axis: BRICK + 1 slack below + 1 above + the stencil's 2
@@ -74,6 +74,7 @@ BLOCK_CUDA = 128  # threads a block on CUDA, and slots parked a round
 MAX_REGISTERS = 64  # a thread's registers (the compiler takes 128 unbounded: see the docstring)
 MAX_BLOCKS = 1 << 15  # blocks at most; each walks segments block, block + MAX_BLOCKS, ...
 PARKED = 16  # floats a parked particle: m, m v (3), affine (9), fx (3)
+SORT_TRAVEL = 0.125  # cells the fastest particle may move between two sorts (see sort_cadence)
 NO_KEY = wp.constant(0x7FFFFFFF)  # tracers and removed particles: sorted last, never scattered
 
 # Shared arrays live in native functions (static, so every call in a block reaches the same
@@ -169,6 +170,37 @@ def runs(op: int, e: int, value: int, lane: int, nthreads: int) -> int: ...
 def fits_brick_keys(nodes: int) -> bool:
     """Whether a grid of `nodes` per axis keeps the sort keys (brick * 64 + corner) in int32."""
     return (-(-nodes // BRICK)) ** 3 * 64 < NO_KEY
+
+
+def sort_cadence(speed: float, dt: float, dx: float, longest: int) -> int:
+    """Substeps between two sorts of the particles' order: the largest power of two up to
+    `longest` in which a particle at `speed` (domain/s; the last substep's fastest) moves at
+    most SORT_TRAVEL cells at steps of dt (s); dx: a cell, domain units.
+
+    Why: a run is consecutive slots whose particles share a corner node. Between sorts the
+    particles cross cell faces, a run breaks into pieces, and the scatter adds each piece
+    (shared atomics, a task of 9 threads a piece), while a sort costs ~0.1 ms at 3.4M
+    particles with its launch gaps. Measured on an H100 (deterministic, one frame after a
+    checkpoint, ms a substep whole / scatter; scripts/p2g_runs.py):
+
+        sorted                    hero_dam (3.4M water,      hero_castle (2.6M sand,
+                                  fastest 0.059 cells)        0.016 cells a substep)
+        at chunk starts (<= 32)   3.06 / 2.48                 1.87 / 1.15
+        every 16 / 8              -                           1.71 / 0.98, 1.62 / 0.89
+        every 4                   1.93 / 1.26                 1.59 / 0.83
+        every 2                   1.84 / 1.10                 1.63 / 0.81
+        every substep             1.91 / 1.02                 -
+
+    The optimum sits where the fastest particle moves 0.06-0.12 cells between sorts, in both;
+    1/8 cell picks it in both. A block at rest (the bench) keeps its runs and sorts once a
+    chunk. Grouping a warp's particles by corner node instead (__match_any_sync, whatever
+    their slots) recovered less (hero_dam 2.41 ms sorted at chunk starts, 1.91 every 2) and
+    lost 3-10 % in the bench at 19M particles, where runs crossing a warp's boundary split."""
+    travel = speed * dt / dx
+    k = 1
+    while 2 * k <= longest and 2 * k * travel <= SORT_TRAVEL:
+        k *= 2
+    return k
 
 
 @wp.func

@@ -272,18 +272,19 @@ class Solver:
         self._phases(state, state.cur, state.nxt, dt, device_clock=False)
 
     def _phases(self, state: State, cur: ParticleBuffers, nxt: ParticleBuffers, dt: float, *,
-                device_clock: bool, brick=None, resort: bool = False) -> None:
+                device_clock: bool, brick=None, resort: bool = False, chunk_start: bool = True) -> None:
         """Launch the four phases reading `cur`, writing `nxt`. device_clock: the kernels take
         dt (and the dt-dependent factors) from self._sub instead of `dt` (stepper.py);
         brick: a p2g_brick.BrickP2G to scatter with (device clock only), else the reference P2G;
-        resort: the brick P2G re-sorts its particle order first."""
+        resort: the brick P2G re-sorts its particle order first; chunk_start: clear the whole
+        grid even where the brick P2G's marks would allow a sparse clear."""
         cfg = self.config
         inv_dx = float(cfg.grid_n)
         nn = cfg.grid_n + 1
         p2g, g2p, grid = self._kernels[device_clock]
         # 1 · clear: with the brick P2G, only the node bricks its last scatter marked, unless a
         # chunk starts (or another P2G wrote last): then all of it, once every ~32 substeps
-        sparse = brick is not None and not resort and self._grid_writer is brick
+        sparse = brick is not None and not chunk_start and self._grid_writer is brick
         clear_grid(self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
                    deterministic=cfg.deterministic, multi_field=self.flags.multi_field,
                    marks=brick.marks if sparse else None)

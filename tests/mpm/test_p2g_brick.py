@@ -35,7 +35,8 @@ def _scene(deterministic: bool):
 
 
 def _grid(solver, state, brick=None, *, sort=False) -> np.ndarray:
-    solver._phases(state, state.cur, state.nxt, 0.0, device_clock=True, brick=brick, resort=sort)
+    solver._phases(state, state.cur, state.nxt, 0.0, device_clock=True, brick=brick, resort=sort,
+                   chunk_start=sort)
     if solver.config.deterministic:
         return solver._grid_fixed.numpy().copy()  # on the CPU numpy() is a view
     return np.concatenate([solver._grid_m.numpy()[..., None], solver._grid_mv.numpy()], -1)
@@ -110,3 +111,14 @@ def test_substeps_after_the_first_clear_and_update_only_the_marked_node_bricks()
                 np.testing.assert_allclose(b, a.numpy(), rtol=1e-5, atol=1e-5 * np.abs(a.numpy()).max(), err_msg=k)
     marks = brick.marks.numpy().reshape((brick.nb,) * 3)
     assert 0 < marks.sum() < marks.size // 2  # sparse: most bricks are left out
+
+
+def test_sort_cadence_sorts_as_often_as_the_fastest_particle_crosses_an_eighth_of_a_cell():
+    from mpmfx.mpm.p2g_brick import SORT_TRAVEL, sort_cadence
+    dx, dt = 1.0 / 256, 5e-5
+    assert sort_cadence(0.0, dt, dx, 32) == 32  # at rest: once a chunk
+    for cells in (0.001, 0.016, 0.03, 0.059, 0.1, 0.2):
+        k = sort_cadence(cells * dx / dt, dt, dx, 32)
+        assert k & (k - 1) == 0 and 1 <= k <= 32  # a power of two: few captured graphs
+        assert k * cells <= SORT_TRAVEL or k == 1  # never further than SORT_TRAVEL between sorts...
+        assert 2 * k * cells > SORT_TRAVEL or k == 32  # ...nor sorting twice as often as that needs
