@@ -14,10 +14,12 @@ in brick order (a brick: 4^3 stencil corner nodes) and one CUDA block scatters a
        particle's mass, momentum, MLS affine term and fx (the reference's numbers:
        `particle_affine`, the same expressions) and parks them in shared memory;
     4. nine threads per run of parked particles sharing a stencil (one per stencil row) sum
-       the run's contributions to their three nodes in registers and add each sum to the
-       window once per channel: ~8x fewer shared atomics than one per particle;
+       the run's contributions to their three nodes in registers and add each sum, rounded to
+       fixed point, to the window once per channel: ~8x fewer shared atomics than one per
+       particle, and integer ones (see _WINDOW);
     5. the block adds each touched window node to the grid, one global atomic per channel
-       (~8x fewer than the runs would need).
+       (~8x fewer than the runs would need): integers to the fixed-point grid in
+       deterministic mode, floats in fast mode.
     A particle that left the window since the sort (more than one cell out of its brick)
     adds to the grid directly, as the reference does: slower, never lost.
     6. every block marks the 3^3 node bricks around its brick (its window's), and a fallback
@@ -38,13 +40,22 @@ snow 3.6 / 4.5 ms at 128 (no cap), 3.0 / 3.8 at 80, 2.7 / 3.4 at 64, 2.7 / 3.3 a
 3.3 at 48 (deterministic: 5.2 / 6.0, 4.7 / 5.5, 4.4 / 5.2, 4.6 / 5.3, 5.1 / 5.8); the same cap
 on G2P made it slower (water 1.49 -> 1.77 ms at 64).
 
-Deterministic mode rounds each run's row sums to the reference's fixed point and adds them
-in an int64 window (integers: order-free). A run's float sums are deterministic: its
-particles are summed in slot order, and the sort starts from particle order each time, so
-ties keep particle order whatever happened before (a run resumed from a checkpoint sums as
-the first did). So replays are bit-identical, while against the reference (which rounds each
+The window holds fixed point in both modes (the reference's quanta, p2g.py), so its sums are
+exact and order-free. A run's float sums are deterministic too: its particles are summed in
+slot order, and the sort starts from particle order each time, so ties keep particle order
+whatever happened before (a run resumed from a checkpoint sums as the first did). So replays
+are bit-identical in deterministic mode, while against the reference (which rounds each
 particle's contribution) a node differs by about a quantum a particle of its runs: rounding
-the sums instead is ~8x fewer float-to-int64 conversions and int64 registers.
+the sums instead is ~8x fewer float-to-int64 conversions and int64 registers. The window
+was float (fast) and int64 (deterministic) before, and shared memory adds both with
+compare-and-swap loops; as 32-bit words, measured on an H100 (G particle-substeps/s, bench
+blocks; ms a substep, shots; scripts/p2g_runs.py):
+
+                                  fast: float -> words       deterministic: int64 -> words
+    Water / Snow 2.4M             3.16 -> 3.42 / 2.34 -> 2.60   2.25 -> 3.45 / 1.83 -> 2.54
+    Water / Snow 19.4M            4.12 -> 4.07 / 2.93 -> 2.91   3.06 -> 4.07 / 2.33 -> 2.87
+    hero_dam / hero_castle (ms)   1.41 -> 1.44 / 1.37 -> 1.38   1.85 -> 1.46 / 1.67 -> 1.37
+
 Extra device memory: 28 bytes a particle (keys and order double-buffered for the sort 16,
 flags / offsets / segment starts 12), and 4 bytes a node brick for the marks; no payload array.
 
@@ -81,21 +92,32 @@ NO_KEY = wp.constant(0x7FFFFFFF)  # tracers and removed particles: sorted last, 
 # memory); each function owns its arrays. On the CPU (one thread a block) they are plain
 # static arrays and the barriers vanish.
 #
-# The window: 4 channel planes (mass, momentum x, y, z) of WIN_NODES nodes; ops: 0 zero,
-# 1 add, 2 read, 3 barrier (channel planes: the threads of a run add one channel at a time,
-# to nodes 8 and 64 words apart, which interleaved channels would crowd onto fewer banks).
+# The window: 4 channel planes (mass, momentum x, y, z) of WIN_NODES nodes, in fixed point
+# (p2g.to_fixed), each value two 32-bit words (low, high): shared memory has native 32-bit
+# integer atomics only (a float or 64-bit add there compiles to a compare-and-swap loop,
+# ATOMS.CAST.SPIN on sm_90). An add is exact 64-bit addition: the low word's atomic returns
+# the word before it, and its carry goes into the high word's add. Ops: 0 zero, 1 add, 2 read,
+# 3 barrier. (Channel planes: the threads of a run add one channel at a time, to nodes 8 and
+# 64 words apart, which interleaved channels would crowd onto fewer banks.)
 _WINDOW = """
 #if defined(__CUDA_ARCH__)
-__shared__ {T} win[4 * {N}];
+__shared__ unsigned int win_lo[4 * {N}];
+__shared__ unsigned int win_hi[4 * {N}];
 #else
-static {T} win[4 * {N}];
+static unsigned int win_lo[4 * {N}];
+static unsigned int win_hi[4 * {N}];
 #endif
-if (op == 0) {{ win[e] = 0; }}
+if (op == 0) {{ win_lo[e] = 0u; win_hi[e] = 0u; }}
 else if (op == 1) {{
+    unsigned long long u = (unsigned long long)value;
+    unsigned int lo = (unsigned int)u, hi = (unsigned int)(u >> 32);
 #if defined(__CUDA_ARCH__)
-    atomicAdd(({A}*)&win[e], ({A})value);
+    unsigned int old = atomicAdd(&win_lo[e], lo);
+    atomicAdd(&win_hi[e], hi + (old + lo < old ? 1u : 0u));
 #else
-    win[e] += value;
+    unsigned int old = win_lo[e];
+    win_lo[e] = old + lo;
+    win_hi[e] += hi + (old + lo < old ? 1u : 0u);
 #endif
 }}
 else if (op == 3) {{
@@ -103,8 +125,9 @@ else if (op == 3) {{
     __syncthreads();
 #endif
 }}
-return win[e];
+return (long long)(((unsigned long long)win_hi[e] << 32) | (unsigned long long)win_lo[e]);
 """
+
 
 # The parked particles of a round: PARKED planes of floats, and each slot's window code
 # (corner node inside the window, or -2: nothing parked); ops: 1 write, 2 read a float,
@@ -151,12 +174,8 @@ return 0;
 """
 
 
-@wp.func_native(_WINDOW.format(T="float", A="float", N=WIN_NODES))
-def window_f(op: int, e: int, value: float) -> float: ...
-
-
-@wp.func_native(_WINDOW.format(T="long long", A="unsigned long long", N=WIN_NODES))
-def window_q(op: int, e: int, value: wp.int64) -> wp.int64: ...
+@wp.func_native(_WINDOW.format(N=WIN_NODES))
+def window(op: int, e: int, value: wp.int64) -> wp.int64: ...
 
 
 @wp.func_native(_PARK.format(F=PARKED, B=BLOCK_CUDA))
@@ -293,18 +312,15 @@ def _seg_starts(keys: wp.array(dtype=wp.int32), flag: wp.array(dtype=wp.int32), 
 
 @functools.lru_cache(maxsize=None)
 def make_brick_scatter(flags: SceneFlags, deterministic: bool):
-    """The scatter kernel for the scene's materials, fast (float window) or deterministic
-    (int64 window; one kernel each, so each declares only its own window)."""
+    """The scatter kernel for the scene's materials; fast mode adds the window to the float
+    grid, deterministic mode to the fixed-point one."""
     particle_affine = make_particle_affine(flags)
     det = deterministic
 
     @wp.func
     def sync():
         """A block barrier (the window's own function, so no second window is declared)."""
-        if wp.static(det):
-            window_q(3, 0, wp.int64(0))
-        else:
-            window_f(3, 0, 0.0)
+        window(3, 0, wp.int64(0))
 
     @wp.func
     def add_to_grid(pp: P2GParams, m: float, mv: wp.vec3, aff: wp.mat33, fx: wp.vec3, b: wp.vec3i,
@@ -370,23 +386,15 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                     mv2 += mom
             u += 1
         e = ((code // (WIN * WIN) + i) * WIN + (code // WIN) % WIN + j) * WIN + code % WIN
-        if wp.static(det):
-            for k in range(3):
-                window_q(1, e + k, to_fixed(m_sum[k], pp.q_mass_inv))
-            for c in range(3):
-                window_q(1, (1 + c) * WIN_NODES + e, to_fixed(mv0[c], pp.q_mom_inv))
-                window_q(1, (1 + c) * WIN_NODES + e + 1, to_fixed(mv1[c], pp.q_mom_inv))
-                window_q(1, (1 + c) * WIN_NODES + e + 2, to_fixed(mv2[c], pp.q_mom_inv))
-        else:
-            for k in range(3):
-                window_f(1, e + k, m_sum[k])
-            for c in range(3):
-                window_f(1, (1 + c) * WIN_NODES + e, mv0[c])
-                window_f(1, (1 + c) * WIN_NODES + e + 1, mv1[c])
-                window_f(1, (1 + c) * WIN_NODES + e + 2, mv2[c])
+        for k in range(3):
+            window(1, e + k, to_fixed(m_sum[k], pp.q_mass_inv))
+        for c in range(3):
+            window(1, (1 + c) * WIN_NODES + e, to_fixed(mv0[c], pp.q_mom_inv))
+            window(1, (1 + c) * WIN_NODES + e + 1, to_fixed(mv1[c], pp.q_mom_inv))
+            window(1, (1 + c) * WIN_NODES + e + 2, to_fixed(mv2[c], pp.q_mom_inv))
 
     @wp.func
-    def flush(e: int, origin: wp.vec3i, nn: int, grid_m: wp.array3d(dtype=float),
+    def flush(pp: P2GParams, e: int, origin: wp.vec3i, nn: int, grid_m: wp.array3d(dtype=float),
               grid_mv: wp.array3d(dtype=wp.vec3), grid_fixed: wp.array4d(dtype=wp.int64)):
         """Window node e to the grid, one atomic a channel, if anything landed there."""
         gi = origin[0] + e // (WIN * WIN)
@@ -395,16 +403,16 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
         if gi >= 0 and gj >= 0 and gk >= 0 and gi < nn and gj < nn and gk < nn:
             if wp.static(det):
                 for c in range(4):
-                    qv = window_q(2, c * WIN_NODES + e, wp.int64(0))
+                    qv = window(2, c * WIN_NODES + e, wp.int64(0))
                     if qv != wp.int64(0):
                         wp.atomic_add(grid_fixed, gi, gj, gk, c, qv)
             else:
-                wm = window_f(2, e, 0.0)
-                if wm != 0.0:
-                    wp.atomic_add(grid_m, gi, gj, gk, wm)
-                    wp.atomic_add(grid_mv, gi, gj, gk, wp.vec3(window_f(2, WIN_NODES + e, 0.0),
-                                                               window_f(2, 2 * WIN_NODES + e, 0.0),
-                                                               window_f(2, 3 * WIN_NODES + e, 0.0)))
+                qm = window(2, e, wp.int64(0))
+                if qm != wp.int64(0):  # the quanta are powers of two: these divisions are exact
+                    wp.atomic_add(grid_m, gi, gj, gk, float(qm) / pp.q_mass_inv)
+                    wp.atomic_add(grid_mv, gi, gj, gk, wp.vec3(
+                        float(window(2, WIN_NODES + e, wp.int64(0))), float(window(2, 2 * WIN_NODES + e, wp.int64(0))),
+                        float(window(2, 3 * WIN_NODES + e, wp.int64(0)))) / pp.q_mom_inv)
 
     @wp.kernel(enable_backward=False, module=flags.key + ("_brick_det" if det else "_brick"),
                cuda_max_registers=MAX_REGISTERS)
@@ -428,10 +436,7 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
         seg = t // block
         while seg < n_seg[0]:  # the same count for every thread of a block: barriers stay uniform
             for ez in range(lane, 4 * WIN_NODES, block):
-                if wp.static(det):
-                    window_q(0, ez, wp.int64(0))
-                else:
-                    window_f(0, ez, 0.0)
+                window(0, ez, wp.int64(0))
             sync()
             s0 = start[seg]
             n_here = start[seg + 1] - s0
@@ -479,7 +484,7 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                     add_run(pp, runs(3, task // 9, 0, lane, block), n_park, (task % 9) // 3, task % 3)
                 sync()  # the parked slots are read before the next round writes them
             for e in range(lane, WIN_NODES, block):
-                flush(e, origin, nn, grid_m, grid_mv, grid_fixed)
+                flush(pp, e, origin, nn, grid_m, grid_mv, grid_fixed)
             for q in range(lane, 27, block):
                 mark_window(marks, brick, nb, q)
             sync()  # every read of the window done before the next segment zeroes it
