@@ -57,6 +57,7 @@ def run_shot(name: str, frames: list[int], *, overrides: list[str], cache: Path,
         "frames_surfaced": frames, "particles": man["voxelise"].get("particles"),
         "substeps_total": sum(substeps), "substeps_per_frame": [min(substeps or [0]), max(substeps or [0])],
         "stages": {r.stage: {"seconds": round(r.seconds, 2), "state": r.state, "frames": r.frames} for r in results},
+        "simulate_split": man["simulate"].get("seconds_split"),
         "run_wall_s": round(wall, 2), "surface_vertices": man["surface"].get("this_run", {}).get("vertices"),
         "surface_faces": man["surface"].get("this_run", {}).get("faces"),
         "voxel_m": None, "_surface_entry": str(entries["surface"].root), "_shot": run.shot,
@@ -113,6 +114,8 @@ def table(rows: list[dict], warm: dict | None, dev: str) -> str:
             r["shot"], r["particles"], r["grid_n"], r["frames_simulated"], r["substeps_total"],
             st.get("voxelise", {}).get("seconds"), st.get("simulate", {}).get("seconds"),
             st.get("surface", {}).get("seconds"), len(r["frames_surfaced"]), r["surface_vertices"], f"{packed:.1f}")))
+        if r.get("simulate_split"):
+            lines.append(f"  {r['shot']} simulate, s: " + ", ".join(f"{k} {v}" for k, v in r["simulate_split"].items()))
     return "\n".join(lines)
 
 

@@ -13,6 +13,7 @@ Frame files are `mpmfx.io.frames.ParticleFrame` records.
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import numpy as np
@@ -113,18 +114,27 @@ def run(ctx: Context) -> dict:
             state, _ = solver.restore(read_arrays(entry.root / "checkpoints" / f"{ckpt:04d}.npz"))
             if not entry.frame_path(frame, FRAME_EXT).exists():  # killed between checkpoint and frame
                 writer.submit(_write_frame, entry, frame, None, None, _host(solver, state), origin, size)
+        split = dict.fromkeys(("advance", "host_copy", "writer_wait"), 0.0)  # s, summed over the frames
         for f in ctx.progress(range(frame + 1, last + 1), total=last - frame, desc="simulate"):
+            t0 = time.perf_counter()
             try:
                 report = solver.advance(state, (f - 1 - start) / fps, (f - start) / fps)
             except SimulationError as exc:
                 raise StageError(f"frame {f}: {_advice(shot, exc)}") from None
+            t1 = time.perf_counter()
             ckpt_data = None
             if (f - start) % shot.solver.checkpoint_every == 0 or f == last:
                 ckpt_data = _host_copy(solver.checkpoint(state, (f - start) / fps), solver)
-            writer.submit(_write_frame, entry, f, _qa(report, size), ckpt_data, _host(solver, state), origin, size)
+            host = _host(solver, state)
+            t2 = time.perf_counter()
+            writer.submit(_write_frame, entry, f, _qa(report, size), ckpt_data, host, origin, size)
+            for k, dt in zip(split, (t1 - t0, t2 - t1, time.perf_counter() - t2)):
+                split[k] += dt
+        t0 = time.perf_counter()
+    split["writer_wait"] += time.perf_counter() - t0  # the last frame's files
     qa = {int(p.stem): json.loads(p.read_text()) for p in sorted((entry.root / "qa").glob("*.json"))}
     return {"qa": qa, "particles": int(state.n), "device": str(solver.device),
-            "materials": [m.mode.name for m in mats]}
+            "materials": [m.mode.name for m in mats], "seconds_split": {k: round(v, 3) for k, v in split.items()}}
 
 
 def _advice(shot: Shot, exc) -> str:
