@@ -498,7 +498,10 @@ class Solver:
         1 for tracers. Host work only: safe on another thread."""
         J = np.ones(len(arrays["material"]), np.float32)
         if self.flags.solid:
-            J = np.linalg.det(arrays["F"]).astype(np.float32)
+            F = arrays["F"]  # the cofactor expansion: np.linalg.det (an LU a matrix) took 1.6 s at 2.6M
+            J = (F[:, 0, 0] * (F[:, 1, 1] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 1])
+                 - F[:, 0, 1] * (F[:, 1, 0] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 0])
+                 + F[:, 0, 2] * (F[:, 1, 0] * F[:, 2, 1] - F[:, 1, 1] * F[:, 2, 0])).astype(np.float32)
         if self.flags.water:
             water = np.array([m.mode == Mode.WATER for m in self.materials])[arrays["material"]]
             J = np.where(water, arrays["J"], J)

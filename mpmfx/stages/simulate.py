@@ -125,7 +125,8 @@ def run(ctx: Context) -> dict:
             ckpt_data = None
             if (f - start) % shot.solver.checkpoint_every == 0 or f == last:
                 ckpt_data = _host_copy(solver.checkpoint(state, (f - start) / fps), solver)
-            host = _host(solver, state)
+            # the frame's arrays are the checkpoint's where there is one (one copy off the device)
+            host = (solver, {k: ckpt_data[k] for k in FRAME_ARRAYS}) if ckpt_data else _host(solver, state)
             t2 = time.perf_counter()
             writer.submit(_write_frame, entry, f, _qa(report, size), ckpt_data, host, origin, size)
             for k, dt in zip(split, (t1 - t0, t2 - t1, time.perf_counter() - t2)):
@@ -173,11 +174,13 @@ def _particles(host: tuple, frame: int, origin, size: float) -> ParticleFrame:
     """The frame's particle record (world units) of the live particles of a host copy."""
     solver, s = host
     s = {**s, "J": solver.volume_ratio(s)}
-    alive = s["alive"].astype(bool)
-    out = ParticleFrame(x=(s["x"][alive] * size + origin).astype(np.float32),
-                        v=(s["v"][alive] * size).astype(np.float32), id=np.flatnonzero(alive).astype(np.int32),
-                        material=s["material"][alive].astype(np.int32), body=s["body"][alive].astype(np.int32),
-                        **{k: s[k][alive].astype(np.float32) for k in ("Jp", "J") if k in s})
+    alive = s["alive"] != 0
+    live = slice(None) if alive.all() else alive  # a slice views; a mask copies (~0.3 s at 2.6M)
+    out = ParticleFrame(x=(s["x"][live] * size + origin).astype(np.float32),
+                        v=(s["v"][live] * size).astype(np.float32), id=np.flatnonzero(alive).astype(np.int32),
+                        material=s["material"][live].astype(np.int32, copy=False),
+                        body=s["body"][live].astype(np.int32, copy=False),
+                        **{k: s[k][live].astype(np.float32, copy=False) for k in ("Jp", "J") if k in s})
     if not all(np.isfinite(a).all() for a in out.arrays().values()):
         raise StageError(f"frame {frame}: the solver returned non-finite values; nothing was cached. "
                          f"Lower solver.cfl or the stiffest material's youngs_modulus / bulk_modulus")
