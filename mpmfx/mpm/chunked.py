@@ -53,6 +53,7 @@ class DeviceAdvance:
         self.p2g = "brick" if brick else "reference"
         self._brick = None
         self.sort_every = 0  # 0: re-sort as the particles move (sort_cadence); k > 0: every k substeps (measuring)
+        self.last_sort_every = CHUNKS[-1]  # what the last chunk did
         self._graphs: dict = {}
         self._graph_state = None  # the State the cached graphs point into (kept alive with them)
 
@@ -146,7 +147,9 @@ class DeviceAdvance:
                 self.clk.assign(c)
             before = c[Clock.N_SUB]
             dt_guess = s._cfl_dt(state.clock)  # the first chunk's: the host's CFL dt
-            self._chunk(state, self._chunk_length(c, dt_guess), self._sort_every(c, dt_guess))
+            k = self._chunk_length(c, dt_guess)
+            self.last_sort_every = min(k, self._sort_every(c, dt_guess))  # (k: a chunk start only; one graph)
+            self._chunk(state, k, self.last_sort_every)
             c = self.clk.numpy()
             if int(c[Clock.N_SUB] - before) % 2:
                 state.swap()
