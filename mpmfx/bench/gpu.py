@@ -29,7 +29,7 @@ MIXED = MATERIALS  # the mixed scene's four columns
 SUBSTEPS = 50  # CFL substeps per timed advance() interval
 REGION_LO, REGION_SIZE = (0.2, 0.1, 0.2), (0.6, 0.4, 0.6)
 COLS = ["impl", "path", "scene", "grid_n", "particles", "det", "substeps", "G_per_s", "ms_substep", "ms_clear",
-        "ms_p2g", "ms_grid", "ms_g2p", "ms_host", "B_per_particle", "grid_MB", "GBs", "copy_GBs",
+        "ms_p2g", "ms_grid", "ms_g2p", "ms_sort", "ms_host", "B_per_particle", "grid_MB", "GBs", "copy_GBs",
         "x_taichi", "device"]
 
 
@@ -139,6 +139,31 @@ def _phase_split(solver, state, t: float, span: float) -> tuple[dict, float]:
     return {f"ms_{p}": v / k for p, v in ms.items()}, t + span
 
 
+def sort_ms(solver, state, reps: int = 10) -> float:
+    """Device ms of one brick-P2G sort (keys, CUB radix sort, segments) of `state`, timed
+    alone (CUDA; 0 without the brick P2G). The radix sort and the scan are not Warp
+    launches, so Warp's kernel timing (_phase_split) does not see them."""
+    import warp as wp
+
+    from mpmfx.mpm.p2g import P2GParams
+    from mpmfx.mpm.stepper import SubstepDev
+    brick = solver._device_advance._brick
+    if brick is None or not solver.device.is_cuda or solver._device_advance.p2g != "brick":
+        return 0.0
+    pp = P2GParams()
+    pp.inv_dx, pp.nodes = float(solver.config.grid_n), solver.config.grid_n + 1
+    sd = SubstepDev()
+    sd.active = 1
+    sub = wp.array([sd], dtype=SubstepDev, device=solver.device)
+    brick.sort(pp, state, state.cur, sub)  # warm
+    wp.synchronize_device(solver.device)
+    t0 = time.perf_counter()
+    for _ in range(reps):
+        brick.sort(pp, state, state.cur, sub)
+    wp.synchronize_device(solver.device)
+    return 1e3 * (time.perf_counter() - t0) / reps
+
+
 def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: float, *, substeps: int = SUBSTEPS,
              path: str = "device") -> dict:
     """One scene through advance(). path: "device" (the default stepper), "device-nograph"
@@ -183,8 +208,10 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
            "B_per_particle": part / state.n, "grid_MB": grid / 2**20, "moved_MB": moved / 2**20,
            "GBs": moved / (ms * 1e-3) / 1e9, "copy_GBs": copy_gbs,
            "finite": bool(np.isfinite(state.cur.x.numpy()).all()), "device": _device_name(solver.device)}
-    if phases:
-        row["ms_host"] = ms - sum(phases.values())
+    if phases:  # the sorts: one every `sort_every` substeps (the cadence the timed interval kept)
+        row["sort_every"] = da.sort_every
+        row["ms_sort"] = sort_ms(solver, state) / max(1, da.sort_every)
+        row["ms_host"] = ms - sum(phases.values()) - row["ms_sort"]
     return row
 
 

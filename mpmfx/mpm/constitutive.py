@@ -112,6 +112,38 @@ def hardening_factor(mat: MaterialParams, jp: float) -> float:
     return wp.exp(mat.hardening * (1.0 - jp))
 
 
+vec6 = wp.types.vector(length=6, dtype=wp.float32)
+"""A symmetric 3x3 matrix as (xx, yy, zz, xy, xz, yz): the stress G2P stores for P2G."""
+
+
+@wp.func
+def to_sym(U: wp.mat33, d: wp.vec3) -> vec6:
+    """U diag(d) U^T, kept as its six independent entries."""
+    A = U * wp.diag(d) * wp.transpose(U)
+    return vec6(A[0, 0], A[1, 1], A[2, 2], A[0, 1], A[0, 2], A[1, 2])
+
+
+@wp.func
+def from_sym(s: vec6) -> wp.mat33:
+    return wp.mat33(s[0], s[3], s[4], s[3], s[1], s[5], s[4], s[5], s[2])
+
+
+@wp.func
+def hencky_diag(eps: wp.vec3, mu: float, la: float) -> wp.vec3:
+    """Principal Kirchhoff stresses of StVK on Hencky strain: 2 mu eps + lambda tr(eps)."""
+    return 2.0 * mu * eps + wp.vec3(la * (eps[0] + eps[1] + eps[2]))
+
+
+@wp.func
+def log_strain(sig: wp.vec3) -> wp.vec3:
+    """Hencky strain of singular values (clamped away from 0: an inverted axis is a compressed one)."""
+    return wp.vec3(
+        wp.log(wp.max(wp.abs(sig[0]), 1.0e-4)),
+        wp.log(wp.max(wp.abs(sig[1]), 1.0e-4)),
+        wp.log(wp.max(wp.abs(sig[2]), 1.0e-4)),
+    )
+
+
 @wp.func
 def fixed_corotated_tau(F: wp.mat33, mu: float, la: float) -> wp.mat33:
     """Kirchhoff stress tau = P F^T of fixed-corotated elasticity (guide §7.1):
@@ -127,14 +159,7 @@ def hencky_tau(F: wp.mat33, mu: float, la: float) -> wp.mat33:
     """Kirchhoff stress of St. Venant-Kirchhoff on Hencky strain (Klar et al. 2016):
     tau = U (2 mu ln S + lambda tr(ln S) I) U^T."""
     U, sig, V = wp.svd3(F)
-    eps = wp.vec3(
-        wp.log(wp.max(wp.abs(sig[0]), 1.0e-4)),
-        wp.log(wp.max(wp.abs(sig[1]), 1.0e-4)),
-        wp.log(wp.max(wp.abs(sig[2]), 1.0e-4)),
-    )
-    tr = eps[0] + eps[1] + eps[2]
-    d = 2.0 * mu * eps + wp.vec3(la * tr)
-    return U * wp.diag(d) * wp.transpose(U)
+    return U * wp.diag(hencky_diag(log_strain(sig), mu, la)) * wp.transpose(U)
 
 
 @wp.func
@@ -156,39 +181,43 @@ def solid_tau(mat: MaterialParams, F: wp.mat33, jp: float) -> wp.mat33:
 
 
 @wp.func
-def snow_return_map(mat: MaterialParams, F: wp.mat33, jp: float) -> wp.mat44:
+def snow_plastic(mat: MaterialParams, F: wp.mat33, jp: float):
     """Stomakhin clamp (guide §7.2): singular values of the trial elastic F into
     [1 - theta_c, 1 + theta_s]; the clamped-away volume goes into Jp, clamped to
-    [jp_min, jp_max]. Returns mat44 packing (new F in the 3x3 block, new Jp at [3,3]).
-    F must not be inverted (G2P mirrors inverted particles first, see `uninvert`).
+    [jp_min, jp_max]. F must not be inverted (G2P mirrors inverted particles first, see
+    `uninvert`). Returns (elastic F, new Jp, tau): tau is the Kirchhoff stress of the
+    returned F and Jp (hardened fixed-corotated, = solid_tau of them), from the same SVD,
+    so P2G needs none of its own.
     F is rebuilt from its SVD only when the clamp fires: each rebuild shrinks the
     singular values by ~1e-6 (float32 SVD), which would otherwise creep in every substep."""
+    U, sig, V = wp.svd3(F)
     Fe = F
     jp_new = jp
+    s = sig
     if mat.plastic != 0:
-        U, sig, V = wp.svd3(F)
         lo = 1.0 - mat.theta_c
         hi = 1.0 + mat.theta_s
         sc = wp.vec3(wp.clamp(sig[0], lo, hi), wp.clamp(sig[1], lo, hi), wp.clamp(sig[2], lo, hi))
-        clamped = sc[0] != sig[0] or sc[1] != sig[1] or sc[2] != sig[2]
-        if clamped:
+        if sc[0] != sig[0] or sc[1] != sig[1] or sc[2] != sig[2]:
             jp_new = jp * (sig[0] * sig[1] * sig[2]) / (sc[0] * sc[1] * sc[2])
             jp_new = wp.clamp(jp_new, mat.jp_min, mat.jp_max)
             Fe = U * wp.diag(sc) * wp.transpose(V)
-    return pack_f_jp(Fe, jp_new)
+            s = sc
+    # fixed-corotated: 2 mu (F - R) F^T + lambda (J - 1) J I = U diag(2 mu (s - 1) s + lambda (J - 1) J) U^T
+    h = hardening_factor(mat, jp_new)
+    J = s[0] * s[1] * s[2]
+    d = 2.0 * mat.mu0 * h * wp.cw_mul(s - wp.vec3(1.0), s) + wp.vec3(mat.lambda0 * h * (J - 1.0) * J)
+    return Fe, jp_new, to_sym(U, d)
 
 
 @wp.func
-def sand_return_map(mat: MaterialParams, F: wp.mat33, vc: float) -> wp.mat44:
+def sand_plastic(mat: MaterialParams, F: wp.mat33, vc: float):
     """Drucker-Prager projection in Hencky strain (Klar et al. 2016) with cohesion and
     volume correction. vc: log-volume expansion discarded at the apex so far (>= 0; kept
-    in the particle's Jp slot). Returns (new F, new vc) packed like snow_return_map."""
+    in the particle's Jp slot). Returns (elastic F, new vc, tau), tau the Kirchhoff stress
+    of the returned F (= hencky_tau of it), from the same SVD."""
     U, sig, V = wp.svd3(F)
-    eps = wp.vec3(
-        wp.log(wp.max(wp.abs(sig[0]), 1.0e-4)),
-        wp.log(wp.max(wp.abs(sig[1]), 1.0e-4)),
-        wp.log(wp.max(wp.abs(sig[2]), 1.0e-4)),
-    )
+    eps = log_strain(sig)
     tr = eps[0] + eps[1] + eps[2] + vc
     eps_hat = eps - wp.vec3(tr / 3.0)
     norm = wp.length(eps_hat) + 1.0e-20
@@ -211,6 +240,21 @@ def sand_return_map(mat: MaterialParams, F: wp.mat33, vc: float) -> wp.mat44:
     if projected:  # rebuild only when projected (each SVD rebuild drifts ~1e-6)
         s = wp.vec3(wp.exp(eps_new[0]), wp.exp(eps_new[1]), wp.exp(eps_new[2]))
         Fe = U * wp.diag(s) * wp.transpose(V)
+        eps_new = log_strain(s)  # what hencky_tau of Fe reads
+    return Fe, vc_new, to_sym(U, hencky_diag(eps_new, mat.mu0, mat.lambda0))
+
+
+@wp.func
+def snow_return_map(mat: MaterialParams, F: wp.mat33, jp: float) -> wp.mat44:
+    """snow_plastic's (new F, new Jp) packed in a mat44 (3x3 block and [3, 3])."""
+    Fe, jp_new, tau = snow_plastic(mat, F, jp)
+    return pack_f_jp(Fe, jp_new)
+
+
+@wp.func
+def sand_return_map(mat: MaterialParams, F: wp.mat33, vc: float) -> wp.mat44:
+    """sand_plastic's (new F, new vc) packed like snow_return_map."""
+    Fe, vc_new, tau = sand_plastic(mat, F, vc)
     return pack_f_jp(Fe, vc_new)
 
 
@@ -239,11 +283,7 @@ def solid_energy_density(mat: MaterialParams, F: wp.mat33, jp: float) -> float:
     the stresses `solid_tau` applies."""
     U, sig, V = wp.svd3(F)
     if mat.mode == MODE_SAND:
-        eps = wp.vec3(
-            wp.log(wp.max(wp.abs(sig[0]), 1.0e-4)),
-            wp.log(wp.max(wp.abs(sig[1]), 1.0e-4)),
-            wp.log(wp.max(wp.abs(sig[2]), 1.0e-4)),
-        )
+        eps = log_strain(sig)
         tr = eps[0] + eps[1] + eps[2]
         return mat.mu0 * wp.dot(eps, eps) + 0.5 * mat.lambda0 * tr * tr
     h = hardening_factor(mat, jp)

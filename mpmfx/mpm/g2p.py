@@ -1,5 +1,9 @@
 """Phase 4 — G2P: gather v and C, advance F (or J), return mapping, advect (guide §3).
 
+A solid's Kirchhoff stress is computed here, from the SVD the return map already took, and
+stored for the next substep's P2G: the guide computes it in P2G from F, which costs a second
+SVD a particle and substep (stress of the elastic F G2P writes = stress P2G would compute).
+
 Reads the current particle buffers and writes the next ones, so a substep the stepper
 rejects leaves the current state untouched. Also reduces the per-substep statistics the
 stepper needs (max speed, hardening, J range) and counts what makes a substep invalid.
@@ -18,9 +22,11 @@ from .constitutive import (
     MaterialParams,
     bspline_weights,
     hardening_factor,
-    sand_return_map,
-    snow_return_map,
+    sand_plastic,
+    snow_plastic,
+    solid_tau,
     uninvert,
+    vec6,
 )
 from .slots import Count, Stat
 from .state import SceneFlags
@@ -104,18 +110,17 @@ def grid_density(gp: G2PParams, grid_m: wp.array3d(dtype=float), grid_fixed: wp.
 def plastic_update(mat: MaterialParams, F: wp.mat33, jp: float, C: wp.mat33, dt: float):
     """F^{n+1} = (I + dt C) F^n, mirrored out if inverted (see constitutive.uninvert), then
     the return map of the particle's mode (guide §7.2).
-    Returns (elastic F, new Jp slot, det of the trial F: <= 0 means it was inverted)."""
+    Returns (elastic F, new Jp slot, Kirchhoff stress of both (the next P2G's), det of the
+    trial F: <= 0 means it was inverted)."""
     Ft = (wp.identity(n=3, dtype=float) + dt * C) * F
     jt = wp.determinant(Ft)
     if jt <= 0.0:
         Ft = uninvert(Ft)
-    r = wp.mat44(0.0)
     if mat.mode == MODE_SNOW:
-        r = snow_return_map(mat, Ft, jp)
-    else:
-        r = sand_return_map(mat, Ft, jp)
-    Fe = wp.mat33(r[0, 0], r[0, 1], r[0, 2], r[1, 0], r[1, 1], r[1, 2], r[2, 0], r[2, 1], r[2, 2])
-    return Fe, r[3, 3], jt
+        Fe, jp_new, tau = snow_plastic(mat, Ft, jp)
+        return Fe, jp_new, tau, jt
+    Fe, jp_new, tau = sand_plastic(mat, Ft, jp)
+    return Fe, jp_new, tau, jt
 
 
 @wp.func
@@ -169,10 +174,10 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
         field_id: wp.array(dtype=wp.int32),
         x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
         F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
-        alive: wp.array(dtype=wp.int32),
+        alive: wp.array(dtype=wp.int32), tau: wp.array(dtype=vec6),
         x_out: wp.array(dtype=wp.vec3), v_out: wp.array(dtype=wp.vec3), C_out: wp.array(dtype=wp.mat33),
         F_out: wp.array(dtype=wp.mat33), J_out: wp.array(dtype=float), Jp_out: wp.array(dtype=float),
-        alive_out: wp.array(dtype=wp.int32),
+        alive_out: wp.array(dtype=wp.int32), tau_out: wp.array(dtype=vec6),
         stats: wp.array(dtype=float),
         counts: wp.array(dtype=wp.int32),
         sub: wp.array(dtype=SubstepDev),
@@ -185,6 +190,8 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
             gp.dt = s.dt
             gp.affine_keep = s.affine_keep
         F_new = wp.mat33(0.0)
+        tau_new = vec6(0.0)
+        solid = bool(False)  # a solid's stress is stored for the next P2G
         if wp.static(has_solid):
             F_new = F[p]
         J_new = float(1.0)
@@ -204,7 +211,8 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
             finite = bool(True)
             if wp.static(has_solid):
                 if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
-                    F_new, jp_new, j_trial = plastic_update(mat, F_new, jp_new, C_new, gp.dt)
+                    solid = True
+                    F_new, jp_new, tau_new, j_trial = plastic_update(mat, F_new, jp_new, C_new, gp.dt)
                     j_now = wp.determinant(F_new)
                     if j_trial <= 0.0:
                         # mirrored back out; the J stats keep the inversion so QA sees it
@@ -249,7 +257,21 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
         alive_out[p] = alive_new
         if wp.static(has_solid):
             F_out[p] = F_new
+            if solid:
+                tau_out[p] = tau_new
         if wp.static(has_water):
             J_out[p] = J_new
 
     return g2p
+
+
+@wp.kernel(enable_backward=False)
+def solid_stress(materials: wp.array(dtype=MaterialParams), material: wp.array(dtype=wp.int32),
+                 F: wp.array(dtype=wp.mat33), Jp: wp.array(dtype=float), tau: wp.array(dtype=vec6)):
+    """tau (n,) of every snow and sand particle from its F and Jp (solid_tau), for a state
+    that has no stored stress yet (a new one, or a checkpoint written before G2P stored it)."""
+    p = wp.tid()
+    mat = materials[material[p]]
+    if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
+        t = solid_tau(mat, F[p], Jp[p])
+        tau[p] = vec6(t[0, 0], t[1, 1], t[2, 2], t[0, 1], t[0, 2], t[1, 2])

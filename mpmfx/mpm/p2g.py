@@ -36,8 +36,9 @@ from .constitutive import (
     MaterialParams,
     bspline_gradients,
     bspline_weights,
-    solid_tau,
+    from_sym,
     tait_pressure,
+    vec6,
 )
 from .state import SceneFlags
 from .stepper import SubstepDev
@@ -67,19 +68,19 @@ def to_fixed(value: float, quantum_inv: float) -> wp.int64:
 @functools.lru_cache(maxsize=None)
 def make_particle_affine(flags: SceneFlags):
     """The MLS affine term of one particle (guide §4.4), specialised like make_p2g:
-    -dt V0 (4 / dx^2) tau + m C, with tau the Kirchhoff stress of its mode. Shared by the
-    reference P2G and the brick one (p2g_brick.py) so both scatter the same numbers."""
+    -dt V0 (4 / dx^2) tau + m C, with tau the Kirchhoff stress of its mode: a solid's as
+    the last G2P stored it (g2p.py), water's from J. Shared by the reference P2G and the
+    brick one (p2g_brick.py) so both scatter the same numbers."""
     has_solid = flags.solid
     has_water = flags.water
 
     @wp.func
-    def particle_affine(pp: P2GParams, mat: MaterialParams, F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float),
-                        Jp: wp.array(dtype=float), C: wp.array(dtype=wp.mat33), volume: wp.array(dtype=float),
-                        p: int, m: float) -> wp.mat33:
+    def particle_affine(pp: P2GParams, mat: MaterialParams, stress: wp.array(dtype=vec6), J: wp.array(dtype=float),
+                        C: wp.array(dtype=wp.mat33), volume: wp.array(dtype=float), p: int, m: float) -> wp.mat33:
         tau = wp.mat33(0.0)
         if wp.static(has_solid):
             if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
-                tau = solid_tau(mat, F[p], Jp[p])
+                tau = from_sym(stress[p])
         if wp.static(has_water):
             if mat.mode == MODE_WATER:
                 Jw = J[p]
@@ -105,7 +106,7 @@ def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
     def p2g(
         pp: P2GParams,
         x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
-        F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
+        tau: wp.array(dtype=vec6), J: wp.array(dtype=float),
         alive: wp.array(dtype=wp.int32),
         mass: wp.array(dtype=float),
         volume: wp.array(dtype=float),
@@ -126,7 +127,7 @@ def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
         m = mass[p]
         if alive[p] == 0 or m == 0.0:
             return  # tracers and removed particles add nothing
-        affine = particle_affine(pp, materials[material[p]], F, J, Jp, C, volume, p, m)
+        affine = particle_affine(pp, materials[material[p]], tau, J, C, volume, p, m)
         inv_dx = pp.inv_dx
         dx = 1.0 / inv_dx
         mv = m * v[p]

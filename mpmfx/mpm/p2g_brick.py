@@ -71,7 +71,7 @@ import functools
 import numpy as np
 import warp as wp
 
-from .constitutive import MaterialParams, bspline_weights
+from .constitutive import MaterialParams, bspline_weights, vec6
 from .p2g import P2GParams, make_particle_affine, to_fixed
 from .state import SceneFlags
 from .stepper import SubstepDev
@@ -419,7 +419,7 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
     def scatter(pp: P2GParams, keys: wp.array(dtype=wp.int32), start: wp.array(dtype=wp.int32),
                 n_seg: wp.array(dtype=wp.int32), block: int, n_blocks: int, idx: wp.array(dtype=wp.int32),
                 x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
-                F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
+                tau: wp.array(dtype=vec6), J: wp.array(dtype=float),
                 alive: wp.array(dtype=wp.int32), mass: wp.array(dtype=float), volume: wp.array(dtype=float),
                 material: wp.array(dtype=wp.int32), materials: wp.array(dtype=MaterialParams),
                 grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
@@ -450,7 +450,7 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                     p = idx[s0 + r0 + lane]
                     m = mass[p]
                     if alive[p] != 0 and m != 0.0:
-                        aff = particle_affine(pp, materials[material[p]], F, J, Jp, C, volume, p, m)
+                        aff = particle_affine(pp, materials[material[p]], tau, J, C, volume, p, m)
                         mv = m * v[p]
                         xg = x[p] * pp.inv_dx
                         b = base_node(x[p], pp.inv_dx)
@@ -519,20 +519,24 @@ class BrickP2G:
         (always before the first scatter)."""
         n, dev = self.n, self.device
         if sort or not self.sorted:
-            wp.launch(_brick_keys, dim=n, device=dev, inputs=[pp, cur.x, cur.alive, state.mass, self.idx, self.keys,
-                                                               sub])
-            wp.utils.radix_sort_pairs(self.keys, self.idx, n)
-            wp.launch(_seg_flags, dim=n, device=dev, inputs=[self.keys, self.flag, sub])
-            wp.utils.array_scan(self.flag, self.pos, inclusive=False)
-            wp.launch(_seg_starts, dim=n, device=dev, inputs=[self.keys, self.flag, self.pos, n, self.start,
-                                                               self.n_seg, sub])
-            self.sorted = True
+            self.sort(pp, state, cur, sub)
         blocks = max(1, min(n, self.nb ** 3, MAX_BLOCKS))
         scatter = make_brick_scatter(self.flags, bool(pp.deterministic))
         wp.launch(scatter, dim=blocks * self.block, block_dim=self.block, device=dev, inputs=[
-            pp, self.keys, self.start, self.n_seg, self.block, blocks, self.idx, cur.x, cur.v, cur.C, cur.F, cur.J,
-            cur.Jp, cur.alive, state.mass, state.volume, state.material, materials, grid_m, grid_mv, grid_fixed,
+            pp, self.keys, self.start, self.n_seg, self.block, blocks, self.idx, cur.x, cur.v, cur.C, cur.tau, cur.J,
+            cur.alive, state.mass, state.volume, state.material, materials, grid_m, grid_mv, grid_fixed,
             self.marks, sub])
+
+    def sort(self, pp: P2GParams, state, cur, sub) -> None:
+        """Re-sort the particles' order by brick and corner node, and find the segments."""
+        n, dev = self.n, self.device
+        wp.launch(_brick_keys, dim=n, device=dev, inputs=[pp, cur.x, cur.alive, state.mass, self.idx, self.keys, sub])
+        wp.utils.radix_sort_pairs(self.keys, self.idx, n)
+        wp.launch(_seg_flags, dim=n, device=dev, inputs=[self.keys, self.flag, sub])
+        wp.utils.array_scan(self.flag, self.pos, inclusive=False)
+        wp.launch(_seg_starts, dim=n, device=dev, inputs=[self.keys, self.flag, self.pos, n, self.start, self.n_seg,
+                                                           sub])
+        self.sorted = True
 
     def nbytes(self) -> int:
         return int(sum(a.capacity for a in (self.keys, self.idx, self.flag, self.pos, self.start, self.marks)))

@@ -25,7 +25,7 @@ from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
 from .constitutive import MaterialParams, pack_material
 from .energy import ENERGY_CHUNK, make_energy
-from .g2p import G2PParams, make_g2p
+from .g2p import G2PParams, make_g2p, solid_stress
 from .grid_update import GridParams, make_grid_update
 from .materials import Material, Mode
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
@@ -37,7 +37,7 @@ from .state import ParticleBuffers, SceneFlags, State, StepperClock
 
 __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
 
-CHECKPOINT_VERSION = 1
+CHECKPOINT_VERSION = 2  # 2: with the solids' stored stress (tau); 1 (without) is restored too
 MAX_FIELDS = 8  # multi-field contact: grid memory grows with the number of fields
 _SYMPTOM = "Everything explodes / NaNs"  # the guide §9.3 row the errors point at
 
@@ -236,8 +236,9 @@ class Solver:
             cur = ParticleBuffers.allocate(n, self.flags, self.device)
             nxt = ParticleBuffers.allocate(n, self.flags, self.device)
             for name, arr in zip(ParticleBuffers.NAMES, cur.arrays()):
-                scalar = np.int32 if name == "alive" else np.float32
-                arr.assign(np.ascontiguousarray(data[name], dtype=scalar))
+                if name in data:
+                    scalar = np.int32 if name == "alive" else np.float32
+                    arr.assign(np.ascontiguousarray(data[name], dtype=scalar))
             state = State(
                 n=n, cur=cur, nxt=nxt,
                 mass=wp.array(np.asarray(data["mass"], np.float32), dtype=float),
@@ -247,12 +248,21 @@ class Solver:
                 field_id=wp.array(field_id, dtype=wp.int32), n_fields=n_fields,
                 clock=clock,
             )
+        if "tau" not in data:  # a new state, or a version 1 checkpoint
+            self.update_stress(state)
         m = np.asarray(data["mass"], np.float64)
         m_ref = float(m[m > 0].mean()) if np.any(m > 0) else 1.0
         # fixed-point quanta: powers of two (see p2g module docstring)
         self._q_mass = _pow2_at_least(m_ref) * 2.0 ** -FIXED_POINT_BITS
         self._q_mom = self._q_mass
         return state
+
+    def update_stress(self, state: State) -> None:
+        """Recompute the stored stress (state.cur.tau) of every solid from its F and Jp. G2P
+        keeps it current; call this after writing F or Jp of `state.cur` directly."""
+        if self.flags.solid:
+            wp.launch(solid_stress, dim=state.n, device=self.device, inputs=[
+                self._materials_dev, state.material, state.cur.F, state.cur.Jp, state.cur.tau])
 
     # ------------------------------------------------------------------ one substep
     def step(self, state: State, dt: float, *, t: float = 0.0) -> None:
@@ -301,7 +311,7 @@ class Solver:
                          sort=resort)
         else:
             wp.launch(p2g, dim=state.n, device=self.device, inputs=[
-                pp, cur.x, cur.v, cur.C, cur.F, cur.J, cur.Jp, cur.alive, state.mass, state.volume,
+                pp, cur.x, cur.v, cur.C, cur.tau, cur.J, cur.alive, state.mass, state.volume,
                 state.material, state.field_id, self._materials_dev,
                 self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed, self._sub])
         # 3 · grid update (with the brick P2G: only the node bricks it marked)
@@ -520,13 +530,13 @@ class Solver:
 
     def restore(self, data: dict[str, np.ndarray]) -> tuple[State, float]:
         """State and shot time t from `checkpoint` output (ValueError if it does not fit)."""
-        required = {*ParticleBuffers.NAMES, "mass", "volume", "material", "body", "clock", "t", "meta"}
+        required = {*ParticleBuffers.NAMES, "mass", "volume", "material", "body", "clock", "t", "meta"} - {"tau"}
         missing = sorted(required - set(data))
         if missing:
             raise ValueError(f"checkpoint: missing arrays {', '.join(missing)}; it was not written by "
                              "Solver.checkpoint (or is truncated); re-simulate from the start")
         meta = np.asarray(data["meta"])
-        if int(meta[0]) != CHECKPOINT_VERSION or int(meta[1]) != self.config.grid_n:
+        if int(meta[0]) not in (1, CHECKPOINT_VERSION) or int(meta[1]) != self.config.grid_n:
             raise ValueError(
                 f"checkpoint: version/grid_n {meta[:2].tolist()} do not match this solver "
                 f"({CHECKPOINT_VERSION}, {self.config.grid_n}); re-simulate from the start")

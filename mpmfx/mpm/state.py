@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import warp as wp
 
+from .constitutive import vec6
 from .materials import Mode
 
 __all__ = ["SceneFlags", "ParticleBuffers", "StepperClock", "State"]
@@ -54,7 +55,9 @@ class ParticleBuffers:
     velocity); F: (n,) mat33 elastic deformation gradient, or (1,) when no material needs
     it; J: (n,) float32 volume ratio of water particles, or (1,) without water;
     Jp: (n,) float32 plastic volume ratio (snow) or log-volume correction (sand);
-    alive: (n,) int32, 0 once a particle left the domain in REMOVE mode.
+    alive: (n,) int32, 0 once a particle left the domain in REMOVE mode;
+    tau: (n,) vec6 Kirchhoff stress of a solid's F and Jp, mass/(domain s^2) (symmetric:
+    xx, yy, zz, xy, xz, yz; written by G2P, read by P2G), or (1,) without solids.
     """
 
     x: wp.array
@@ -64,8 +67,9 @@ class ParticleBuffers:
     J: wp.array
     Jp: wp.array
     alive: wp.array
+    tau: wp.array
 
-    NAMES = ("x", "v", "C", "F", "J", "Jp", "alive")
+    NAMES = ("x", "v", "C", "F", "J", "Jp", "alive", "tau")
 
     @classmethod
     def allocate(cls, n: int, flags: SceneFlags, device) -> "ParticleBuffers":
@@ -77,6 +81,7 @@ class ParticleBuffers:
             F=arr(wp.mat33, n if flags.solid else 1),
             J=arr(wp.float32, n if flags.water else 1),
             Jp=arr(wp.float32), alive=arr(wp.int32),
+            tau=arr(vec6, n if flags.solid else 1),
         )
 
     def arrays(self):

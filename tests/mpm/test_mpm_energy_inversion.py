@@ -91,6 +91,7 @@ def test_inverted_elastic_block_recovers(kind):
     F = np.tile(np.eye(3, dtype=np.float32), (state.n, 1, 1))
     F[:: 2 if kind.startswith("every") else 1, 0, 0] = -1.0
     state.cur.F.assign(F)
+    solver.update_stress(state)
     reports = [solver.advance(state, f / 25, (f + 1) / 25) for f in range(5)]  # 0.2 s
     out = solver.state_to_numpy(state)
     assert reports[0].inverted > 0 and reports[0].j_min <= 0  # QA sees the event

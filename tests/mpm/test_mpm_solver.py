@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from tests.mpm.mpm_helpers import block, concat
-from mpmfx.mpm import Particles, SimulationError, Solver, SolverConfig, preset
+from mpmfx.bench.reference_step import fixed_corotated_tau, hencky_tau
+from mpmfx.mpm import Mode, Particles, SimulationError, Solver, SolverConfig, preset
 
 ZERO_G = (0.0, 0.0, 0.0)
 
@@ -20,6 +21,7 @@ def test_p2g_conserves_mass_and_momentum():
         state = solver.init_state(p)
         state.cur.C.assign(rng.normal(size=(state.n, 3, 3)).astype(np.float32))
         state.cur.F.assign((np.eye(3) + 0.05 * rng.normal(size=(state.n, 3, 3))).astype(np.float32))
+        solver.update_stress(state)
         solver.step(state, 1e-4)
         m = state.mass.numpy().astype(np.float64)
         if det:
@@ -128,6 +130,54 @@ def test_checkpoint_restore_equals_uninterrupted_run():
         Solver([preset("Soft")], SolverConfig(grid_n=24), device="cpu").restore(ckpt)
     with pytest.raises(ValueError, match="missing arrays clock"):
         fresh.restore({k: v for k, v in ckpt.items() if k != "clock"})
+
+
+def test_stored_stress_is_the_stress_of_the_stored_deformation():
+    """G2P stores each solid's Kirchhoff stress from its return map's SVD for the next P2G
+    (g2p.py); it must be the stress the guide's P2G would compute from the F and Jp it stored
+    (solid_tau), also where the snow clamp and the sand projection fired. Then a checkpoint
+    without the stored stress (version 1) resumes to the same motion."""
+    mats = [preset("Mushy"), preset("Granular"), preset("Elastic")]
+    parts = concat(*(block((0.15 + 0.25 * i, 0.3, 0.3), (0.35 + 0.25 * i, 0.6, 0.6), grid_n=16, material=i)
+                     for i in range(3)))
+    solver = Solver(mats, SolverConfig(grid_n=16, gravity=ZERO_G), device="cpu")
+    state = solver.init_state(parts)
+    dt = 1e-3  # one substep squeezing the blocks by ~5 % an axis (their gathered C is ~1/8 of this one
+    # near their faces): beyond the snow clamp (2.5 %) at once
+    state.cur.C.assign(np.tile(-400.0 * np.eye(3, dtype=np.float32), (state.n, 1, 1)))
+    solver.step(state, dt)
+    out = solver.state_to_numpy(state)
+    mat = parts.material
+    assert np.median(out["Jp"][mat == 0]) < 0.99  # the clamp fired
+    stored = state.cur.tau.numpy().copy()
+    ckpt = {k: v.copy() for k, v in solver.checkpoint(state, 0.0).items()}
+    solver.update_stress(state)  # the guide's way: solid_tau of the stored F and Jp, its own SVD
+    recomputed = state.cur.tau.numpy()
+    F, Jp = out["F"].astype(np.float64), out["Jp"].astype(np.float64)
+    for i, m in enumerate(mats):  # both against the stress of the stored F and Jp in float64
+        sel = mat == i
+        ones = np.ones(sel.sum())
+        if m.mode == Mode.SAND:
+            exact = hencky_tau(F[sel], m.mu0 * ones, m.lambda0 * ones)
+        else:
+            h = np.exp(m.hardening * (1.0 - Jp[sel]))
+            exact = fixed_corotated_tau(F[sel], m.mu0 * h, m.lambda0 * h)
+        exact = exact[:, [0, 1, 2, 0, 0, 1], [0, 1, 2, 1, 2, 2]]
+        scale = np.abs(exact).max()
+        err_stored = np.abs(stored[sel] - exact).max()
+        err_guide = np.abs(recomputed[sel] - exact).max()
+        # float32 SVDs: both ~1e-4 of the largest stress; the stress of the trial (unclamped)
+        # F would be off by the clamp itself, ~1.5 % strain
+        assert err_stored < 5e-4 * scale and err_stored < 4 * err_guide + 1e-6 * scale, (i, err_stored, err_guide, scale)
+
+    old = {k: v for k, v in ckpt.items() if k != "tau"}
+    old["meta"] = old["meta"].copy()
+    old["meta"][0] = 1
+    a, b = Solver(mats, SolverConfig(grid_n=16), device="cpu"), Solver(mats, SolverConfig(grid_n=16), device="cpu")
+    (sa, _), (sb, _) = a.restore(ckpt), b.restore(old)
+    for s, st in ((a, sa), (b, sb)):
+        s.advance(st, 0.0, 1 / 24)
+    np.testing.assert_allclose(b.state_to_numpy(sb)["x"], a.state_to_numpy(sa)["x"], rtol=0, atol=1e-5)
 
 
 def test_substeps_land_on_the_frame_and_follow_cfl():
