@@ -21,12 +21,14 @@ def throughput_plot(rows: list[dict], out: str | Path, *, name: str = "gpu") -> 
     for r in rows:
         if not r.get("G_per_s") or str(r.get("det") or "0") not in ("0", "False") or r.get("scene") == "Mixed":
             continue
-        if r["impl"] == "mpmfx" and r.get("path", "device") != "device":
-            continue  # the lever rows (reference loop, no graphs, ...) are in the table, not the plot
-        lines.setdefault((r["impl"], r["scene"]), []).append((int(r["particles"]), float(r["G_per_s"])))
+        path = r.get("path", "device")
+        if r["impl"] == "mpmfx" and path not in ("device", "device-sort32"):
+            continue  # the other lever rows (reference loop, no graphs, ...) are in the table, not the plot
+        impl = r["impl"] + (" sorted once a chunk" if path == "device-sort32" else "")
+        lines.setdefault((impl, r["scene"]), []).append((int(r["particles"]), float(r["G_per_s"])))
     for (impl, sc), pts in sorted(lines.items()):
         pts.sort()
-        ax.plot([p for p, _ in pts], [g for _, g in pts], "o-" if impl == "mpmfx" else "s--", label=f"{impl} {sc}")
+        ax.plot([p for p, _ in pts], [g for _, g in pts], "o-" if impl == "mpmfx" else "o:" if impl.startswith("mpmfx") else "s--", label=f"{impl} {sc}")
     device = next((r.get("device") for r in rows if r.get("device")), "?")
     ax.set_xscale("log")
     ax.set_yscale("log")
