@@ -82,9 +82,10 @@ def profile(name: str, frames: int, overrides: list[str], cache: Path, device: s
         k = rep.substeps + rep.rejected_substeps
         rows.append({"frame": start + f, "substeps": rep.substeps, "rejected": rep.rejected_substeps, "wall_s": wall,
                      "ms_substep": 1e3 * wall / max(1, k), "host_copy_s": copy,
-                     "G_per_s": state.n * rep.substeps / wall / 1e9})
+                     "G_per_s": state.n * rep.substeps / wall / 1e9, "sort_every": state.clock.sort_every})
         print(f"{name} frame {start + f}: {rep.substeps} substeps (+{rep.rejected_substeps} rejected), "
-              f"{wall:.2f} s, {1e3 * wall / max(1, k):.3f} ms/substep, host copy {copy:.3f} s", flush=True)
+              f"{wall:.2f} s, {1e3 * wall / max(1, k):.3f} ms/substep, host copy {copy:.3f} s, "
+              f"sorting every {state.clock.sort_every}", flush=True)
     split = {}
     if solver.device.is_cuda:
         f = frames + 1

@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from .colliders import ColliderKeys, pack_colliders
-from .p2g_brick import BrickP2G, fits_brick_keys, sort_cadence
+from .p2g_brick import BrickP2G, fits_brick_keys, sort_cadence, travel_cadence
 from .slots import Clock, Count, Status
 from .stepper import CHUNKS, StepperParams, make_clock_kernels, pose_colliders, wave_table, WaveParams
 
@@ -52,7 +52,7 @@ class DeviceAdvance:
         brick = not solver.flags.multi_field and solver.device.is_cuda and fits_brick_keys(cfg.grid_n + 1)
         self.p2g = "brick" if brick else "reference"
         self._brick = None
-        self.sort_every = 0  # 0: re-sort as the particles move (sort_cadence); k > 0: every k substeps (measuring)
+        self.sort_every = 0  # 0: re-sort as the order wears (sort_cadence); k > 0: every k substeps (measuring)
         self.last_sort_every = CHUNKS[-1]  # what the last chunk did
         self._graphs: dict = {}
         self._graph_state = None  # the State the cached graphs point into (kept alive with them)
@@ -124,12 +124,19 @@ class DeviceAdvance:
         want = math.ceil(remaining / dt) if dt > 0 else CHUNKS[-1]
         return max((k for k in CHUNKS if k <= want), default=CHUNKS[0])
 
-    def _sort_every(self, c: np.ndarray, dt_guess: float) -> int:
-        """The next chunk's substeps between the brick P2G's sorts (p2g_brick.sort_cadence)."""
+    def _sort_every(self, state, c: np.ndarray, dt_guess: float, frag) -> int:
+        """The next chunk's substeps between the brick P2G's sorts: from the wear the last
+        chunk's scatters counted (`frag`; p2g_brick.sort_cadence), or at an advance's first
+        chunk the cadence the last advance ended with (state.clock, checkpointed: a resumed run
+        picks what the uninterrupted one did), never longer than the fastest particle's travel
+        allows (travel_cadence)."""
         if self.sort_every or self.p2g != "brick":
             return self.sort_every or CHUNKS[-1]
         dt = c[Clock.DT_CFL] if c[Clock.DT_CFL] > 0 else dt_guess
-        return sort_cadence(float(c[Clock.MAX_SPEED]), float(dt), self.s.config.dx, CHUNKS[-1])
+        cap = travel_cadence(float(c[Clock.MAX_SPEED]), float(dt), self.s.config.dx, CHUNKS[-1])
+        if frag is None:
+            return max(1, min(state.clock.sort_every or cap, cap))
+        return sort_cadence(frag, self.last_sort_every, state.n, cap)
 
     def run(self, state, t0: float, t1: float):
         s, cfg = self.s, self.s.config
@@ -141,6 +148,9 @@ class DeviceAdvance:
         if self.keys is not None:  # the fields no substep changes (kind, shape, friction, ...)
             s._colliders_dev.assign(pack_colliders(s.colliders, t0, t0, 1.0))
         c = self.clk.numpy()
+        frag, cadence = None, 0  # the brick P2G's wear counts of the last chunk (none yet in this advance)
+        if self._brick is not None:
+            self._brick.frag.zero_()
         while int(c[Clock.STATUS]) in (Status.RUNNING, Status.REJECTED):
             if int(c[Clock.STATUS]) == Status.REJECTED:
                 c[Clock.STATUS] = Status.RUNNING
@@ -148,12 +158,18 @@ class DeviceAdvance:
             before = c[Clock.N_SUB]
             dt_guess = s._cfl_dt(state.clock)  # the first chunk's: the host's CFL dt
             k = self._chunk_length(c, dt_guess)
-            self.last_sort_every = min(k, self._sort_every(c, dt_guess))  # (k: a chunk start only; one graph)
+            cadence = self._sort_every(state, c, dt_guess, frag)
+            self.last_sort_every = min(k, cadence)  # (a chunk no longer than it sorts at its start only: one graph)
             self._chunk(state, k, self.last_sort_every)
             c = self.clk.numpy()
+            if self._brick is not None:
+                frag = self._brick.frag.numpy()
+                self._brick.frag.zero_()
             if int(c[Clock.N_SUB] - before) % 2:
                 state.swap()
         self._to_clock(state, c)
+        if self.p2g == "brick" and not self.sort_every:
+            state.clock.sort_every = cadence
         t = t0 + c[Clock.DONE] / cfg.time_scale
         if int(c[Clock.STATUS]) == Status.DT_TOO_SMALL:
             s._last_bad = self.last_bad.numpy() if c[Clock.HAS_BAD] else None

@@ -67,6 +67,7 @@ the runs and the fallback there; only the barriers and the warp vote are CUDA's 
 from __future__ import annotations
 
 import functools
+import math
 
 import numpy as np
 import warp as wp
@@ -76,7 +77,7 @@ from .p2g import P2GParams, make_particle_affine, to_fixed
 from .state import SceneFlags
 from .stepper import SubstepDev
 
-__all__ = ["BrickP2G", "fits_brick_keys", "sort_cadence"]
+__all__ = ["BrickP2G", "fits_brick_keys", "sort_cadence", "travel_cadence"]
 
 BRICK = 4  # corner nodes per brick and axis (a key's low 6 bits)
 WIN = 8  # window nodes per axis: BRICK + 1 slack below + 1 above + the stencil's 2
@@ -85,8 +86,19 @@ BLOCK_CUDA = 128  # threads a block on CUDA, and slots parked a round
 MAX_REGISTERS = 64  # a thread's registers (the compiler takes 128 unbounded: see the docstring)
 MAX_BLOCKS = 1 << 15  # blocks at most; each walks segments block, block + MAX_BLOCKS, ...
 PARKED = 16  # floats a parked particle: m, m v (3), affine (9), fx (3)
-SORT_TRAVEL = 0.125  # cells the fastest particle may move between two sorts (see sort_cadence)
+SORT_TRAVEL = 1.0  # cells the fastest particle may move between two sorts: a window's slack (travel_cadence)
+SORT_PIECES_PER_PARTICLE = 0.27  # a sort's cost in scattered pieces (sort_cadence; H200, 2.4M-19.4M particles:
+SORT_PIECES_FIXED = 2.8e5  # 0.23-1.34 ms a sort, 0.245 ns a piece)
+FALLBACK_PIECES = 16.0  # a particle out of its window, in pieces: a guess, not fitted (no measured scene fell
+# back; travel_cadence keeps particles inside their windows, so it rarely matters)
 NO_KEY = wp.constant(0x7FFFFFFF)  # tracers and removed particles: sorted last, never scattered
+# BrickP2G.frag, int64 counters the scatter adds to (sort_cadence reads them): the runs it
+# scattered right after a sort [0] and later [1], the fallback particles (out of their
+# window) [2], and the substeps of each kind [3], [4]
+FRAG_PIECES = wp.constant(0)
+FRAG_FALLBACKS = wp.constant(2)
+FRAG_SUBSTEPS = wp.constant(3)
+FRAG_SLOTS = 5
 
 # Shared arrays live in native functions (static, so every call in a block reaches the same
 # memory); each function owns its arrays. On the CPU (one thread a block) they are plain
@@ -191,35 +203,57 @@ def fits_brick_keys(nodes: int) -> bool:
     return (-(-nodes // BRICK)) ** 3 * 64 < NO_KEY
 
 
-def sort_cadence(speed: float, dt: float, dx: float, longest: int) -> int:
-    """Substeps between two sorts of the particles' order: the largest power of two up to
-    `longest` in which a particle at `speed` (domain/s; the last substep's fastest) moves at
-    most SORT_TRAVEL cells at steps of dt (s); dx: a cell, domain units.
-
-    Why: a run is consecutive slots whose particles share a corner node. Between sorts the
-    particles cross cell faces, a run breaks into pieces, and the scatter adds each piece
-    (shared atomics, a task of 9 threads a piece), while a sort costs ~0.1 ms at 3.4M
-    particles with its launch gaps. Measured on an H100 (deterministic, one frame after a
-    checkpoint, ms a substep whole / scatter; scripts/p2g_runs.py):
-
-        sorted                    hero_dam (3.4M water,      hero_castle (2.6M sand,
-                                  fastest 0.059 cells)        0.016 cells a substep)
-        at chunk starts (<= 32)   3.06 / 2.48                 1.87 / 1.15
-        every 16 / 8              -                           1.71 / 0.98, 1.62 / 0.89
-        every 4                   1.93 / 1.26                 1.59 / 0.83
-        every 2                   1.84 / 1.10                 1.63 / 0.81
-        every substep             1.91 / 1.02                 -
-
-    The optimum sits where the fastest particle moves 0.06-0.12 cells between sorts, in both;
-    1/8 cell picks it in both. A block at rest (the bench) keeps its runs and sorts once a
-    chunk. Grouping a warp's particles by corner node instead (__match_any_sync, whatever
-    their slots) recovered less (hero_dam 2.41 ms sorted at chunk starts, 1.91 every 2) and
-    lost 3-10 % in the bench at 19M particles, where runs crossing a warp's boundary split."""
+def travel_cadence(speed: float, dt: float, dx: float, longest: int) -> int:
+    """The most substeps between two sorts (a power of two up to `longest`) in which a particle
+    at `speed` (domain/s, the last substep's fastest; dt in s, dx a cell in domain units) moves
+    at most SORT_TRAVEL cells: further, and it could leave its brick's window (one cell of slack)
+    and add to the grid directly, the slow path."""
     travel = speed * dt / dx
     k = 1
     while 2 * k <= longest and 2 * k * travel <= SORT_TRAVEL:
         k *= 2
     return k
+
+
+def sort_cadence(frag, every: int, n: int, cap: int) -> int:
+    """Substeps between the next chunk's sorts of the particles' order, from the wear the last
+    chunk's scatters counted (`frag`, BrickP2G.frag, with the last chunk sorted every `every`
+    substeps); n particles; cap: the most allowed (travel_cadence, at most a chunk).
+
+    Why: between sorts the particles cross cell faces, a run (consecutive slots sharing a corner
+    node) breaks into pieces, and the scatter spends a task on each piece; a sort costs what
+    SORT_PIECES_PER_PARTICLE * n + SORT_PIECES_FIXED pieces cost. If the pieces grow by g a
+    substep after a sort, sorting every k substeps costs S / k + g (k - 1) / 2 a substep, least at
+    k = sqrt(2 S / g) (rounded to a power of two in log scale). g is measured: the mean pieces of
+    the substeps after the first of each sort, against those right after a sort. With no such
+    substeps (every substep sorted) the next chunk tries twice the cadence. The counts are of
+    particles, not of time, so a deterministic run picks the same cadences when replayed.
+
+    Measured on an H200 (scripts/cadence_fit.py, renders/readme/cadence_fit_h200.json; ms a
+    substep through advance() with the order sorted every k substeps; * this rule's pick):
+
+        k                     1      2      4       8       16     32
+        hero_dam (3.4M)       1.52   1.40   1.35*   1.37    1.42   1.48
+        hero_castle (2.6M)    1.42   1.30   1.24    1.23*   1.23   1.27
+        Mushy block 19.4M     7.16   7.05   6.71    6.34*   6.37   5.85
+
+    A piece costs 0.22-0.27 ns of scatter in every scene there (slope of scatter time against
+    pieces between cadences); a sort 1.34 ms at 19.4M, 0.23 ms at 2.4M. The falling block's runs
+    heal as it falls on (a whole run crosses a face and is one run again), which the linear
+    growth does not see, so it sorts more often there than it needs to; the earlier rule (the
+    fastest particle's travel alone, 1/8 cell) sorted it every substep (7.16 ms)."""
+    fresh_sub, stale_sub = float(frag[FRAG_SUBSTEPS]), float(frag[FRAG_SUBSTEPS + 1])
+    if fresh_sub == 0:
+        return max(1, min(every, cap))
+    if stale_sub == 0:
+        return max(1, min(2 * every, cap))
+    wear = float(frag[FRAG_PIECES + 1]) / stale_sub - float(frag[FRAG_PIECES]) / fresh_sub
+    wear += FALLBACK_PIECES * float(frag[FRAG_FALLBACKS]) / stale_sub
+    if wear <= 0.0:
+        return cap
+    growth = wear / (0.5 * every)  # stale substeps are 1 .. every-1 after their sort: on average every / 2
+    k = math.sqrt(2.0 * (SORT_PIECES_PER_PARTICLE * n + SORT_PIECES_FIXED) / growth)
+    return int(max(1, min(cap, 2 ** round(math.log2(max(k, 1.0))))))
 
 
 @wp.func
@@ -424,11 +458,13 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                 material: wp.array(dtype=wp.int32), materials: wp.array(dtype=MaterialParams),
                 grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
                 grid_fixed: wp.array4d(dtype=wp.int64), marks: wp.array(dtype=wp.int32),
-                sub: wp.array(dtype=SubstepDev)):
+                sub: wp.array(dtype=SubstepDev), fresh: int, frag: wp.array(dtype=wp.int64)):
         t = wp.tid()
         if sub[0].active == 0:
             return  # the whole launch: every thread of a block returns together
         pp.dt = sub[0].dt
+        if t == 0:  # the order's wear (BrickP2G.frag): one substep more of its kind
+            wp.atomic_add(frag, FRAG_SUBSTEPS + 1 - fresh, wp.int64(1))
         lane = t % block
         nn = pp.nodes
         nb = (nn + BRICK - 1) // BRICK
@@ -466,6 +502,7 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                                     park(1, (4 + 3 * c + d) * BLOCK_CUDA + lane, aff[c, d])
                         else:
                             add_to_grid(pp, m, mv, aff, fx, b, grid_m, grid_mv, grid_fixed, marks)
+                            wp.atomic_add(frag, FRAG_FALLBACKS, wp.int64(1))
                 if lane < n_park:
                     park(4, lane, float(code))
                 sync()
@@ -479,6 +516,8 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                 packed = runs(1, first, 0, lane, block)
                 if first != 0:
                     runs(2, packed >> 16, lane, lane, block)
+                if lane == 0:
+                    wp.atomic_add(frag, FRAG_PIECES + 1 - fresh, wp.int64(packed & 0xFFFF))
                 sync()
                 for task in range(lane, 9 * (packed & 0xFFFF), block):
                     add_run(pp, runs(3, task // 9, 0, lane, block), n_park, (task % 9) // 3, task % 3)
@@ -513,19 +552,21 @@ class BrickP2G:
             self.pos = wp.empty(n, dtype=wp.int32)
             self.start = wp.empty(n + 1, dtype=wp.int32)
             self.n_seg = wp.zeros(1, dtype=wp.int32)
+            self.frag = wp.zeros(FRAG_SLOTS, dtype=wp.int64)  # see FRAG_PIECES
 
     def launch(self, pp: P2GParams, state, cur, materials, grid_m, grid_mv, grid_fixed, sub, *, sort: bool) -> None:
         """Scatter `cur` onto the grid; sort: re-sort the particles' order and segments first
         (always before the first scatter)."""
         n, dev = self.n, self.device
-        if sort or not self.sorted:
+        fresh = int(sort or not self.sorted)
+        if fresh:
             self.sort(pp, state, cur, sub)
         blocks = max(1, min(n, self.nb ** 3, MAX_BLOCKS))
         scatter = make_brick_scatter(self.flags, bool(pp.deterministic))
         wp.launch(scatter, dim=blocks * self.block, block_dim=self.block, device=dev, inputs=[
             pp, self.keys, self.start, self.n_seg, self.block, blocks, self.idx, cur.x, cur.v, cur.C, cur.tau, cur.J,
             cur.alive, state.mass, state.volume, state.material, materials, grid_m, grid_mv, grid_fixed,
-            self.marks, sub])
+            self.marks, sub, fresh, self.frag])
 
     def sort(self, pp: P2GParams, state, cur, sub) -> None:
         """Re-sort the particles' order by brick and corner node, and find the segments."""

@@ -96,7 +96,8 @@ class StepperClock:
     dt_scale: factor in (0, 1] on the CFL step, halved per rejected substep and regrown by
     1.25x per accepted one; max_speed: |v|max of the last accepted substep, domain/s;
     max_hardening: largest exp(xi (1 - Jp)) among snow particles; water_j_min: smallest
-    J among water particles; substeps: accepted substeps since init_state.
+    J among water particles; substeps: accepted substeps since init_state; sort_every: the
+    brick P2G's re-sort cadence the last advance ended with (0: none yet; chunked.py).
     """
 
     dt_scale: float = 1.0
@@ -105,8 +106,9 @@ class StepperClock:
     water_j_min: float = 1.0
     last_dt: float = 0.0
     substeps: int = 0
+    sort_every: int = 0
 
-    FIELDS = ("dt_scale", "max_speed", "max_hardening", "water_j_min", "last_dt", "substeps")
+    FIELDS = ("dt_scale", "max_speed", "max_hardening", "water_j_min", "last_dt", "substeps", "sort_every")
 
     def to_array(self) -> np.ndarray:
         return np.array([float(getattr(self, k)) for k in self.FIELDS], dtype=np.float64)
@@ -115,6 +117,7 @@ class StepperClock:
     def from_array(cls, a: np.ndarray) -> "StepperClock":
         vals = dict(zip(cls.FIELDS, (float(x) for x in a)))
         vals["substeps"] = int(vals["substeps"])
+        vals["sort_every"] = int(vals.get("sort_every", 0))  # (absent in older checkpoints)
         return cls(**vals)
 
 

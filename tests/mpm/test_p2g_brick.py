@@ -113,12 +113,62 @@ def test_substeps_after_the_first_clear_and_update_only_the_marked_node_bricks()
     assert 0 < marks.sum() < marks.size // 2  # sparse: most bricks are left out
 
 
-def test_sort_cadence_sorts_as_often_as_the_fastest_particle_crosses_an_eighth_of_a_cell():
-    from mpmfx.mpm.p2g_brick import SORT_TRAVEL, sort_cadence
+def test_travel_cadence_keeps_the_fastest_particle_inside_its_window():
+    from mpmfx.mpm.p2g_brick import SORT_TRAVEL, travel_cadence
     dx, dt = 1.0 / 256, 5e-5
-    assert sort_cadence(0.0, dt, dx, 32) == 32  # at rest: once a chunk
-    for cells in (0.001, 0.016, 0.03, 0.059, 0.1, 0.2):
-        k = sort_cadence(cells * dx / dt, dt, dx, 32)
+    assert travel_cadence(0.0, dt, dx, 32) == 32  # at rest: once a chunk
+    for cells in (0.001, 0.016, 0.03, 0.059, 0.1, 0.2, 1.5):
+        k = travel_cadence(cells * dx / dt, dt, dx, 32)
         assert k & (k - 1) == 0 and 1 <= k <= 32  # a power of two: few captured graphs
         assert k * cells <= SORT_TRAVEL or k == 1  # never further than SORT_TRAVEL between sorts...
         assert 2 * k * cells > SORT_TRAVEL or k == 32  # ...nor sorting twice as often as that needs
+
+
+def _frag(every, fresh_pieces, growth, fallbacks=0.0, chunk=32):
+    """The counts a chunk of `chunk` substeps sorted every `every` would leave in BrickP2G.frag
+    if its pieces grew by `growth` a substep after each sort."""
+    fresh, stale = chunk // every, chunk - chunk // every
+    stale_pieces = sum(fresh_pieces + growth * age for age in range(1, every)) * fresh
+    return np.array([fresh_pieces * fresh, stale_pieces, fallbacks * stale, fresh, stale], np.int64)
+
+
+def test_sort_cadence_balances_the_sort_against_the_wear_it_removes():
+    """k = sqrt(2 S / g): the cadence whose sorts cost what the runs' wear would (S a sort in
+    pieces, g the pieces gained a substep). The figures are hero_dam's and hero_castle's on an
+    H200 (scripts/cadence_fit.py), where the measured optimum was 4 and 8."""
+    from mpmfx.mpm.p2g_brick import SORT_PIECES_FIXED, SORT_PIECES_PER_PARTICLE, sort_cadence
+    n = 3_400_000
+    S = SORT_PIECES_PER_PARTICLE * n + SORT_PIECES_FIXED
+    assert sort_cadence(_frag(4, 487_000, 110_000), 4, n, 32) == 4  # hero_dam
+    assert sort_cadence(_frag(8, 360_000, 20_500), 8, 2_640_000, 32) == 8  # hero_castle
+    for g in (1e3, 1e4, 1e5, 1e6, 1e7):
+        for every in (2, 4, 8, 16):
+            k = sort_cadence(_frag(every, 500_000, g), every, n, 32)
+            assert k & (k - 1) == 0 and 1 <= k <= 32
+            best = np.sqrt(2 * S / g)
+            assert k == 32 or k == 1 or best / np.sqrt(2) <= k <= best * np.sqrt(2)  # nearest power of two
+    assert sort_cadence(_frag(4, 500_000, 1e3), 4, n, 8) == 8  # never past the travel cap
+    assert sort_cadence(_frag(4, 500_000, 0.0), 4, n, 32) == 32  # no wear: once a chunk
+    assert sort_cadence(_frag(1, 500_000, 0.0), 1, n, 32) == 2  # no worn substeps seen: try twice as long
+    # particles out of their windows wear the order too (each a slow, direct scatter)
+    assert sort_cadence(_frag(8, 500_000, 0.0, fallbacks=20_000), 8, n, 32) < 8
+
+
+def test_the_brick_scatter_counts_the_wear_of_the_order():
+    """BrickP2G.frag, what sort_cadence reads: the runs scattered right after a sort and
+    later, the particles that left their window (scattered directly), the substeps of each kind."""
+    from mpmfx.mpm.p2g_brick import FRAG_FALLBACKS, FRAG_PIECES, FRAG_SUBSTEPS
+    solver, state, rng = _scene(False)
+    brick = BrickP2G(solver.flags, state.n, solver.device, nodes=GRID + 1)
+    brick.frag.zero_()
+    _grid(solver, state, brick, sort=True)
+    x = state.cur.x.numpy()
+    moved = x + rng.uniform(-3.0, 3.0, x.shape).astype(np.float32) / GRID  # some leave their window
+    state.cur.x.assign(np.clip(moved, 1.0 / GRID, 1.0 - 1.0 / GRID))  # where G2P keeps them
+    for _ in range(3):
+        _grid(solver, state, brick)
+    frag = brick.frag.numpy()
+    assert frag[FRAG_SUBSTEPS] == 1 and frag[FRAG_SUBSTEPS + 1] == 3
+    assert frag[FRAG_PIECES] == state.n  # on the CPU a block parks one particle at a time: a run each
+    assert 0 < frag[FRAG_FALLBACKS] < 3 * state.n
+    assert frag[FRAG_PIECES + 1] + frag[FRAG_FALLBACKS] == 3 * state.n  # each particle in a run or fallen back
