@@ -18,7 +18,7 @@ CASES = [("Mushy", 128, False), ("Mushy", 128, True), ("Water", 128, False), ("M
          ("Mushy", 256, True), ("Granular", 256, False), ("Elastic", 256, False), ("Water", 256, False),
          ("Water", 256, True)]
 COLS = ["scene", "grid_n", "det", "substeps", "G_per_s", "ms_substep", "ms_p2g", "ms_grid", "ms_g2p", "ms_clear",
-        "B_per_particle"]
+        "ms_sort", "sort_every", "captures", "B_per_particle"]
 
 
 def main():

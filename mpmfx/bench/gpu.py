@@ -5,7 +5,7 @@ falling under gravity inside walls: Water, Mushy (snow), Granular (sand), Elasti
 64 / 128 / 256 (~0.3M / 2.4M / 19M particles); plus a mixed scene (the four materials side
 by side) hit by a moving SDF sphere collider at grid 128. Each is timed through `advance()`
 (adaptive dt, every guard, the per-advance report), deterministic mode off and on, over an
-interval of about `SUBSTEPS` CFL substeps after three warm-up intervals (compiles, and the
+interval of about `SUBSTEPS` CFL substeps after four warm-up intervals (compiles, and the
 CUDA graphs of the cadence the timed interval keeps; `captures` counts any left in it).
 
 Per row: particle-substeps per second (G/s = 1e9), ms per substep and its split by phase
@@ -192,19 +192,20 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     solver.advance(state, span, 2 * span)
     # the block speeds up as it falls, and the brick P2G re-sorts more often as it does
     # (p2g_brick.sort_cadence): a new cadence is a new graph to capture, so the timed interval
-    # keeps the last one (steady state; a shot pays each capture once), after one more warm-up
-    # interval that captures that cadence's graphs (without it they were captured inside the
-    # timing: 0.4 ms a substep at 0.3M particles, H100)
-    da.sort_every = da.sort_every or da.last_sort_every
-    solver.advance(state, 2 * span, 3 * span)
+    # keeps the one the warm-up ended with (steady state; a shot pays each capture once), after
+    # two more warm-up intervals that capture that cadence's graphs (without them they were
+    # captured inside the timing: 0.4 ms a substep at 0.3M particles, H100)
+    da.sort_every = da.sort_every or state.clock.sort_every or da.last_sort_every
+    for i in (2, 3):
+        solver.advance(state, i * span, (i + 1) * span)
     captured = len(da._graphs)
     wp.synchronize_device(solver.device)
     t0 = time.perf_counter()
-    report = solver.advance(state, 3 * span, 4 * span)
+    report = solver.advance(state, 4 * span, 5 * span)
     wp.synchronize_device(solver.device)
     wall = time.perf_counter() - t0
     captured = len(da._graphs) - captured  # graphs captured inside the timing (a one-off cost)
-    phases, _ = _phase_split(solver, state, 4 * span, span)
+    phases, _ = _phase_split(solver, state, 5 * span, span)
     part, grid, moved = traffic(solver, state)
     k = report.substeps + report.rejected_substeps
     ms = 1e3 * wall / k
