@@ -8,7 +8,7 @@ neighbour lines are read once into registers instead of through a block-map look
 import warp as wp
 
 from mpmfx.surface.line_kernels import block_faces, line_neighbours, line_sides, read, vec8
-from mpmfx.surface.redistance_kernels import eikonal_update
+from mpmfx.surface.redistance_kernels import crossing_distance, crossing_inv2, eikonal_update
 from mpmfx.surface.sparse_kernels import BS, BV
 
 
@@ -106,12 +106,10 @@ def init_eikonal_lines(
             if frozen[t] != 0:
                 fz = fz | (1 << z)
                 n = line_neighbours(phi, sides, t, l, z, clip, -clip)
-                near = float(1.0)
+                inv2 = wp.vec3(0.0)
                 for q in range(6):
-                    u = n[q]
-                    if (u > 0.0) != (v > 0.0):
-                        near = wp.min(near, wp.abs(v) / wp.max(wp.abs(v) + wp.abs(u), 1.0e-12))
-                d = wp.where(v > 0.0, wp.min(wp.abs(v), near), -wp.min(wp.abs(v), near))
+                    inv2[q // 2] = crossing_inv2(v, n[q], inv2[q // 2])
+                d = crossing_distance(v, inv2)
             dist[t] = d
             dist2[t] = d
         changed[tid] = fz
