@@ -258,7 +258,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     _renormalise(wp, S, bcoord, bmap, phi, tiles, grid.voxel, grid.background, values)
     tiles = (grid.background, -grid.background)
     timings["smooth"] = _lap(wp, t0)
-    mesh = _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel if with_v else None, grid)
+    mesh = _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel if with_v else None, w, grid)
     timings["mesh"] = _lap(wp, t0)
     kind = wp.empty(max(nact, 1), dtype=wp.int32)
     _launch(wp, M.classify_output_blocks, nact, [values, grid.background, kind])
@@ -606,9 +606,10 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     return phi
 
 
-def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> tuple | None:
+def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, w, grid: SparseGrid) -> tuple | None:
     """Marching cubes over active cells: (world, normals, velocities, faces) device arrays of
-    exact size, or None for an empty surface."""
+    exact size, or None for an empty surface (w: the kernel weight sums, which say where the
+    velocity field vel holds a velocity)."""
     from mpmfx.surface.mc_tables import device_tables
 
     nvox = values.shape[0]
@@ -647,6 +648,6 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
     origin = wp.vec3(*grid.origin.astype(np.float32))
-    _split(wp, M.sample_vertices, m, [bmap, values, *tiles, vel_arg, int(vel is not None), verts, origin, grid.voxel,
+    _split(wp, M.sample_vertices, m, [bmap, values, *tiles, vel_arg, w, int(vel is not None), verts, origin, grid.voxel,
                                       world, normals, velocities])
     return world, normals, velocities, faces
