@@ -8,7 +8,7 @@ neighbour lines are read once into registers instead of through a block-map look
 import warp as wp
 
 from mpmfx.surface.line_kernels import block_faces, line_neighbours, line_sides, read, vec8
-from mpmfx.surface.redistance_kernels import crossing_distance, crossing_inv2, eikonal_update
+from mpmfx.surface.redistance_kernels import crossing_fraction, eikonal_update, frozen_distance
 from mpmfx.surface.sparse_kernels import BS, BV
 
 
@@ -82,6 +82,7 @@ def init_eikonal_lines(
     bmap: wp.array3d(dtype=wp.int32),
     phi: wp.array(dtype=float),
     clip: float,
+    plane: int,
     frozen: wp.array(dtype=wp.int32),
     dist: wp.array(dtype=float),
     dist2: wp.array(dtype=float),
@@ -107,9 +108,13 @@ def init_eikonal_lines(
                 fz = fz | (1 << z)
                 n = line_neighbours(phi, sides, t, l, z, clip, -clip)
                 inv2 = wp.vec3(0.0)
+                near = float(1.0)
                 for q in range(6):
-                    inv2[q // 2] = crossing_inv2(v, n[q], inv2[q // 2])
-                d = crossing_distance(v, inv2)
+                    f = crossing_fraction(v, n[q])
+                    if f <= 1.0:
+                        near = wp.min(near, f)
+                        inv2[q // 2] = wp.max(inv2[q // 2], 1.0 / wp.max(f * f, 1.0e-24))
+                d = frozen_distance(v, inv2, near, plane)
             dist[t] = d
             dist2[t] = d
         changed[tid] = fz

@@ -13,23 +13,26 @@ from mpmfx.surface.sparse_kernels import step_get, voxel_of
 
 
 @wp.func
-def crossing_inv2(v: float, u: float, inv2: float):
-    """max(inv2, 1 / f^2), f = |v| / (|v| + |u|) the fraction of the way from v to the zero
-    crossing interpolated towards the neighbour u, where u has the other sign; else inv2."""
-    out = inv2
+def crossing_fraction(v: float, u: float):
+    """|v| / (|v| + |u|): the fraction of the way from v to the zero crossing interpolated
+    towards its neighbour u, where u has the other sign; 2 (none) where it has v's."""
+    f = float(2.0)
     if (u > 0.0) != (v > 0.0):
         f = wp.abs(v) / wp.max(wp.abs(v) + wp.abs(u), 1.0e-12)
-        out = wp.max(inv2, 1.0 / wp.max(f * f, 1.0e-24))
-    return out
+    return f
 
 
 @wp.func
-def crossing_distance(v: float, inv2: wp.vec3):
-    """The distance (v's sign) from a voxel to the plane through the zero crossings interpolated
-    along each axis (inv2[a] = 1 / the nearest one's fraction^2 along axis a, 0 for none):
-    1 / sqrt(sum inv2). It has slope 1 across the crossing whatever the field's slope there, and
-    keeps the crossings where linear interpolation puts them on an axis-aligned face."""
-    d = 1.0 / wp.sqrt(inv2[0] + inv2[1] + inv2[2])
+def frozen_distance(v: float, inv2: wp.vec3, near: float, plane: int):
+    """The start value (v's sign) of a voxel next to the zero crossing. plane != 0: its distance
+    to the plane through the crossings interpolated along each axis (inv2[a] = 1 / the nearest
+    one's fraction^2 along axis a, 0 for none), 1 / sqrt(sum inv2): slope 1 across the crossing
+    whatever the field's slope there, the crossings where linear interpolation puts them on an
+    axis-aligned face. plane = 0: |v|, at most the nearest axis crossing `near` (for a field
+    that is a distance already: the closing's grown one)."""
+    d = wp.min(wp.abs(v), near)
+    if plane != 0:
+        d = 1.0 / wp.sqrt(inv2[0] + inv2[1] + inv2[2])
     return wp.where(v > 0.0, d, -d)
 
 
@@ -41,29 +44,35 @@ def init_eikonal(
     out_v: float,
     in_v: float,
     clip: float,
+    plane: int,
     frozen: wp.array(dtype=wp.int32),
     dist: wp.array(dtype=float),
     base: int,
 ):
-    """Voxels with a 6-neighbour of the other sign (frozen = 1) start at their distance to the
-    plane through the crossings interpolated along the axes (crossing_distance); the others at
-    +-clip with phi's sign. They used to keep phi itself (at most the nearest axis crossing):
-    the raw field's slope across its crossing is not 1 (0.97 on a flat lattice face: -0.008 /
-    +0.964 voxels), so the distance had a kink there, and each blur pass moved flat faces out
-    across it (+0.014 h after five passes on the 100k lattice box, "fine")."""
+    """Voxels with a 6-neighbour of the other sign (frozen = 1) start at frozen_distance; the
+    others at +-clip with phi's sign. With plane = 1 (the raw field, sparse._distance) that is
+    the distance to the plane through the axis crossings; it used to be phi itself (at most the
+    nearest axis crossing), but the raw field's slope across its crossing is not 1 (0.97 on a
+    flat lattice face: -0.008 / +0.964 voxels), so the distance had a kink there, and each blur
+    pass moved flat faces out across it (+0.014 h after five passes on the 100k lattice box,
+    "fine"). plane = 0 keeps phi (the closing's grown distance: redistancing it then changes
+    nothing on a smooth surface, and the closing's gate leaves lattices where they were)."""
     t = wp.tid() + base
     c = voxel_of(t, bcoord)
     v = phi[t]
     inv2 = wp.vec3(0.0)
+    near = float(1.0)
     cross = int(0)
     for n in range(6):
         u = step_get(bmap, phi, t, c, n // 2, 2 * (n % 2) - 1, out_v, in_v)
-        if (u > 0.0) != (v > 0.0):
+        f = crossing_fraction(v, u)
+        if f <= 1.0:
             cross = 1
-        inv2[n // 2] = crossing_inv2(v, u, inv2[n // 2])
+            near = wp.min(near, f)
+            inv2[n // 2] = wp.max(inv2[n // 2], 1.0 / wp.max(f * f, 1.0e-24))
     frozen[t] = cross
     if cross == 1:
-        dist[t] = crossing_distance(v, inv2)
+        dist[t] = frozen_distance(v, inv2, near, plane)
     else:
         dist[t] = wp.where(v > 0.0, clip, -clip)
 

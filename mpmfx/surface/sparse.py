@@ -509,19 +509,22 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     if nvox == 0:
         return d1
     # the raw field is a distance only near its zero level (it flattens to -r inside, and the
-    # renormalised values there are no distance either): keep the voxels next to the crossing,
-    # recompute the rest of the band from them (|grad phi| = 1). Without it each blur pass that
-    # reached the flat part moved lattice surfaces outward (sphere +0.08 h at five passes).
+    # renormalised values there are no distance either): keep its zero crossings, start the
+    # voxels next to them at their distance to the plane through the axis crossings
+    # (redistance_kernels.init_eikonal, plane = 1: the field's own slope there is not 1, and a
+    # kink at the crossing moved flat faces out under the blur), and recompute the rest of the
+    # band from them (|grad phi| = 1). Without it each blur pass that reached the flat part
+    # moved lattice surfaces outward (sphere +0.08 h at five passes).
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     was = wp.empty(nvox // BS, dtype=wp.int32)  # voxels changed by a sweep (CPU)
     if _lines(phi):  # the second renormalise and the average only where init_eikonal reads them
         _blocks(wp, L.crossing_average_lines, [bcoord, bmap, d1, clip, frozen, d2])
-        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, frozen, a, b, was])
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, 1, frozen, a, b, was])
     else:
         _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
         _launch(wp, S.average_into, nvox, [d1, d2])
-        _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, frozen, a])
+        _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, 1, frozen, a])
     return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip)
 
 
@@ -536,9 +539,9 @@ def _redistance(wp, bcoord, bmap, phi, clip: float):
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     was = wp.empty(nvox // BS, dtype=wp.int32)
-    _split(wp, R.init_eikonal, nvox, [bcoord, bmap, phi, clip, -clip, clip, frozen, a])
+    _split(wp, R.init_eikonal, nvox, [bcoord, bmap, phi, clip, -clip, clip, 0, frozen, a])
     if _lines(phi):  # the same values again, with both sweep buffers and the changed bits the line sweeps start from
-        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, frozen, a, b, was])
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, 0, frozen, a, b, was])
     return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip)
 
 
