@@ -23,10 +23,27 @@ def crossing_fraction(v: float, u: float):
 
 
 @wp.func
+def axis_inv2(v: float, u: float, inv2: float):
+    """max(inv2, 1 / t^2), t = v / (v - u) the zero level's distance from v along the axis
+    towards its neighbour u by linear interpolation (t <= 1: u has the other sign) or
+    extrapolation (t > 1: u has v's sign but is nearer zero); inv2 where the line moves away
+    from zero. 1 / t^2 is continuous as u passes through zero, so the plane start does not jump
+    when a crossing appears on another axis between frames."""
+    out = inv2
+    if (u > 0.0) != (v > 0.0):
+        f = wp.abs(v) / wp.max(wp.abs(v) + wp.abs(u), 1.0e-12)
+        out = wp.max(inv2, 1.0 / wp.max(f * f, 1.0e-24))
+    elif wp.abs(u) < wp.abs(v):
+        g = (wp.abs(v) - wp.abs(u)) / wp.abs(v)
+        out = wp.max(inv2, g * g)
+    return out
+
+
+@wp.func
 def frozen_distance(v: float, inv2: wp.vec3, near: float, plane: int):
     """The start value (v's sign) of a voxel next to the zero crossing. plane != 0: its distance
     to the plane through the crossings interpolated along each axis (inv2[a] = 1 / the nearest
-    one's fraction^2 along axis a, 0 for none), 1 / sqrt(sum inv2): slope 1 across the crossing
+    one's fraction^2 along axis a: axis_inv2), 1 / sqrt(sum inv2): slope 1 across the crossing
     whatever the field's slope there, the crossings where linear interpolation puts them on an
     axis-aligned face. plane = 0: |v|, at most the nearest axis crossing `near` (for a field
     that is a distance already: the closing's grown one)."""
@@ -69,7 +86,7 @@ def init_eikonal(
         if f <= 1.0:
             cross = 1
             near = wp.min(near, f)
-            inv2[n // 2] = wp.max(inv2[n // 2], 1.0 / wp.max(f * f, 1.0e-24))
+        inv2[n // 2] = axis_inv2(v, u, inv2[n // 2])
     frozen[t] = cross
     if cross == 1:
         dist[t] = frozen_distance(v, inv2, near, plane)

@@ -518,7 +518,7 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     was = wp.empty(nvox // BS, dtype=wp.int32)  # voxels changed by a sweep (CPU)
-    if _lines(phi):  # the second renormalise and the average only where init_eikonal reads them
+    if _lines(phi):  # the second renormalise and the average in one pass, with the frozen flags
         _blocks(wp, L.crossing_average_lines, [bcoord, bmap, d1, clip, frozen, d2])
         _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, 1, frozen, a, b, was])
     else:
