@@ -79,14 +79,16 @@ def init_eikonal_lines(
     phi: wp.array(dtype=float),
     clip: float,
     plane: int,
+    find: int,
     frozen: wp.array(dtype=wp.int32),
     dist: wp.array(dtype=float),
     dist2: wp.array(dtype=float),
     changed: wp.array(dtype=wp.int32),
     base: int,
 ):
-    """redistance_kernels.init_eikonal (tiles +-clip) on one block (thread = block), frozen given
-    (crossing_average_lines), into both buffers of the sweeps (dist, dist2). changed[line]:
+    """redistance_kernels.init_eikonal (tiles +-clip) on one block (thread = block), into both
+    buffers of the sweeps (dist, dist2); frozen given (crossing_average_lines, find = 0) or
+    found here (find = 1: a 6-neighbour of the other sign, as init_eikonal). changed[line]:
     bit z set where voxel z is frozen. A voxel that neither is nor touches a frozen one holds
     +-clip, as do all its neighbours (tiles too), and a sweep leaves it at +-clip: for the
     first sweep (eikonal_lines) the frozen voxels are the ones that changed."""
@@ -100,17 +102,24 @@ def init_eikonal_lines(
             t = tid * BS + z
             v = phi[t]
             d = wp.where(v > 0.0, clip, -clip)
-            if frozen[t] != 0:
-                fz = fz | (1 << z)
+            if find != 0 or frozen[t] != 0:
                 n = line_neighbours(phi, sides, t, l, z, clip, -clip)
                 inv2 = wp.vec3(0.0)
                 near = float(1.0)
+                cross = int(0)
                 for q in range(6):
                     f = crossing_fraction(v, n[q])
                     if f <= 1.0:
+                        cross = 1
                         near = wp.min(near, f)
                     inv2[q // 2] = axis_inv2(v, n[q], inv2[q // 2])
-                d = frozen_distance(v, inv2, near, plane)
+                if find != 0:
+                    frozen[t] = cross
+                else:
+                    cross = 1  # frozen given
+                if cross != 0:
+                    fz = fz | (1 << z)
+                    d = frozen_distance(v, inv2, near, plane)
             dist[t] = d
             dist2[t] = d
         changed[tid] = fz

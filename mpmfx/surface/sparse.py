@@ -520,7 +520,7 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     was = wp.empty(nvox // BS, dtype=wp.int32)  # voxels changed by a sweep (CPU)
     if _lines(phi):  # the second renormalise and the average in one pass, with the frozen flags
         _blocks(wp, L.crossing_average_lines, [bcoord, bmap, d1, clip, frozen, d2])
-        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, 1, frozen, a, b, was])
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, 1, 0, frozen, a, b, was])
     else:
         _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
         _launch(wp, S.average_into, nvox, [d1, d2])
@@ -539,9 +539,10 @@ def _redistance(wp, bcoord, bmap, phi, clip: float):
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     was = wp.empty(nvox // BS, dtype=wp.int32)
-    _split(wp, R.init_eikonal, nvox, [bcoord, bmap, phi, clip, -clip, clip, 0, frozen, a])
-    if _lines(phi):  # the same values again, with both sweep buffers and the changed bits the line sweeps start from
-        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, 0, frozen, a, b, was])
+    if _lines(phi):  # the frozen flags found too, into both sweep buffers, with the changed bits the line sweeps start from
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, 0, 1, frozen, a, b, was])
+    else:
+        _split(wp, R.init_eikonal, nvox, [bcoord, bmap, phi, clip, -clip, clip, 0, frozen, a])
     return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip)
 
 
