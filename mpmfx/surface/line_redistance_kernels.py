@@ -8,7 +8,7 @@ neighbour lines are read once into registers instead of through a block-map look
 import warp as wp
 
 from mpmfx.surface.line_kernels import block_faces, line_neighbours, line_sides, read, vec8
-from mpmfx.surface.redistance_kernels import eikonal_update
+from mpmfx.surface.redistance_kernels import axis_inv2, crossing_fraction, eikonal_update, frozen_distance
 from mpmfx.surface.sparse_kernels import BS, BV
 
 
@@ -48,12 +48,11 @@ def crossing_average_lines(
     out: wp.array(dtype=float),
     base: int,
 ):
-    """The second renormalise and the average of _distance, only where init_eikonal keeps a
-    value: frozen = 1 at voxels with a 6-neighbour of the other sign (tiles +-clip), where
-    out = (d1 + renormalise(d1)) / 2 as sparse_kernels.renormalise and average_into give it;
-    elsewhere out = d1. Renormalising keeps each sign, so the crossings are d1's, and
-    init_eikonal reads values only at crossing voxels (its own and its other-sign neighbours';
-    elsewhere only the sign)."""
+    """The second renormalise and the average of _distance: out = (d1 + renormalise(d1)) / 2 as
+    sparse_kernels.renormalise and average_into give it, and frozen = 1 at voxels with a
+    6-neighbour of the other sign (tiles +-clip). Renormalising keeps each sign, so the
+    crossings are d1's. (It used to average only the frozen voxels, the only values
+    init_eikonal read; its plane start now reads the frozen voxels' same-sign neighbours too.)"""
     b = wp.tid() + base
     faces = block_faces(bmap, bcoord[b])
     for l in range(64):
@@ -68,12 +67,9 @@ def crossing_average_lines(
                 if (n[q] > 0.0) != (v > 0.0):
                     cross = 1
             frozen[t] = cross
-            if cross != 0:
-                grad = 0.5 * wp.length(wp.vec3(n[1] - n[0], n[3] - n[2], n[5] - n[4]))
-                d2 = wp.clamp(v / wp.max(grad, 0.05) * 1.0, -clip, clip)
-                out[t] = 0.5 * (v + d2)
-            else:
-                out[t] = v
+            grad = 0.5 * wp.length(wp.vec3(n[1] - n[0], n[3] - n[2], n[5] - n[4]))
+            d2 = wp.clamp(v / wp.max(grad, 0.05) * 1.0, -clip, clip)
+            out[t] = 0.5 * (v + d2)
 
 
 @wp.kernel
@@ -82,14 +78,17 @@ def init_eikonal_lines(
     bmap: wp.array3d(dtype=wp.int32),
     phi: wp.array(dtype=float),
     clip: float,
+    plane: int,
+    find: int,
     frozen: wp.array(dtype=wp.int32),
     dist: wp.array(dtype=float),
     dist2: wp.array(dtype=float),
     changed: wp.array(dtype=wp.int32),
     base: int,
 ):
-    """redistance_kernels.init_eikonal (tiles +-clip) on one block (thread = block), frozen given
-    (crossing_average_lines), into both buffers of the sweeps (dist, dist2). changed[line]:
+    """redistance_kernels.init_eikonal (tiles +-clip) on one block (thread = block), into both
+    buffers of the sweeps (dist, dist2); frozen given (crossing_average_lines, find = 0) or
+    found here (find = 1: a 6-neighbour of the other sign, as init_eikonal). changed[line]:
     bit z set where voxel z is frozen. A voxel that neither is nor touches a frozen one holds
     +-clip, as do all its neighbours (tiles too), and a sweep leaves it at +-clip: for the
     first sweep (eikonal_lines) the frozen voxels are the ones that changed."""
@@ -103,15 +102,24 @@ def init_eikonal_lines(
             t = tid * BS + z
             v = phi[t]
             d = wp.where(v > 0.0, clip, -clip)
-            if frozen[t] != 0:
-                fz = fz | (1 << z)
+            if find != 0 or frozen[t] != 0:
                 n = line_neighbours(phi, sides, t, l, z, clip, -clip)
+                inv2 = wp.vec3(0.0)
                 near = float(1.0)
+                cross = int(0)
                 for q in range(6):
-                    u = n[q]
-                    if (u > 0.0) != (v > 0.0):
-                        near = wp.min(near, wp.abs(v) / wp.max(wp.abs(v) + wp.abs(u), 1.0e-12))
-                d = wp.where(v > 0.0, wp.min(wp.abs(v), near), -wp.min(wp.abs(v), near))
+                    f = crossing_fraction(v, n[q])
+                    if f <= 1.0:
+                        cross = 1
+                        near = wp.min(near, f)
+                    inv2[q // 2] = axis_inv2(v, n[q], inv2[q // 2])
+                if find != 0:
+                    frozen[t] = cross
+                else:
+                    cross = 1  # frozen given
+                if cross != 0:
+                    fz = fz | (1 << z)
+                    d = frozen_distance(v, inv2, near, plane)
             dist[t] = d
             dist2[t] = d
         changed[tid] = fz

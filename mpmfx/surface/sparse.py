@@ -258,7 +258,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     _renormalise(wp, S, bcoord, bmap, phi, tiles, grid.voxel, grid.background, values)
     tiles = (grid.background, -grid.background)
     timings["smooth"] = _lap(wp, t0)
-    mesh = _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel if with_v else None, grid)
+    mesh = _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel if with_v else None, w, grid)
     timings["mesh"] = _lap(wp, t0)
     kind = wp.empty(max(nact, 1), dtype=wp.int32)
     _launch(wp, M.classify_output_blocks, nact, [values, grid.background, kind])
@@ -509,19 +509,22 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     if nvox == 0:
         return d1
     # the raw field is a distance only near its zero level (it flattens to -r inside, and the
-    # renormalised values there are no distance either): keep the voxels next to the crossing,
-    # recompute the rest of the band from them (|grad phi| = 1). Without it each blur pass that
-    # reached the flat part moved lattice surfaces outward (sphere +0.08 h at five passes).
+    # renormalised values there are no distance either): keep its zero crossings, start the
+    # voxels next to them at their distance to the plane through the axis crossings
+    # (redistance_kernels.init_eikonal, plane = 1: the field's own slope there is not 1, and a
+    # kink at the crossing moved flat faces out under the blur), and recompute the rest of the
+    # band from them (|grad phi| = 1). Without it each blur pass that reached the flat part
+    # moved lattice surfaces outward (sphere +0.08 h at five passes).
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     was = wp.empty(nvox // BS, dtype=wp.int32)  # voxels changed by a sweep (CPU)
-    if _lines(phi):  # the second renormalise and the average only where init_eikonal reads them
+    if _lines(phi):  # the second renormalise and the average in one pass, with the frozen flags
         _blocks(wp, L.crossing_average_lines, [bcoord, bmap, d1, clip, frozen, d2])
-        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, frozen, a, b, was])
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, 1, 0, frozen, a, b, was])
     else:
         _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
         _launch(wp, S.average_into, nvox, [d1, d2])
-        _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, frozen, a])
+        _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, 1, frozen, a])
     return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip)
 
 
@@ -536,9 +539,10 @@ def _redistance(wp, bcoord, bmap, phi, clip: float):
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     was = wp.empty(nvox // BS, dtype=wp.int32)
-    _split(wp, R.init_eikonal, nvox, [bcoord, bmap, phi, clip, -clip, clip, frozen, a])
-    if _lines(phi):  # the same values again, with both sweep buffers and the changed bits the line sweeps start from
-        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, frozen, a, b, was])
+    if _lines(phi):  # the frozen flags found too, into both sweep buffers, with the changed bits the line sweeps start from
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, 0, 1, frozen, a, b, was])
+    else:
+        _split(wp, R.init_eikonal, nvox, [bcoord, bmap, phi, clip, -clip, clip, 0, frozen, a])
     return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip)
 
 
@@ -606,9 +610,10 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     return phi
 
 
-def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> tuple | None:
+def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, w, grid: SparseGrid) -> tuple | None:
     """Marching cubes over active cells: (world, normals, velocities, faces) device arrays of
-    exact size, or None for an empty surface."""
+    exact size, or None for an empty surface (w: the kernel weight sums, which say where the
+    velocity field vel holds a velocity)."""
     from mpmfx.surface.mc_tables import device_tables
 
     nvox = values.shape[0]
@@ -647,6 +652,6 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, grid: SparseGrid) -> 
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
     origin = wp.vec3(*grid.origin.astype(np.float32))
-    _split(wp, M.sample_vertices, m, [bmap, values, *tiles, vel_arg, int(vel is not None), verts, origin, grid.voxel,
+    _split(wp, M.sample_vertices, m, [bmap, values, *tiles, vel_arg, w, int(vel is not None), verts, origin, grid.voxel,
                                       world, normals, velocities])
     return world, normals, velocities, faces

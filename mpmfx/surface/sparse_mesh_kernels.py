@@ -107,6 +107,7 @@ def sample_vertices(
     out_v: float,
     in_v: float,
     vel: wp.array(dtype=wp.vec3),
+    wsum: wp.array(dtype=float),
     with_v: int,
     verts: wp.array(dtype=wp.vec3),
     origin: wp.vec3,
@@ -116,13 +117,19 @@ def sample_vertices(
     velocities: wp.array(dtype=wp.vec3),
     base: int,
 ):
-    """World position, outward normal (trilinear gradient) and trilinear velocity per vertex."""
+    """World position, outward normal (trilinear gradient) and trilinear velocity per vertex.
+
+    The velocity interpolates only the corners that some particle reaches (kernel weight sum
+    wsum > 0; the others hold no velocity), renormalised: where the closing filled a sample void
+    (SurfaceParams.close_voids) a vertex can lie next to voxels no particle reaches, and reading
+    them as 0 slowed such vertices (0.68 of the particles' speed at worst, 3000 random particles)."""
     t = wp.tid() + base
     g = verts[t]
     c = wp.vec3i(int(wp.floor(g[0])), int(wp.floor(g[1])), int(wp.floor(g[2])))
     f = g - wp.vec3(float(c[0]), float(c[1]), float(c[2]))
     grad = wp.vec3(0.0)
     vv = wp.vec3(0.0)
+    vw = float(0.0)
     for n in range(8):
         ox = n & 1
         oy = (n >> 1) & 1
@@ -138,10 +145,12 @@ def sample_vertices(
         if with_v != 0:
             s = slot(bmap, c[0] + ox, c[1] + oy, c[2] + oz)
             if s >= 0:
-                vv += (wx * wy * wz) * vel[s]
+                if wsum[s] > 0.0:
+                    vv += (wx * wy * wz) * vel[s]
+                    vw += wx * wy * wz
     ln = wp.length(grad)
     normals[t] = wp.where(ln > 0.0, grad / wp.max(ln, 1.0e-20), wp.vec3(0.0, 0.0, 1.0))
-    velocities[t] = vv
+    velocities[t] = wp.where(vw > 0.0, vv / wp.max(vw, 1.0e-20), wp.vec3(0.0))
     world[t] = origin + g * voxel
 
 

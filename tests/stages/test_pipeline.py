@@ -128,12 +128,14 @@ def test_cli_status_and_clean(first_run, capsys):
 
 def test_close_voids_is_a_surface_knob(first_run, tmp_path, capsys):
     """surface.close_voids reaches the surfacer (the closing changes the mesh, only surface
-    re-runs); a negative radius is a config error naming the field."""
+    re-runs); a negative radius is a config error naming the field. Three spacings: at one the
+    gated closing finds nothing to fill on this lattice-like block (the mesh is the one without
+    it since the redistancing starts from the crossing plane)."""
     from mpmfx.cli import main
     from mpmfx.io.frames import SurfaceFrame
     shot, cache, first = first_run
     h = mpmfx.load_shot(shot, cache_root=cache, quiet=True).shot.particle_spacing
-    run = mpmfx.load_shot(shot, overrides=[f"surface.close_voids={h}"], cache_root=cache, quiet=True)
+    run = mpmfx.load_shot(shot, overrides=[f"surface.close_voids={3 * h}"], cache_root=cache, quiet=True)
     results = run.run(until="surface")
     assert _states(results) == {"voxelise": "cached", "simulate": "cached", "surface": "ran"}
     before = SurfaceFrame.read(first[2].entry / "frames" / "0003.npz").groups["Elastic"].vertices
