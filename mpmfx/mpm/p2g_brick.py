@@ -5,7 +5,7 @@ global atomics (14.4 ms a substep for 19M particles on an H100). Here the partic
 in brick order (a brick: 4^3 stencil corner nodes) and one CUDA block scatters a brick:
 
     1. at the first substep of a chunk (chunked.py), and then every few substeps as the
-       particles move (sort_cadence), the particles' order `idx` is radix-sorted by brick,
+       order wears (sort_cadence), the particles' order `idx` is radix-sorted by brick,
        then by corner node inside it, and the slot ranges of equal bricks (segments) are
        found; the substeps between keep both (particles move a fraction of a cell a substep);
     2. per substep, per segment, one block zeroes a window of 8^3 nodes in shared memory
