@@ -45,14 +45,14 @@ def window_q_plain(op: int, e: int, value: wp.int64) -> wp.int64: ...
 def window_q_noflush(op: int, e: int, value: wp.int64) -> wp.int64: ...
 
 
-def g2p_caps(grid_n: int = 128) -> list[dict]:
-    """G2P ms a substep, Mushy block of mpmfx bench gpu, under register caps."""
+def g2p_caps(grid_n: int = 128, name: str = "Mushy", caps=(None, 96, 80, 72)) -> list[dict]:
+    """G2P ms a substep, the `name` block of mpmfx bench gpu, under register caps."""
     import mpmfx.mpm.g2p as g2p_mod
     from mpmfx.bench.gpu import scene
     from mpmfx.mpm import Solver, SolverConfig
     from shot_profile import kernel_split
     kernel, rows = wp.kernel, []
-    for cap in (None, 96, 80, 72):
+    for cap in caps:
         def capped(*a, **kw):
             def deco(f):
                 if f.__name__ != "g2p":
@@ -63,7 +63,7 @@ def g2p_caps(grid_n: int = 128) -> list[dict]:
         g2p_mod.wp.kernel = capped
         g2p_mod.make_g2p.cache_clear()
         try:
-            mats, parts, _ = scene("Mushy", grid_n)
+            mats, parts, _ = scene(name, grid_n)
             solver = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=False), device=DEVICE)
         finally:
             g2p_mod.wp.kernel = kernel
@@ -72,7 +72,7 @@ def g2p_caps(grid_n: int = 128) -> list[dict]:
         solver.advance(state, 0.0, span)
         ms, rep = kernel_split(solver, state, span, 2 * span)
         k = max(1, rep.substeps + rep.rejected_substeps)
-        rows.append({"probe": "g2p cap", "variant": str(cap), "n": state.n,
+        rows.append({"probe": f"g2p cap, {name}", "variant": str(cap), "n": state.n,
                      "g2p_ms": sum(v for n, v in ms.items() if "g2p" in n) / k,
                      "total_ms": sum(ms.values()) / k})
         print(json.dumps(rows[-1]), flush=True)
@@ -113,3 +113,38 @@ def main() -> int:
 
 if __name__ == "__main__":
     sys.exit(main())
+
+
+def scatter_caps(grid_n: int = 128, name: str = "Mushy", caps=(None, 80, 64, 56)) -> list[dict]:
+    """The brick P2G's scatter ms a substep under register caps (p2g_brick.MAX_REGISTERS)."""
+    from mpmfx.bench.gpu import scene
+    from mpmfx.mpm import Solver, SolverConfig
+    from shot_profile import kernel_split
+    kernel, rows = wp.kernel, []
+    for cap in caps:
+        def capped(*a, **kw):
+            def deco(f):
+                if f.__name__ != "scatter":
+                    return kernel(*a, **kw)(f)
+                opts = {**kw, "cuda_max_registers": cap, "module": kw["module"] + f"_cap{cap}"}
+                if cap is None:
+                    opts.pop("cuda_max_registers")
+                return kernel(*a, **opts)(f)
+            return deco
+        pb.wp.kernel = capped
+        pb.make_brick_scatter.cache_clear()
+        try:
+            mats, parts, _ = scene(name, grid_n)
+            solver = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=False), device=DEVICE)
+            state = solver.init_state(parts)
+            span = 32 * solver.config.cfl * solver.config.dx / max(m.wave_speed() for m in mats)
+            solver.advance(state, 0.0, span)
+            ms, rep = kernel_split(solver, state, span, 2 * span)
+        finally:
+            pb.wp.kernel = kernel
+        k = max(1, rep.substeps + rep.rejected_substeps)
+        rows.append({"probe": f"scatter cap, {name}", "variant": str(cap), "n": state.n,
+                     "scatter_ms": sum(v for n, v in ms.items() if "scatter" in n) / k,
+                     "total_ms": sum(ms.values()) / k})
+        print(json.dumps(rows[-1]), flush=True)
+    return rows

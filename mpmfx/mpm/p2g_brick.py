@@ -38,7 +38,11 @@ blocks of 192 or 256 threads (5.0 ms: the 128 registers a thread the compiler ta
 multiprocessor 512 threads). Capping registers (MAX_REGISTERS) let more blocks in: water /
 snow 3.6 / 4.5 ms at 128 (no cap), 3.0 / 3.8 at 80, 2.7 / 3.4 at 64, 2.7 / 3.3 at 56, 2.8 /
 3.3 at 48 (deterministic: 5.2 / 6.0, 4.7 / 5.5, 4.4 / 5.2, 4.6 / 5.3, 5.1 / 5.8); the same cap
-on G2P made it slower (water 1.49 -> 1.77 ms at 64).
+on G2P made it slower (water 1.49 -> 1.77 ms at 64). Since the particles' stress is stored (g2p.py: no
+SVD here any more) 80 is better than 64; H200, fast mode, the scatter alone, ms a substep at
+19.4M (cap 80 / 72 / 64): snow 2.54 / 2.56 / 2.79, water 2.48 / 2.44 / 2.58, sand 2.53 / 2.55 /
+2.79; at 2.4M (uncapped / 96 / 80 / 64 / 56): snow 0.401 / 0.370 / 0.349 / 0.371 / 0.384, water
+0.506 / 0.376 / 0.351 / 0.353 / 0.365 (scripts/kernel_probe.py scatter_caps).
 
 The window holds fixed point in both modes (the reference's quanta, p2g.py), so its sums are
 exact and order-free. A run's float sums are deterministic too: its particles are summed in
@@ -83,7 +87,7 @@ BRICK = 4  # corner nodes per brick and axis (a key's low 6 bits)
 WIN = 8  # window nodes per axis: BRICK + 1 slack below + 1 above + the stencil's 2
 WIN_NODES = WIN * WIN * WIN
 BLOCK_CUDA = 128  # threads a block on CUDA, and slots parked a round
-MAX_REGISTERS = 64  # a thread's registers (the compiler takes 128 unbounded: see the docstring)
+MAX_REGISTERS = 80  # a thread's registers (the compiler takes 128 unbounded: see the docstring)
 MAX_BLOCKS = 1 << 15  # blocks at most; each walks segments block, block + MAX_BLOCKS, ...
 PARKED = 16  # floats a parked particle: m, m v (3), affine (9), fx (3)
 SORT_TRAVEL = 1.0  # cells the fastest particle may move between two sorts: a window's slack (travel_cadence)
