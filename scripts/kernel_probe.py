@@ -4,7 +4,7 @@
    after two frames with the shipped kernel, each variant swaps one piece of the int64 window
    for a cheaper, WRONG one for one timed quarter frame (only its time is read): 32-bit shared
    atomics, plain (racy) adds, no global flush;
-2. G2P of snow (Mushy, grid 128) under register caps (the compiler takes 128 a thread).
+2. G2P (and, by kernel_caps("scatter", ...), the brick P2G's scatter) under register caps.
 
     python3 scripts/kernel_probe.py --out $OUT
 """
@@ -45,35 +45,39 @@ def window_q_plain(op: int, e: int, value: wp.int64) -> wp.int64: ...
 def window_q_noflush(op: int, e: int, value: wp.int64) -> wp.int64: ...
 
 
-def g2p_caps(grid_n: int = 128, name: str = "Mushy", caps=(None, 96, 80, 72)) -> list[dict]:
-    """G2P ms a substep, the `name` block of mpmfx bench gpu, under register caps."""
-    import mpmfx.mpm.g2p as g2p_mod
+def kernel_caps(kernel_name: str, grid_n: int = 128, name: str = "Mushy", caps=(None, 96, 80, 72)) -> list[dict]:
+    """Device ms a substep of the kernel `kernel_name` ("g2p", or the brick P2G's "scatter") in the
+    `name` block of mpmfx bench gpu, compiled under each register cap (None: the compiler's own)."""
     from mpmfx.bench.gpu import scene
     from mpmfx.mpm import Solver, SolverConfig
+    from mpmfx.mpm import g2p as g2p_mod
     from shot_profile import kernel_split
     kernel, rows = wp.kernel, []
     for cap in caps:
         def capped(*a, **kw):
             def deco(f):
-                if f.__name__ != "g2p":
+                if f.__name__ != kernel_name:
                     return kernel(*a, **kw)(f)
-                extra = {"cuda_max_registers": cap} if cap is not None else {}
-                return kernel(*a, **{**kw, **extra, "module": kw["module"] + f"_cap{cap}"})(f)
+                opts = {**kw, "cuda_max_registers": cap, "module": kw["module"] + f"_cap{cap}"}
+                if cap is None:
+                    opts.pop("cuda_max_registers")
+                return kernel(*a, **opts)(f)
             return deco
-        g2p_mod.wp.kernel = capped
+        wp.kernel = capped  # (both kernels are built lazily: at the solver's construction / first scatter)
         g2p_mod.make_g2p.cache_clear()
+        pb.make_brick_scatter.cache_clear()
         try:
             mats, parts, _ = scene(name, grid_n)
             solver = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=False), device=DEVICE)
+            state = solver.init_state(parts)
+            span = 32 * solver.config.cfl * solver.config.dx / max(m.wave_speed() for m in mats)
+            solver.advance(state, 0.0, span)
         finally:
-            g2p_mod.wp.kernel = kernel
-        state = solver.init_state(parts)
-        span = 32 * solver.config.cfl * solver.config.dx / max(m.wave_speed() for m in mats)
-        solver.advance(state, 0.0, span)
+            wp.kernel = kernel
         ms, rep = kernel_split(solver, state, span, 2 * span)
         k = max(1, rep.substeps + rep.rejected_substeps)
-        rows.append({"probe": f"g2p cap, {name}", "variant": str(cap), "n": state.n,
-                     "g2p_ms": sum(v for n, v in ms.items() if "g2p" in n) / k,
+        rows.append({"probe": f"{kernel_name} cap, {name}", "variant": str(cap), "n": state.n,
+                     f"{kernel_name}_ms": sum(v for n, v in ms.items() if kernel_name in n) / k,
                      "total_ms": sum(ms.values()) / k})
         print(json.dumps(rows[-1]), flush=True)
     return rows
@@ -104,7 +108,7 @@ def main() -> int:
         rows.append({"probe": "det window", "variant": name, "scatter_ms": ms})
         print(json.dumps(rows[-1]), flush=True)
     pb.window_q = variants["int64 window (as shipped)"]
-    rows += g2p_caps(16 if SMOKE else 128)
+    rows += kernel_caps("g2p", 16 if SMOKE else 128)
     out = Path(os.environ.get("OUT", "profile_out"))  # as shot_profile.py / p2g_shot.py
     out.mkdir(parents=True, exist_ok=True)
     (out / "kernel_probe.json").write_text(json.dumps(rows, indent=1))
@@ -114,37 +118,3 @@ def main() -> int:
 if __name__ == "__main__":
     sys.exit(main())
 
-
-def scatter_caps(grid_n: int = 128, name: str = "Mushy", caps=(None, 80, 64, 56)) -> list[dict]:
-    """The brick P2G's scatter ms a substep under register caps (p2g_brick.MAX_REGISTERS)."""
-    from mpmfx.bench.gpu import scene
-    from mpmfx.mpm import Solver, SolverConfig
-    from shot_profile import kernel_split
-    kernel, rows = wp.kernel, []
-    for cap in caps:
-        def capped(*a, **kw):
-            def deco(f):
-                if f.__name__ != "scatter":
-                    return kernel(*a, **kw)(f)
-                opts = {**kw, "cuda_max_registers": cap, "module": kw["module"] + f"_cap{cap}"}
-                if cap is None:
-                    opts.pop("cuda_max_registers")
-                return kernel(*a, **opts)(f)
-            return deco
-        pb.wp.kernel = capped
-        pb.make_brick_scatter.cache_clear()
-        try:
-            mats, parts, _ = scene(name, grid_n)
-            solver = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=False), device=DEVICE)
-            state = solver.init_state(parts)
-            span = 32 * solver.config.cfl * solver.config.dx / max(m.wave_speed() for m in mats)
-            solver.advance(state, 0.0, span)
-            ms, rep = kernel_split(solver, state, span, 2 * span)
-        finally:
-            pb.wp.kernel = kernel
-        k = max(1, rep.substeps + rep.rejected_substeps)
-        rows.append({"probe": f"scatter cap, {name}", "variant": str(cap), "n": state.n,
-                     "scatter_ms": sum(v for n, v in ms.items() if "scatter" in n) / k,
-                     "total_ms": sum(ms.values()) / k})
-        print(json.dumps(rows[-1]), flush=True)
-    return rows

@@ -42,7 +42,7 @@ on G2P made it slower (water 1.49 -> 1.77 ms at 64). Since the particles' stress
 SVD here any more) 80 is better than 64; H200, fast mode, the scatter alone, ms a substep at
 19.4M (cap 80 / 72 / 64): snow 2.54 / 2.56 / 2.79, water 2.48 / 2.44 / 2.58, sand 2.53 / 2.55 /
 2.79; at 2.4M (uncapped / 96 / 80 / 64 / 56): snow 0.401 / 0.370 / 0.349 / 0.371 / 0.384, water
-0.506 / 0.376 / 0.351 / 0.353 / 0.365 (scripts/kernel_probe.py scatter_caps).
+0.506 / 0.376 / 0.351 / 0.353 / 0.365 (scripts/kernel_probe.py, kernel_caps("scatter")).
 
 The window holds fixed point in both modes (the reference's quanta, p2g.py), so its sums are
 exact and order-free. A run's float sums are deterministic too: its particles are summed in
