@@ -53,7 +53,7 @@ def measure(label, solver, state, t, span, cadence, rows, restore=None):
     row = {"scene": label, "det": int(solver.config.deterministic), "particles": state.n, "sort_every": cadence,
            "ms_substep": 1e3 * wall / max(1, rep.substeps + rep.rejected_substeps),
            "ms_scatter": sum(v for n, v in ms.items() if "scatter" in n) / k,
-           "pieces": (frag[0] + frag[1]) / k, "fallbacks": frag[2] / k, "ms_sort": sort_ms(solver, state),
+           "pieces": (frag[0] + frag[1]) / k, "fallbacks": frag[2] / k, "ms_sort": sort_ms(solver, state, whole=True),
            "substeps": k}
     rows.append(row)
     print(json.dumps(row), flush=True)

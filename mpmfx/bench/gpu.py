@@ -140,10 +140,11 @@ def _phase_split(solver, state, t: float, span: float) -> tuple[dict, float]:
     return {f"ms_{p}": v / k for p, v in ms.items()}, t + span
 
 
-def sort_ms(solver, state, reps: int = 10) -> float:
-    """Device ms of one brick-P2G sort (keys, CUB radix sort, segments) of `state`, timed
-    alone (CUDA; 0 without the brick P2G). The radix sort and the scan are not Warp
-    launches, so Warp's kernel timing (_phase_split) does not see them."""
+def sort_ms(solver, state, reps: int = 10, *, whole: bool = False) -> float:
+    """Device ms of one brick-P2G sort of `state`, timed alone (CUDA; 0 without the brick P2G):
+    its CUB calls (radix sort and scan), which are not Warp launches, so Warp's kernel timing
+    (_phase_split) does not see them (its Warp kernels, keys and segments, are in P2G's); whole:
+    the whole sort (what p2g_brick.sort_cadence weighs)."""
     import warp as wp
 
     from mpmfx.mpm.p2g import P2GParams
@@ -156,11 +157,19 @@ def sort_ms(solver, state, reps: int = 10) -> float:
     sd = SubstepDev()
     sd.active = 1
     sub = wp.array([sd], dtype=SubstepDev, device=solver.device)
-    brick.sort(pp, state, state.cur, sub)  # warm
+
+    def once():  # (a radix sort's cost does not depend on the keys' order)
+        if whole:
+            brick.sort(pp, state, state.cur, sub)
+        else:
+            wp.utils.radix_sort_pairs(brick.keys, brick.idx, brick.n)
+            wp.utils.array_scan(brick.flag, brick.pos, inclusive=False)
+
+    once()  # warm
     wp.synchronize_device(solver.device)
     t0 = time.perf_counter()
     for _ in range(reps):
-        brick.sort(pp, state, state.cur, sub)
+        once()
     wp.synchronize_device(solver.device)
     return 1e3 * (time.perf_counter() - t0) / reps
 

@@ -168,7 +168,7 @@ class DeviceAdvance:
             if int(c[Clock.N_SUB] - before) % 2:
                 state.swap()
         self._to_clock(state, c)
-        if self.p2g == "brick" and not self.sort_every:
+        if self.p2g == "brick" and not self.sort_every and cadence:
             state.clock.sort_every = cadence
         t = t0 + c[Clock.DONE] / cfg.time_scale
         if int(c[Clock.STATUS]) == Status.DT_TOO_SMALL:
