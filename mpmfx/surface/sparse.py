@@ -357,8 +357,9 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         _split(wp, L.sorted_copy, n, [g, order, gs])
         if with_v:
             _split(wp, L.sorted_copy, n, [v, order, vs])
-        _blocks(wp, L.gather_zhu_bridson_blocks, [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox,
-                                                  grid.r_vox, grid.far_vox, phi, w, offset, vel, wp.empty(nvox, dtype=wp.vec3)])
+        nacc = 10 if with_v else 7  # vec8 sums per line: w, offset, weight gradient (, velocity)
+        _blocks(wp, L.gather_zhu_bridson_blocks, [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox, grid.r_vox,
+                                                  grid.far_vox, phi, w, offset, vel, wp.empty(nvox // BS * nacc, dtype=L.vec8), nacc])
     else:
         wp.launch(S.gather_zhu_bridson, nvox,
                   inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
