@@ -34,8 +34,8 @@ def gather_zhu_bridson_blocks(
     w_out: wp.array(dtype=float),
     offset: wp.array(dtype=wp.vec3),
     vel: wp.array(dtype=wp.vec3),
-    acc: wp.array(dtype=vec8),
     nacc: int,
+    acc: wp.array(dtype=vec8),
     base: int,
 ):
     """sparse_kernels.gather_zhu_bridson for the 512 voxels of one block (thread = active
@@ -49,7 +49,8 @@ def gather_zhu_bridson_blocks(
 
     acc: scratch, nacc (7, or 10 with velocities) vec8 sums per line of the block (w, the
     offset's x y z, the weight gradient's x y z, the velocity's x y z), turned into the field
-    by the block's last step. A particle adds to all 8 voxels of a line it reaches, the
+    by the block's last step; indexed by the launch's thread (wp.tid()), so one CPU thread's
+    chunks can share one (launch.launch_split_scratch). A particle adds to all 8 voxels of a line it reaches, the
     weights of voxels beyond the kernel masked to 0: adding +-0 leaves a sum as it is, and
     the mask is the voxel kernel's test d2 < r2, so the sums stay the voxel kernel's bit for
     bit. The visits cost more than the arithmetic: a particle reaches 1.2 voxels of an
@@ -61,7 +62,7 @@ def gather_zhu_bridson_blocks(
     c = bcoord[b] * BS
     t0 = b * BV
     r2 = reach * reach
-    a0 = b * (BS * BS) * nacc
+    a0 = wp.tid() * (BS * BS) * nacc  # this launch's thread's part of the scratch
     for q in range(BS * BS * nacc):
         acc[a0 + q] = vec8(0.0)
     shape = wp.vec3i(cells.shape[0], cells.shape[1], cells.shape[2])
