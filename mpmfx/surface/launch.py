@@ -14,6 +14,7 @@ most MAX_THREADS); 1 turns splitting off.
 from __future__ import annotations
 
 import os
+import queue
 from concurrent.futures import ThreadPoolExecutor
 
 MAX_THREADS = 8
@@ -65,5 +66,33 @@ def launch_split(wp, kernel, dim: int, inputs: list, *, device, min_split: int |
     step = -(-dim // (n * CHUNKS_PER_THREAD))
     chunks = [(lo, min(step, dim - lo)) for lo in range(0, dim, step)]
     futures = [_executor(n).submit(wp.launch, kernel, size, inputs=[*inputs, lo], device=device) for lo, size in chunks]
+    for f in futures:
+        f.result()
+
+
+def launch_split_scratch(wp, kernel, dim: int, inputs: list, scratch, *, device) -> None:
+    """launch_split for a kernel of one block per thread that takes inputs + [scratch, base]
+    and uses scratch per thread of its launch (its thread tid's part, whatever base): each
+    CPU thread gets its own scratch(threads) array, reused by the chunks it runs, instead of
+    one for every block. scratch(k): a new array for k kernel threads."""
+    if dim <= 0:
+        return
+    n = cpu_threads() if device.is_cpu else 1
+    if n == 1:
+        wp.launch(kernel, dim, inputs=[*inputs, scratch(dim), 0], device=device)
+        return
+    step = -(-dim // (n * CHUNKS_PER_THREAD))
+    free: queue.SimpleQueue = queue.SimpleQueue()
+    for _ in range(n):
+        free.put(scratch(step))
+
+    def run(lo: int, size: int) -> None:
+        buf = free.get()
+        try:
+            wp.launch(kernel, size, inputs=[*inputs, buf, lo], device=device)
+        finally:
+            free.put(buf)
+
+    futures = [_executor(n).submit(run, lo, min(step, dim - lo)) for lo in range(0, dim, step)]
     for f in futures:
         f.result()

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from mpmfx.surface.launch import launch_split
+from mpmfx.surface.launch import launch_split, launch_split_scratch
 from mpmfx.surface.params import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, SurfaceResult
 
 log = logging.getLogger(__name__)
@@ -357,8 +357,10 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         _split(wp, L.sorted_copy, n, [g, order, gs])
         if with_v:
             _split(wp, L.sorted_copy, n, [v, order, vs])
-        _blocks(wp, L.gather_zhu_bridson_blocks, [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox,
-                                                  grid.r_vox, grid.far_vox, phi, w, offset, vel, wp.empty(nvox, dtype=wp.vec3)])
+        nacc = 10 if with_v else 7  # vec8 sums per line: w, offset, weight gradient (, velocity)
+        launch_split_scratch(wp, L.gather_zhu_bridson_blocks, bcoord.shape[0],
+                             [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w,
+                              offset, vel, nacc], lambda k: wp.empty(k * BS * BS * nacc, dtype=L.vec8), device=phi.device)
     else:
         wp.launch(S.gather_zhu_bridson, nvox,
                   inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
