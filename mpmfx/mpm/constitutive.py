@@ -117,10 +117,15 @@ vec6 = wp.types.vector(length=6, dtype=wp.float32)
 
 
 @wp.func
+def sym6(A: wp.mat33) -> vec6:
+    """A symmetric A's six independent entries (its upper triangle)."""
+    return vec6(A[0, 0], A[1, 1], A[2, 2], A[0, 1], A[0, 2], A[1, 2])
+
+
+@wp.func
 def to_sym(U: wp.mat33, d: wp.vec3) -> vec6:
     """U diag(d) U^T, kept as its six independent entries."""
-    A = U * wp.diag(d) * wp.transpose(U)
-    return vec6(A[0, 0], A[1, 1], A[2, 2], A[0, 1], A[0, 2], A[1, 2])
+    return sym6(U * wp.diag(d) * wp.transpose(U))
 
 
 @wp.func

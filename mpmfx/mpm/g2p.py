@@ -25,6 +25,7 @@ from .constitutive import (
     sand_plastic,
     snow_plastic,
     solid_tau,
+    sym6,
     uninvert,
     vec6,
 )
@@ -273,5 +274,4 @@ def solid_stress(materials: wp.array(dtype=MaterialParams), material: wp.array(d
     p = wp.tid()
     mat = materials[material[p]]
     if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
-        t = solid_tau(mat, F[p], Jp[p])
-        tau[p] = vec6(t[0, 0], t[1, 1], t[2, 2], t[0, 1], t[0, 2], t[1, 2])
+        tau[p] = sym6(solid_tau(mat, F[p], Jp[p]))
