@@ -200,10 +200,15 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
             J_new = J[p]
         jp_new = Jp[p]
         x_new = x[p]
-        v_new = v[p]
-        C_new = C[p]
+        v_new = wp.vec3(0.0)
+        C_new = wp.mat33(0.0)
         alive_new = alive[p]
-        if alive_new != 0:
+        if alive_new == 0:
+            # a removed particle keeps its v and C; a live one's come from the grid alone, so
+            # they are not read (48 of G2P's ~220 bytes a solid particle, C a slow 36-byte load)
+            v_new = v[p]
+            C_new = C[p]
+        else:
             v_new, C_new = gather(grid_v, x[p], gp.inv_dx, field_id[p] * gp.nodes)
             C_new = gp.affine_keep * C_new  # drag: blend toward PIC at a rate (guide §6 trap)
             mid = material[p]
