@@ -18,6 +18,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..mpm.state import m33_assign
+
 __all__ = ["CaseResult", "lattice", "fc_energy", "free_fall", "rigid_rotation", "vibrating_bar",
            "standing_wave", "hydrostatic_column", "colliding_disks"]
 
@@ -188,7 +190,7 @@ def rigid_rotation(*, grid_n: int = 16, cfl: float = 0.4, ppa: int = 2, revoluti
     extra = {"drag": 1e9} if pic else {}
     solver, state = _setup(_elastic(E, 0.2), x, v, dx / ppa, grid_n=grid_n, device=device, **extra)
     skew = np.array([[0, -w[2], w[1]], [w[2], 0, -w[0]], [-w[1], w[0], 0]], np.float32)
-    state.cur.C.assign(np.tile(skew, (state.n, 1, 1)))
+    m33_assign(state.cur.C, np.tile(skew, (state.n, 1, 1)))
     L0 = _angular_momentum(solver.state_to_numpy(state), c, dx)
     t_end = revolutions * 2 * math.pi / np.linalg.norm(w)
     steps = math.ceil(t_end / _dt(solver, state, cfl, R * np.linalg.norm(w)))

@@ -23,7 +23,7 @@ from .constitutive import (
     solid_energy_density,
     tait_energy_density,
 )
-from .state import SceneFlags
+from .state import SceneFlags, load_m33
 
 ENERGY_CHUNK = 64  # particles per thread: enough threads for the SVDs, few partial sums
 
@@ -39,7 +39,7 @@ def make_energy(flags: SceneFlags):
         materials: wp.array(dtype=MaterialParams),
         material: wp.array(dtype=wp.int32),
         volume: wp.array(dtype=float),
-        F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
+        F: wp.array2d(dtype=wp.vec3), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
         alive: wp.array(dtype=wp.int32), n: int,
         partial: wp.array2d(dtype=wp.float64),
     ):
@@ -51,7 +51,7 @@ def make_energy(flags: SceneFlags):
                 psi = float(0.0)
                 if wp.static(has_solid):
                     if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
-                        psi = solid_energy_density(mat, F[p], Jp[p])
+                        psi = solid_energy_density(mat, load_m33(F, p), Jp[p])
                 if wp.static(has_water):
                     if mat.mode == MODE_WATER:
                         psi = tait_energy_density(mat, J[p])

@@ -30,7 +30,7 @@ from .constitutive import (
     vec6,
 )
 from .slots import Count, Stat
-from .state import SceneFlags
+from .state import SceneFlags, load_m33, store_m33
 from .stepper import SubstepDev
 
 G2P_MAX_REGISTERS = 80  # see make_g2p
@@ -173,11 +173,11 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
         materials: wp.array(dtype=MaterialParams),
         material: wp.array(dtype=wp.int32),
         field_id: wp.array(dtype=wp.int32),
-        x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
-        F: wp.array(dtype=wp.mat33), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
+        x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array2d(dtype=wp.vec3),
+        F: wp.array2d(dtype=wp.vec3), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
         alive: wp.array(dtype=wp.int32), tau: wp.array(dtype=vec6),
-        x_out: wp.array(dtype=wp.vec3), v_out: wp.array(dtype=wp.vec3), C_out: wp.array(dtype=wp.mat33),
-        F_out: wp.array(dtype=wp.mat33), J_out: wp.array(dtype=float), Jp_out: wp.array(dtype=float),
+        x_out: wp.array(dtype=wp.vec3), v_out: wp.array(dtype=wp.vec3), C_out: wp.array2d(dtype=wp.vec3),
+        F_out: wp.array2d(dtype=wp.vec3), J_out: wp.array(dtype=float), Jp_out: wp.array(dtype=float),
         alive_out: wp.array(dtype=wp.int32), tau_out: wp.array(dtype=vec6),
         stats: wp.array(dtype=float),
         counts: wp.array(dtype=wp.int32),
@@ -194,7 +194,7 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
         tau_new = vec6(0.0)
         solid = bool(False)  # a solid's stress is stored for the next P2G
         if wp.static(has_solid):
-            F_new = F[p]
+            F_new = load_m33(F, p)
         J_new = float(1.0)
         if wp.static(has_water):
             J_new = J[p]
@@ -207,7 +207,7 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
             # a removed particle keeps its v and C; a live one's come from the grid alone, so
             # they are not read (48 of G2P's ~220 bytes a solid particle, C a slow 36-byte load)
             v_new = v[p]
-            C_new = C[p]
+            C_new = load_m33(C, p)
         else:
             v_new, C_new = gather(grid_v, x[p], gp.inv_dx, field_id[p] * gp.nodes)
             C_new = gp.affine_keep * C_new  # drag: blend toward PIC at a rate (guide §6 trap)
@@ -258,11 +258,11 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
         # each output written once (G2P is memory bound)
         x_out[p] = x_new
         v_out[p] = v_new
-        C_out[p] = C_new
+        store_m33(C_out, p, C_new)
         Jp_out[p] = jp_new
         alive_out[p] = alive_new
         if wp.static(has_solid):
-            F_out[p] = F_new
+            store_m33(F_out, p, F_new)
             if solid:
                 tau_out[p] = tau_new
         if wp.static(has_water):
@@ -273,10 +273,10 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
 
 @wp.kernel(enable_backward=False)
 def solid_stress(materials: wp.array(dtype=MaterialParams), material: wp.array(dtype=wp.int32),
-                 F: wp.array(dtype=wp.mat33), Jp: wp.array(dtype=float), tau: wp.array(dtype=vec6)):
+                 F: wp.array2d(dtype=wp.vec3), Jp: wp.array(dtype=float), tau: wp.array(dtype=vec6)):
     """tau (n,) of every snow and sand particle from its F and Jp (solid_tau), for a state
     that has no stored stress yet (a new one, or a checkpoint written before G2P stored it)."""
     p = wp.tid()
     mat = materials[material[p]]
     if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
-        tau[p] = sym6(solid_tau(mat, F[p], Jp[p]))
+        tau[p] = sym6(solid_tau(mat, load_m33(F, p), Jp[p]))

@@ -40,7 +40,7 @@ from .constitutive import (
     tait_pressure,
     vec6,
 )
-from .state import SceneFlags
+from .state import SceneFlags, load_m33
 from .stepper import SubstepDev
 
 FIXED_POINT_BITS = 32  # see module docstring
@@ -76,7 +76,7 @@ def make_particle_affine(flags: SceneFlags):
 
     @wp.func
     def particle_affine(pp: P2GParams, mat: MaterialParams, stress: wp.array(dtype=vec6), J: wp.array(dtype=float),
-                        C: wp.array(dtype=wp.mat33), volume: wp.array(dtype=float), p: int, m: float) -> wp.mat33:
+                        C: wp.array2d(dtype=wp.vec3), volume: wp.array(dtype=float), p: int, m: float) -> wp.mat33:
         tau = wp.mat33(0.0)
         if wp.static(has_solid):
             if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
@@ -88,7 +88,7 @@ def make_particle_affine(flags: SceneFlags):
                 tau = wp.identity(n=3, dtype=float) * (-tait_pressure(mat, Jw) * Jw)
         inv_dx = pp.inv_dx
         # D^-1 = 4 / dx^2 for quadratic B-splines
-        return (-pp.dt * volume[p] * 4.0 * inv_dx * inv_dx) * tau + m * C[p]
+        return (-pp.dt * volume[p] * 4.0 * inv_dx * inv_dx) * tau + m * load_m33(C, p)
 
     return particle_affine
 
@@ -105,7 +105,7 @@ def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
     @wp.kernel(enable_backward=False, module=flags.key + ("_dev" if device_clock else ""))
     def p2g(
         pp: P2GParams,
-        x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
+        x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array2d(dtype=wp.vec3),
         tau: wp.array(dtype=vec6), J: wp.array(dtype=float),
         alive: wp.array(dtype=wp.int32),
         mass: wp.array(dtype=float),

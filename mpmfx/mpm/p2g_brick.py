@@ -456,7 +456,7 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                cuda_max_registers=MAX_REGISTERS)
     def scatter(pp: P2GParams, keys: wp.array(dtype=wp.int32), start: wp.array(dtype=wp.int32),
                 n_seg: wp.array(dtype=wp.int32), block: int, n_blocks: int, idx: wp.array(dtype=wp.int32),
-                x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array(dtype=wp.mat33),
+                x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array2d(dtype=wp.vec3),
                 tau: wp.array(dtype=vec6), J: wp.array(dtype=float),
                 alive: wp.array(dtype=wp.int32), mass: wp.array(dtype=float), volume: wp.array(dtype=float),
                 material: wp.array(dtype=wp.int32), materials: wp.array(dtype=MaterialParams),

@@ -33,7 +33,7 @@ from .p2g_brick import BRICK
 from .chunked import DeviceAdvance
 from .stepper import SubstepDev, report_sums, sum_partials
 from .slots import REJECTING, Count, Stat
-from .state import ParticleBuffers, SceneFlags, State, StepperClock
+from .state import ParticleBuffers, SceneFlags, State, StepperClock, m33_assign, m33_to_host
 
 __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
 
@@ -236,7 +236,9 @@ class Solver:
             cur = ParticleBuffers.allocate(n, self.flags, self.device)
             nxt = ParticleBuffers.allocate(n, self.flags, self.device)
             for name, arr in zip(ParticleBuffers.NAMES, cur.arrays()):
-                if name in data:
+                if name in ParticleBuffers.MATRICES:
+                    m33_assign(arr, data[name])
+                elif name in data:
                     scalar = np.int32 if name == "alive" else np.float32
                     arr.assign(np.ascontiguousarray(data[name], dtype=scalar))
             state = State(
@@ -501,7 +503,8 @@ class Solver:
             arrays["F"] = cur.F
         if self.flags.water:
             arrays["J"] = cur.J
-        return {k: a.numpy() for k, a in arrays.items() if names is None or k in names}
+        return {k: m33_to_host(a) if k in ParticleBuffers.MATRICES else a.numpy()
+                for k, a in arrays.items() if names is None or k in names}
 
     def volume_ratio(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
         """J (n,) float32 from `host_arrays` (material, F, J): det F for solids, J for water,
@@ -520,7 +523,8 @@ class Solver:
 
     def checkpoint(self, state: State, t: float) -> dict[str, np.ndarray]:
         """Full state + stepper clock, as numpy arrays; `restore` resumes bit-identically."""
-        data = {name: arr.numpy() for name, arr in zip(ParticleBuffers.NAMES, state.cur.arrays())}
+        data = {name: m33_to_host(arr) if name in ParticleBuffers.MATRICES else arr.numpy()
+                for name, arr in zip(ParticleBuffers.NAMES, state.cur.arrays())}
         data.update(mass=state.mass.numpy(), volume=state.volume.numpy(),
                     material=state.material.numpy(), body=state.body.numpy())
         data["clock"] = state.clock.to_array()

@@ -10,7 +10,8 @@ import warp as wp
 from .constitutive import vec6
 from .materials import Mode
 
-__all__ = ["SceneFlags", "ParticleBuffers", "StepperClock", "State"]
+__all__ = ["SceneFlags", "ParticleBuffers", "StepperClock", "State", "load_m33", "store_m33", "m33_to_host",
+           "m33_assign"]
 
 
 @dataclass(frozen=True)
@@ -47,13 +48,43 @@ class SceneFlags:
         return f"mpmfx_mpm_scene_{tag or 'tracer'}"
 
 
+# A matrix field (C, F) is stored as three planes of rows, a (3, n) vec3 array: row r of
+# particle p at [r, p]. Why: an array of mat33 (36 bytes a particle) copies at 1.3 TB/s on an
+# H200, three planes of 12-byte rows at 3.9 (scripts/layout_probe.py), and G2P reads F and
+# writes C and F every substep.
+
+
+@wp.func
+def load_m33(a: wp.array2d(dtype=wp.vec3), p: int) -> wp.mat33:
+    """Particle p's matrix of a (3, n) row-plane array."""
+    return wp.matrix_from_rows(a[0, p], a[1, p], a[2, p])
+
+
+@wp.func
+def store_m33(a: wp.array2d(dtype=wp.vec3), p: int, m: wp.mat33):
+    """Write particle p's matrix into a (3, n) row-plane array."""
+    a[0, p] = m[0]
+    a[1, p] = m[1]
+    a[2, p] = m[2]
+
+
+def m33_to_host(a: wp.array) -> np.ndarray:
+    """(n, 3, 3) float32 host copy of a (3, n) row-plane array."""
+    return np.ascontiguousarray(a.numpy().transpose(1, 0, 2))
+
+
+def m33_assign(a: wp.array, values) -> None:
+    """Upload (n, 3, 3) matrices into a (3, n) row-plane array."""
+    a.assign(np.ascontiguousarray(np.asarray(values, np.float32).transpose(1, 0, 2)))
+
+
 @dataclass
 class ParticleBuffers:
     """The particle fields that change every substep, on the device.
 
-    x: (n,) vec3 domain units; v: (n,) vec3 domain/s; C: (n,) mat33 1/s (APIC affine
-    velocity); F: (n,) mat33 elastic deformation gradient, or (1,) when no material needs
-    it; J: (n,) float32 volume ratio of water particles, or (1,) without water;
+    x: (n,) vec3 domain units; v: (n,) vec3 domain/s; C: (3, n) row planes (load_m33) of
+    the 1/s APIC affine velocity; F: (3, n) row planes of the elastic deformation gradient,
+    or (3, 1) when no material needs it; J: (n,) float32 volume ratio of water particles, or (1,) without water;
     Jp: (n,) float32 plastic volume ratio (snow) or log-volume correction (sand);
     alive: (n,) int32, 0 once a particle left the domain in REMOVE mode;
     tau: (n,) vec6 Kirchhoff stress of a solid's F and Jp, mass/(domain s^2) (symmetric:
@@ -70,6 +101,7 @@ class ParticleBuffers:
     tau: wp.array
 
     NAMES = ("x", "v", "C", "F", "J", "Jp", "alive", "tau")
+    MATRICES = ("C", "F")  # row planes: m33_to_host / m33_assign on the host
 
     @classmethod
     def allocate(cls, n: int, flags: SceneFlags, device) -> "ParticleBuffers":
@@ -77,8 +109,8 @@ class ParticleBuffers:
             return wp.zeros(count, dtype=dtype, device=device)
 
         return cls(
-            x=arr(wp.vec3), v=arr(wp.vec3), C=arr(wp.mat33),
-            F=arr(wp.mat33, n if flags.solid else 1),
+            x=arr(wp.vec3), v=arr(wp.vec3), C=arr(wp.vec3, (3, n)),
+            F=arr(wp.vec3, (3, n if flags.solid else 1)),
             J=arr(wp.float32, n if flags.water else 1),
             Jp=arr(wp.float32), alive=arr(wp.int32),
             tau=arr(vec6, n if flags.solid else 1),

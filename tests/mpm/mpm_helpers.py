@@ -4,6 +4,7 @@ import numpy as np
 import warp as wp
 
 from mpmfx.mpm import Particles
+from mpmfx.mpm.state import m33_assign
 
 wp.config.quiet = True
 
@@ -40,5 +41,5 @@ def free_bar(*, grid_n: int, half_width: float, length: float = 0.6, E: float = 
     state = solver.init_state(p)
     C = np.zeros((state.n, 3, 3), np.float32)
     C[:, 0, 0] = -v0 * k * np.sin(k * (p.x[:, 0] - x0))
-    state.cur.C.assign(C)
+    m33_assign(state.cur.C, C)
     return solver, state, p, k

@@ -6,6 +6,7 @@ import pytest
 from tests.mpm.mpm_helpers import block, concat
 from mpmfx.bench.reference_step import fixed_corotated_tau, hencky_tau
 from mpmfx.mpm import Mode, Particles, SimulationError, Solver, SolverConfig, preset
+from mpmfx.mpm.state import m33_assign
 
 ZERO_G = (0.0, 0.0, 0.0)
 
@@ -19,8 +20,8 @@ def test_p2g_conserves_mass_and_momentum():
     for det in (False, True):
         solver = Solver([preset("Elastic")], SolverConfig(grid_n=16, gravity=ZERO_G, deterministic=det), device="cpu")
         state = solver.init_state(p)
-        state.cur.C.assign(rng.normal(size=(state.n, 3, 3)).astype(np.float32))
-        state.cur.F.assign((np.eye(3) + 0.05 * rng.normal(size=(state.n, 3, 3))).astype(np.float32))
+        m33_assign(state.cur.C, rng.normal(size=(state.n, 3, 3)).astype(np.float32))
+        m33_assign(state.cur.F, (np.eye(3) + 0.05 * rng.normal(size=(state.n, 3, 3))).astype(np.float32))
         solver.update_stress(state)
         solver.step(state, 1e-4)
         m = state.mass.numpy().astype(np.float64)
@@ -73,7 +74,7 @@ def _spin(drag, revolutions):
     solver = Solver([mat], cfg, device="cpu")
     state = solver.init_state(p)
     skew = np.array([[0, -omega, 0], [omega, 0, 0], [0, 0, 0]], np.float32)
-    state.cur.C.assign(np.tile(skew, (state.n, 1, 1)))
+    m33_assign(state.cur.C, np.tile(skew, (state.n, 1, 1)))
     L0 = _angular_momentum(solver.state_to_numpy(state), 0.5, cfg.dx)[2]
     dt = solver._cfl_dt(state.clock)
     steps = int(round(revolutions * 2 * np.pi / omega / dt))
@@ -144,7 +145,7 @@ def test_stored_stress_is_the_stress_of_the_stored_deformation():
     state = solver.init_state(parts)
     dt = 1e-3  # one substep squeezing the blocks by ~5 % an axis (their gathered C is ~1/8 of this one
     # near their faces): beyond the snow clamp (2.5 %) at once
-    state.cur.C.assign(np.tile(-400.0 * np.eye(3, dtype=np.float32), (state.n, 1, 1)))
+    m33_assign(state.cur.C, np.tile(-400.0 * np.eye(3, dtype=np.float32), (state.n, 1, 1)))
     solver.step(state, dt)
     out = solver.state_to_numpy(state)
     mat = parts.material

@@ -107,7 +107,7 @@ def test_substeps_after_the_first_clear_and_update_only_the_marked_node_bricks()
         for _ in range(substeps):  # each cleared by the last one's marks
             _assert_close(_grid(solver, state, brick), ref)
             for k, a in zip("xvC", (ref_state.nxt.x, ref_state.nxt.v, ref_state.nxt.C)):
-                b = getattr(state.nxt, k).numpy()
+                b = getattr(state.nxt, k).numpy()  # (C: row planes, compared as stored)
                 np.testing.assert_allclose(b, a.numpy(), rtol=1e-5, atol=1e-5 * np.abs(a.numpy()).max(), err_msg=k)
     marks = brick.marks.numpy().reshape((brick.nb,) * 3)
     assert 0 < marks.sum() < marks.size // 2  # sparse: most bricks are left out
