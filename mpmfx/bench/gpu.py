@@ -101,17 +101,15 @@ def traffic(solver, state) -> tuple[int, int, int]:
     grid is cleared, read and written by the update, and read once more by G2P."""
     cur = state.cur.arrays()
     const = [state.mass, state.volume, state.material, state.body, state.field_id]
-    part = _bytes(cur) + _bytes(state.nxt.arrays()) + _bytes(const)
+    part = _bytes(cur) + _bytes(state.nxt.arrays()) + _bytes(const) + state.pid.capacity
     da = solver._device_advance
     brick = solver.stepper == "device" and da.p2g == "brick" and da._brick is not None
     if brick:  # the brick P2G's scratch (its sort, once a chunk of up to 32 substeps, is left out)
-        part += da._brick.nbytes()
+        part += da._brick.nbytes() + (_bytes(state.spare) if state.spare else 0)
     grid_arrays = [solver._grid_m, solver._grid_mv, solver._grid_fixed, solver._grid_v, solver._grid_normal]
     grid = _bytes(grid_arrays)
     acc = _bytes([solver._grid_fixed] if solver.config.deterministic else [solver._grid_m, solver._grid_mv])
     moved = (_bytes(cur) + _bytes(const) - state.body.capacity) + 2 * _bytes(cur) + 3 * acc + 2 * solver._grid_v.capacity
-    if brick:  # the brick P2G reads the particles' order once
-        moved += 4 * state.n
     return part, grid, moved
 
 

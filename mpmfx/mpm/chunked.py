@@ -84,8 +84,8 @@ class DeviceAdvance:
         if self._graph_state is not state:
             self._graphs.clear()
             self._graph_state = state
-        key = (k, id(state.cur), self.s._grid_v.ptr, state.n_fields, self.s._q_mass, self.p2g, id(self._brick),
-               every)
+        key = (k, id(state.cur), id(state.mass), self.s._grid_v.ptr, state.n_fields, self.s._q_mass, self.p2g,
+               id(self._brick), every)
         graph = self._graphs.get(key)
         if graph is None:
             with wp.ScopedCapture(device=self.s.device) as cap:
@@ -144,6 +144,8 @@ class DeviceAdvance:
         s._last_bad = None
         if self.p2g == "brick" and (self._brick is None or self._brick.n != state.n):
             self._brick = BrickP2G(s.flags, state.n, s.device, nodes=cfg.grid_n + 1)  # before any capture: it allocates
+        if self.p2g == "brick" and state.spare is None:  # where sorting substeps store the constants
+            state.spare = tuple(wp.empty_like(a) for a in state.consts())
         self._upload(state, t0, t1)
         if self.keys is not None:  # the fields no substep changes (kind, shape, friction, ...)
             s._colliders_dev.assign(pack_colliders(s.colliders, t0, t0, 1.0))
@@ -160,8 +162,15 @@ class DeviceAdvance:
             k = self._chunk_length(c, dt_guess)
             cadence = self._sort_every(state, c, dt_guess, frag)
             self.last_sort_every = min(k, cadence)  # (a chunk no longer than it sorts at its start only: one graph)
+            consts = (state.consts(), state.spare)
             self._chunk(state, k, self.last_sort_every)
             c = self.clk.numpy()
+            if self._brick is not None:
+                # each accepted sorting substep moved the constants into their other copy
+                # (launching or capturing the chunk swapped them once per sorting substep)
+                sorts = -(-int(c[Clock.N_SUB] - before) // self.last_sort_every)
+                if state.mass is not consts[sorts % 2][0]:
+                    state.swap_consts()
             if self._brick is not None:
                 frag = self._brick.frag.numpy()
                 self._brick.frag.zero_()

@@ -182,14 +182,31 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
         stats: wp.array(dtype=float),
         counts: wp.array(dtype=wp.int32),
         sub: wp.array(dtype=SubstepDev),
+        order: wp.array(dtype=wp.int32), permute: int,
+        mass: wp.array(dtype=float), volume: wp.array(dtype=float), body: wp.array(dtype=wp.int32),
+        pid: wp.array(dtype=wp.int32), mass_out: wp.array(dtype=float), volume_out: wp.array(dtype=float),
+        material_out: wp.array(dtype=wp.int32), body_out: wp.array(dtype=wp.int32),
+        field_id_out: wp.array(dtype=wp.int32), pid_out: wp.array(dtype=wp.int32),
     ):
-        p = wp.tid()
+        slot = wp.tid()
         if wp.static(device_clock):
             s = sub[0]
             if s.active == 0:
                 return
             gp.dt = s.dt
             gp.affine_keep = s.affine_keep
+        # the particle this thread advances, and the slot it is stored in next: the same one,
+        # or (permute: the brick P2G sorted at this substep) the sort's order, slot -> particle,
+        # with the constants moved along into their other copy (state.State: storage order)
+        p = slot
+        if permute != 0:
+            p = order[slot]
+            mass_out[slot] = mass[p]
+            volume_out[slot] = volume[p]
+            material_out[slot] = material[p]
+            body_out[slot] = body[p]
+            field_id_out[slot] = field_id[p]
+            pid_out[slot] = pid[p]
         F_new = wp.mat33(0.0)
         tau_new = vec6(0.0)
         solid = bool(False)  # a solid's stress is stored for the next P2G
@@ -256,17 +273,17 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
             wp.atomic_max(stats, Stat.J_MAX, j_now)
             x_new, alive_new = keep_in_domain(gp, x_new, counts)
         # each output written once (G2P is memory bound)
-        x_out[p] = x_new
-        v_out[p] = v_new
-        store_m33(C_out, p, C_new)
-        Jp_out[p] = jp_new
-        alive_out[p] = alive_new
+        x_out[slot] = x_new
+        v_out[slot] = v_new
+        store_m33(C_out, slot, C_new)
+        Jp_out[slot] = jp_new
+        alive_out[slot] = alive_new
         if wp.static(has_solid):
-            store_m33(F_out, p, F_new)
+            store_m33(F_out, slot, F_new)
             if solid:
-                tau_out[p] = tau_new
+                tau_out[slot] = tau_new
         if wp.static(has_water):
-            J_out[p] = J_new
+            J_out[slot] = J_new
 
     return g2p
 

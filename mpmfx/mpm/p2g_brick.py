@@ -463,6 +463,8 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                 grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
                 grid_fixed: wp.array4d(dtype=wp.int64), marks: wp.array(dtype=wp.int32),
                 sub: wp.array(dtype=SubstepDev), fresh: int, frag: wp.array(dtype=wp.int64)):
+        # fresh: 1 right after a sort, when the particles are still stored in their old order
+        # and slot s holds particle idx[s]; the G2P of that substep stores them in slot order
         t = wp.tid()
         if sub[0].active == 0:
             return  # the whole launch: every thread of a block returns together
@@ -487,7 +489,9 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                 # park: one particle a thread, consecutive slots
                 code = -2
                 if lane < n_park and r0 + lane < n_here:
-                    p = idx[s0 + r0 + lane]
+                    p = s0 + r0 + lane
+                    if fresh != 0:
+                        p = idx[p]
                     m = mass[p]
                     if alive[p] != 0 and m != 0.0:
                         aff = particle_affine(pp, materials[material[p]], tau, J, C, volume, p, m)
@@ -558,9 +562,10 @@ class BrickP2G:
             self.n_seg = wp.zeros(1, dtype=wp.int32)
             self.frag = wp.zeros(FRAG_SLOTS, dtype=wp.int64)  # see FRAG_PIECES
 
-    def launch(self, pp: P2GParams, state, cur, materials, grid_m, grid_mv, grid_fixed, sub, *, sort: bool) -> None:
+    def launch(self, pp: P2GParams, state, cur, materials, grid_m, grid_mv, grid_fixed, sub, *, sort: bool) -> bool:
         """Scatter `cur` onto the grid; sort: re-sort the particles' order and segments first
-        (always before the first scatter)."""
+        (always before the first scatter). Returns whether it sorted: then this substep's G2P
+        must store the particles in the new order (`idx`, slot -> particle)."""
         n, dev = self.n, self.device
         fresh = int(sort or not self.sorted)
         if fresh:
@@ -571,6 +576,7 @@ class BrickP2G:
             pp, self.keys, self.start, self.n_seg, self.block, blocks, self.idx, cur.x, cur.v, cur.C, cur.tau, cur.J,
             cur.alive, state.mass, state.volume, state.material, materials, grid_m, grid_mv, grid_fixed,
             self.marks, sub, fresh, self.frag])
+        return bool(fresh)
 
     def sort(self, pp: P2GParams, state, cur, sub) -> None:
         """Re-sort the particles' order by brick and corner node, and find the segments."""

@@ -33,11 +33,13 @@ from .p2g_brick import BRICK
 from .chunked import DeviceAdvance
 from .stepper import SubstepDev, report_sums, sum_partials
 from .slots import REJECTING, Count, Stat
+from .order import in_particle_order, to_slots
 from .state import ParticleBuffers, SceneFlags, State, StepperClock, m33_assign, m33_to_host
 
 __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
 
-CHECKPOINT_VERSION = 2  # 2: with the solids' stored stress (tau); 1 (without) is restored too
+CHECKPOINT_VERSION = 3  # 3: with the slots' particles (pid); 2: with the solids' stored stress (tau); 1 and 2 are
+# restored too
 MAX_FIELDS = 8  # multi-field contact: grid memory grows with the number of fields
 _SYMPTOM = "Everything explodes / NaNs"  # the guide §9.3 row the errors point at
 
@@ -229,7 +231,13 @@ class Solver:
         return self._build_state(data, clock)
 
     def _build_state(self, data: dict, clock: StepperClock) -> State:
+        """data: arrays in particle order, and `pid` (a checkpoint's: the slot order to restore)."""
         n = int(data["x"].shape[0])
+        pid = np.asarray(data["pid"], np.int32) if "pid" in data else np.arange(n, dtype=np.int32)
+        permuted = bool(np.any(pid != np.arange(n)))
+        if permuted:  # back into the slots they were in, so a resumed run sums as the first did
+            data = {k: to_slots(np.asarray(v), pid, n) if k in ParticleBuffers.NAMES + State.CONSTS[:4] else v
+                    for k, v in data.items()}
         field_id, n_fields = self._field_ids(np.asarray(data["body"]))
         self._allocate_grid(n_fields)
         with wp.ScopedDevice(self.device):
@@ -247,8 +255,8 @@ class Solver:
                 volume=wp.array(np.asarray(data["volume"], np.float32), dtype=float),
                 material=wp.array(np.asarray(data["material"], np.int32), dtype=wp.int32),
                 body=wp.array(np.asarray(data["body"], np.int32), dtype=wp.int32),
-                field_id=wp.array(field_id, dtype=wp.int32), n_fields=n_fields,
-                clock=clock,
+                field_id=wp.array(field_id, dtype=wp.int32), pid=wp.array(pid, dtype=wp.int32),
+                n_fields=n_fields, clock=clock, permuted=permuted,
             )
         if "tau" not in data:  # a new state, or a version 1 checkpoint
             self.update_stress(state)
@@ -308,9 +316,10 @@ class Solver:
         pp.inv_dx, pp.dt, pp.nodes = inv_dx, float(dt), nn
         pp.deterministic = int(cfg.deterministic)
         pp.q_mass_inv, pp.q_mom_inv = 1.0 / self._q_mass, 1.0 / self._q_mom
+        permute = False
         if brick is not None:
-            brick.launch(pp, state, cur, self._materials_dev, self._grid_m, self._grid_mv, self._grid_fixed, self._sub,
-                         sort=resort)
+            permute = brick.launch(pp, state, cur, self._materials_dev, self._grid_m, self._grid_mv, self._grid_fixed,
+                                   self._sub, sort=resort)
         else:
             wp.launch(p2g, dim=state.n, device=self.device, inputs=[
                 pp, cur.x, cur.v, cur.C, cur.tau, cur.J, cur.alive, state.mass, state.volume,
@@ -332,9 +341,17 @@ class Solver:
         gp.remove = int(cfg.out_of_domain == OutOfDomain.REMOVE)
         gp.nodes = nn
         gp.deterministic, gp.q_mass = int(cfg.deterministic), self._q_mass
+        # a sorting substep stores the particles in the sort's order (State: storage order)
+        if permute and state.spare is None:
+            state.spare = tuple(wp.empty_like(a) for a in state.consts())
+        outs = state.spare if permute else state.consts()
         wp.launch(g2p, dim=state.n, device=self.device, inputs=[
             gp, self._grid_v, self._grid_m, self._grid_fixed, self._materials_dev, state.material, state.field_id,
-            *cur.arrays(), *nxt.arrays(), self._stats, self._counts, self._sub])
+            *cur.arrays(), *nxt.arrays(), self._stats, self._counts, self._sub,
+            brick.idx if permute else state.pid, int(permute), state.mass, state.volume, state.body, state.pid, *outs])
+        if permute:
+            state.swap_consts()
+            state.permuted = True
 
     def _grid_params(self, dt: float, n_fields: int) -> GridParams:
         cfg = self.config
@@ -503,8 +520,14 @@ class Solver:
             arrays["F"] = cur.F
         if self.flags.water:
             arrays["J"] = cur.J
-        return {k: m33_to_host(a) if k in ParticleBuffers.MATRICES else a.numpy()
-                for k, a in arrays.items() if names is None or k in names}
+        return self._to_host(state, {k: a for k, a in arrays.items() if names is None or k in names})
+
+    @staticmethod
+    def _to_host(state: State, arrays: dict) -> dict[str, np.ndarray]:
+        """Host copies of device arrays, in particle order (see State: storage order)."""
+        if state.permuted:
+            arrays = {k: in_particle_order(a, state.pid) for k, a in arrays.items()}
+        return {k: m33_to_host(a) if k in ParticleBuffers.MATRICES else a.numpy() for k, a in arrays.items()}
 
     def volume_ratio(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
         """J (n,) float32 from `host_arrays` (material, F, J): det F for solids, J for water,
@@ -523,10 +546,9 @@ class Solver:
 
     def checkpoint(self, state: State, t: float) -> dict[str, np.ndarray]:
         """Full state + stepper clock, as numpy arrays; `restore` resumes bit-identically."""
-        data = {name: m33_to_host(arr) if name in ParticleBuffers.MATRICES else arr.numpy()
-                for name, arr in zip(ParticleBuffers.NAMES, state.cur.arrays())}
-        data.update(mass=state.mass.numpy(), volume=state.volume.numpy(),
-                    material=state.material.numpy(), body=state.body.numpy())
+        data = self._to_host(state, {**dict(zip(ParticleBuffers.NAMES, state.cur.arrays())), "mass": state.mass,
+                                     "volume": state.volume, "material": state.material, "body": state.body})
+        data["pid"] = state.pid.numpy()
         data["clock"] = state.clock.to_array()
         data["t"] = np.array([t], np.float64)
         data["meta"] = np.array([CHECKPOINT_VERSION, self.config.grid_n, state.n], np.int64)
@@ -540,7 +562,7 @@ class Solver:
             raise ValueError(f"checkpoint: missing arrays {', '.join(missing)}; it was not written by "
                              "Solver.checkpoint (or is truncated); re-simulate from the start")
         meta = np.asarray(data["meta"])
-        if int(meta[0]) not in (1, CHECKPOINT_VERSION) or int(meta[1]) != self.config.grid_n:
+        if int(meta[0]) not in (1, 2, CHECKPOINT_VERSION) or int(meta[1]) != self.config.grid_n:
             raise ValueError(
                 f"checkpoint: version/grid_n {meta[:2].tolist()} do not match this solver "
                 f"({CHECKPOINT_VERSION}, {self.config.grid_n}); re-simulate from the start")

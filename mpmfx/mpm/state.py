@@ -162,7 +162,14 @@ class State:
     mass: (n,) float32 (0 for tracers); volume: (n,) float32 rest volume, domain^3;
     material: (n,) int32 row in the solver's material table; body: (n,) int32 object id;
     field_id: (n,) int32 velocity field of the particle (0, or the body's field in multi-field
-    mode); n_fields: number of fields.
+    mode); pid: (n,) int32 the particle (its index in init_state's Particles) each storage slot
+    holds; n_fields: number of fields.
+
+    Storage order: on a GPU the brick P2G keeps the particles themselves in its sort order (a
+    sorting substep's G2P writes them there, p2g_brick.py), so every array above is in slot
+    order, not particle order: `Solver.host_arrays` and `checkpoint` give them back in particle
+    order. The constants' other copy (`spare`, CONSTS order) is where a sorting G2P writes the
+    permuted ones; `swap_consts` makes it current.
     """
 
     n: int
@@ -173,8 +180,23 @@ class State:
     material: wp.array
     body: wp.array
     field_id: wp.array
+    pid: wp.array
     n_fields: int = 1
     clock: StepperClock = field(default_factory=StepperClock)
+    spare: tuple | None = None  # the constants' second copy (allocated at the first sort)
+    permuted: bool = False  # whether slots may differ from particles (pid not the identity)
+
+    CONSTS = ("mass", "volume", "material", "body", "field_id", "pid")
 
     def swap(self) -> None:
         self.cur, self.nxt = self.nxt, self.cur
+
+    def consts(self) -> tuple:
+        return tuple(getattr(self, k) for k in self.CONSTS)
+
+    def swap_consts(self) -> None:
+        """Make the spare constants (a sorting G2P's output) current, and the current spare."""
+        now = self.consts()
+        for k, a in zip(self.CONSTS, self.spare):
+            setattr(self, k, a)
+        self.spare = now
