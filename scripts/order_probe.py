@@ -28,11 +28,12 @@ def brick_order(x: np.ndarray, grid_n: int) -> np.ndarray:
     return np.argsort(brick * 64 + corner, kind="stable")
 
 
-def ordered_scene(order: str):
-    built = bench.scene
+BUILT = bench.scene
 
+
+def ordered_scene(order: str):
     def scene(name, grid_n):
-        mats, parts, colliders = built(name, grid_n)
+        mats, parts, colliders = BUILT(name, grid_n)
         if order == "built":
             return mats, parts, colliders
         perm = (brick_order(parts.x, grid_n) if order == "bricks"
