@@ -6,8 +6,10 @@ fallback particles). Then a least-squares fit over every row
 
     scatter ms a substep = a * particles + b * pieces + f * fallbacks
 
-and the constants sort_cadence uses: a sort's cost per particle in pieces (sort ms / b / n)
-and a fallback particle's cost in pieces (f / b). On the GPU:
+and the constants sort_cadence uses: a sort's cost per particle in pieces ((sort ms + e) / b / n,
+e: what the sorting substep's G2P costs over a plain one, as it moves every particle to its new
+slot: the fit of G2P ms a substep = g + e / cadence, per scene) and a fallback particle's cost in
+pieces (f / b). On the GPU:
 
     python3 scripts/cadence_fit.py --out $OUT        # bench blocks and both hero shots
 """
@@ -45,14 +47,14 @@ def measure(label, solver, state, t, span, cadence, rows, restore=None):
     wp.synchronize_device(solver.device)
     wall = time.perf_counter() - t0
     t += span
-    da._brick.frag.zero_()
     ms, rep2 = kernel_split(solver, state, t, t + span)
     t += span
     k = rep2.substeps + rep2.rejected_substeps
-    frag = da._brick.frag.numpy().astype(np.float64)
+    frag = np.asarray(da.frag_total, np.float64)  # (advance zeroes the scatter's own counts each chunk)
     row = {"scene": label, "det": int(solver.config.deterministic), "particles": state.n, "sort_every": cadence,
            "ms_substep": 1e3 * wall / max(1, rep.substeps + rep.rejected_substeps),
            "ms_scatter": sum(v for n, v in ms.items() if "scatter" in n) / k,
+           "ms_g2p": sum(v for n, v in ms.items() if "g2p" in n) / k,
            "pieces": (frag[0] + frag[1]) / k, "fallbacks": frag[2] / k, "ms_sort": sort_ms(solver, state, whole=True),
            "substeps": k}
     rows.append(row)
@@ -100,8 +102,14 @@ def fit(rows):
     scale = A.max(axis=0)
     coef, *_ = np.linalg.lstsq(A / scale, y, rcond=None)
     a, b, f = coef / scale
-    sort_per_particle = np.median([r["ms_sort"] / r["particles"] for r in rows])
+    moves = {}  # per scene: ms a sorting substep's G2P adds (slope of G2P ms against 1 / cadence)
+    for scene in {r["scene"] for r in rows}:
+        rs = [r for r in rows if r["scene"] == scene]
+        slope, _ = np.polyfit([1.0 / r["sort_every"] for r in rs], [r["ms_g2p"] for r in rs], 1)
+        moves[scene] = max(0.0, float(slope))
+    sort_per_particle = np.median([(r["ms_sort"] + moves[r["scene"]]) / r["particles"] for r in rows])
     out = {"ms_per_particle": a, "ms_per_piece": b, "ms_per_fallback": f, "sort_ms_per_particle": sort_per_particle,
+           "move_ms": moves,
            "SORT_PIECES": sort_per_particle / b if b > 0 else None, "FALLBACK_PIECES": f / b if b > 0 else None,
            "residual_ms": float(np.abs(A @ (coef / scale) - y).max())}
     print("FIT", json.dumps(out), flush=True)

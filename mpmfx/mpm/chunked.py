@@ -56,6 +56,7 @@ class DeviceAdvance:
         self.last_sort_every = CHUNKS[-1]  # what the last chunk did
         self._graphs: dict = {}
         self._graph_state = None  # the State the cached graphs point into (kept alive with them)
+        self.frag_total = None  # the last advance's wear counts summed over its chunks (measuring)
 
     # ------------------------------------------------------------------ one chunk
     def _launch_chunk(self, state, k: int, every: int) -> None:
@@ -153,6 +154,7 @@ class DeviceAdvance:
         frag, cadence = None, 0  # the brick P2G's wear counts of the last chunk (none yet in this advance)
         if self._brick is not None:
             self._brick.frag.zero_()
+            self.frag_total = 0
         while int(c[Clock.STATUS]) in (Status.RUNNING, Status.REJECTED):
             if int(c[Clock.STATUS]) == Status.REJECTED:
                 c[Clock.STATUS] = Status.RUNNING
@@ -172,8 +174,9 @@ class DeviceAdvance:
                 if state.mass is not consts[sorts % 2][0]:
                     state.swap_consts()
             if self._brick is not None:
-                frag = self._brick.frag.numpy()
+                frag = self._brick.frag.numpy().copy()  # (on the CPU numpy() views the array zeroed next)
                 self._brick.frag.zero_()
+                self.frag_total = self.frag_total + frag
             if int(c[Clock.N_SUB] - before) % 2:
                 state.swap()
         self._to_clock(state, c)
