@@ -91,8 +91,8 @@ MAX_REGISTERS = 80  # a thread's registers (the compiler takes 128 unbounded: se
 MAX_BLOCKS = 1 << 15  # blocks at most; each walks segments block, block + MAX_BLOCKS, ...
 PARKED = 16  # floats a parked particle: m, m v (3), affine (9), fx (3)
 SORT_TRAVEL = 1.0  # cells the fastest particle may move between two sorts: a window's slack (travel_cadence)
-SORT_PIECES_PER_PARTICLE = 0.27  # a sort's cost in scattered pieces (sort_cadence; H200, 2.4M-19.4M particles:
-SORT_PIECES_FIXED = 2.8e5  # 0.23-1.34 ms a sort, 0.245 ns a piece)
+SORT_PIECES_PER_PARTICLE = 0.32  # a sort's cost in scattered pieces (sort_cadence; H200, 2.4M-19.4M particles:
+SORT_PIECES_FIXED = 2.5e5  # 0.29-1.84 ms a sort with its G2P's moves, 0.28 ns a piece)
 FALLBACK_PIECES = 16.0  # a particle out of its window, in pieces: a guess, not fitted (no measured scene fell
 # back; travel_cadence keeps particles inside their windows, so it rarely matters)
 NO_KEY = wp.constant(0x7FFFFFFF)  # tracers and removed particles: sorted last, never scattered
@@ -233,8 +233,8 @@ def sort_cadence(frag, every: int, n: int, cap: int) -> int:
     substeps (every substep sorted) the next chunk tries twice the cadence. The counts are of
     particles, not of time, so a deterministic run picks the same cadences when replayed.
 
-    Measured on an H200 (scripts/cadence_fit.py, renders/readme/cadence_fit_h200.json; ms a
-    substep through advance() with the order sorted every k substeps; * this rule's pick):
+    Measured on an H200 before the particles were stored in the sort's order (ms a substep
+    through advance() with the order sorted every k substeps; * this rule's pick):
 
         k                     1      2      4       8       16     32
         hero_dam (3.4M)       1.52   1.40   1.35*   1.37    1.42   1.48
@@ -242,7 +242,11 @@ def sort_cadence(frag, every: int, n: int, cap: int) -> int:
         Mushy block 19.4M     7.16   7.05   6.71    6.34*   6.37   5.85
 
     A piece costs 0.22-0.27 ns of scatter in every scene there (slope of scatter time against
-    pieces between cadences); a sort 1.34 ms at 19.4M, 0.23 ms at 2.4M. The falling block's runs
+    pieces between cadences); a sort 1.34 ms at 19.4M, 0.23 ms at 2.4M. Refitted since
+    (scripts/cadence_fit.py, renders/readme/cadence_fit_h200.json, same scenes): a piece 0.28 ns,
+    and a sort also costs its substep's G2P moving every particle to its new slot (0.06-0.08 ms
+    at 2.4M-3.4M, 0.46-0.50 at 19.4M): 0.29 ms a sort at 2.4M, 1.8 at 19.4M; scatter + sort
+    ms a substep for hero_dam at k = 2 / 4 / 8 / 16: 0.68 / 0.61 / 0.60 / 0.64. The falling block's runs
     heal as it falls on (a whole run crosses a face and is one run again), which the linear
     growth does not see, so it sorts more often there than it needs to; the earlier rule (the
     fastest particle's travel alone, 1/8 cell) sorted it every substep (7.16 ms)."""

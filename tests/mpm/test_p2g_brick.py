@@ -151,7 +151,7 @@ def test_sort_cadence_balances_the_sort_against_the_wear_it_removes():
     assert sort_cadence(_frag(4, 500_000, 0.0), 4, n, 32) == 32  # no wear: once a chunk
     assert sort_cadence(_frag(1, 500_000, 0.0), 1, n, 32) == 2  # no worn substeps seen: try twice as long
     # particles out of their windows wear the order too (each a slow, direct scatter)
-    assert sort_cadence(_frag(8, 500_000, 0.0, fallbacks=20_000), 8, n, 32) < 8
+    assert sort_cadence(_frag(8, 500_000, 0.0, fallbacks=40_000), 8, n, 32) < 8
 
 
 def test_the_brick_scatter_counts_the_wear_of_the_order():
