@@ -84,12 +84,14 @@ def init_eikonal_lines(
     dist: wp.array(dtype=float),
     dist2: wp.array(dtype=float),
     changed: wp.array(dtype=wp.int32),
+    fbits: wp.array(dtype=wp.int32),
     base: int,
 ):
     """redistance_kernels.init_eikonal (tiles +-clip) on one block (thread = block), into both
     buffers of the sweeps (dist, dist2); frozen given (crossing_average_lines, find = 0) or
-    found here (find = 1: a 6-neighbour of the other sign, as init_eikonal). changed[line]:
-    bit z set where voxel z is frozen. A voxel that neither is nor touches a frozen one holds
+    found here (find = 1: a 6-neighbour of the other sign, as init_eikonal). changed[line] and
+    fbits[line]: bit z set where voxel z is frozen (fbits: what eikonal_lines reads instead of
+    the line's 8 flags). A voxel that neither is nor touches a frozen one holds
     +-clip, as do all its neighbours (tiles too), and a sweep leaves it at +-clip: for the
     first sweep (eikonal_lines) the frozen voxels are the ones that changed."""
     b = wp.tid() + base
@@ -123,6 +125,29 @@ def init_eikonal_lines(
             dist[t] = d
             dist2[t] = d
         changed[tid] = fz
+        fbits[tid] = fz
+
+
+@wp.func
+def eikonal_lane(xm: float, xp: float, ym: float, yp: float, lo: float, hi: float, v: float, clip: float):
+    """redistance_kernels.eikonal_update of one voxel from its 6 neighbours, branch-free: all
+    three candidates are computed and the one eikonal_update's branches pick is kept (each
+    with eikonal_update's arithmetic, so the same bits). The branches depend on the data (the
+    sorted axis distances), so they mispredicted; a fixed sequence also lets a line's 8
+    voxels run side by side."""
+    ax = wp.min(wp.abs(xm), wp.abs(xp))
+    ay = wp.min(wp.abs(ym), wp.abs(yp))
+    az = wp.min(wp.abs(lo), wp.abs(hi))
+    a0 = wp.min(ax, wp.min(ay, az))
+    a2 = wp.max(ax, wp.max(ay, az))
+    a1 = ax + ay + az - a0 - a2
+    u1 = a0 + 1.0
+    u2 = 0.5 * (a0 + a1 + wp.sqrt(wp.max(2.0 - (a0 - a1) * (a0 - a1), 0.0)))
+    s = a0 + a1 + a2
+    u3 = (s + wp.sqrt(wp.max(s * s - 3.0 * (a0 * a0 + a1 * a1 + a2 * a2 - 1.0), 0.0))) / 3.0
+    u = wp.where(u1 > a1, wp.where(u2 > a2, u3, u2), u1)
+    u = wp.min(wp.min(u, wp.abs(v)), clip)
+    return wp.where(v > 0.0, u, -u)
 
 
 @wp.kernel
@@ -130,7 +155,7 @@ def eikonal_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
     src: wp.array(dtype=float),
-    frozen: wp.array(dtype=wp.int32),
+    fbits: wp.array(dtype=wp.int32),
     out_v: float,
     in_v: float,
     clip: float,
@@ -142,11 +167,13 @@ def eikonal_lines(
     """redistance_kernels.eikonal_sweep on the 64 lines along z of one block (thread = block).
 
     was / now: per line, bit z set where the previous / this sweep changed voxel z (before the
-    first sweep: the frozen voxels, see init_eikonal_lines). A voxel whose 6 neighbours and
-    itself did not change in the previous sweep would compute what it holds, and with src and
-    dst swapped every sweep dst holds the values of two sweeps ago, the same ones: it is
-    skipped. Only the voxels at the moving front work, and the result is the plain Jacobi
-    sweep's."""
+    first sweep: the frozen voxels, see init_eikonal_lines); fbits: per line, bit z set where
+    voxel z is frozen. A voxel whose 6 neighbours and itself did not change in the previous
+    sweep would compute what it holds, and with src and dst swapped every sweep dst holds the
+    values of two sweeps ago, the same ones: it is skipped. Only the lines at the moving front
+    work, and the result is the plain Jacobi sweep's. Such a line updates all 8 voxels
+    (eikonal_lane) and keeps src's value where its voxel is skipped or frozen (dst holds that
+    value there already, see above): no branch per voxel."""
     b = wp.tid() + base
     faces = block_faces(bmap, bcoord[b])
     for l in range(64):
@@ -155,10 +182,6 @@ def eikonal_lines(
         lj = l - li * BS
         sides = line_sides(faces, li, lj)
         t0 = tid * BS
-        fz = int(0)  # bit z: voxel z is frozen (keeps its value)
-        for z in range(BS):
-            if frozen[t0 + z] != 0:
-                fz = fz | (1 << z)
         mine = was[tid]
         need = mine | (mine << 1) | (mine >> 1)
         need = need | line_flag(was, sides[0], (BS - 1) * BS + lj) | line_flag(was, sides[1], lj)
@@ -172,7 +195,7 @@ def eikonal_lines(
             need = need | was[tid - 1]
         if lj < BS - 1:
             need = need | was[tid + 1]
-        need = need & (~fz) & 255
+        need = need & (~fbits[tid]) & 255
         if need == 0:
             now[tid] = 0
             continue
@@ -187,18 +210,13 @@ def eikonal_lines(
         zp = read(src, sides[5], l * BS, out_v, in_v)
         moved = int(0)
         for z in range(BS):
-            if (need >> z) & 1 != 0:
-                v = own[z]
-                lo = zm
-                if z > 0:
-                    lo = own[z - 1]
-                hi = zp
-                if z < BS - 1:
-                    hi = own[z + 1]
-                a = wp.vec3(wp.min(wp.abs(xm[z]), wp.abs(xp[z])), wp.min(wp.abs(ym[z]), wp.abs(yp[z])),
-                            wp.min(wp.abs(lo), wp.abs(hi)))
-                u = eikonal_update(a, v, clip)
-                dst[t0 + z] = u
-                if u != v:
-                    moved = moved | (1 << z)
+            lo = zm
+            if z > 0:
+                lo = own[z - 1]
+            hi = zp
+            if z < BS - 1:
+                hi = own[z + 1]
+            u = wp.where((need >> z) & 1 != 0, eikonal_lane(xm[z], xp[z], ym[z], yp[z], lo, hi, own[z], clip), own[z])
+            dst[t0 + z] = u
+            moved = moved | wp.where(u != own[z], 1 << z, 0)
         now[tid] = moved

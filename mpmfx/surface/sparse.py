@@ -520,14 +520,15 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     was = wp.empty(nvox // BS, dtype=wp.int32)  # voxels changed by a sweep (CPU)
+    fbits = wp.empty(nvox // BS, dtype=wp.int32)  # the frozen voxels, a bit each (CPU)
     if _lines(phi):  # the second renormalise and the average in one pass, with the frozen flags
         _blocks(wp, L.crossing_average_lines, [bcoord, bmap, d1, clip, frozen, d2])
-        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, 1, 0, frozen, a, b, was])
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, 1, 0, frozen, a, b, was, fbits])
     else:
         _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
         _launch(wp, S.average_into, nvox, [d1, d2])
         _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, 1, frozen, a])
-    return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip)
+    return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, fbits, clip)
 
 
 def _redistance(wp, bcoord, bmap, phi, clip: float):
@@ -541,16 +542,18 @@ def _redistance(wp, bcoord, bmap, phi, clip: float):
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     was = wp.empty(nvox // BS, dtype=wp.int32)
+    fbits = wp.empty(nvox // BS, dtype=wp.int32)
     if _lines(phi):  # the frozen flags found too, into both sweep buffers, with the changed bits the line sweeps start from
-        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, 0, 1, frozen, a, b, was])
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, 0, 1, frozen, a, b, was, fbits])
     else:
         _split(wp, R.init_eikonal, nvox, [bcoord, bmap, phi, clip, -clip, clip, 0, frozen, a])
-    return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip)
+    return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, fbits, clip)
 
 
-def _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip: float):
+def _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, fbits, clip: float):
     """Jacobi sweeps of |grad phi| = 1 from the initial distance a (b: the second buffer; on the
-    CPU a copy of a, `was` the voxels init set), one voxel of progress per sweep, until clip."""
+    CPU a copy of a, `was` the voxels init set, fbits the frozen ones a bit per voxel), one
+    voxel of progress per sweep, until clip."""
     from mpmfx.surface import line_redistance_kernels as L
     from mpmfx.surface import redistance_kernels as R
 
@@ -558,7 +561,7 @@ def _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip: float):
     now = wp.empty(nvox // BS, dtype=wp.int32)
     for sweep in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
         if _lines(a):
-            _blocks(wp, L.eikonal_lines, [bcoord, bmap, a, frozen, clip, -clip, clip, b, was, now])
+            _blocks(wp, L.eikonal_lines, [bcoord, bmap, a, fbits, clip, -clip, clip, b, was, now])
             was, now = now, was
         else:
             _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
