@@ -488,7 +488,7 @@ def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
     for _ in range(passes):
         for axis in range(3):
             if _lines(w) and NORMAL_STEP == 2:  # the line kernel is written out for step 2
-                _blocks(wp, L.blur_weight_lines, [bcoord, bmap, a, axis, b])
+                _blocks(wp, L.blur_weight_lines, [bcoord, bmap, L.rows(a), axis, L.rows(b)])
             else:
                 _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
             a, b = b, a
@@ -607,7 +607,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     for _ in range(iters):
         for axis in range(3):
             if _lines(phi):
-                _blocks(wp, L.blur_lines, [bcoord, bmap, phi, axis, *tiles, tmp])
+                _blocks(wp, L.blur_lines, [bcoord, bmap, L.rows(phi), axis, *tiles, L.rows(tmp)])
             else:
                 _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
             phi, tmp = tmp, phi
