@@ -554,6 +554,7 @@ def _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, fbits, clip: float):
     """Jacobi sweeps of |grad phi| = 1 from the initial distance a (b: the second buffer; on the
     CPU a copy of a, `was` the voxels init set, fbits the frozen ones a bit per voxel), one
     voxel of progress per sweep, until clip."""
+    from mpmfx.surface import line_kernels as LK
     from mpmfx.surface import line_redistance_kernels as L
     from mpmfx.surface import redistance_kernels as R
 
@@ -561,7 +562,7 @@ def _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, fbits, clip: float):
     now = wp.empty(nvox // BS, dtype=wp.int32)
     for sweep in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
         if _lines(a):
-            _blocks(wp, L.eikonal_lines, [bcoord, bmap, a, fbits, clip, -clip, clip, b, was, now])
+            _blocks(wp, L.eikonal_lines, [bcoord, bmap, LK.rows(a), fbits, clip, -clip, clip, LK.rows(b), was, now])
             was, now = now, was
         else:
             _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
