@@ -362,29 +362,71 @@ def line_neighbours(src: wp.array(dtype=float), sides: vec6i, t: int, l: int, z:
     return n
 
 
+@wp.func
+def neighbour_rows(src: wp.array(dtype=vec8), sides: vec6i, r: int, l: int, out_v: float, in_v: float):
+    """line_neighbours for the 8 voxels of row r (= block * 64 + line l) at once, from vec8
+    rows (rows): the rows of the -x, +x, -y, +y neighbours, and the row shifted towards -z and
+    +z (sides from line_sides)."""
+    li = l // BS
+    lj = l - li * BS
+    own = src[r]
+    xm = vec8(0.0)
+    if li > 0:
+        xm = src[r - BS]
+    else:
+        xm = row_or_tile(src, sides[0], (BS - 1) * BS + lj, out_v, in_v)
+    xp = vec8(0.0)
+    if li < BS - 1:
+        xp = src[r + BS]
+    else:
+        xp = row_or_tile(src, sides[1], lj, out_v, in_v)
+    ym = vec8(0.0)
+    if lj > 0:
+        ym = src[r - 1]
+    else:
+        ym = row_or_tile(src, sides[2], li * BS + BS - 1, out_v, in_v)
+    yp = vec8(0.0)
+    if lj < BS - 1:
+        yp = src[r + 1]
+    else:
+        yp = row_or_tile(src, sides[3], li * BS, out_v, in_v)
+    zm = row_or_tile(src, sides[4], l, out_v, in_v)[BS - 1]
+    zp = row_or_tile(src, sides[5], l, out_v, in_v)[0]
+    lo = vec8(zm, own[0], own[1], own[2], own[3], own[4], own[5], own[6])
+    hi = vec8(own[1], own[2], own[3], own[4], own[5], own[6], own[7], zp)
+    return xm, xp, ym, yp, lo, hi
+
+
 @wp.kernel
 def renormalise_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
-    phi: wp.array(dtype=float),
+    phi: wp.array(dtype=vec8),
     out_v: float,
     in_v: float,
     scale: float,
     clip: float,
-    out: wp.array(dtype=float),
+    out: wp.array(dtype=vec8),
     base: int,
 ):
-    """sparse_kernels.renormalise on the 64 lines along z of one block (thread = block)."""
+    """sparse_kernels.renormalise on the 64 lines along z of one block (thread = block), phi and
+    out as vec8 rows (rows): a line's neighbour lines are one load each, the differences vec8
+    operations, the gradient's length and the division per voxel as renormalise has them."""
     b = wp.tid() + base
     faces = block_faces(bmap, bcoord[b])
     for l in range(64):
-        tid = b * 64 + l
+        r = b * 64 + l
         sides = line_sides(faces, l // BS, l - (l // BS) * BS)
+        xm, xp, ym, yp, lo, hi = neighbour_rows(phi, sides, r, l, out_v, in_v)
+        dx = xp - xm
+        dy = yp - ym
+        dz = hi - lo
+        own = phi[r]
+        res = vec8(0.0)
         for z in range(BS):
-            t = tid * BS + z
-            n = line_neighbours(phi, sides, t, l, z, out_v, in_v)
-            grad = 0.5 * wp.length(wp.vec3(n[1] - n[0], n[3] - n[2], n[5] - n[4]))
-            out[t] = wp.clamp(phi[t] / wp.max(grad, 0.05) * scale, -clip, clip)
+            grad = 0.5 * wp.length(wp.vec3(dx[z], dy[z], dz[z]))
+            res[z] = wp.clamp(own[z] / wp.max(grad, 0.05) * scale, -clip, clip)
+        out[r] = res
 
 
 vec27i = wp.types.vector(length=27, dtype=wp.int32)
@@ -425,17 +467,18 @@ def match_tiles_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=w
             if edge or z == 0 or z == BS - 1:  # interior voxels have no tile neighbour
                 t = (b * 64 + l) * BS + z
                 v = phi[t]
-                for n in range(27):
-                    # the block offset of neighbour (n // 9 - 1, n // 3 % 3 - 1, n % 3 - 1): -1, 0 or 1 per axis
-                    bx = (li + n // 9 - 1 + BS) // BS - 1
-                    by = (lj + (n // 3) % 3 - 1 + BS) // BS - 1
-                    bz = (z + n % 3 - 1 + BS) // BS - 1
-                    if bx != 0 or by != 0 or bz != 0:
-                        s = codes[(bx + 1) * 9 + (by + 1) * 3 + bz + 1]
-                        if s == TILE_OUTSIDE and v <= 0.0:
-                            v = eps
-                        if s == TILE_INSIDE and v > 0.0:
-                            v = -eps
+                # match_tiles visits the 27 neighbours in (x, y, z) order: the other blocks
+                # they fall in come in runs, in lexicographic order of the block offset, and
+                # a run's repeats change nothing more, so each block once in that order
+                for bx in range(wp.where(li == 0, -1, 0), wp.where(li == BS - 1, 2, 1)):
+                    for by in range(wp.where(lj == 0, -1, 0), wp.where(lj == BS - 1, 2, 1)):
+                        for bz in range(wp.where(z == 0, -1, 0), wp.where(z == BS - 1, 2, 1)):
+                            if bx != 0 or by != 0 or bz != 0:
+                                s = codes[(bx + 1) * 9 + (by + 1) * 3 + bz + 1]
+                                if s == TILE_OUTSIDE and v <= 0.0:
+                                    v = eps
+                                if s == TILE_INSIDE and v > 0.0:
+                                    v = -eps
                 phi[t] = v
 
 

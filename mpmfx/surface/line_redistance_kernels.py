@@ -7,7 +7,7 @@ neighbour lines are read once into registers instead of through a block-map look
 
 import warp as wp
 
-from mpmfx.surface.line_kernels import block_faces, line_neighbours, line_sides, read, row_or_tile, vec8
+from mpmfx.surface.line_kernels import block_faces, line_neighbours, line_sides, neighbour_rows, read, row_or_tile, vec8
 from mpmfx.surface.redistance_kernels import axis_inv2, crossing_fraction, eikonal_update, frozen_distance
 from mpmfx.surface.sparse_kernels import BS, BV
 
@@ -24,34 +24,42 @@ def line_flag(flags: wp.array(dtype=wp.int32), code: int, line: int):
 def crossing_average_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
-    d1: wp.array(dtype=float),
+    d1: wp.array(dtype=vec8),
     clip: float,
     frozen: wp.array(dtype=wp.int32),
-    out: wp.array(dtype=float),
+    out: wp.array(dtype=vec8),
     base: int,
 ):
     """The second renormalise and the average of _distance: out = (d1 + renormalise(d1)) / 2 as
     sparse_kernels.renormalise and average_into give it, and frozen = 1 at voxels with a
     6-neighbour of the other sign (tiles +-clip). Renormalising keeps each sign, so the
     crossings are d1's. (It used to average only the frozen voxels, the only values
-    init_eikonal read; its plane start now reads the frozen voxels' same-sign neighbours too.)"""
+    init_eikonal read; its plane start now reads the frozen voxels' same-sign neighbours too.)
+    d1 and out are vec8 rows (line_kernels.rows), as in line_kernels.renormalise_lines."""
     b = wp.tid() + base
     faces = block_faces(bmap, bcoord[b])
     for l in range(64):
-        tid = b * 64 + l
+        r = b * 64 + l
         sides = line_sides(faces, l // BS, l - (l // BS) * BS)
+        xm, xp, ym, yp, lo, hi = neighbour_rows(d1, sides, r, l, clip, -clip)
+        dx = xp - xm
+        dy = yp - ym
+        dz = hi - lo
+        own = d1[r]
+        res = vec8(0.0)
         for z in range(BS):
-            t = tid * BS + z
-            v = d1[t]
-            n = line_neighbours(d1, sides, t, l, z, clip, -clip)
+            v = own[z]
+            pos = v > 0.0
             cross = int(0)
-            for q in range(6):
-                if (n[q] > 0.0) != (v > 0.0):
-                    cross = 1
-            frozen[t] = cross
-            grad = 0.5 * wp.length(wp.vec3(n[1] - n[0], n[3] - n[2], n[5] - n[4]))
+            if (xm[z] > 0.0) != pos or (xp[z] > 0.0) != pos or (ym[z] > 0.0) != pos:
+                cross = 1
+            if (yp[z] > 0.0) != pos or (lo[z] > 0.0) != pos or (hi[z] > 0.0) != pos:
+                cross = 1
+            frozen[r * BS + z] = cross
+            grad = 0.5 * wp.length(wp.vec3(dx[z], dy[z], dz[z]))
             d2 = wp.clamp(v / wp.max(grad, 0.05) * 1.0, -clip, clip)
-            out[t] = 0.5 * (v + d2)
+            res[z] = 0.5 * (v + d2)
+        out[r] = res
 
 
 @wp.kernel

@@ -288,7 +288,7 @@ def _renormalise(wp, S, bcoord, bmap, phi, tiles, scale: float, clip: float, out
     from mpmfx.surface import line_kernels as L
 
     if _lines(phi):
-        _blocks(wp, L.renormalise_lines, [bcoord, bmap, phi, *tiles, scale, clip, out])
+        _blocks(wp, L.renormalise_lines, [bcoord, bmap, L.rows(phi), *tiles, scale, clip, L.rows(out)])
     else:
         _split(wp, S.renormalise, phi.shape[0], [bcoord, bmap, phi, *tiles, scale, clip, out])
 
@@ -502,6 +502,7 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     outward as far as it would move the raw field inward (0.3-0.5 % volume per pass, measured).
     Renormalising that once more flips the curvature back; the mean of the two is straight to
     second order."""
+    from mpmfx.surface import line_kernels as LK
     from mpmfx.surface import line_redistance_kernels as L
     from mpmfx.surface import redistance_kernels as R
 
@@ -522,7 +523,7 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     was = wp.empty(nvox // BS, dtype=wp.int32)  # voxels changed by a sweep (CPU)
     fbits = wp.empty(nvox // BS, dtype=wp.int32)  # the frozen voxels, a bit each (CPU)
     if _lines(phi):  # the second renormalise and the average in one pass, with the frozen flags
-        _blocks(wp, L.crossing_average_lines, [bcoord, bmap, d1, clip, frozen, d2])
+        _blocks(wp, L.crossing_average_lines, [bcoord, bmap, LK.rows(d1), clip, frozen, LK.rows(d2)])
         _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, 1, 0, frozen, a, b, was, fbits])
     else:
         _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
