@@ -18,6 +18,9 @@ from mpmfx.surface.sparse_kernels import BS, BV, CS, TILE_INSIDE, TILE_OUTSIDE, 
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
 
+# forward only: nothing differentiates these kernels, and their adjoints lengthened the compile of the unrolled loops
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.kernel
 def gather_zhu_bridson_blocks(

@@ -11,6 +11,9 @@ from mpmfx.surface.line_kernels import block_faces, line_neighbours, line_sides,
 from mpmfx.surface.redistance_kernels import axis_inv2, crossing_fraction, eikonal_update, frozen_distance
 from mpmfx.surface.sparse_kernels import BS, BV
 
+# forward only: nothing differentiates these kernels, and their adjoints lengthened the compile of the unrolled loops
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.func
 def line_flag(flags: wp.array(dtype=wp.int32), code: int, line: int):
