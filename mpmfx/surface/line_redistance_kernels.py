@@ -7,9 +7,12 @@ neighbour lines are read once into registers instead of through a block-map look
 
 import warp as wp
 
-from mpmfx.surface.line_kernels import block_faces, line_neighbours, line_sides, read, vec8
+from mpmfx.surface.line_kernels import block_faces, line_neighbours, line_sides, neighbour_rows, read, row_or_tile, vec8
 from mpmfx.surface.redistance_kernels import axis_inv2, crossing_fraction, eikonal_update, frozen_distance
 from mpmfx.surface.sparse_kernels import BS, BV
+
+# forward only: nothing differentiates these kernels, and their adjoints lengthened the compile of the unrolled loops
+wp.set_module_options({"enable_backward": False})
 
 
 @wp.func
@@ -20,56 +23,46 @@ def line_flag(flags: wp.array(dtype=wp.int32), code: int, line: int):
     return 0
 
 
-@wp.func
-def side_line(src: wp.array(dtype=float), inside: int, t0: int, step: int, code: int, local: int, out_v: float, in_v: float):
-    """The 8 values (z = 0..7) of a neighbour line: at t0 + step in the same block when inside
-    != 0, else line `local` (its first voxel's index in the block) of the block with code `code`."""
-    n = vec8(0.0)
-    if inside != 0:
-        for z in range(BS):
-            n[z] = src[t0 + step + z]
-    elif code >= 0:
-        for z in range(BS):
-            n[z] = src[code * BV + local + z]
-    else:
-        v = read(src, code, 0, out_v, in_v)
-        for z in range(BS):
-            n[z] = v
-    return n
-
-
 @wp.kernel
 def crossing_average_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
-    d1: wp.array(dtype=float),
+    d1: wp.array(dtype=vec8),
     clip: float,
     frozen: wp.array(dtype=wp.int32),
-    out: wp.array(dtype=float),
+    out: wp.array(dtype=vec8),
     base: int,
 ):
     """The second renormalise and the average of _distance: out = (d1 + renormalise(d1)) / 2 as
     sparse_kernels.renormalise and average_into give it, and frozen = 1 at voxels with a
     6-neighbour of the other sign (tiles +-clip). Renormalising keeps each sign, so the
     crossings are d1's. (It used to average only the frozen voxels, the only values
-    init_eikonal read; its plane start now reads the frozen voxels' same-sign neighbours too.)"""
+    init_eikonal read; its plane start now reads the frozen voxels' same-sign neighbours too.)
+    d1 and out are vec8 rows (line_kernels.rows), as in line_kernels.renormalise_lines."""
     b = wp.tid() + base
     faces = block_faces(bmap, bcoord[b])
     for l in range(64):
-        tid = b * 64 + l
+        r = b * 64 + l
         sides = line_sides(faces, l // BS, l - (l // BS) * BS)
+        xm, xp, ym, yp, lo, hi = neighbour_rows(d1, sides, r, l, clip, -clip)
+        dx = xp - xm
+        dy = yp - ym
+        dz = hi - lo
+        own = d1[r]
+        res = vec8(0.0)
         for z in range(BS):
-            t = tid * BS + z
-            v = d1[t]
-            n = line_neighbours(d1, sides, t, l, z, clip, -clip)
+            v = own[z]
+            pos = v > 0.0
             cross = int(0)
-            for q in range(6):
-                if (n[q] > 0.0) != (v > 0.0):
-                    cross = 1
-            frozen[t] = cross
-            grad = 0.5 * wp.length(wp.vec3(n[1] - n[0], n[3] - n[2], n[5] - n[4]))
+            if (xm[z] > 0.0) != pos or (xp[z] > 0.0) != pos or (ym[z] > 0.0) != pos:
+                cross = 1
+            if (yp[z] > 0.0) != pos or (lo[z] > 0.0) != pos or (hi[z] > 0.0) != pos:
+                cross = 1
+            frozen[r * BS + z] = cross
+            grad = 0.5 * wp.length(wp.vec3(dx[z], dy[z], dz[z]))
             d2 = wp.clamp(v / wp.max(grad, 0.05) * 1.0, -clip, clip)
-            out[t] = 0.5 * (v + d2)
+            res[z] = 0.5 * (v + d2)
+        out[r] = res
 
 
 @wp.kernel
@@ -84,12 +77,14 @@ def init_eikonal_lines(
     dist: wp.array(dtype=float),
     dist2: wp.array(dtype=float),
     changed: wp.array(dtype=wp.int32),
+    fbits: wp.array(dtype=wp.int32),
     base: int,
 ):
     """redistance_kernels.init_eikonal (tiles +-clip) on one block (thread = block), into both
     buffers of the sweeps (dist, dist2); frozen given (crossing_average_lines, find = 0) or
-    found here (find = 1: a 6-neighbour of the other sign, as init_eikonal). changed[line]:
-    bit z set where voxel z is frozen. A voxel that neither is nor touches a frozen one holds
+    found here (find = 1: a 6-neighbour of the other sign, as init_eikonal). changed[line] and
+    fbits[line]: bit z set where voxel z is frozen (fbits: what eikonal_lines reads instead of
+    the line's 8 flags). A voxel that neither is nor touches a frozen one holds
     +-clip, as do all its neighbours (tiles too), and a sweep leaves it at +-clip: for the
     first sweep (eikonal_lines) the frozen voxels are the ones that changed."""
     b = wp.tid() + base
@@ -123,42 +118,72 @@ def init_eikonal_lines(
             dist[t] = d
             dist2[t] = d
         changed[tid] = fz
+        fbits[tid] = fz
+
+
+@wp.func
+def eikonal_row(xm: vec8, xp: vec8, ym: vec8, yp: vec8, lo: vec8, hi: vec8, v: vec8, clip: float):
+    """redistance_kernels.eikonal_update of the 8 voxels of a row (along z) from their
+    neighbours' rows, branch-free: all three candidates are computed and the one
+    eikonal_update's branches pick is kept, each with eikonal_update's arithmetic per voxel
+    (the same bits). The branches depend on the data (the sorted axis distances), so they
+    mispredicted; as vec8 operations the 8 voxels run side by side."""
+    ax = wp.min(wp.abs(xm), wp.abs(xp))
+    ay = wp.min(wp.abs(ym), wp.abs(yp))
+    az = wp.min(wp.abs(lo), wp.abs(hi))
+    a0 = wp.min(ax, wp.min(ay, az))
+    a2 = wp.max(ax, wp.max(ay, az))
+    a1 = ax + ay + az - a0 - a2
+    d = a0 - a1
+    q2 = wp.max(vec8(2.0) - wp.cw_mul(d, d), vec8(0.0))
+    s = a0 + a1 + a2
+    q3 = wp.max(wp.cw_mul(s, s) - 3.0 * (wp.cw_mul(a0, a0) + wp.cw_mul(a1, a1) + wp.cw_mul(a2, a2) - vec8(1.0)), vec8(0.0))
+    av = wp.abs(v)
+    out = vec8(0.0)
+    for z in range(BS):
+        u = a0[z] + 1.0
+        u2 = 0.5 * (a0[z] + a1[z] + wp.sqrt(q2[z]))
+        u3 = (s[z] + wp.sqrt(q3[z])) / 3.0
+        u = wp.where(u > a1[z], wp.where(u2 > a2[z], u3, u2), u)
+        u = wp.min(wp.min(u, av[z]), clip)
+        out[z] = wp.where(v[z] > 0.0, u, -u)
+    return out
 
 
 @wp.kernel
 def eikonal_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
-    src: wp.array(dtype=float),
-    frozen: wp.array(dtype=wp.int32),
+    src: wp.array(dtype=vec8),
+    fbits: wp.array(dtype=wp.int32),
     out_v: float,
     in_v: float,
     clip: float,
-    dst: wp.array(dtype=float),
+    dst: wp.array(dtype=vec8),
     was: wp.array(dtype=wp.int32),
     now: wp.array(dtype=wp.int32),
     base: int,
 ):
-    """redistance_kernels.eikonal_sweep on the 64 lines along z of one block (thread = block).
+    """redistance_kernels.eikonal_sweep on the 64 lines along z of one block (thread = block);
+    src and dst: the distance as vec8 rows along z (line_kernels.rows), so a line and its x and
+    y neighbour lines are one load each.
 
     was / now: per line, bit z set where the previous / this sweep changed voxel z (before the
-    first sweep: the frozen voxels, see init_eikonal_lines). A voxel whose 6 neighbours and
-    itself did not change in the previous sweep would compute what it holds, and with src and
-    dst swapped every sweep dst holds the values of two sweeps ago, the same ones: it is
-    skipped. Only the voxels at the moving front work, and the result is the plain Jacobi
-    sweep's."""
+    first sweep: the frozen voxels, see init_eikonal_lines); fbits: per line, bit z set where
+    voxel z is frozen. A voxel whose 6 neighbours and itself did not change in the previous
+    sweep would compute what it holds, and with src and dst swapped every sweep dst holds the
+    values of two sweeps ago, the same ones: it is skipped. Only the lines at the moving front
+    work, and the result is the plain Jacobi sweep's. Such a line updates all 8 voxels
+    (eikonal_row) and keeps src's value where its voxel is skipped or frozen (dst holds that
+    value there already, see above): no branch per voxel."""
     b = wp.tid() + base
     faces = block_faces(bmap, bcoord[b])
+    r0 = b * 64
     for l in range(64):
-        tid = b * 64 + l
+        tid = r0 + l
         li = l // BS
         lj = l - li * BS
         sides = line_sides(faces, li, lj)
-        t0 = tid * BS
-        fz = int(0)  # bit z: voxel z is frozen (keeps its value)
-        for z in range(BS):
-            if frozen[t0 + z] != 0:
-                fz = fz | (1 << z)
         mine = was[tid]
         need = mine | (mine << 1) | (mine >> 1)
         need = need | line_flag(was, sides[0], (BS - 1) * BS + lj) | line_flag(was, sides[1], lj)
@@ -172,33 +197,40 @@ def eikonal_lines(
             need = need | was[tid - 1]
         if lj < BS - 1:
             need = need | was[tid + 1]
-        need = need & (~fz) & 255
+        need = need & (~fbits[tid]) & 255
         if need == 0:
             now[tid] = 0
             continue
-        own = vec8(0.0)
-        for z in range(BS):
-            own[z] = src[t0 + z]
-        xm = side_line(src, wp.where(li > 0, 1, 0), t0, -BS * BS, sides[0], ((BS - 1) * BS + lj) * BS, out_v, in_v)
-        xp = side_line(src, wp.where(li < BS - 1, 1, 0), t0, BS * BS, sides[1], lj * BS, out_v, in_v)
-        ym = side_line(src, wp.where(lj > 0, 1, 0), t0, -BS, sides[2], (li * BS + BS - 1) * BS, out_v, in_v)
-        yp = side_line(src, wp.where(lj < BS - 1, 1, 0), t0, BS, sides[3], li * BS * BS, out_v, in_v)
-        zm = read(src, sides[4], l * BS + BS - 1, out_v, in_v)
-        zp = read(src, sides[5], l * BS, out_v, in_v)
+        own = src[tid]
+        xm = vec8(0.0)
+        if li > 0:
+            xm = src[tid - BS]
+        else:
+            xm = row_or_tile(src, sides[0], (BS - 1) * BS + lj, out_v, in_v)
+        xp = vec8(0.0)
+        if li < BS - 1:
+            xp = src[tid + BS]
+        else:
+            xp = row_or_tile(src, sides[1], lj, out_v, in_v)
+        ym = vec8(0.0)
+        if lj > 0:
+            ym = src[tid - 1]
+        else:
+            ym = row_or_tile(src, sides[2], li * BS + BS - 1, out_v, in_v)
+        yp = vec8(0.0)
+        if lj < BS - 1:
+            yp = src[tid + 1]
+        else:
+            yp = row_or_tile(src, sides[3], li * BS, out_v, in_v)
+        zm = row_or_tile(src, sides[4], l, out_v, in_v)[BS - 1]
+        zp = row_or_tile(src, sides[5], l, out_v, in_v)[0]
+        lo = vec8(zm, own[0], own[1], own[2], own[3], own[4], own[5], own[6])
+        hi = vec8(own[1], own[2], own[3], own[4], own[5], own[6], own[7], zp)
+        u = eikonal_row(xm, xp, ym, yp, lo, hi, own, clip)
         moved = int(0)
         for z in range(BS):
-            if (need >> z) & 1 != 0:
-                v = own[z]
-                lo = zm
-                if z > 0:
-                    lo = own[z - 1]
-                hi = zp
-                if z < BS - 1:
-                    hi = own[z + 1]
-                a = wp.vec3(wp.min(wp.abs(xm[z]), wp.abs(xp[z])), wp.min(wp.abs(ym[z]), wp.abs(yp[z])),
-                            wp.min(wp.abs(lo), wp.abs(hi)))
-                u = eikonal_update(a, v, clip)
-                dst[t0 + z] = u
-                if u != v:
-                    moved = moved | (1 << z)
+            keep = wp.where((need >> z) & 1 != 0, u[z], own[z])
+            u[z] = keep
+            moved = moved | wp.where(keep != own[z], 1 << z, 0)
+        dst[tid] = u
         now[tid] = moved

@@ -288,7 +288,7 @@ def _renormalise(wp, S, bcoord, bmap, phi, tiles, scale: float, clip: float, out
     from mpmfx.surface import line_kernels as L
 
     if _lines(phi):
-        _blocks(wp, L.renormalise_lines, [bcoord, bmap, phi, *tiles, scale, clip, out])
+        _blocks(wp, L.renormalise_lines, [bcoord, bmap, L.rows(phi), *tiles, scale, clip, L.rows(out)])
     else:
         _split(wp, S.renormalise, phi.shape[0], [bcoord, bmap, phi, *tiles, scale, clip, out])
 
@@ -488,7 +488,7 @@ def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
     for _ in range(passes):
         for axis in range(3):
             if _lines(w) and NORMAL_STEP == 2:  # the line kernel is written out for step 2
-                _blocks(wp, L.blur_weight_lines, [bcoord, bmap, a, axis, b])
+                _blocks(wp, L.blur_weight_lines, [bcoord, bmap, L.rows(a), axis, L.rows(b)])
             else:
                 _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
             a, b = b, a
@@ -502,6 +502,7 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     outward as far as it would move the raw field inward (0.3-0.5 % volume per pass, measured).
     Renormalising that once more flips the curvature back; the mean of the two is straight to
     second order."""
+    from mpmfx.surface import line_kernels as LK
     from mpmfx.surface import line_redistance_kernels as L
     from mpmfx.surface import redistance_kernels as R
 
@@ -520,14 +521,15 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     was = wp.empty(nvox // BS, dtype=wp.int32)  # voxels changed by a sweep (CPU)
+    fbits = wp.empty(nvox // BS, dtype=wp.int32)  # the frozen voxels, a bit each (CPU)
     if _lines(phi):  # the second renormalise and the average in one pass, with the frozen flags
-        _blocks(wp, L.crossing_average_lines, [bcoord, bmap, d1, clip, frozen, d2])
-        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, 1, 0, frozen, a, b, was])
+        _blocks(wp, L.crossing_average_lines, [bcoord, bmap, LK.rows(d1), clip, frozen, LK.rows(d2)])
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, 1, 0, frozen, a, b, was, fbits])
     else:
         _renormalise(wp, S, bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
         _launch(wp, S.average_into, nvox, [d1, d2])
         _split(wp, R.init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, 1, frozen, a])
-    return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip)
+    return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, fbits, clip)
 
 
 def _redistance(wp, bcoord, bmap, phi, clip: float):
@@ -541,16 +543,19 @@ def _redistance(wp, bcoord, bmap, phi, clip: float):
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
     was = wp.empty(nvox // BS, dtype=wp.int32)
+    fbits = wp.empty(nvox // BS, dtype=wp.int32)
     if _lines(phi):  # the frozen flags found too, into both sweep buffers, with the changed bits the line sweeps start from
-        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, 0, 1, frozen, a, b, was])
+        _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, 0, 1, frozen, a, b, was, fbits])
     else:
         _split(wp, R.init_eikonal, nvox, [bcoord, bmap, phi, clip, -clip, clip, 0, frozen, a])
-    return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip)
+    return _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, fbits, clip)
 
 
-def _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip: float):
+def _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, fbits, clip: float):
     """Jacobi sweeps of |grad phi| = 1 from the initial distance a (b: the second buffer; on the
-    CPU a copy of a, `was` the voxels init set), one voxel of progress per sweep, until clip."""
+    CPU a copy of a, `was` the voxels init set, fbits the frozen ones a bit per voxel), one
+    voxel of progress per sweep, until clip."""
+    from mpmfx.surface import line_kernels as LK
     from mpmfx.surface import line_redistance_kernels as L
     from mpmfx.surface import redistance_kernels as R
 
@@ -558,7 +563,7 @@ def _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, clip: float):
     now = wp.empty(nvox // BS, dtype=wp.int32)
     for sweep in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
         if _lines(a):
-            _blocks(wp, L.eikonal_lines, [bcoord, bmap, a, frozen, clip, -clip, clip, b, was, now])
+            _blocks(wp, L.eikonal_lines, [bcoord, bmap, LK.rows(a), fbits, clip, -clip, clip, LK.rows(b), was, now])
             was, now = now, was
         else:
             _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
@@ -604,7 +609,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     for _ in range(iters):
         for axis in range(3):
             if _lines(phi):
-                _blocks(wp, L.blur_lines, [bcoord, bmap, phi, axis, *tiles, tmp])
+                _blocks(wp, L.blur_lines, [bcoord, bmap, L.rows(phi), axis, *tiles, L.rows(tmp)])
             else:
                 _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
             phi, tmp = tmp, phi
