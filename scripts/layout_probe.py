@@ -150,8 +150,10 @@ def main() -> int:
     ap.add_argument("--scene", default="Mushy")
     ap.add_argument("--grid", type=int, default=128)
     ap.add_argument("--ncu", action="store_true", help="one scene's substeps, graphs off (under ncu)")
+    ap.add_argument("--lineinfo", action="store_true", help="kernels with line info (ncu's source counters)")
     a = ap.parse_args()
     wp.config.quiet = True
+    wp.config.lineinfo = a.lineinfo
     wp.init()
     if a.ncu:
         solver, state, span = build(a.scene, a.grid)
