@@ -7,7 +7,10 @@ in brick order (a brick: 4^3 stencil corner nodes) and one CUDA block scatters a
     1. at the first substep of a chunk (chunked.py), and then every few substeps as the
        order wears (sort_cadence), the particles' order `idx` is radix-sorted by brick,
        then by corner node inside it, and the slot ranges of equal bricks (segments) are
-       found; the substeps between keep both (particles move a fraction of a cell a substep);
+       found; that substep's scatter reads particle idx[slot], and its G2P stores each
+       particle in its slot (g2p.py, State: storage order), so the substeps between read the
+       slots as they lie in memory and keep the segments (particles move a fraction of a cell
+       a substep);
     2. per substep, per segment, one block zeroes a window of 8^3 nodes in shared memory
        (the brick's 4^3 corners, one node of slack below and above, and the stencil's reach);
     3. in rounds of 128 consecutive slots (coalesced reads) each thread computes one
@@ -310,8 +313,9 @@ def _brick_keys(pp: P2GParams, x: wp.array(dtype=wp.vec3), alive: wp.array(dtype
     p = wp.tid()
     if sub[0].active == 0:
         return
-    # the sort starts from particle order, so equal keys keep it: the order inside a run, and
-    # so a run's float sums, depend on the particles alone (a resumed run sums as the first did)
+    # the sort starts from the storage order, so equal keys keep it: the order inside a run, and
+    # so a run's float sums, depend on the run's history, which a checkpoint keeps (State.pid: a
+    # resumed run's slots are the first run's, and it sums as the first did)
     idx[p] = p
     if alive[p] == 0 or mass[p] == 0.0:
         keys[p] = NO_KEY
