@@ -173,7 +173,6 @@ class DeviceAdvance:
                 sorts = -(-int(c[Clock.N_SUB] - before) // self.last_sort_every)
                 if state.mass is not consts[sorts % 2][0]:
                     state.swap_consts()
-            if self._brick is not None:
                 frag = self._brick.frag.numpy().copy()  # (on the CPU numpy() views the array zeroed next)
                 self._brick.frag.zero_()
                 self.frag_total = self.frag_total + frag

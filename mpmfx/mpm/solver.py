@@ -236,8 +236,8 @@ class Solver:
         pid = np.asarray(data["pid"], np.int32) if "pid" in data else np.arange(n, dtype=np.int32)
         permuted = bool(np.any(pid != np.arange(n)))
         if permuted:  # back into the slots they were in, so a resumed run sums as the first did
-            data = {k: to_slots(np.asarray(v), pid, n) if k in ParticleBuffers.NAMES + State.CONSTS[:4] else v
-                    for k, v in data.items()}
+            per_particle = (*ParticleBuffers.NAMES, "mass", "volume", "material", "body")
+            data = {k: to_slots(np.asarray(v), pid, n) if k in per_particle else v for k, v in data.items()}
         field_id, n_fields = self._field_ids(np.asarray(data["body"]))
         self._allocate_grid(n_fields)
         with wp.ScopedDevice(self.device):
@@ -341,9 +341,8 @@ class Solver:
         gp.remove = int(cfg.out_of_domain == OutOfDomain.REMOVE)
         gp.nodes = nn
         gp.deterministic, gp.q_mass = int(cfg.deterministic), self._q_mass
-        # a sorting substep stores the particles in the sort's order (State: storage order)
-        if permute and state.spare is None:
-            state.spare = tuple(wp.empty_like(a) for a in state.consts())
+        # a sorting substep stores the particles in the sort's order (State: storage order; the
+        # constants' spare copy is allocated by chunked.py before any capture)
         outs = state.spare if permute else state.consts()
         wp.launch(g2p, dim=state.n, device=self.device, inputs=[
             gp, self._grid_v, self._grid_m, self._grid_fixed, self._materials_dev, state.material, state.field_id,
@@ -545,7 +544,8 @@ class Solver:
         return np.where(tracer, 1.0, J).astype(np.float32)
 
     def checkpoint(self, state: State, t: float) -> dict[str, np.ndarray]:
-        """Full state + stepper clock, as numpy arrays; `restore` resumes bit-identically."""
+        """Full state + stepper clock, as numpy arrays in particle order, and `pid`: the particle
+        each storage slot held (State), which `restore` puts back, so it resumes bit-identically."""
         data = self._to_host(state, {**dict(zip(ParticleBuffers.NAMES, state.cur.arrays())), "mass": state.mass,
                                      "volume": state.volume, "material": state.material, "body": state.body})
         data["pid"] = state.pid.numpy()
