@@ -183,7 +183,7 @@ class State:
     pid: wp.array
     n_fields: int = 1
     clock: StepperClock = field(default_factory=StepperClock)
-X
+    spare: tuple | None = None  # the constants' second copy (allocated by the device stepper, chunked.py)
     permuted: bool = False  # whether slots may differ from particles (pid not the identity)
 
     CONSTS = ("mass", "volume", "material", "body", "field_id", "pid")
