@@ -145,8 +145,8 @@ class DeviceAdvance:
         s._last_bad = None
         if self.p2g == "brick" and (self._brick is None or self._brick.n != state.n):
             self._brick = BrickP2G(s.flags, state.n, s.device, nodes=cfg.grid_n + 1)  # before any capture: it allocates
-        if self.p2g == "brick" and state.spare is None:  # where sorting substeps store the constants
-            state.spare = tuple(wp.empty_like(a) for a in state.consts())
+        if self.p2g == "brick":
+            state.spare_consts()  # where sorting substeps store the constants: allocated before any capture
         self._upload(state, t0, t1)
         if self.keys is not None:  # the fields no substep changes (kind, shape, friction, ...)
             s._colliders_dev.assign(pack_colliders(s.colliders, t0, t0, 1.0))
@@ -164,7 +164,7 @@ class DeviceAdvance:
             k = self._chunk_length(c, dt_guess)
             cadence = self._sort_every(state, c, dt_guess, frag)
             self.last_sort_every = min(k, cadence)  # (a chunk no longer than it sorts at its start only: one graph)
-            consts = (state.consts(), state.spare)
+            consts = (state.consts(), state.spare_consts() if self._brick is not None else None)
             self._chunk(state, k, self.last_sort_every)
             c = self.clk.numpy()
             if self._brick is not None:

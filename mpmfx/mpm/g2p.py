@@ -153,8 +153,12 @@ def recover_volume(gp: G2PParams, mat: MaterialParams, grid_m: wp.array3d(dtype=
 
 
 @functools.lru_cache(maxsize=None)
-def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
-    """G2P kernel specialised for the scene's materials (see p2g.make_p2g, also for device_clock)."""
+def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = False):
+    """G2P kernel specialised for the scene's materials (see p2g.make_p2g, also for device_clock).
+    sorting: the variant of a substep whose brick P2G sorted, which stores each particle in its new
+    slot (State: storage order; `order` is the sort's, slot -> particle), in a module of its own: the
+    variant without that code keeps a register more for the rest (G2P at 19.4M snow, H200: 2.36 ms
+    a substep with one kernel for both, 2.26 before the moves)."""
     has_solid = flags.solid
     has_water = flags.water
     recovery = flags.volume_recovery
@@ -163,8 +167,9 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
     # 128, which leaves a multiprocessor 512 threads; measured on an H100 (snow, 2.4M
     # particles): G2P 0.419 ms a substep uncapped, 0.430 at 96, 0.358 at 80, 0.381 at 72.
     # Water's G2P takes 80 anyway; at 64 it was slower (1.49 -> 1.77 ms at 19.4M).
-    @wp.kernel(enable_backward=False, module=flags.key + ("_dev" if device_clock else ""),
-               cuda_max_registers=G2P_MAX_REGISTERS)
+    module = flags.key + ("_dev" if device_clock else "") + ("_sort" if sorting else "")
+
+    @wp.kernel(enable_backward=False, module=module, cuda_max_registers=G2P_MAX_REGISTERS)
     def g2p(
         gp: G2PParams,
         grid_v: wp.array3d(dtype=wp.vec3),
@@ -182,7 +187,7 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
         stats: wp.array(dtype=float),
         counts: wp.array(dtype=wp.int32),
         sub: wp.array(dtype=SubstepDev),
-        order: wp.array(dtype=wp.int32), permute: int,
+        order: wp.array(dtype=wp.int32),
         mass: wp.array(dtype=float), volume: wp.array(dtype=float), body: wp.array(dtype=wp.int32),
         pid: wp.array(dtype=wp.int32), mass_out: wp.array(dtype=float), volume_out: wp.array(dtype=float),
         material_out: wp.array(dtype=wp.int32), body_out: wp.array(dtype=wp.int32),
@@ -196,10 +201,10 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False):
             gp.dt = s.dt
             gp.affine_keep = s.affine_keep
         # the particle this thread advances, and the slot it is stored in next: the same one,
-        # or (permute: the brick P2G sorted at this substep) the sort's order, slot -> particle,
+        # or (sorting: the brick P2G sorted at this substep) the sort's order, slot -> particle,
         # with the constants moved along into their other copy (state.State: storage order)
         p = slot
-        if permute != 0:
+        if wp.static(sorting):
             p = order[slot]
             mass_out[slot] = mass[p]
             volume_out[slot] = volume[p]

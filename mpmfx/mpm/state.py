@@ -183,7 +183,7 @@ class State:
     pid: wp.array
     n_fields: int = 1
     clock: StepperClock = field(default_factory=StepperClock)
-    spare: tuple | None = None  # the constants' second copy (allocated by the device stepper, chunked.py)
+    spare: tuple | None = None  # the constants' second copy (spare_consts)
     permuted: bool = False  # whether slots may differ from particles (pid not the identity)
 
     CONSTS = ("mass", "volume", "material", "body", "field_id", "pid")
@@ -193,6 +193,12 @@ class State:
 
     def consts(self) -> tuple:
         return tuple(getattr(self, k) for k in self.CONSTS)
+
+    def spare_consts(self) -> tuple:
+        """The constants' second copy, allocated at the first call (before a CUDA graph capture)."""
+        if self.spare is None:
+            self.spare = tuple(wp.empty_like(a) for a in self.consts())
+        return self.spare
 
     def swap_consts(self) -> None:
         """Make the spare constants (a sorting G2P's output) current, and the current spare."""
