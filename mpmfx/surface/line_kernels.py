@@ -97,12 +97,19 @@ def gather_zhu_bridson_blocks(
                         for z in range(BS):
                             dzv[z] = gp[2] - float(c[2] + z)
                         dz2 = wp.cw_mul(dzv, dzv)
+                        # a line whose nearest voxel lies beyond the kernel would add only zeros
+                        # (float addition is monotone, so dxy + the least dz2 >= r2 means d2 >= r2
+                        # at every voxel of it): skipped, the sums are the same bits. A particle
+                        # above or below the block reaches a smaller disc of its lines
+                        dz2min = dz2[0]
+                        for z in range(1, BS):
+                            dz2min = wp.min(dz2min, dz2[z])
                         for i in range(i0, i1 + 1):
                             dx = gp[0] - float(i)
                             for j in range(j0, j1 + 1):
                                 dy = gp[1] - float(j)
                                 dxy = dx * dx + dy * dy
-                                if dxy < r2:
+                                if dxy + dz2min < r2:
                                     u = vec8(0.0)
                                     for z in range(BS):
                                         d2 = dxy + dz2[z]
