@@ -215,7 +215,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     g = wp.empty(n, dtype=wp.vec3)
     wp.launch(S.to_grid, n, inputs=[x, wp.vec3(*grid.origin.astype(np.float32)), 1.0 / grid.voxel, g])
     counts, cells, starts, order = _bin_particles(wp, S, g, grid)
-    bmap, bcoord = _classify(wp, S, g, counts, grid)
+    bmap, bcoord = _classify(wp, S, g, counts, cells, starts, order, grid)
     nact = bcoord.shape[0]
     nvox = nact * BS**3
     timings["blocks"] = _lap(wp, t0)
@@ -375,10 +375,18 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
     return phi, w, vel
 
 
-def _classify(wp, S, g, counts, grid: SparseGrid):
-    """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates)."""
+def _classify(wp, S, g, counts, cells, starts, order, grid: SparseGrid):
+    """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates);
+    cells, starts, order: the gather cells' particles (_bin_particles)."""
     near = wp.zeros(grid.nblocks, dtype=wp.int32)
-    _split(wp, S.mark_near_blocks, g.shape[0], [g, grid.reach_vox, near])  # writes 1s: any interleaving agrees
+    if _lines(g):  # a block of particles per thread, most blocks decided without their particles
+        from mpmfx.surface import near_blocks_cpu as N
+
+        nb = math.prod(grid.nblocks)
+        _split(wp, N.mark_near_certain, nb, [cells, grid.reach_vox, near])
+        _split(wp, N.mark_near_tested, nb, [cells, starts, order, g, grid.reach_vox, near])
+    else:
+        _split(wp, S.mark_near_blocks, g.shape[0], [g, grid.reach_vox, near])  # writes 1s: any interleaving agrees
     state = wp.empty(grid.nblocks, dtype=wp.int32)
     wp.launch(S.classify_blocks, grid.nblocks, inputs=[counts, near, grid.dense_reach, grid.dense_min, state])
     labels = wp.empty(grid.nblocks, dtype=wp.int32)
