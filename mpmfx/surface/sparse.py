@@ -637,33 +637,38 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, w, grid: SparseGrid) 
     dev = values.device
     # a thread per edge and per cell (GPU), or per block (CPU), counted per edge and cell (GPU) or
     # per block line along z (its 24 edges and 8 cells)
+    from mpmfx.surface import line_kernels as LK
     from mpmfx.surface import line_mesh_kernels as L
 
-    if _lines(values):
+    if _lines(values):  # the corner signs once per line: 9 bits each (L.sign_columns)
         kv, kf, nv, nf = L.mc_vertices_lines, L.mc_faces_lines, nvox // BS, nvox // BS
+        masks = wp.empty(nvox // BS, dtype=wp.int32)
+        _blocks(wp, L.sign_columns, [bcoord, bmap, LK.rows(values), *tiles, masks])
+        vin, fin = [values, *tiles, masks], [masks, *tiles]
 
         def run(kernel, dim, inputs):
             _blocks(wp, kernel, inputs)
     else:
         kv, kf, nv, nf = M.mc_vertices, M.mc_faces, nvox * 3, nvox
+        vin = fin = [values, *tiles]
 
         def run(kernel, dim, inputs):
             _split(wp, kernel, dim, inputs)
     ecount = wp.empty(nv, dtype=wp.int32)
     edge_vert = wp.empty(nvox * 3, dtype=wp.int32)
-    run(kv, nv, [bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
+    run(kv, nv, [bcoord, bmap, *vin, ecount, 1, ecount, edge_vert, None])
     eoff = _scan(wp, ecount, inclusive=True)
     tables = list(device_tables(wp, dev))
     fcount = wp.empty(nf, dtype=wp.int32)
-    run(kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
+    run(kf, nf, [bcoord, bmap, *fin, edge_vert, *tables, fcount, 1, fcount, None])
     foff = _scan(wp, fcount, inclusive=True)
     m, k = (int(a[-1:].numpy()[0]) for a in (eoff, foff))  # the two sizes: one sync each
     if m == 0 or k == 0:
         return None
     verts = wp.empty(m, dtype=wp.vec3)
-    run(kv, nv, [bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
+    run(kv, nv, [bcoord, bmap, *vin, eoff, 0, ecount, edge_vert, verts])
     faces = wp.empty(3 * k, dtype=wp.int32)
-    run(kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
+    run(kf, nf, [bcoord, bmap, *fin, edge_vert, *tables, foff, 0, fcount, faces])
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
     origin = wp.vec3(*grid.origin.astype(np.float32))
