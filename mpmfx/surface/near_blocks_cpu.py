@@ -9,7 +9,7 @@ point of that span is near as soon as C holds a particle, and one out of reach o
 is never marked from C. Only the blocks in between test C's particles, with
 mark_near_blocks' own float32 arithmetic and candidate range, and stop at the first that
 reaches. The bounds are taken in float64 with a margin of 1e-4 r^2, far wider than float32's
-rounding of the distances (~1e-5 r^2), so `near` is mark_near_blocks' bit for bit.
+rounding of the distances (a few 1e-7 r^2), so `near` is mark_near_blocks' bit for bit.
 
 Two launches: the certain marks first, so the particle tests run only for blocks still
 unmarked (the outer shell of the near set). Threads write only 1s: any interleaving agrees.
