@@ -38,7 +38,7 @@ def gather_zhu_bridson_blocks(
     offset: wp.array(dtype=wp.vec3),
     vel: wp.array(dtype=wp.vec3),
     nacc: int,
-    acc: wp.array(dtype=vec8),
+    acc: wp.array2d(dtype=vec8),
     base: int,
 ):
     """sparse_kernels.gather_zhu_bridson for the 512 voxels of one block (thread = active
@@ -51,8 +51,11 @@ def gather_zhu_bridson_blocks(
     sorted_copy): the fetches run through memory in order instead of jumping.
 
     acc: scratch, nacc (7, or 10 with velocities) vec8 sums per line of the block (w, the
-    offset's x y z, the weight gradient's x y z, the velocity's x y z), turned into the field
-    by the block's last step; indexed by the launch's thread (wp.tid()), so one CPU thread's
+    offset's x y z, the weight gradient's x y z, the velocity's x y z; acc[line, sum]), turned
+    into the field by the block's last step. Two-dimensional so that a line's sums share one
+    index: Warp wraps every negative index, and for acc[la + k] that was a compare and a
+    conditional move per sum, as many instructions as the sums' arithmetic (acc[la, k] and the
+    skipped lines below: gather 1.15-1.35x faster, 100k, all six shapes "fine", one thread). Indexed by the launch's thread (wp.tid()), so one CPU thread's
     chunks can share one (launch.launch_split_scratch). A particle adds to all 8 voxels of a line it reaches, the
     weights of voxels beyond the kernel masked to 0: adding +-0 leaves a sum as it is, and
     the mask is the voxel kernel's test d2 < r2, so the sums stay the voxel kernel's bit for
@@ -65,9 +68,10 @@ def gather_zhu_bridson_blocks(
     c = bcoord[b] * BS
     t0 = b * BV
     r2 = reach * reach
-    a0 = wp.tid() * (BS * BS) * nacc  # this launch's thread's part of the scratch
-    for q in range(BS * BS * nacc):
-        acc[a0 + q] = vec8(0.0)
+    a0 = wp.tid() * (BS * BS)  # this launch's thread's part of the scratch
+    for q in range(BS * BS):
+        for k in range(nacc):
+            acc[a0 + q, k] = vec8(0.0)
     shape = wp.vec3i(cells.shape[0], cells.shape[1], cells.shape[2])
     lo = wp.vec3i(0)
     hi = wp.vec3i(0)
@@ -97,39 +101,46 @@ def gather_zhu_bridson_blocks(
                         for z in range(BS):
                             dzv[z] = gp[2] - float(c[2] + z)
                         dz2 = wp.cw_mul(dzv, dzv)
+                        # a line whose nearest voxel lies beyond the kernel would add only zeros
+                        # (float addition is monotone, so dxy + the least dz2 >= r2 means d2 >= r2
+                        # at every voxel of it): skipped, the sums are the same bits. A particle
+                        # above or below the block reaches a smaller disc of its lines
+                        dz2min = dz2[0]
+                        for z in range(1, BS):
+                            dz2min = wp.min(dz2min, dz2[z])
                         for i in range(i0, i1 + 1):
                             dx = gp[0] - float(i)
                             for j in range(j0, j1 + 1):
                                 dy = gp[1] - float(j)
                                 dxy = dx * dx + dy * dy
-                                if dxy < r2:
+                                if dxy + dz2min < r2:
                                     u = vec8(0.0)
                                     for z in range(BS):
                                         d2 = dxy + dz2[z]
                                         u[z] = wp.where(d2 < r2, 1.0 - d2 / r2, 0.0)
                                     uu = wp.cw_mul(u, u)
                                     wk = wp.cw_mul(uu, u)
-                                    la = a0 + ((i - c[0]) * BS + (j - c[1])) * nacc
-                                    acc[la] = acc[la] + wk
-                                    acc[la + 1] = acc[la + 1] + dx * wk
-                                    acc[la + 2] = acc[la + 2] + dy * wk
-                                    acc[la + 3] = acc[la + 3] + wp.cw_mul(wk, dzv)
-                                    acc[la + 4] = acc[la + 4] + dx * uu
-                                    acc[la + 5] = acc[la + 5] + dy * uu
-                                    acc[la + 6] = acc[la + 6] + wp.cw_mul(uu, dzv)
+                                    la = a0 + (i - c[0]) * BS + (j - c[1])
+                                    acc[la, 0] = acc[la, 0] + wk
+                                    acc[la, 1] = acc[la, 1] + dx * wk
+                                    acc[la, 2] = acc[la, 2] + dy * wk
+                                    acc[la, 3] = acc[la, 3] + wp.cw_mul(wk, dzv)
+                                    acc[la, 4] = acc[la, 4] + dx * uu
+                                    acc[la, 5] = acc[la, 5] + dy * uu
+                                    acc[la, 6] = acc[la, 6] + wp.cw_mul(uu, dzv)
                                     if with_v != 0:
-                                        acc[la + 7] = acc[la + 7] + vp[0] * wk
-                                        acc[la + 8] = acc[la + 8] + vp[1] * wk
-                                        acc[la + 9] = acc[la + 9] + vp[2] * wk
+                                        acc[la, 7] = acc[la, 7] + vp[0] * wk
+                                        acc[la, 8] = acc[la, 8] + vp[1] * wk
+                                        acc[la, 9] = acc[la, 9] + vp[2] * wk
     for q in range(BV):
         lq = q // BS
         z = q - lq * BS
-        la = a0 + lq * nacc
+        la = a0 + lq
         vw = wp.vec3(0.0)
         if with_v != 0:
-            vw = wp.vec3(acc[la + 7][z], acc[la + 8][z], acc[la + 9][z])
-        write_field(t0 + q, acc[la][z], wp.vec3(acc[la + 1][z], acc[la + 2][z], acc[la + 3][z]),
-                    wp.vec3(acc[la + 4][z], acc[la + 5][z], acc[la + 6][z]), vw, radius_vox, with_v, far_vox, phi, w_out, offset, vel)
+            vw = wp.vec3(acc[la, 7][z], acc[la, 8][z], acc[la, 9][z])
+        write_field(t0 + q, acc[la, 0][z], wp.vec3(acc[la, 1][z], acc[la, 2][z], acc[la, 3][z]),
+                    wp.vec3(acc[la, 4][z], acc[la, 5][z], acc[la, 6][z]), vw, radius_vox, with_v, far_vox, phi, w_out, offset, vel)
 
 
 @wp.func

@@ -4,14 +4,16 @@ A line along z of block b owns the 24 edges (voxel * 3 + axis) and the 8 cells (
 of its voxels. Each needs the values of at most 4 voxel columns (the line and its +x, +y, +xy
 neighbours, up to z + 8), so these are read once per line (36 reads instead of 64 per cell
 sweep) and their signs kept as 9-bit masks: counting is bit arithmetic, and a line whose
-columns all share one sign has nothing to do. The same vertices and triangles come out in the
-same order as the voxel kernels' (tests/surface/test_line_kernels.py).
+columns all share one sign has nothing to do. The signs are found once per line
+(sign_columns: a line's 8 voxels and the next one along z as a 9-bit mask), so the count
+passes and the triangles read one int per column instead of its 9 values. The same vertices
+and triangles come out in the same order as the voxel kernels' (tests/surface/test_line_kernels.py).
 """
 
 import warp as wp
 
-from mpmfx.surface.line_kernels import block_code, read
-from mpmfx.surface.sparse_kernels import BS, slot
+from mpmfx.surface.line_kernels import block_code, read, row_or_tile, side_code, vec8
+from mpmfx.surface.sparse_kernels import BS, TILE_INSIDE, slot
 
 vec9 = wp.types.vector(length=9, dtype=wp.float32)
 vec8i = wp.types.vector(length=8, dtype=wp.int32)
@@ -49,14 +51,49 @@ def column(phi: wp.array(dtype=float), codes: vec8i, x: int, y: int, out_v: floa
     return col
 
 
+@wp.kernel
+def sign_columns(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi8: wp.array(dtype=vec8),
+    out_v: float,
+    in_v: float,
+    masks: wp.array(dtype=wp.int32),
+    base: int,
+):
+    """masks[line] = the corner signs of the line's column: bit z (0..7) where its voxel z is
+    >= 0, bit 8 where the first voxel of the same line of the block above along z is (a
+    tile's value there). phi8: the values as vec8 rows along z (line_kernels.rows); thread = block."""
+    b = wp.tid() + base
+    zp = side_code(bmap, bcoord[b], 2, 1)
+    for l in range(64):
+        row = phi8[b * 64 + l]
+        m = int(0)
+        for z in range(BS):
+            m = m | wp.where(row[z] >= 0.0, 1 << z, 0)
+        top = row_or_tile(phi8, zp, l, out_v, in_v)[0]
+        masks[b * 64 + l] = m | wp.where(top >= 0.0, 1 << BS, 0)
+
+
 @wp.func
-def sign_mask(col: vec9):
-    """Bit z set where col[z] >= 0 (the corner sign marching cubes uses)."""
-    m = int(0)
-    for z in range(BS + 1):
-        if col[z] >= 0.0:
-            m = m | (1 << z)
-    return m
+def column_mask(masks: wp.array(dtype=wp.int32), codes: vec8i, x: int, y: int, out_v: float, in_v: float):
+    """Bit z set where column(...)[z] >= 0 (the corner sign marching cubes uses), local
+    (x, y, z), z = 0..8, of the block of codes[0] (x, y in 0..8), from sign_columns' masks."""
+    ox = x // BS
+    oy = y // BS
+    line = (x - ox * BS) * BS + (y - oy * BS)
+    lo = codes[ox * 4 + oy * 2]
+    if lo >= 0:
+        return masks[lo * 64 + line]
+    # a tile's 8 voxels hold its value (read); the ninth is the block above's
+    m = wp.where(wp.where(lo == TILE_INSIDE, in_v, out_v) >= 0.0, (1 << BS) - 1, 0)
+    hi = codes[ox * 4 + oy * 2 + 1]
+    top = int(0)
+    if hi >= 0:
+        top = masks[hi * 64 + line] & 1
+    else:
+        top = wp.where(wp.where(hi == TILE_INSIDE, in_v, out_v) >= 0.0, 1, 0)
+    return m | (top << BS)
 
 
 @wp.func
@@ -74,6 +111,7 @@ def mc_vertices_lines(
     phi: wp.array(dtype=float),
     out_v: float,
     in_v: float,
+    masks: wp.array(dtype=wp.int32),
     offsets: wp.array(dtype=wp.int32),
     count_only: int,
     counts: wp.array(dtype=wp.int32),
@@ -84,7 +122,8 @@ def mc_vertices_lines(
     """sparse_mesh_kernels.mc_vertices for the 24 edges (voxel * 3 + axis) of each of the 64
     lines along z of one block (thread = block), counted per line (counts[line]; offsets:
     their inclusive scan): the same vertices in the same order. Unlike mc_vertices, edges
-    without a vertex keep whatever edge_vert held: mc_faces_lines reads only crossing edges."""
+    without a vertex keep whatever edge_vert held: mc_faces_lines reads only crossing edges.
+    masks: sign_columns of phi (the count pass reads only those)."""
     b = wp.tid() + base
     bc = bcoord[b]
     codes = corner_blocks(bmap, b, bc)
@@ -94,17 +133,17 @@ def mc_vertices_lines(
             continue  # no vertex (and edge_vert is read only at crossing edges: no -1 to write)
         li = l // BS
         lj = l - li * BS
-        own = column(phi, codes, li, lj, out_v, in_v)
-        cx = column(phi, codes, li + 1, lj, out_v, in_v)
-        cy = column(phi, codes, li, lj + 1, out_v, in_v)
-        m0 = sign_mask(own)
+        m0 = masks[tid]
         low = (1 << BS) - 1
-        ex = (m0 ^ sign_mask(cx)) & low  # bit z: edge (voxel z, axis 0) crosses
-        ey = (m0 ^ sign_mask(cy)) & low
+        ex = (m0 ^ column_mask(masks, codes, li + 1, lj, out_v, in_v)) & low  # bit z: edge (voxel z, axis 0) crosses
+        ey = (m0 ^ column_mask(masks, codes, li, lj + 1, out_v, in_v)) & low
         ez = (m0 ^ (m0 >> 1)) & low
         if count_only != 0:
             counts[tid] = bit_count(ex) + bit_count(ey) + bit_count(ez)
             continue
+        own = column(phi, codes, li, lj, out_v, in_v)  # the values, at the lines with a vertex
+        cx = column(phi, codes, li + 1, lj, out_v, in_v)
+        cy = column(phi, codes, li, lj + 1, out_v, in_v)
         idx = offsets[tid] - counts[tid]
         for z in range(BS):
             t = tid * BS + z
@@ -130,7 +169,7 @@ def mc_vertices_lines(
 def mc_faces_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
-    phi: wp.array(dtype=float),
+    masks: wp.array(dtype=wp.int32),
     out_v: float,
     in_v: float,
     edge_vert: wp.array(dtype=wp.int32),
@@ -144,7 +183,8 @@ def mc_faces_lines(
     base: int,
 ):
     """sparse_mesh_kernels.mc_faces for the 8 cells of each of the 64 lines along z of one
-    block (thread = block), counted per line: the same triangles in the same order."""
+    block (thread = block), counted per line: the same triangles in the same order. Only the
+    corner signs count: masks from sign_columns (out_v, in_v: the tiles' values)."""
     b = wp.tid() + base
     bc = bcoord[b]
     codes = corner_blocks(bmap, b, bc)
@@ -155,10 +195,10 @@ def mc_faces_lines(
         li = l // BS
         lj = l - li * BS
         # corner order of warp.geometry: (0,0,0) (1,0,0) (1,1,0) (0,1,0), then z + 1
-        m0 = sign_mask(column(phi, codes, li, lj, out_v, in_v))
-        m1 = sign_mask(column(phi, codes, li + 1, lj, out_v, in_v))
-        m2 = sign_mask(column(phi, codes, li + 1, lj + 1, out_v, in_v))
-        m3 = sign_mask(column(phi, codes, li, lj + 1, out_v, in_v))
+        m0 = masks[tid]
+        m1 = column_mask(masks, codes, li + 1, lj, out_v, in_v)
+        m2 = column_mask(masks, codes, li + 1, lj + 1, out_v, in_v)
+        m3 = column_mask(masks, codes, li, lj + 1, out_v, in_v)
         if (m0 & m1 & m2 & m3) == ALL or (m0 | m1 | m2 | m3) == 0:  # one sign: no triangle
             counts[tid] = 0  # (count pass; the write pass skipped the line above)
             continue

@@ -215,7 +215,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     g = wp.empty(n, dtype=wp.vec3)
     wp.launch(S.to_grid, n, inputs=[x, wp.vec3(*grid.origin.astype(np.float32)), 1.0 / grid.voxel, g])
     counts, cells, starts, order = _bin_particles(wp, S, g, grid)
-    bmap, bcoord = _classify(wp, S, g, counts, grid)
+    bmap, bcoord = _classify(wp, S, g, counts, cells, starts, order, grid)
     nact = bcoord.shape[0]
     nvox = nact * BS**3
     timings["blocks"] = _lap(wp, t0)
@@ -360,7 +360,7 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         nacc = 10 if with_v else 7  # vec8 sums per line: w, offset, weight gradient (, velocity)
         launch_split_scratch(wp, L.gather_zhu_bridson_blocks, bcoord.shape[0],
                              [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w,
-                              offset, vel, nacc], lambda k: wp.empty(k * BS * BS * nacc, dtype=L.vec8), device=phi.device)
+                              offset, vel, nacc], lambda k: wp.empty((k * BS * BS, nacc), dtype=L.vec8), device=phi.device)
     else:
         wp.launch(S.gather_zhu_bridson, nvox,
                   inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
@@ -375,10 +375,18 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
     return phi, w, vel
 
 
-def _classify(wp, S, g, counts, grid: SparseGrid):
-    """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates)."""
+def _classify(wp, S, g, counts, cells, starts, order, grid: SparseGrid):
+    """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates);
+    cells, starts, order: the gather cells' particles (_bin_particles)."""
     near = wp.zeros(grid.nblocks, dtype=wp.int32)
-    _split(wp, S.mark_near_blocks, g.shape[0], [g, grid.reach_vox, near])  # writes 1s: any interleaving agrees
+    if _lines(g):  # a block of particles per thread, most blocks decided without their particles
+        from mpmfx.surface import near_blocks_cpu as N
+
+        nb = math.prod(grid.nblocks)
+        _split(wp, N.mark_near_certain, nb, [cells, grid.reach_vox, near])
+        _split(wp, N.mark_near_tested, nb, [cells, starts, order, g, grid.reach_vox, near])
+    else:
+        _split(wp, S.mark_near_blocks, g.shape[0], [g, grid.reach_vox, near])  # writes 1s: any interleaving agrees
     state = wp.empty(grid.nblocks, dtype=wp.int32)
     wp.launch(S.classify_blocks, grid.nblocks, inputs=[counts, near, grid.dense_reach, grid.dense_min, state])
     labels = wp.empty(grid.nblocks, dtype=wp.int32)
@@ -629,33 +637,38 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, w, grid: SparseGrid) 
     dev = values.device
     # a thread per edge and per cell (GPU), or per block (CPU), counted per edge and cell (GPU) or
     # per block line along z (its 24 edges and 8 cells)
+    from mpmfx.surface import line_kernels as LK
     from mpmfx.surface import line_mesh_kernels as L
 
-    if _lines(values):
+    if _lines(values):  # the corner signs once per line: 9 bits each (L.sign_columns)
         kv, kf, nv, nf = L.mc_vertices_lines, L.mc_faces_lines, nvox // BS, nvox // BS
+        masks = wp.empty(nvox // BS, dtype=wp.int32)
+        _blocks(wp, L.sign_columns, [bcoord, bmap, LK.rows(values), *tiles, masks])
+        vin, fin = [values, *tiles, masks], [masks, *tiles]
 
         def run(kernel, dim, inputs):
             _blocks(wp, kernel, inputs)
     else:
         kv, kf, nv, nf = M.mc_vertices, M.mc_faces, nvox * 3, nvox
+        vin = fin = [values, *tiles]
 
         def run(kernel, dim, inputs):
             _split(wp, kernel, dim, inputs)
     ecount = wp.empty(nv, dtype=wp.int32)
     edge_vert = wp.empty(nvox * 3, dtype=wp.int32)
-    run(kv, nv, [bcoord, bmap, values, *tiles, ecount, 1, ecount, edge_vert, None])
+    run(kv, nv, [bcoord, bmap, *vin, ecount, 1, ecount, edge_vert, None])
     eoff = _scan(wp, ecount, inclusive=True)
     tables = list(device_tables(wp, dev))
     fcount = wp.empty(nf, dtype=wp.int32)
-    run(kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, fcount, 1, fcount, None])
+    run(kf, nf, [bcoord, bmap, *fin, edge_vert, *tables, fcount, 1, fcount, None])
     foff = _scan(wp, fcount, inclusive=True)
     m, k = (int(a[-1:].numpy()[0]) for a in (eoff, foff))  # the two sizes: one sync each
     if m == 0 or k == 0:
         return None
     verts = wp.empty(m, dtype=wp.vec3)
-    run(kv, nv, [bcoord, bmap, values, *tiles, eoff, 0, ecount, edge_vert, verts])
+    run(kv, nv, [bcoord, bmap, *vin, eoff, 0, ecount, edge_vert, verts])
     faces = wp.empty(3 * k, dtype=wp.int32)
-    run(kf, nf, [bcoord, bmap, values, *tiles, edge_vert, *tables, foff, 0, fcount, faces])
+    run(kf, nf, [bcoord, bmap, *fin, edge_vert, *tables, foff, 0, fcount, faces])
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
     origin = wp.vec3(*grid.origin.astype(np.float32))

@@ -10,6 +10,7 @@ from __future__ import annotations
 import logging
 
 from mpmfx.surface.launch import launch_split
+from mpmfx.surface.line_kernels import rows
 from mpmfx.surface.sparse import BS, MAX_SWEEP_ROUNDS
 
 log = logging.getLogger(__name__)
@@ -27,7 +28,7 @@ def flood_bits(wp, T, bcoord, bmap, phi, mark, seed_depth: float, seeds: str):
     sign, reached = wp.empty(nact * BS, dtype=wp.uint64), wp.empty(nact * BS, dtype=wp.uint64)
     pending = wp.empty(nact, dtype=wp.int32)
     blocks = {"device": phi.device, "min_split": 1}  # a block per thread: few threads, much work each
-    launch_split(wp, F.seed_bits, nact, [bcoord, bmap, phi, mark, seed_depth, SEEDS[seeds], sign, reached, pending], **blocks)
+    launch_split(wp, F.seed_bits, nact, [bcoord, bmap, rows(phi), mark, seed_depth, SEEDS[seeds], sign, reached, pending], **blocks)
     changed = wp.zeros(1, dtype=wp.int32)
     active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
     rounds = 0

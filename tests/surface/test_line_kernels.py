@@ -43,3 +43,34 @@ def test_a_bad_thread_count_names_the_variable(monkeypatch):
         cpu_threads()
     monkeypatch.setenv("MPMFX_SURFACE_THREADS", "2")
     assert cpu_threads() == 2
+
+
+@pytest.mark.parametrize("sampling", ["lattice", "random"])
+@pytest.mark.parametrize("voxel_h, iters", [(0.6, 2), (0.5, 5)])
+def test_cpu_near_blocks_are_mark_near_blocks(monkeypatch, sampling, voxel_h, iters):
+    """near_blocks_cpu (a block of particles per thread, most blocks decided from the block's
+    span) marks exactly the blocks sparse_kernels.mark_near_blocks marks, lattice planes on
+    block faces included."""
+    import warp as wp
+
+    import mpmfx.surface.sparse as sparse
+    from mpmfx.surface import near_blocks_cpu as N
+    from mpmfx.surface import sparse_kernels as S
+
+    monkeypatch.setenv("MPMFX_SURFACE_THREADS", "3")
+    monkeypatch.setattr("mpmfx.surface.launch.MIN_SPLIT", 64)
+    x, h = sample_shape("torus", 6000, sampling)
+    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel_h * h, smooth_iters=iters, dense_output=False)
+    xd = wp.array(x, dtype=wp.vec3, device="cpu")
+    grid = sparse.SparseGrid(*sparse.particle_bounds(wp, S, xd), params)
+    g = wp.empty(xd.shape[0], dtype=wp.vec3, device="cpu")
+    wp.launch(S.to_grid, xd.shape[0], inputs=[xd, wp.vec3(*grid.origin.astype(np.float32)), 1.0 / grid.voxel, g], device="cpu")
+    _, cells, starts, order = sparse._bin_particles(wp, S, g, grid)
+    want = wp.zeros(grid.nblocks, dtype=wp.int32, device="cpu")
+    wp.launch(S.mark_near_blocks, g.shape[0], inputs=[g, grid.reach_vox, want, 0], device="cpu")
+    got = wp.zeros(grid.nblocks, dtype=wp.int32, device="cpu")
+    nb = int(np.prod(grid.nblocks))
+    sparse._split(wp, N.mark_near_certain, nb, [cells, grid.reach_vox, got])
+    sparse._split(wp, N.mark_near_tested, nb, [cells, starts, order, g, grid.reach_vox, got])
+    assert 0 < want.numpy().sum() < nb
+    np.testing.assert_array_equal(got.numpy(), want.numpy())
