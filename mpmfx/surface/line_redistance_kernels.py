@@ -7,7 +7,7 @@ neighbour lines are read once into registers instead of through a block-map look
 
 import warp as wp
 
-from mpmfx.surface.line_kernels import block_faces, line_neighbours, line_sides, neighbour_rows, read, row_or_tile, vec8
+from mpmfx.surface.line_kernels import block_faces, line_neighbours, line_sides, neighbour_rows, read, vec8
 from mpmfx.surface.redistance_kernels import axis_inv2, crossing_fraction, eikonal_update, frozen_distance
 from mpmfx.surface.sparse_kernels import BS, BV
 
@@ -202,30 +202,7 @@ def eikonal_lines(
             now[tid] = 0
             continue
         own = src[tid]
-        xm = vec8(0.0)
-        if li > 0:
-            xm = src[tid - BS]
-        else:
-            xm = row_or_tile(src, sides[0], (BS - 1) * BS + lj, out_v, in_v)
-        xp = vec8(0.0)
-        if li < BS - 1:
-            xp = src[tid + BS]
-        else:
-            xp = row_or_tile(src, sides[1], lj, out_v, in_v)
-        ym = vec8(0.0)
-        if lj > 0:
-            ym = src[tid - 1]
-        else:
-            ym = row_or_tile(src, sides[2], li * BS + BS - 1, out_v, in_v)
-        yp = vec8(0.0)
-        if lj < BS - 1:
-            yp = src[tid + 1]
-        else:
-            yp = row_or_tile(src, sides[3], li * BS, out_v, in_v)
-        zm = row_or_tile(src, sides[4], l, out_v, in_v)[BS - 1]
-        zp = row_or_tile(src, sides[5], l, out_v, in_v)[0]
-        lo = vec8(zm, own[0], own[1], own[2], own[3], own[4], own[5], own[6])
-        hi = vec8(own[1], own[2], own[3], own[4], own[5], own[6], own[7], zp)
+        xm, xp, ym, yp, lo, hi = neighbour_rows(src, sides, tid, l, out_v, in_v)
         u = eikonal_row(xm, xp, ym, yp, lo, hi, own, clip)
         moved = int(0)
         for z in range(BS):
