@@ -164,7 +164,7 @@ class DeviceAdvance:
             k = self._chunk_length(c, dt_guess)
             cadence = self._sort_every(state, c, dt_guess, frag)
             self.last_sort_every = min(k, cadence)  # (a chunk no longer than it sorts at its start only: one graph)
-            consts = (state.consts(), state.spare_consts() if self._brick is not None else None)
+            consts = (state.consts(), state.spare)  # (spare: allocated above where the brick P2G runs)
             self._chunk(state, k, self.last_sort_every)
             c = self.clk.numpy()
             if self._brick is not None:

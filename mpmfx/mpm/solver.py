@@ -341,14 +341,16 @@ class Solver:
         gp.remove = int(cfg.out_of_domain == OutOfDomain.REMOVE)
         gp.nodes = nn
         gp.deterministic, gp.q_mass = int(cfg.deterministic), self._q_mass
-        # a sorting substep stores the particles in the sort's order (State: storage order)
-        outs = state.spare_consts() if permute else state.consts()
+        # a sorting substep stores the particles in the sort's order (State: storage order); the
+        # other G2P takes the same arguments and leaves the order and the constants' outputs unread
+        order, outs = state.pid, state.consts()
         if permute:
             g2p = make_g2p(self.flags, device_clock=device_clock, sorting=True)
+            order, outs = brick.idx, state.spare_consts()
         wp.launch(g2p, dim=state.n, device=self.device, inputs=[
             gp, self._grid_v, self._grid_m, self._grid_fixed, self._materials_dev, state.material, state.field_id,
             *cur.arrays(), *nxt.arrays(), self._stats, self._counts, self._sub,
-            brick.idx if permute else state.pid, state.mass, state.volume, state.body, state.pid, *outs])
+            order, state.mass, state.volume, state.body, state.pid, *outs])
         if permute:
             state.swap_consts()
             state.permuted = True
