@@ -356,6 +356,19 @@ def _seg_starts(keys: wp.array(dtype=wp.int32), flag: wp.array(dtype=wp.int32), 
         n_seg[0] = 0
 
 
+@wp.func
+def row_weight(W: wp.mat33, i: int, axis: int) -> float:
+    """W[i, axis] of bspline_weights for a run-time row i, by selects: a matrix indexed with a
+    run-time row lives in local memory (the scatter's add_run spilled its W there: ~75 % of
+    its local traffic, Nsight Compute, 19.4M snow, H200). axis: a constant at every call."""
+    w = W[0, axis]
+    if i == 1:
+        w = W[1, axis]
+    elif i == 2:
+        w = W[2, axis]
+    return w
+
+
 @functools.lru_cache(maxsize=None)
 def make_brick_scatter(flags: SceneFlags, deterministic: bool):
     """The scatter kernel for the scene's materials; fast mode adds the window to the float
@@ -419,8 +432,9 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                 for d in range(3):
                     aff[c, d] = park(2, (4 + 3 * c + d) * BLOCK_CUDA + u, 0.0)
             W = bspline_weights(fx)
+            wij = row_weight(W, i, 0) * row_weight(W, j, 1)
             for k in range(3):
-                w = W[i, 0] * W[j, 1] * W[k, 2]
+                w = wij * W[k, 2]
                 dpos = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
                 mom = w * (mv + aff * dpos)
                 m_sum[k] = m_sum[k] + w * m
