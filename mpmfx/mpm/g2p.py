@@ -59,8 +59,14 @@ class G2PParams:
 def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float, field_offset: int):
     """Gather from the particle's 3x3x3 nodes: v = sum w v_i, and the APIC/MLS affine
     velocity C = (sum w v_i dpos^T) D^-1 with D^-1 = 4 / dx^2 (guide §6).
-    field_offset: first-axis offset of the particle's velocity field (multi-field)."""
-    dx = 1.0 / inv_dx
+    field_offset: first-axis offset of the particle's velocity field (multi-field).
+
+    Summed as sum (w v_i) (dpos / dx)^T, dx and D^-1 applied once at the end: ~16 operations a
+    node (9 of them multiply-adds) where w * outer(v_i, dpos) and dpos took ~40 (the outer
+    products and matrix sums were 13 % of snow G2P's instructions, Nsight Compute, 19.4M
+    particles, H200). Results move by float
+    rounding only. (Tried with it: one flat row offset per (i, j) instead of the 3-D index,
+    which was slower: G2P water 1.23 -> 1.27 ms at 19.4M.)"""
     xg = x * inv_dx
     bi = int(wp.floor(xg[0] - 0.5))
     bj = int(wp.floor(xg[1] - 0.5))
@@ -68,15 +74,15 @@ def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float, field_o
     fx = xg - wp.vec3(float(bi), float(bj), float(bk))
     W = bspline_weights(fx)  # once per particle per transfer
     v = wp.vec3(0.0)
-    B = wp.mat33(0.0)
+    B = wp.mat33(0.0)  # sum w v_i (dpos / dx)^T: dx and D^-1 applied once, at the end
     for i in range(3):
         for j in range(3):
+            wij = W[i, 0] * W[j, 1]
             for k in range(3):
-                w = W[i, 0] * W[j, 1] * W[k, 2]
-                g = grid_v[field_offset + bi + i, bj + j, bk + k]
-                v += w * g
-                B += w * wp.outer(g, (wp.vec3(float(i), float(j), float(k)) - fx) * dx)
-    return v, (4.0 * inv_dx * inv_dx) * B
+                wg = (wij * W[k, 2]) * grid_v[field_offset + bi + i, bj + j, bk + k]
+                v += wg
+                B += wp.outer(wg, wp.vec3(float(i), float(j), float(k)) - fx)
+    return v, (4.0 * inv_dx) * B
 
 
 @wp.func
