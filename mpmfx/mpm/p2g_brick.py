@@ -45,7 +45,10 @@ on G2P made it slower (water 1.49 -> 1.77 ms at 64). Since the particles' stress
 SVD here any more) 80 is better than 64; H200, fast mode, the scatter alone, ms a substep at
 19.4M (cap 80 / 72 / 64): snow 2.54 / 2.56 / 2.79, water 2.48 / 2.44 / 2.58, sand 2.53 / 2.55 /
 2.79; at 2.4M (uncapped / 96 / 80 / 64 / 56): snow 0.401 / 0.370 / 0.349 / 0.371 / 0.384, water
-0.506 / 0.376 / 0.351 / 0.353 / 0.365 (scripts/kernel_probe.py, kernel_caps("scatter")).
+0.506 / 0.376 / 0.351 / 0.353 / 0.365 (scripts/kernel_probe.py, kernel_caps("scatter")). Since a run's
+weights stay in registers (row_weight: W had spilled to local memory), 64 is best: snow at 19.4M
+(cap 96 / 80 / 72 / 64 / 56) 2.24 / 2.07 / 1.94 / 1.84 / 1.89 ms, water (80 / 72 / 64) 2.20 / 2.06 /
+1.93 (H200).
 
 The window holds fixed point in both modes (the reference's quanta, p2g.py), so its sums are
 exact and order-free. A run's float sums are deterministic too: its particles are summed in
@@ -90,7 +93,7 @@ BRICK = 4  # corner nodes per brick and axis (a key's low 6 bits)
 WIN = 8  # window nodes per axis: BRICK + 1 slack below + 1 above + the stencil's 2
 WIN_NODES = WIN * WIN * WIN
 BLOCK_CUDA = 128  # threads a block on CUDA, and slots parked a round
-MAX_REGISTERS = 80  # a thread's registers (the compiler takes 128 unbounded: see the docstring)
+MAX_REGISTERS = 64  # a thread's registers (the compiler takes 128 unbounded: see the docstring)
 MAX_BLOCKS = 1 << 15  # blocks at most; each walks segments block, block + MAX_BLOCKS, ...
 PARKED = 16  # floats a parked particle: m, m v (3), affine (9), fx (3)
 SORT_TRAVEL = 1.0  # cells the fastest particle may move between two sorts: a window's slack (travel_cadence)
