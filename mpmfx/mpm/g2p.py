@@ -34,6 +34,17 @@ from .state import SceneFlags, load_m33, store_m33
 from .stepper import SubstepDev
 
 G2P_MAX_REGISTERS = 80  # see make_g2p
+G2P_BLOCK = 256  # threads a block
+
+
+def g2p_launch_shape(flags) -> tuple[int, int]:
+    """(register cap, threads a block) of the scene's G2P: a water-only G2P (no SVD) keeps 72
+    registers a thread, and blocks of 128 fit 7 a multiprocessor (28 warps, where 256-thread
+    blocks fit 3 at either cap). H200, 19.4M particles, G2P ms a substep, two rounds, cap / block:
+    water 80/256 1.16, 80/128 1.14, 72/128 1.065, 64/128 1.12; snow 2.19, 2.21, 2.29, 2.45."""
+    if flags.solid:
+        return G2P_MAX_REGISTERS, G2P_BLOCK
+    return 72, 128
 
 
 @wp.struct
@@ -172,10 +183,11 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
     # 80 registers a thread: a solid's return maps (two inlined SVDs) took the compiler to
     # 128, which leaves a multiprocessor 512 threads; measured on an H100 (snow, 2.4M
     # particles): G2P 0.419 ms a substep uncapped, 0.430 at 96, 0.358 at 80, 0.381 at 72.
-    # Water's G2P takes 80 anyway; at 64 it was slower (1.49 -> 1.77 ms at 19.4M).
+    # A water-only G2P: see g2p_launch_shape (at 64 registers in 256-thread blocks it was
+    # slower: 1.49 -> 1.77 ms at 19.4M).
     module = flags.key + ("_dev" if device_clock else "") + ("_sort" if sorting else "")
 
-    @wp.kernel(enable_backward=False, module=module, cuda_max_registers=G2P_MAX_REGISTERS)
+    @wp.kernel(enable_backward=False, module=module, cuda_max_registers=g2p_launch_shape(flags)[0])
     def g2p(
         gp: G2PParams,
         grid_v: wp.array3d(dtype=wp.vec3),

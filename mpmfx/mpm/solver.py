@@ -25,7 +25,7 @@ from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
 from .constitutive import MaterialParams, pack_material
 from .energy import ENERGY_CHUNK, make_energy
-from .g2p import G2PParams, make_g2p, solid_stress
+from .g2p import G2PParams, g2p_launch_shape, make_g2p, solid_stress
 from .grid_update import GridParams, make_grid_update
 from .materials import Material, Mode
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
@@ -347,7 +347,7 @@ class Solver:
         if permute:
             g2p = make_g2p(self.flags, device_clock=device_clock, sorting=True)
             order, outs = brick.idx, state.spare_consts()
-        wp.launch(g2p, dim=state.n, device=self.device, inputs=[
+        wp.launch(g2p, dim=state.n, block_dim=g2p_launch_shape(self.flags)[1], device=self.device, inputs=[
             gp, self._grid_v, self._grid_m, self._grid_fixed, self._materials_dev, state.material, state.field_id,
             *cur.arrays(), *nxt.arrays(), self._stats, self._counts, self._sub,
             order, state.mass, state.volume, state.body, state.pid, *outs])
