@@ -75,9 +75,8 @@ def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float, field_o
     Summed as sum (w v_i) (dpos / dx)^T, dx and D^-1 applied once at the end: ~16 operations a
     node (9 of them multiply-adds) where w * outer(v_i, dpos) and dpos took ~40 (the outer
     products and matrix sums were 13 % of snow G2P's instructions, Nsight Compute, 19.4M
-    particles, H200). Results move by float
-    rounding only. (Tried with it: one flat row offset per (i, j) instead of the 3-D index,
-    which was slower: G2P water 1.23 -> 1.27 ms at 19.4M.)"""
+    particles, H200). Results move by float rounding only. (Tried with it: one flat row offset
+    per (i, j) instead of the 3-D index, which was slower: G2P water 1.23 -> 1.27 ms at 19.4M.)"""
     xg = x * inv_dx
     bi = int(wp.floor(xg[0] - 0.5))
     bj = int(wp.floor(xg[1] - 0.5))

@@ -48,7 +48,9 @@ SVD here any more) 80 is better than 64; H200, fast mode, the scatter alone, ms 
 0.506 / 0.376 / 0.351 / 0.353 / 0.365 (scripts/kernel_probe.py, kernel_caps("scatter")). Since a run's
 weights stay in registers (row_weight: W had spilled to local memory), 64 is best: snow at 19.4M
 (cap 96 / 80 / 72 / 64 / 56) 2.24 / 2.07 / 1.94 / 1.84 / 1.89 ms, water (80 / 72 / 64) 2.20 / 2.06 /
-1.93 (H200).
+1.93 (H200). Also dropped (H200, 19.4M snow): rounds cut after block // 9 runs so a round's run
+tasks always fit one pass (the barrier after an uneven second pass was 11 % of the scatter's stall
+samples): P2G 2.30 -> 2.56 ms, re-parking the rest of the round costs more than the idle threads.
 
 The window holds fixed point in both modes (the reference's quanta, p2g.py), so its sums are
 exact and order-free. A run's float sums are deterministic too: its particles are summed in
