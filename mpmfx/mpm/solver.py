@@ -498,7 +498,8 @@ class Solver:
         cur = state.cur
         part = wp.empty(((state.n + ENERGY_CHUNK - 1) // ENERGY_CHUNK, 1), dtype=wp.float64, device=self.device)
         wp.launch(self._energy, dim=part.shape[0], device=self.device, inputs=[
-            self._materials_dev, state.material, state.volume, cur.F, cur.J, cur.Jp, cur.alive, state.n, part])
+            self._materials_dev, state.material, state.volume, cur.F, cur.J, cur.Jp, cur.alive, state.n,
+            int(self.device.is_cuda), part])
         return float(sum_partials(part, self.device)[0])
 
     # ------------------------------------------------------------------ I/O

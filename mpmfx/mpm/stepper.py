@@ -227,13 +227,31 @@ def pose_colliders(sp: StepperParams, clk: wp.array(dtype=wp.float64), keys_t: w
 REPORT_CHUNK = 256  # particles summed in order by one thread: the sums do not depend on scheduling
 
 
+@wp.func
+def chunk_particle(b: int, i: int, chunk: int, threads: int, coalesced: int) -> int:
+    """Particle i of thread b's fixed set of `chunk` (the threads' sets cover 0..threads * chunk;
+    a reduction sums its set in i order, so its partial sums never depend on scheduling).
+    coalesced (a GPU): the threads' i-th particles are neighbours, so a warp reads consecutive
+    memory (H200, 19.4M particles, ms a call, runs of a thread's own -> coalesced: the elastic
+    energy 3.32 -> 1.05 snow, 1.96 -> 0.39 water; this report 0.63 -> 0.36); else (the
+    CPU, whose threads run one after another) thread b's set is the run b * chunk + i."""
+    if coalesced != 0:
+        return b + i * threads
+    return b * chunk + i
+
+
 @wp.kernel(enable_backward=False)
 def _report_partials(v: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float), alive: wp.array(dtype=wp.int32),
-                     n: int, out: wp.array2d(dtype=wp.float64)):
-    """Per block of REPORT_CHUNK particles, in order: mass, momentum (3), kinetic energy x 2."""
+                     n: int, coalesced: int, out: wp.array2d(dtype=wp.float64)):
+    """Per thread's set of REPORT_CHUNK particles (chunk_particle), in order: mass, momentum
+    (3), kinetic energy x 2."""
     b = wp.tid()
+    rows = out.shape[0]
     acc = wp.vector(length=5, dtype=wp.float64)
-    for p in range(b * REPORT_CHUNK, wp.min(n, (b + 1) * REPORT_CHUNK)):
+    for i in range(REPORT_CHUNK):
+        p = chunk_particle(b, i, REPORT_CHUNK, rows, coalesced)
+        if p >= n:
+            break
         if alive[p] > 0:
             m = wp.float64(mass[p])
             vp = v[p]
@@ -274,6 +292,7 @@ def report_sums(state, device) -> tuple[float, np.ndarray, float]:
     fixed order (replays give the same bits). Only the few partial sums come to the host."""
     rows = (state.n + REPORT_CHUNK - 1) // REPORT_CHUNK
     part = wp.empty((rows, 5), dtype=wp.float64, device=device)
-    wp.launch(_report_partials, dim=rows, device=device, inputs=[state.cur.v, state.mass, state.cur.alive, state.n, part])
+    wp.launch(_report_partials, dim=rows, device=device,
+              inputs=[state.cur.v, state.mass, state.cur.alive, state.n, int(wp.get_device(device).is_cuda), part])
     s = sum_partials(part, device)
     return float(s[0]), s[1:4].copy(), float(0.5 * s[4])
