@@ -71,20 +71,20 @@ def launch_split(wp, kernel, dim: int, inputs: list, *, device, min_split: int |
 
 
 def launch_split_scratch(wp, kernel, dim: int, inputs: list, scratch, *, device) -> None:
-    """launch_split for a kernel of one block per thread that takes inputs + [scratch, base]
-    and uses scratch per thread of its launch (its thread tid's part, whatever base): each
-    CPU thread gets its own scratch(threads) array, reused by the chunks it runs, instead of
-    one for every block. scratch(k): a new array for k kernel threads."""
+    """launch_split for a CPU kernel of one block per thread that takes inputs + [scratch, base]
+    and uses scratch for one of its threads at a time (a CPU launch runs its threads one after
+    another): each CPU thread gets its own scratch() array, reused by the chunks it runs.
+    scratch(): a new array."""
     if dim <= 0:
         return
     n = cpu_threads() if device.is_cpu else 1
     if n == 1:
-        wp.launch(kernel, dim, inputs=[*inputs, scratch(dim), 0], device=device)
+        wp.launch(kernel, dim, inputs=[*inputs, scratch(), 0], device=device)
         return
     step = -(-dim // (n * CHUNKS_PER_THREAD))
     free: queue.SimpleQueue = queue.SimpleQueue()
     for _ in range(n):
-        free.put(scratch(step))
+        free.put(scratch())
 
     def run(lo: int, size: int) -> None:
         buf = free.get()
