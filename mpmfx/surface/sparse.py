@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mpmfx.surface.cpu_memory import keep_freed_memory
 from mpmfx.surface.launch import launch_split, launch_split_scratch
 from mpmfx.surface.params import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, SurfaceResult
 
@@ -207,6 +208,8 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     from mpmfx.surface import sparse_mesh_kernels as M
     from mpmfx.surface import topology_kernels as T
 
+    if x.device.is_cpu:  # the call's arrays reuse the previous call's pages (no page faults)
+        keep_freed_memory()
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     grid = SparseGrid(*particle_bounds(wp, S, x), params)

@@ -74,3 +74,16 @@ def test_cpu_near_blocks_are_mark_near_blocks(monkeypatch, sampling, voxel_h, it
     sparse._split(wp, N.mark_near_tested, nb, [cells, starts, order, g, grid.reach_vox, got])
     assert 0 < want.numpy().sum() < nb
     np.testing.assert_array_equal(got.numpy(), want.numpy())
+
+
+def test_keeping_freed_memory_respects_the_users_malloc_settings(monkeypatch):
+    """cpu_memory leaves glibc alone where the user opted out or tuned malloc themselves."""
+    from mpmfx.surface import cpu_memory
+
+    for name, value in [("MPMFX_SURFACE_KEEP_MEMORY", "0"), ("GLIBC_TUNABLES", "glibc.malloc.trim_threshold=1"),
+                        ("MALLOC_ARENA_MAX", "2")]:
+        monkeypatch.setattr(cpu_memory, "_done", False)
+        monkeypatch.setenv(name, value)
+        assert cpu_memory.keep_freed_memory() is False
+        monkeypatch.delenv(name)
+    assert cpu_memory.keep_freed_memory() is False  # once a process
