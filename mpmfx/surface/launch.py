@@ -29,6 +29,10 @@ from concurrent.futures import ThreadPoolExecutor
 MAX_THREADS = 8
 CHUNKS_PER_THREAD = 4
 MIN_SPLIT = 1 << 14  # threads of a launch below which splitting costs more than it gains
+# blocks below which a light block kernel (a few hundred ns a block: the blurs, a flood round) runs
+# unsplit: on 2800 blocks a blur pass took 0.62 ms on one thread and 0.84-0.86 ms split in two
+# (the two vCPUs slow each other's vector code ~1.4x, and the hand-offs cost ~0.1-0.2 ms)
+LIGHT_MIN_SPLIT = 1 << 13
 
 _pool: ThreadPoolExecutor | None = None
 _pool_key = (0, 0)  # (workers, pid): a forked child must not reuse its parent's pool (no threads behind it)
@@ -97,15 +101,20 @@ def _chunk_launcher(wp, kernel, inputs: list, device):
     return run
 
 
-def launch_split(wp, kernel, dim: int, inputs: list, *, device, min_split: int | None = None) -> None:
+def launch_split(wp, kernel, dim: int, inputs: list, *, device, min_split: int | None = None, light: int = 0) -> None:
     """Launch `kernel` over `dim` threads with `inputs` + [base]: on a CPU device as
     CHUNKS_PER_THREAD x cpu_threads() chunks run on cpu_threads() threads, else (or when small)
     as one launch with base 0 (also below min_split threads: a kernel whose threads do much
-    work, such as a block each, passes a smaller one)."""
+    work, such as a block each, passes a smaller one). light: the kernel's threads per block
+    where its work is light (a few hundred ns a block): it then runs unsplit below
+    LIGHT_MIN_SPLIT blocks."""
     if dim <= 0:
         return
     n = cpu_threads() if device.is_cpu else 1
-    if n == 1 or dim < (MIN_SPLIT if min_split is None else min_split):
+    least = MIN_SPLIT if min_split is None else min_split
+    if light:
+        least = max(least, LIGHT_MIN_SPLIT * light)
+    if n == 1 or dim < least:
         wp.launch(kernel, dim, inputs=[*inputs, 0], device=device)
         return
     _run_chunks(n, dim, _chunk_launcher(wp, kernel, inputs, device))
