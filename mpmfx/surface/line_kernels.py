@@ -112,9 +112,15 @@ def gather_zhu_bridson_blocks(
                         dz2min = dz2[0]
                         for z in range(1, BS):
                             dz2min = wp.min(dz2min, dz2[z])
-                        for i in range(i0, i1 + 1):
+                        # while, not range(): Warp's range() with bounds known only at run time
+                        # steps a (start, end, step) triple and tests the step's sign every
+                        # iteration, ~12 instructions per line tested (the gather alone, same
+                        # inputs, best of 7: 0.99-1.23x on five 100k cases, lattice and random; same bits)
+                        i = i0
+                        while i <= i1:
                             dx = gp[0] - float(i)
-                            for j in range(j0, j1 + 1):
+                            j = j0
+                            while j <= j1:
                                 dy = gp[1] - float(j)
                                 dxy = dx * dx + dy * dy
                                 if dxy + dz2min < r2:
@@ -136,6 +142,8 @@ def gather_zhu_bridson_blocks(
                                         acc[la, 7] = acc[la, 7] + vp[0] * wk
                                         acc[la, 8] = acc[la, 8] + vp[1] * wk
                                         acc[la, 9] = acc[la, 9] + vp[2] * wk
+                                j += 1
+                            i += 1
     for q in range(BV):
         lq = q // BS
         z = q - lq * BS
