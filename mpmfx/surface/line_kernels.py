@@ -481,11 +481,20 @@ def match_tiles_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=w
         li = l // BS
         lj = l - li * BS
         near = int(0)  # a tile among the blocks this line's voxels touch
-        for ox in range(wp.where(li == 0, -1, 0), wp.where(li == BS - 1, 2, 1)):
-            for oy in range(wp.where(lj == 0, -1, 0), wp.where(lj == BS - 1, 2, 1)):
+        # while loops: a range() with run-time bounds costs a step-sign test per iteration
+        x0 = wp.where(li == 0, -1, 0)
+        x1 = wp.where(li == BS - 1, 2, 1)
+        y0 = wp.where(lj == 0, -1, 0)
+        y1 = wp.where(lj == BS - 1, 2, 1)
+        ox = x0
+        while ox < x1:
+            oy = y0
+            while oy < y1:
                 for oz in range(-1, 2):
                     if codes[(ox + 1) * 9 + (oy + 1) * 3 + oz + 1] < 0:
                         near = 1
+                oy += 1
+            ox += 1
         if near == 0:
             continue
         edge = li == 0 or li == BS - 1 or lj == 0 or lj == BS - 1
@@ -496,15 +505,23 @@ def match_tiles_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=w
                 # match_tiles visits the 27 neighbours in (x, y, z) order: the other blocks
                 # they fall in come in runs, in lexicographic order of the block offset, and
                 # a run's repeats change nothing more, so each block once in that order
-                for bx in range(wp.where(li == 0, -1, 0), wp.where(li == BS - 1, 2, 1)):
-                    for by in range(wp.where(lj == 0, -1, 0), wp.where(lj == BS - 1, 2, 1)):
-                        for bz in range(wp.where(z == 0, -1, 0), wp.where(z == BS - 1, 2, 1)):
+                z0 = wp.where(z == 0, -1, 0)
+                z1 = wp.where(z == BS - 1, 2, 1)
+                bx = x0
+                while bx < x1:
+                    by = y0
+                    while by < y1:
+                        bz = z0
+                        while bz < z1:
                             if bx != 0 or by != 0 or bz != 0:
                                 s = codes[(bx + 1) * 9 + (by + 1) * 3 + bz + 1]
                                 if s == TILE_OUTSIDE and v <= 0.0:
                                     v = eps
                                 if s == TILE_INSIDE and v > 0.0:
                                     v = -eps
+                            bz += 1
+                        by += 1
+                    bx += 1
                 phi[t] = v
 
 
