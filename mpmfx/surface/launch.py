@@ -68,7 +68,7 @@ def _run_chunks(n: int, dim: int, run) -> None:
     pool workers, each taking the next chunk when done with one: a thread that shares its core
     with another process takes fewer of them instead of holding the whole launch up."""
     step = -(-dim // (n * CHUNKS_PER_THREAD))
-    todo = iter(range(0, dim, step))  # next() on a list iterator is atomic under the GIL
+    todo = iter(range(0, dim, step))  # next() on it is atomic under the GIL: each chunk runs once
 
     def work() -> None:
         for lo in todo:
@@ -121,17 +121,18 @@ def launch_split(wp, kernel, dim: int, inputs: list, *, device, min_split: int |
 
 
 def launch_split_scratch(wp, kernel, dim: int, inputs: list, scratch, *, device) -> None:
-    """launch_split for a kernel of one block per thread that takes inputs + [scratch, base]
-    and uses scratch per thread of its launch (its thread tid's part, whatever base): each
-    CPU thread gets its own scratch(threads) array, reused by the chunks it runs, instead of
-    one for every block. scratch(k): a new array for k kernel threads."""
+    """launch_split for a CPU kernel of one block per thread that takes inputs + [scratch, base]
+    and uses scratch for one of its threads at a time (a CPU launch runs its threads one after
+    another): each CPU thread gets its own scratch() array, reused by the chunks it runs.
+    scratch(): a new array."""
     if dim <= 0:
         return
-    n = cpu_threads() if device.is_cpu else 1
+    if not device.is_cpu:  # a GPU runs the launch's threads at once: they would share one scratch
+        raise ValueError(f"launch_split_scratch: {kernel.key} is a CPU kernel (one scratch for all its threads)")
+    n = cpu_threads()
     if n == 1:
         wp.launch(kernel, dim, inputs=[*inputs, scratch(), 0], device=device)
         return
-    step = -(-dim // (n * CHUNKS_PER_THREAD))
     free: queue.SimpleQueue = queue.SimpleQueue()
     for _ in range(n):
         free.put(scratch())
