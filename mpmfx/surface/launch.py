@@ -7,12 +7,21 @@ that take a trailing `base: int` (their first thread's index) can be split that 
 thread must write only its own outputs (or, like the flood fills' in-place sweeps, be correct
 in any interleaving, as they are on a GPU). On a GPU the launch is one call with base 0.
 
+A split launch costs Python time that a surfacing call (70-100 split launches, 500-800 chunks)
+feels: the calling thread runs chunks itself and n - 1 pool workers take the rest from the same
+list (one wake-up and one hand-back per worker, where a future per chunk paid both for every
+chunk: a round trip to a pool thread takes ~70 us on the 2-core VM), and the kernel's arguments
+are packed once (`wp.launch(record_cmd=True)`), each chunk setting only its size and base
+(~8 us; a `wp.launch` packs every argument again: ~26-36 us). Whole calls, 100k lattices, two
+threads, alternating in one process: 10-25 % less time than a future and a `wp.launch` per chunk.
+
 MPMFX_SURFACE_THREADS sets the CPU thread count (default: the cores this process may use, at
 most MAX_THREADS); 1 turns splitting off.
 """
 
 from __future__ import annotations
 
+import copy
 import os
 import queue
 from concurrent.futures import ThreadPoolExecutor
@@ -20,9 +29,13 @@ from concurrent.futures import ThreadPoolExecutor
 MAX_THREADS = 8
 CHUNKS_PER_THREAD = 4
 MIN_SPLIT = 1 << 14  # threads of a launch below which splitting costs more than it gains
+# blocks below which a light block kernel (a few hundred ns a block: the blurs, a flood round) runs
+# unsplit: on 2800 blocks a blur pass took 0.62 ms on one thread and 0.84-0.86 ms split in two
+# (the two vCPUs slow each other's vector code ~1.4x, and the hand-offs cost ~0.1-0.2 ms)
+LIGHT_MIN_SPLIT = 1 << 13
 
 _pool: ThreadPoolExecutor | None = None
-_pool_key = (0, 0)  # (threads, pid): a forked child must not reuse its parent's pool (no threads behind it)
+_pool_key = (0, 0)  # (workers, pid): a forked child must not reuse its parent's pool (no threads behind it)
 
 
 def cpu_threads() -> int:
@@ -50,41 +63,79 @@ def _executor(n: int) -> ThreadPoolExecutor:
     return _pool
 
 
-def launch_split(wp, kernel, dim: int, inputs: list, *, device, min_split: int | None = None) -> None:
+def _run_chunks(n: int, dim: int, run) -> None:
+    """run(lo, size) over CHUNKS_PER_THREAD x n chunks of range(dim), on this thread and n - 1
+    pool workers, each taking the next chunk when done with one: a thread that shares its core
+    with another process takes fewer of them instead of holding the whole launch up."""
+    step = -(-dim // (n * CHUNKS_PER_THREAD))
+    todo = iter(range(0, dim, step))  # next() on it is atomic under the GIL: each chunk runs once
+
+    def work() -> None:
+        for lo in todo:
+            run(lo, min(step, dim - lo))
+
+    futures = [_executor(n - 1).submit(work) for _ in range(n - 1)]
+    try:
+        work()
+    finally:
+        for f in futures:
+            f.result()
+
+
+def _chunk_launcher(wp, kernel, inputs: list, device):
+    """run(lo, size) launching `kernel` on threads lo .. lo + size - 1 (base = lo) from one
+    packing of `inputs` (the trailing base excluded). Each call packs only the size and base,
+    into its own copy of the recorded launch (chunks run on several threads at once). Relies on
+    warp 1.19's Launch (params, set_dim, set_param_at_index; pinned in pyproject.toml)."""
+    cmd = wp.launch(kernel, 1, inputs=[*inputs, 0], device=device, record_cmd=True)
+    cmd.fwd_args = None  # the copies must not write into a shared list (it only serves graph capture)
+    last = len(inputs)
+
+    def run(lo: int, size: int) -> None:
+        c = copy.copy(cmd)
+        c.params = list(cmd.params)
+        c.set_dim(size)
+        c.set_param_at_index(last, lo)
+        c.launch()
+
+    return run
+
+
+def launch_split(wp, kernel, dim: int, inputs: list, *, device, min_split: int | None = None, light: int = 0) -> None:
     """Launch `kernel` over `dim` threads with `inputs` + [base]: on a CPU device as
     CHUNKS_PER_THREAD x cpu_threads() chunks run on cpu_threads() threads, else (or when small)
     as one launch with base 0 (also below min_split threads: a kernel whose threads do much
-    work, such as a block each, passes a smaller one)."""
+    work, such as a block each, passes a smaller one). light: the kernel's threads per block
+    where its work is light (a few hundred ns a block): it then runs unsplit below
+    LIGHT_MIN_SPLIT blocks."""
     if dim <= 0:
         return
     n = cpu_threads() if device.is_cpu else 1
-    if n == 1 or dim < (MIN_SPLIT if min_split is None else min_split):
+    least = MIN_SPLIT if min_split is None else min_split
+    if light:
+        least = max(least, LIGHT_MIN_SPLIT * light)
+    if n == 1 or dim < least:
         wp.launch(kernel, dim, inputs=[*inputs, 0], device=device)
         return
-    # more chunks than threads: a thread that shares its core with another process takes fewer
-    # of them instead of holding the whole launch up
-    step = -(-dim // (n * CHUNKS_PER_THREAD))
-    chunks = [(lo, min(step, dim - lo)) for lo in range(0, dim, step)]
-    futures = [_executor(n).submit(wp.launch, kernel, size, inputs=[*inputs, lo], device=device) for lo, size in chunks]
-    for f in futures:
-        f.result()
+    _run_chunks(n, dim, _chunk_launcher(wp, kernel, inputs, device))
 
 
 def launch_split_scratch(wp, kernel, dim: int, inputs: list, scratch, *, device) -> None:
-    """launch_split for a kernel of one block per thread that takes inputs + [scratch, base]
-    and uses scratch per thread of its launch (its thread tid's part, whatever base): each
-    CPU thread gets its own scratch(threads) array, reused by the chunks it runs, instead of
-    one for every block. scratch(k): a new array for k kernel threads."""
+    """launch_split for a CPU kernel of one block per thread that takes inputs + [scratch, base]
+    and uses scratch for one of its threads at a time (a CPU launch runs its threads one after
+    another): each CPU thread gets its own scratch() array, reused by the chunks it runs.
+    scratch(): a new array."""
     if dim <= 0:
         return
-    n = cpu_threads() if device.is_cpu else 1
+    if not device.is_cpu:  # a GPU runs the launch's threads at once: they would share one scratch
+        raise ValueError(f"launch_split_scratch: {kernel.key} is a CPU kernel (one scratch for all its threads)")
+    n = cpu_threads()
     if n == 1:
-        wp.launch(kernel, dim, inputs=[*inputs, scratch(dim), 0], device=device)
+        wp.launch(kernel, dim, inputs=[*inputs, scratch(), 0], device=device)
         return
-    step = -(-dim // (n * CHUNKS_PER_THREAD))
     free: queue.SimpleQueue = queue.SimpleQueue()
     for _ in range(n):
-        free.put(scratch(step))
+        free.put(scratch())
 
     def run(lo: int, size: int) -> None:
         buf = free.get()
@@ -93,6 +144,4 @@ def launch_split_scratch(wp, kernel, dim: int, inputs: list, scratch, *, device)
         finally:
             free.put(buf)
 
-    futures = [_executor(n).submit(run, lo, min(step, dim - lo)) for lo in range(0, dim, step)]
-    for f in futures:
-        f.result()
+    _run_chunks(n, dim, run)

@@ -214,7 +214,8 @@ def mc_faces_lines(
             ntri = (tri_range[code + 1] - start) // 3
             if count_only == 0:
                 c = wp.vec3i(bc[0] * BS + li, bc[1] * BS + lj, bc[2] * BS + z)
-                for m in range(ntri):
+                m = int(0)
+                while m < ntri:  # not range(): a run-time bound costs a step-sign test per iteration
                     for s in range(3):
                         le = tri_local[start + 3 * m + s]
                         sl = slot(bmap, c[0] + edge_offset[le, 0], c[1] + edge_offset[le, 1], c[2] + edge_offset[le, 2])
@@ -222,6 +223,7 @@ def mc_faces_lines(
                         if sl >= 0:
                             idx = edge_vert[sl * 3 + edge_offset[le, 3]]
                         faces[3 * (first + total + m) + s] = idx
+                    m += 1
             total += ntri
         if count_only != 0:
             counts[tid] = total

@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from mpmfx.surface.cpu_memory import keep_freed_memory
 from mpmfx.surface.launch import launch_split, launch_split_scratch
 from mpmfx.surface.params import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, SurfaceResult
 
@@ -207,6 +208,8 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     from mpmfx.surface import sparse_mesh_kernels as M
     from mpmfx.surface import topology_kernels as T
 
+    if x.device.is_cpu:  # the call's arrays reuse the previous call's pages (no page faults)
+        keep_freed_memory()
     t0 = time.perf_counter()
     timings: dict[str, float] = {}
     grid = SparseGrid(*particle_bounds(wp, S, x), params)
@@ -293,10 +296,11 @@ def _renormalise(wp, S, bcoord, bmap, phi, tiles, scale: float, clip: float, out
         _split(wp, S.renormalise, phi.shape[0], [bcoord, bmap, phi, *tiles, scale, clip, out])
 
 
-def _blocks(wp, kernel, inputs: list) -> None:
+def _blocks(wp, kernel, inputs: list, *, light: bool = False) -> None:
     """Launch a CPU-path kernel that takes a block per thread (inputs[0]: bcoord, the active
-    blocks), split across CPU threads however few the blocks."""
-    launch_split(wp, kernel, inputs[0].shape[0], inputs, device=inputs[0].device, min_split=1)
+    blocks), split across CPU threads however few the blocks, or (light: a few hundred ns a
+    block) from launch.LIGHT_MIN_SPLIT blocks on."""
+    launch_split(wp, kernel, inputs[0].shape[0], inputs, device=inputs[0].device, min_split=1, light=int(light))
 
 
 def _split(wp, kernel, dim: int, inputs: list) -> None:
@@ -360,7 +364,7 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         nacc = 10 if with_v else 7  # vec8 sums per line: w, offset, weight gradient (, velocity)
         launch_split_scratch(wp, L.gather_zhu_bridson_blocks, bcoord.shape[0],
                              [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w,
-                              offset, vel, nacc], lambda k: wp.empty((k * BS * BS, nacc), dtype=L.vec8), device=phi.device)
+                              offset, vel, nacc], lambda: wp.empty((BS * BS, nacc), dtype=L.vec8), device=phi.device)
     else:
         wp.launch(S.gather_zhu_bridson, nvox,
                   inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
@@ -496,7 +500,7 @@ def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
     for _ in range(passes):
         for axis in range(3):
             if _lines(w) and NORMAL_STEP == 2:  # the line kernel is written out for step 2
-                _blocks(wp, L.blur_weight_lines, [bcoord, bmap, L.rows(a), axis, L.rows(b)])
+                _blocks(wp, L.blur_weight_lines, [bcoord, bmap, L.rows(a), axis, L.rows(b)], light=True)
             else:
                 _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
             a, b = b, a
@@ -617,7 +621,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     for _ in range(iters):
         for axis in range(3):
             if _lines(phi):
-                _blocks(wp, L.blur_lines, [bcoord, bmap, L.rows(phi), axis, *tiles, L.rows(tmp)])
+                _blocks(wp, L.blur_lines, [bcoord, bmap, L.rows(phi), axis, *tiles, L.rows(tmp)], light=True)
             else:
                 _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
             phi, tmp = tmp, phi
@@ -643,7 +647,7 @@ def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, w, grid: SparseGrid) 
     if _lines(values):  # the corner signs once per line: 9 bits each (L.sign_columns)
         kv, kf, nv, nf = L.mc_vertices_lines, L.mc_faces_lines, nvox // BS, nvox // BS
         masks = wp.empty(nvox // BS, dtype=wp.int32)
-        _blocks(wp, L.sign_columns, [bcoord, bmap, LK.rows(values), *tiles, masks])
+        _blocks(wp, L.sign_columns, [bcoord, bmap, LK.rows(values), *tiles, masks], light=True)
         vin, fin = [values, *tiles, masks], [masks, *tiles]
 
         def run(kernel, dim, inputs):

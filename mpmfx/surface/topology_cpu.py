@@ -36,7 +36,8 @@ def flood_bits(wp, T, bcoord, bmap, phi, mark, seed_depth: float, seeds: str):
         wp.launch(T.active_blocks, nact, inputs=[bcoord, bmap, pending, was, int(rounds == 0), active])
         changed.zero_()
         moved.zero_()
-        launch_split(wp, F.flood_bits, nact, [bcoord, bmap, sign, reached, active, changed, moved], **blocks)
+        # a round visits only the blocks near the last round's changes: light
+        launch_split(wp, F.flood_bits, nact, [bcoord, bmap, sign, reached, active, changed, moved], **blocks, light=1)
         rounds += 1
         moved, was = was, moved
         if int(changed.numpy()[0]) == 0:
@@ -51,7 +52,8 @@ def flip_unreached(wp, reached, phi, tiles) -> None:
     (inside), unreached inside ones -> tiles[0]."""
     from mpmfx.surface import bitfill_kernels as F
 
-    launch_split(wp, F.flip_unreached_bits, reached.shape[0], [reached, tiles[1], tiles[0], phi], device=phi.device)
+    launch_split(wp, F.flip_unreached_bits, reached.shape[0], [reached, tiles[1], tiles[0], phi], device=phi.device,
+                 light=BS)  # a word per block line
 
 
 def small_labels(wp, T, bcoord, bmap, phi, mark):

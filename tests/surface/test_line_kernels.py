@@ -24,6 +24,7 @@ def test_cpu_line_kernels_and_threads_give_the_voxel_kernels_surface(monkeypatch
                            min_feature_particles=8, dense_output=False, close_voids=close * h)
     monkeypatch.setenv("MPMFX_SURFACE_THREADS", "3")  # more chunks than cores: any split must agree
     monkeypatch.setattr("mpmfx.surface.launch.MIN_SPLIT", 64)
+    monkeypatch.setattr("mpmfx.surface.launch.LIGHT_MIN_SPLIT", 8)
     lines = surface_particles(x, v, params, device="cpu")
     monkeypatch.setattr(sparse, "LINE_KERNELS_ON_CPU", False)
     monkeypatch.setenv("MPMFX_SURFACE_THREADS", "1")
@@ -74,3 +75,16 @@ def test_cpu_near_blocks_are_mark_near_blocks(monkeypatch, sampling, voxel_h, it
     sparse._split(wp, N.mark_near_tested, nb, [cells, starts, order, g, grid.reach_vox, got])
     assert 0 < want.numpy().sum() < nb
     np.testing.assert_array_equal(got.numpy(), want.numpy())
+
+
+def test_keeping_freed_memory_respects_the_users_malloc_settings(monkeypatch):
+    """cpu_memory leaves glibc alone where the user opted out or tuned malloc themselves."""
+    from mpmfx.surface import cpu_memory
+
+    for name, value in [("MPMFX_SURFACE_KEEP_MEMORY", "0"), ("GLIBC_TUNABLES", "glibc.malloc.trim_threshold=1"),
+                        ("MALLOC_ARENA_MAX", "2")]:
+        monkeypatch.setattr(cpu_memory, "_done", False)
+        monkeypatch.setenv(name, value)
+        assert cpu_memory.keep_freed_memory() is False
+        monkeypatch.delenv(name)
+    assert cpu_memory.keep_freed_memory() is False  # once a process
