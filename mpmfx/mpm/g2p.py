@@ -37,7 +37,7 @@ G2P_MAX_REGISTERS = 80  # see make_g2p
 G2P_BLOCK = 256  # threads a block
 
 
-def g2p_launch_shape(flags) -> tuple[int, int]:
+def g2p_launch_shape(flags: SceneFlags) -> tuple[int, int]:
     """(register cap, threads a block) of the scene's G2P: a water-only G2P (no SVD) keeps 72
     registers a thread, and blocks of 128 fit 7 a multiprocessor (28 warps, where 256-thread
     blocks fit 3 at either cap). H200, 19.4M particles, G2P ms a substep, two rounds, cap / block:
