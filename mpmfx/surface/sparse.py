@@ -532,8 +532,8 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     # moved lattice surfaces outward (sphere +0.08 h at five passes).
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
-    was = wp.empty(nvox // BS, dtype=wp.int32)  # voxels changed by a sweep (CPU)
-    fbits = wp.empty(nvox // BS, dtype=wp.int32)  # the frozen voxels, a bit each (CPU)
+    was = wp.empty(nvox // 64, dtype=wp.uint64)  # voxels changed by a sweep, a bit each (CPU)
+    fbits = wp.empty(nvox // 64, dtype=wp.uint64)  # the frozen voxels, a bit each (CPU)
     if _lines(phi):  # the second renormalise and the average in one pass, with the frozen flags
         _blocks(wp, L.crossing_average_lines, [bcoord, bmap, LK.rows(d1), clip, frozen, LK.rows(d2)])
         _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, 1, 0, frozen, a, b, was, fbits])
@@ -554,8 +554,8 @@ def _redistance(wp, bcoord, bmap, phi, clip: float):
     nvox = phi.shape[0]
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
-    was = wp.empty(nvox // BS, dtype=wp.int32)
-    fbits = wp.empty(nvox // BS, dtype=wp.int32)
+    was = wp.empty(nvox // 64, dtype=wp.uint64)
+    fbits = wp.empty(nvox // 64, dtype=wp.uint64)
     if _lines(phi):  # the frozen flags found too, into both sweep buffers, with the changed bits the line sweeps start from
         _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, 0, 1, frozen, a, b, was, fbits])
     else:
@@ -572,7 +572,7 @@ def _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, fbits, clip: float):
     from mpmfx.surface import redistance_kernels as R
 
     nvox = a.shape[0]
-    now = wp.empty(nvox // BS, dtype=wp.int32)
+    now = wp.empty(nvox // 64, dtype=wp.uint64)
     for sweep in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
         if _lines(a):
             _blocks(wp, L.eikonal_lines, [bcoord, bmap, LK.rows(a), fbits, clip, -clip, clip, LK.rows(b), was, now])
