@@ -364,7 +364,8 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         nacc = 10 if with_v else 7  # vec8 sums per line: w, offset, weight gradient (, velocity)
         launch_split_scratch(wp, L.gather_zhu_bridson_blocks, bcoord.shape[0],
                              [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w,
-                              offset, vel, nacc], lambda: wp.empty((BS * BS, nacc), dtype=L.vec8), device=phi.device)
+                              offset, vel, nacc, int(grid.normal_passes == 0)],  # else phi comes from the wide normal below
+                             lambda: wp.empty((BS * BS, nacc), dtype=L.vec8), device=phi.device)
     else:
         wp.launch(S.gather_zhu_bridson, nvox,
                   inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
