@@ -23,6 +23,31 @@ wp.set_module_options({"enable_backward": False})
 
 
 @wp.func
+def fmin(a: float, b: float):
+    """wp.min for numbers that are never NaN: one compare and select (minps), where wp.min's
+    NaN checks cost a compare, an and and a blend of one chain."""
+    return wp.where(b < a, b, a)
+
+
+@wp.func
+def vmin(a: vec8, b: vec8):
+    """fmin of each of the 8."""
+    r = vec8(0.0)
+    for z in range(BS):
+        r[z] = wp.where(b[z] < a[z], b[z], a[z])
+    return r
+
+
+@wp.func
+def vmax(a: vec8, b: vec8):
+    """wp.max of each of the 8 for numbers that are never NaN (as fmin)."""
+    r = vec8(0.0)
+    for z in range(BS):
+        r[z] = wp.where(b[z] > a[z], b[z], a[z])
+    return r
+
+
+@wp.func
 def write_sums(t: int, w: float, dw: wp.vec3, vw: wp.vec3, with_v: int, w_out: wp.array(dtype=float),
                offset: wp.array(dtype=wp.vec3), vel: wp.array(dtype=wp.vec3)):
     """write_field without phi: w, the offset x - xbar and the mean velocity."""
