@@ -237,7 +237,43 @@ def eikonal_lines(
             todo[cnt] = x * BS + y
             cnt += wp.where(((n >> wp.uint64(y * BS)) & BYTE) != wp.uint64(0), 1, 0)
     moved_words = vec8u(wp.uint64(0))
+    # two lines at a time: a line's update is one long dependency chain (compares, two square
+    # roots, a division), and with its neighbour rows loaded first the two chains interleave in
+    # one stretch of code without a branch (the sweeps alone, 11 captured sweeps, 100k lattice
+    # "fine", one thread, best of 12 alternating, two runs: sphere 37.7-39.4 -> 33.2-35.9 ms,
+    # torus 65.8-71.0 -> 55.6-60.5; bitwise the same)
     k = int(0)
+    while k + 1 < cnt:
+        l1 = todo[k]
+        l2 = todo[k + 1]
+        k += 2
+        t1 = r0 + l1
+        t2 = r0 + l2
+        i1 = l1 // BS
+        j1 = l1 - i1 * BS
+        i2 = l2 // BS
+        j2 = l2 - i2 * BS
+        own1 = src[t1]
+        own2 = src[t2]
+        xm1, xp1, ym1, yp1, lo1, hi1 = neighbour_rows(src, line_sides(faces, i1, j1), t1, l1, out_v, in_v)
+        xm2, xp2, ym2, yp2, lo2, hi2 = neighbour_rows(src, line_sides(faces, i2, j2), t2, l2, out_v, in_v)
+        u1 = eikonal_row(xm1, xp1, ym1, yp1, lo1, hi1, own1, clip)
+        u2 = eikonal_row(xm2, xp2, ym2, yp2, lo2, hi2, own2, clip)
+        f1 = int((frz[i1] >> wp.uint64(j1 * BS)) & BYTE)
+        f2 = int((frz[i2] >> wp.uint64(j2 * BS)) & BYTE)
+        m1 = int(0)
+        m2 = int(0)
+        for z in range(BS):
+            keep1 = wp.where((f1 >> z) & 1 != 0, own1[z], u1[z])
+            keep2 = wp.where((f2 >> z) & 1 != 0, own2[z], u2[z])
+            u1[z] = keep1
+            u2[z] = keep2
+            m1 = m1 | wp.where(keep1 != own1[z], 1 << z, 0)
+            m2 = m2 | wp.where(keep2 != own2[z], 1 << z, 0)
+        dst[t1] = u1
+        dst[t2] = u2
+        moved_words[i1] = moved_words[i1] | (wp.uint64(m1) << wp.uint64(j1 * BS))
+        moved_words[i2] = moved_words[i2] | (wp.uint64(m2) << wp.uint64(j2 * BS))
     while k < cnt:
         l = todo[k]
         k += 1
