@@ -497,14 +497,15 @@ def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
     """The kernel weight sums blurred `passes` times along each axis (a new array)."""
     from mpmfx.surface import line_kernels as L
 
-    a, b = wp.clone(w), wp.empty_like(w)
+    # the first pass reads w itself (no copy of it: 8 MB at 100k "fine"), then two buffers take turns
+    a, b = w, wp.empty_like(w)
     for _ in range(passes):
         for axis in range(3):
             if _lines(w) and NORMAL_STEP == 2:  # the line kernel is written out for step 2
                 _blocks(wp, L.blur_weight_lines, [bcoord, bmap, L.rows(a), axis, L.rows(b)], light=True)
             else:
                 _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
-            a, b = b, a
+            a, b = b, (wp.empty_like(w) if a is w else a)
     return a
 
 
@@ -618,14 +619,14 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
 
     if iters == 0:
         return dist
-    phi, tmp = wp.clone(dist), wp.empty_like(dist)
+    phi, tmp = dist, wp.empty_like(dist)  # the first pass reads dist itself (kept: no copy), then two buffers take turns
     for _ in range(iters):
         for axis in range(3):
             if _lines(phi):
                 _blocks(wp, L.blur_lines, [bcoord, bmap, L.rows(phi), axis, *tiles, L.rows(tmp)], light=True)
             else:
                 _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
-            phi, tmp = tmp, phi
+            phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)
     _split(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
     return phi
 
