@@ -364,7 +364,8 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
         nacc = 10 if with_v else 7  # vec8 sums per line: w, offset, weight gradient (, velocity)
         launch_split_scratch(wp, L.gather_zhu_bridson_blocks, bcoord.shape[0],
                              [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w,
-                              offset, vel, nacc], lambda: wp.empty((BS * BS, nacc), dtype=L.vec8), device=phi.device)
+                              offset, vel, nacc, int(grid.normal_passes == 0)],  # else phi comes from the wide normal below
+                             lambda: wp.empty((BS * BS, nacc), dtype=L.vec8), device=phi.device)
     else:
         wp.launch(S.gather_zhu_bridson, nvox,
                   inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
@@ -496,14 +497,15 @@ def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
     """The kernel weight sums blurred `passes` times along each axis (a new array)."""
     from mpmfx.surface import line_kernels as L
 
-    a, b = wp.clone(w), wp.empty_like(w)
+    # the first pass reads w itself (no copy of it: 8 MB at 100k "fine"), then two buffers take turns
+    a, b = w, wp.empty_like(w)
     for _ in range(passes):
         for axis in range(3):
             if _lines(w) and NORMAL_STEP == 2:  # the line kernel is written out for step 2
                 _blocks(wp, L.blur_weight_lines, [bcoord, bmap, L.rows(a), axis, L.rows(b)], light=True)
             else:
                 _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
-            a, b = b, a
+            a, b = b, (wp.empty_like(w) if a is w else a)
     return a
 
 
@@ -532,8 +534,8 @@ def _distance(wp, S, bcoord, bmap, phi, tiles, clip: float):
     # moved lattice surfaces outward (sphere +0.08 h at five passes).
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
-    was = wp.empty(nvox // BS, dtype=wp.int32)  # voxels changed by a sweep (CPU)
-    fbits = wp.empty(nvox // BS, dtype=wp.int32)  # the frozen voxels, a bit each (CPU)
+    was = wp.empty(nvox // 64, dtype=wp.uint64)  # voxels changed by a sweep, a bit each (CPU)
+    fbits = wp.empty(nvox // 64, dtype=wp.uint64)  # the frozen voxels, a bit each (CPU)
     if _lines(phi):  # the second renormalise and the average in one pass, with the frozen flags
         _blocks(wp, L.crossing_average_lines, [bcoord, bmap, LK.rows(d1), clip, frozen, LK.rows(d2)])
         _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, d2, clip, 1, 0, frozen, a, b, was, fbits])
@@ -554,8 +556,8 @@ def _redistance(wp, bcoord, bmap, phi, clip: float):
     nvox = phi.shape[0]
     frozen = wp.empty(nvox, dtype=wp.int32)
     a, b = wp.empty_like(phi), wp.empty_like(phi)
-    was = wp.empty(nvox // BS, dtype=wp.int32)
-    fbits = wp.empty(nvox // BS, dtype=wp.int32)
+    was = wp.empty(nvox // 64, dtype=wp.uint64)
+    fbits = wp.empty(nvox // 64, dtype=wp.uint64)
     if _lines(phi):  # the frozen flags found too, into both sweep buffers, with the changed bits the line sweeps start from
         _blocks(wp, L.init_eikonal_lines, [bcoord, bmap, phi, clip, 0, 1, frozen, a, b, was, fbits])
     else:
@@ -572,7 +574,7 @@ def _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, fbits, clip: float):
     from mpmfx.surface import redistance_kernels as R
 
     nvox = a.shape[0]
-    now = wp.empty(nvox // BS, dtype=wp.int32)
+    now = wp.empty(nvox // 64, dtype=wp.uint64)
     for sweep in range(int(math.ceil(clip)) + 1):  # one voxel of progress per sweep
         if _lines(a):
             _blocks(wp, L.eikonal_lines, [bcoord, bmap, LK.rows(a), fbits, clip, -clip, clip, LK.rows(b), was, now])
@@ -617,14 +619,14 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
 
     if iters == 0:
         return dist
-    phi, tmp = wp.clone(dist), wp.empty_like(dist)
+    phi, tmp = dist, wp.empty_like(dist)  # the first pass reads dist itself (kept: no copy), then two buffers take turns
     for _ in range(iters):
         for axis in range(3):
             if _lines(phi):
                 _blocks(wp, L.blur_lines, [bcoord, bmap, L.rows(phi), axis, *tiles, L.rows(tmp)], light=True)
             else:
                 _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
-            phi, tmp = tmp, phi
+            phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)
     _split(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
     return phi
 
