@@ -73,17 +73,24 @@ def sparse_output(wp, M, d: DeviceSurface, params: SurfaceParams, *, pinned: boo
         launch(wp, M.gather_blocks, nact * BS**3, [keep, offsets, d.w, fog])
         launch(wp, M.scale_clamp01, size, [fog, 1.0 / bulk_weight(d, params)])
     values, velocity, density, kinds, bcoord, bmap = to_host(wp, [out, vout, fog, d.kind, d.bcoord, d.bmap], pinned=pinned)
-    kinds = kinds[:nact]
+    return _leaves(grid, kinds[:nact], bcoord, bmap, values[:size].reshape(m, BS, BS, BS),
+                   None if velocity is None else velocity[:size].reshape(m, BS, BS, BS, 3),
+                   None if density is None else density[:size].reshape(m, BS, BS, BS))
+
+
+def _leaves(grid, kinds: np.ndarray, bcoord: np.ndarray, bmap: np.ndarray, values, velocity, density) -> SparseLevelSet:
+    """The level set of the kept blocks' voxels (values, velocity, density: (m, BS, BS, BS[, 3])),
+    kinds / bcoord: the active blocks' kinds and block coordinates, bmap the block map (-2 inside)."""
     blocks = bcoord.astype(np.int64).reshape(-1, 3)
     inside = np.concatenate([np.argwhere(bmap == -2).astype(np.int64), blocks[kinds == 1]])
     return SparseLevelSet(
         block_ijk=blocks[kinds == 2] * BS + grid.ijk0,
-        values=values[:size].reshape(m, BS, BS, BS),
-        velocity=None if velocity is None else velocity[:size].reshape(m, BS, BS, BS, 3),
+        values=values,
+        velocity=velocity,
         inside_ijk=inside * BS + grid.ijk0,
         voxel_size=grid.voxel,
         background=grid.background,
-        density=None if density is None else density[:size].reshape(m, BS, BS, BS),
+        density=density,
     )
 
 
@@ -105,17 +112,7 @@ def _sparse_output_host(wp, M, d: DeviceSurface, params: SurfaceParams) -> Spars
         density = kept(d.w)
         launch(wp, M.scale_clamp01, m * BS**3, [wp.array(density.reshape(-1), dtype=float, device=d.w.device, copy=False),
                                                 1.0 / bulk_weight(d, params)])
-    blocks = d.bcoord.numpy().astype(np.int64).reshape(-1, 3)[:nact]
-    inside = np.concatenate([np.argwhere(d.bmap.numpy() == -2).astype(np.int64), blocks[kinds == 1]])
-    return SparseLevelSet(
-        block_ijk=blocks[keep] * BS + grid.ijk0,
-        values=kept(d.values),
-        velocity=velocity,
-        inside_ijk=inside * BS + grid.ijk0,
-        voxel_size=grid.voxel,
-        background=grid.background,
-        density=density,
-    )
+    return _leaves(grid, kinds, d.bcoord.numpy()[:nact], d.bmap.numpy(), kept(d.values), velocity, density)
 
 
 def bulk_weight(d: DeviceSurface, params: SurfaceParams) -> float:
