@@ -177,12 +177,16 @@ def update_node(gp: GridParams, grid_m: wp.array3d(dtype=float), grid_mv: wp.arr
 
 
 @functools.lru_cache(maxsize=None)
-def make_grid_update(*, device_clock: bool = False, sparse: bool = False):
+def make_grid_update(*, device_clock: bool = False, sparse: bool = False, clears: bool = False):
     """The grid-update kernel; device_clock as in p2g.make_p2g. sparse: launched over the
     node bricks (BRICK^3 threads each, `marks` order), it updates only those `marks` flags
     (the brick P2G's, p2g_brick.py): G2P reads no other node, and the others' velocities are
-    left as they were. Otherwise launched over the nodes (3D)."""
-    module = ("mpmfx_mpm_grid_dev" if device_clock else __name__) + ("_sparse" if sparse else "")
+    left as they were. Otherwise launched over the nodes (3D). clears (sparse only): each node's
+    mass and momentum are zeroed once read, which is the next substep's clear (the same marked
+    bricks), so that substep launches none; only where G2P reads no node mass (water volume
+    recovery does)."""
+    module = ("mpmfx_mpm_grid_dev" if device_clock else __name__) + ("_sparse" if sparse else "") + (
+        "_clears" if clears else "")
 
     @wp.kernel(enable_backward=False, module=module)
     def grid_update(
@@ -210,6 +214,13 @@ def make_grid_update(*, device_clock: bool = False, sparse: bool = False):
                 if m > 0.0:
                     v = boundaries(gp, colliders, sdf, counts, v, node[0], node[1], node[2])
                 grid_v[node[0], node[1], node[2]] = v
+                if wp.static(clears):
+                    if gp.deterministic != 0:
+                        for c in range(grid_fixed.shape[3]):
+                            grid_fixed[node[0], node[1], node[2], c] = wp.int64(0)
+                    else:
+                        grid_m[node[0], node[1], node[2]] = 0.0
+                        grid_mv[node[0], node[1], node[2]] = wp.vec3(0.0)
         else:
             i, j, k = wp.tid()
             update_node(gp, grid_m, grid_mv, grid_normal, grid_fixed, colliders, sdf, grid_v, counts, i, j, k)

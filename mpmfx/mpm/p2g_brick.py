@@ -479,7 +479,7 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                         float(window(2, WIN_NODES + e, wp.int64(0))), float(window(2, 2 * WIN_NODES + e, wp.int64(0))),
                         float(window(2, 3 * WIN_NODES + e, wp.int64(0)))) / pp.q_mom_inv)
 
-    @wp.kernel(enable_backward=False, module=flags.key + ("_brick_det" if det else "_brick"),
+    @wp.kernel(enable_backward=False, grid_stride=False, module=flags.key + ("_brick_det" if det else "_brick"),
                cuda_max_registers=MAX_REGISTERS)
     def scatter(pp: P2GParams, keys: wp.array(dtype=wp.int32), start: wp.array(dtype=wp.int32),
                 n_seg: wp.array(dtype=wp.int32), block: int, n_blocks: int, idx: wp.array(dtype=wp.int32),

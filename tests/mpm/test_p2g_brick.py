@@ -34,9 +34,11 @@ def _scene(deterministic: bool):
     return solver, state, rng
 
 
-def _grid(solver, state, brick=None, *, sort=False) -> np.ndarray:
+def _grid(solver, state, brick=None, *, sort=False, keep_grid=True) -> np.ndarray:
+    """One substep's phases; the grid P2G scattered (keep_grid: else the brick path's update
+    zeroes it as it reads it, and this returns zeros)."""
     solver._phases(state, state.cur, state.nxt, 0.0, device_clock=True, brick=brick, resort=sort,
-                   chunk_start=sort)
+                   chunk_start=sort, keep_grid=keep_grid)
     if solver.config.deterministic:
         return solver._grid_fixed.numpy().copy()  # on the CPU numpy() is a view
     return np.concatenate([solver._grid_m.numpy()[..., None], solver._grid_mv.numpy()], -1)
@@ -71,11 +73,11 @@ def _assert_close(out, ref):
 SPARSE_GRID = 64
 
 
-def _sparse_scene():
+def _sparse_scene(deterministic=True):
     """A few hundred particles strewn through the domain: most bricks' neighbours are empty,
     so a window's marks are all that covers the nodes its particles reach."""
-    solver = Solver([preset("Water"), preset("Mushy")], SolverConfig(grid_n=SPARSE_GRID), device="cpu",
-                    stepper="device")
+    solver = Solver([preset("Water"), preset("Mushy")], SolverConfig(grid_n=SPARSE_GRID, deterministic=deterministic),
+                    device="cpu", stepper="device")
     rng = np.random.default_rng(5)
     n = 100
     parts = Particles(x=rng.uniform(0.15, 0.85, (n, 3)).astype(np.float32),
@@ -87,17 +89,20 @@ def _sparse_scene():
     return solver, state, rng
 
 
-def test_substeps_after_the_first_clear_and_update_only_the_marked_node_bricks():
+@pytest.mark.parametrize("keep_grid, deterministic", [(True, True), (False, True), (False, False)])
+def test_substeps_after_the_first_clear_and_update_only_the_marked_node_bricks(keep_grid, deterministic):
     """Inside a chunk the brick P2G's node marks stand in for the whole grid: the clear zeroes
     only the bricks the last scatter touched and the grid update skips the rest. The marks
     must cover every node holding mass (the windows' and the fallbacks', for particles that
     left their window since the sort), and G2P must read the same velocities as with the
-    dense phases, or particles would pick up the last substep's stale grid."""
-    solver, state, rng = _sparse_scene()
+    dense phases, or particles would pick up the last substep's stale grid. Without keep_grid
+    the grid update itself zeroes what it read (no clear launch): then the particles of the
+    second substep after the fallback tell whether it left anything behind."""
+    solver, state, rng = _sparse_scene(deterministic)
     brick = BrickP2G(solver.flags, state.n, solver.device, nodes=SPARSE_GRID + 1)
     _grid(solver, state, brick, sort=True)  # a chunk's first substep: all of the grid cleared
     x0 = state.cur.x.numpy().copy()
-    ref_solver, ref_state, _ = _sparse_scene()  # the dense reference phases at the same positions
+    ref_solver, ref_state, _ = _sparse_scene(deterministic)  # the dense reference phases at the same positions
     # moved within their windows (up to a cell), then out of them (up to 6 cells): the fallback
     for reach, substeps in ((1.0, 1), (6.0, 2)):
         x = x0 + rng.uniform(-reach, reach, x0.shape).astype(np.float32) / SPARSE_GRID
@@ -105,7 +110,11 @@ def test_substeps_after_the_first_clear_and_update_only_the_marked_node_bricks()
         ref_state.cur.x.assign(x)
         ref = _grid(ref_solver, ref_state)
         for _ in range(substeps):  # each cleared by the last one's marks
-            _assert_close(_grid(solver, state, brick), ref)
+            grid = _grid(solver, state, brick, keep_grid=keep_grid)
+            if keep_grid:
+                _assert_close(grid, ref)
+            else:
+                assert not grid.any()  # zeroed once read
             for k, a in zip("xvC", (ref_state.nxt.x, ref_state.nxt.v, ref_state.nxt.C)):
                 b = getattr(state.nxt, k).numpy()  # (C: row planes, compared as stored)
                 np.testing.assert_allclose(b, a.numpy(), rtol=1e-5, atol=1e-5 * np.abs(a.numpy()).max(), err_msg=k)
