@@ -1,8 +1,9 @@
 """The brick P2G on a GPU: (1) it against the reference, deterministic and fast, over a
-few hundred substeps; (2) their kernels one by one beside the
-reference P2G; (3) the paths through advance() back to back. One table each; rows also under $OUT (or renders/bench).
+few hundred substeps; (1b) G2P compiled with CUDA fast math (the default, g2p.G2P_FAST_MATH)
+against IEEE G2P; (2) their kernels one by one beside the reference P2G; (3) the paths through
+advance() back to back. One table each; rows also under $OUT (or renders/bench).
 
-    python3 scripts/p2g_gpu.py [grid ...] [--skip agreement|kernels|paths ...]   (grids: 128 256)
+    python3 scripts/p2g_gpu.py [grid ...] [--skip agreement|fastmath|kernels|paths ...]   (grids: 128 256)
 """
 import json
 import os
@@ -53,6 +54,46 @@ def agreement(grid_n=32, frames=6):
     return rows
 
 
+def fast_math_agreement(grid_n=48, frames=6):
+    """Max |fast-math G2P - IEEE G2P| over x, v, F after `frames` stirred frames, Mushy, Granular
+    and Water in both modes; beside it the IEEE run's own run-to-run difference (0 in
+    deterministic mode, the float atomics' order in fast mode)."""
+    from mpmfx.mpm.g2p import make_g2p
+    from mpmfx.mpm.state import SceneFlags
+
+    def g2p_modules(on):
+        for mats in ([preset("Mushy")], [preset("Granular")], [preset("Water")]):
+            for clock in (False, True):
+                for sorting in (False, True):  # made first: making one sets its module's default
+                    kernel = make_g2p(SceneFlags.of(mats), device_clock=clock, sorting=sorting)
+                    wp.set_module_options({"fast_math": on}, module=kernel.module)
+
+    def run(name, det):
+        mats, parts, _ = scene(name, grid_n)
+        parts.v[:] = np.random.default_rng(1).normal(0.0, 0.5, parts.v.shape)
+        s = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=det), device="cuda", stepper="device")
+        st = s.init_state(parts)
+        subs = sum(s.advance(st, f / 24, (f + 1) / 24).substeps for f in range(frames))
+        return s.state_to_numpy(st), subs
+
+    rows = []
+    for name in ("Mushy", "Granular", "Water"):
+        for det in (True, False):
+            g2p_modules(False)
+            (a, na), (a2, _) = run(name, det), run(name, det)
+            g2p_modules(True)
+            b, nb = run(name, det)
+            row = {"scene": name, "det": int(det), "substeps_ieee": na, "substeps_fast": nb}
+            for k in ("x", "v", "F"):
+                if k in a:
+                    row[f"max_d{k}"] = float(np.abs(a[k] - b[k]).max())
+                    row[f"ieee_replay_d{k}"] = float(np.abs(a[k] - a2[k]).max())
+            rows.append(row)
+    g2p_modules(True)
+    print_table(rows, list(rows[2]))
+    return rows
+
+
 def kernels(name, grid_n, det, p2g, sort1=False):
     """Device ms per substep of each P2G kernel over one advance (graphs off)."""
     mats, parts, _ = scene(name, grid_n)
@@ -89,6 +130,7 @@ def main():
     t0 = time.time()
     ag = agreement() if "agreement" not in skip else []
     print(f"agreement {time.time() - t0:.0f} s", flush=True)
+    fm = fast_math_agreement() if "fastmath" not in skip else []
     ks = []
     for g in grids if "kernels" not in skip else ():
         for name in ("Mushy", "Water"):
@@ -107,7 +149,7 @@ def main():
         print_table(rows, COLS)
     print(f"total {time.time() - t0:.0f} s", flush=True)
     with open(os.path.join(OUT, "p2g_gpu.json"), "w") as f:
-        json.dump({"agreement": ag, "kernels": ks, "paths": rows}, f, indent=1, default=str)
+        json.dump({"agreement": ag, "fast_math": fm, "kernels": ks, "paths": rows}, f, indent=1, default=str)
 
 
 if __name__ == "__main__":

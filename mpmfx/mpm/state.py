@@ -41,7 +41,7 @@ class SceneFlags:
 
     @property
     def key(self) -> str:
-        """Name of the Warp module holding this scene's specialised P2G and G2P."""
+        """Prefix of the Warp modules holding this scene's specialised P2G and G2P kernels."""
         flags = (("s", self.snow), ("g", self.sand), ("w", self.water), ("m", self.multi_field),
                  ("r", self.volume_recovery))
         tag = "".join(c for c, on in flags if on)
