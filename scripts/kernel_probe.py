@@ -45,9 +45,11 @@ def window_q_plain(op: int, e: int, value: wp.int64) -> wp.int64: ...
 def window_q_noflush(op: int, e: int, value: wp.int64) -> wp.int64: ...
 
 
-def kernel_caps(kernel_name: str, grid_n: int = 128, name: str = "Mushy", caps=(None, 96, 80, 72)) -> list[dict]:
+def kernel_caps(kernel_name: str, grid_n: int = 128, name: str = "Mushy", caps=(None, 96, 80, 72),
+                block: int | None = None) -> list[dict]:
     """Device ms a substep of the kernel `kernel_name` ("g2p", or the brick P2G's "scatter") in the
-    `name` block of mpmfx bench gpu, compiled under each register cap (None: the compiler's own)."""
+    `name` block of mpmfx bench gpu, compiled under each register cap (None: the compiler's own);
+    block: G2P's threads a block (g2p.G2P_BLOCK) for the probe."""
     from mpmfx.bench.gpu import scene
     from mpmfx.mpm import Solver, SolverConfig
     from mpmfx.mpm import g2p as g2p_mod
@@ -59,11 +61,15 @@ def kernel_caps(kernel_name: str, grid_n: int = 128, name: str = "Mushy", caps=(
                 if f.__name__ != kernel_name:
                     return kernel(*a, **kw)(f)
                 opts = {**kw, "cuda_max_registers": cap, "module": kw["module"] + f"_cap{cap}"}
+                if kernel_name == "g2p":  # the renamed module keeps G2P's fast math
+                    wp.set_module_options({"fast_math": g2p_mod.G2P_FAST_MATH}, module=opts["module"])
                 if cap is None:
                     opts.pop("cuda_max_registers")
                 return kernel(*a, **opts)(f)
             return deco
         wp.kernel = capped  # (both kernels are built lazily: at the solver's construction / first scatter)
+        block0 = g2p_mod.G2P_BLOCK
+        g2p_mod.G2P_BLOCK = block or block0
         g2p_mod.make_g2p.cache_clear()
         pb.make_brick_scatter.cache_clear()
         try:
@@ -75,8 +81,9 @@ def kernel_caps(kernel_name: str, grid_n: int = 128, name: str = "Mushy", caps=(
         finally:
             wp.kernel = kernel
         ms, rep = kernel_split(solver, state, span, 2 * span)
+        g2p_mod.G2P_BLOCK = block0
         k = max(1, rep.substeps + rep.rejected_substeps)
-        rows.append({"probe": f"{kernel_name} cap, {name}", "variant": str(cap), "n": state.n,
+        rows.append({"probe": f"{kernel_name} cap, {name}", "variant": f"{cap}/{block or 'default'}", "n": state.n,
                      f"{kernel_name}_ms": sum(v for n, v in ms.items() if kernel_name in n) / k,
                      "total_ms": sum(ms.values()) / k})
         print(json.dumps(rows[-1]), flush=True)

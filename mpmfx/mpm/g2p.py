@@ -33,19 +33,20 @@ from .slots import Count, Stat
 from .state import SceneFlags, load_m33, store_m33
 from .stepper import SubstepDev
 
-G2P_MAX_REGISTERS = 80  # see make_g2p
-G2P_BLOCK = 256  # threads a block
+G2P_MAX_REGISTERS = 72  # see g2p_launch_shape
+G2P_BLOCK = 128  # threads a block
 G2P_FAST_MATH = True  # see make_g2p
 
 
-def g2p_launch_shape(flags: SceneFlags) -> tuple[int, int]:
-    """(register cap, threads a block) of the scene's G2P: a water-only G2P (no SVD) keeps 72
-    registers a thread, and blocks of 128 fit 7 a multiprocessor (28 warps, where 256-thread
-    blocks fit 3 at either cap). H200, 19.4M particles, G2P ms a substep, two rounds, cap / block:
-    water 80/256 1.16, 80/128 1.14, 72/128 1.065, 64/128 1.12; snow 2.19, 2.21, 2.29, 2.45."""
-    if flags.solid:
-        return G2P_MAX_REGISTERS, G2P_BLOCK
-    return 72, 128
+def g2p_launch_shape() -> tuple[int, int]:
+    """(register cap, threads a block) of G2P, every scene: 72 registers in blocks of 128 fit 7
+    blocks a multiprocessor (28 warps), where 256-thread blocks fit 3 at 80 or 72. H100, 19.4M
+    particles, G2P ms a substep with fast math (make_g2p), cap / block: snow 96/256 2.79, 80/256
+    2.25, 72/256 2.33, 96/128 2.44, 80/128 2.25, 72/128 2.17, 64/128 2.55; sand 80/256 2.26,
+    72/128 2.17; at 2.4M snow 80/256 0.307, 72/128 0.306. Water (no SVD), H200, before fast math:
+    80/256 1.16, 72/128 1.065, 64/128 1.12. (Solids before fast math, H200: 80/256 2.19 was best,
+    72/128 2.29.)"""
+    return G2P_MAX_REGISTERS, G2P_BLOCK
 
 
 @wp.struct
@@ -180,11 +181,9 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
     has_water = flags.water
     recovery = flags.volume_recovery
 
-    # 80 registers a thread: a solid's return maps (two inlined SVDs) took the compiler to
-    # 128, which leaves a multiprocessor 512 threads; measured on an H100 (snow, 2.4M
-    # particles): G2P 0.419 ms a substep uncapped, 0.430 at 96, 0.358 at 80, 0.381 at 72.
-    # A water-only G2P: see g2p_launch_shape (at 64 registers in 256-thread blocks it was
-    # slower: 1.49 -> 1.77 ms at 19.4M).
+    # registers capped (g2p_launch_shape): a solid's return map took the compiler to 128, which
+    # leaves a multiprocessor 512 threads (H100, snow, 2.4M particles, before fast math: G2P
+    # 0.419 ms a substep uncapped, 0.358 at 80)
     module = flags.key + "_g2p" + ("_dev" if device_clock else "") + ("_sort" if sorting else "")
     # CUDA fast math (G2P's module only; no effect on the CPU): approximate division, square
     # root, exp and log (~2 ulp) and denormals flushed. The return map's SVD divides twice in
@@ -197,7 +196,7 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
     # single change a runout 2.60 -> 2.64 (1.7 %).
     wp.set_module_options({"fast_math": G2P_FAST_MATH}, module=module)
 
-    @wp.kernel(enable_backward=False, module=module, cuda_max_registers=g2p_launch_shape(flags)[0])
+    @wp.kernel(enable_backward=False, module=module, cuda_max_registers=g2p_launch_shape()[0])
     def g2p(
         gp: G2PParams,
         grid_v: wp.array3d(dtype=wp.vec3),

@@ -357,7 +357,7 @@ class Solver:
         if permute:
             g2p = make_g2p(self.flags, device_clock=device_clock, sorting=True)
             order, outs = brick.idx, state.spare_consts()
-        wp.launch(g2p, dim=state.n, block_dim=g2p_launch_shape(self.flags)[1], device=self.device, inputs=[
+        wp.launch(g2p, dim=state.n, block_dim=g2p_launch_shape()[1], device=self.device, inputs=[
             gp, self._grid_v, self._grid_m, self._grid_fixed, self._materials_dev, state.material, state.field_id,
             *cur.arrays(), *nxt.arrays(), self._stats, self._counts, self._sub,
             order, state.mass, state.volume, state.body, state.pid, *outs])
