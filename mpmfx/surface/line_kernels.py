@@ -456,3 +456,21 @@ def project_on_wide_normal_lines(
             if gl > 0.0:
                 dist = -wp.dot(d, g) / gl  # g points inward (towards the particles)
             phi[t] = dist - radius_vox
+
+
+@wp.kernel
+def limit_inward_lines(bcoord: wp.array(dtype=wp.vec3i), a: wp.array(dtype=vec8), ref: wp.array(dtype=vec8), delta: float,
+                       base: int):
+    """sparse_kernels.limit_inward for the 64 rows of active block b (thread = block; bcoord
+    gives the launch its size), vec8 rows (rows): a = min(a, ref + delta) with wp.min per
+    voxel, as limit_inward (a thread per voxel cost ~2 ns each, 4.4 ms at 2.1 M voxels, one
+    thread)."""
+    b = wp.tid() + base
+    for l in range(BS * BS):
+        r = b * BS * BS + l
+        x = a[r]
+        y = ref[r]
+        out = vec8(0.0)
+        for z in range(BS):
+            out[z] = wp.min(x[z], y[z] + delta)
+        a[r] = out

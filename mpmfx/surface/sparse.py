@@ -631,7 +631,10 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
             else:
                 _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
             phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)
-    _split(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
+    if _lines(phi):
+        _blocks(wp, L.limit_inward_lines, [bcoord, L.rows(phi), L.rows(dist), limit])
+    else:
+        _split(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
     return phi
 
 
