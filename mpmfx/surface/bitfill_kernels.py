@@ -17,6 +17,7 @@ import warp as wp
 
 from mpmfx.surface.line_kernels import side_code, vec8
 from mpmfx.surface.sparse_kernels import BS, BV, LABEL_NONE, TILE_INSIDE, TILE_OUTSIDE
+from mpmfx.surface.topology_kernels import sweep_min_line
 
 vec8u = wp.types.vector(length=8, dtype=wp.uint64)
 ALL = wp.constant(wp.uint64(0xFFFFFFFFFFFFFFFF))
@@ -260,3 +261,29 @@ def labels_from_bits(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp
         labels[t] = lab
     if left != wp.uint64(0):
         pending[w // BS] = 1
+
+
+@wp.kernel
+def sweep_min_labels_blocks(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    labels: wp.array(dtype=wp.int32),
+    active: wp.array(dtype=wp.int32),
+    axis: int,
+    changed: wp.array(dtype=wp.int32),
+    base: int,
+):
+    """topology_kernels.sweep_min_labels for the 64 lines of block b (thread = block): the
+    blocks left out (active[b] == 0, all but the few holding small components) cost a thread
+    each instead of 64 (a thread per line cost ~1 ms a launch over 2.1 M voxels' lines, one
+    thread). The lines run in another order than on a GPU, which the min-label sweeps allow:
+    they end at each component's least label whatever the order (sparse._remove_small)."""
+    b = wp.tid() + base
+    if active[b] == 0:
+        return
+    count = int(0)
+    for l in range(BS * BS):
+        count += sweep_min_line(bcoord, bmap, labels, axis, b, l)
+    if count > 0:
+        wp.atomic_add(changed, 0, count)
+

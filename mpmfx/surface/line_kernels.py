@@ -5,8 +5,9 @@ Warp's CPU backend runs a launch's threads one after another on one core, so the
 counts is the work per voxel, not the thread count: the GPU's layout (a thread per voxel) pays
 there for what a GPU hides (index arithmetic, a block-map lookup per neighbour read). Here the
 neighbour blocks are looked up once per block, a line's neighbour lines are read once, and the
-field gather fetches each candidate particle once per block, not once per line of it. Every voxel gets the same arithmetic in the same order as in the voxel kernels, so the
-results are theirs bit for bit (tests/surface/test_line_kernels.py).
+field gather (mpmfx.surface.line_gather_kernels) fetches each candidate particle once per
+block, not once per line of it. Every voxel gets the same arithmetic in the same order as in
+the voxel kernels, so the results are theirs bit for bit (tests/surface/test_line_kernels.py).
 
 `base`: the first thread's index, so a launch can be split into chunks run on several CPU
 threads (Warp's CPU launches release the GIL; mpmfx.surface.launch).
@@ -14,7 +15,7 @@ threads (Warp's CPU launches release the GIL; mpmfx.surface.launch).
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, CS, TILE_INSIDE, TILE_OUTSIDE, line_voxel, stride, write_field
+from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, line_voxel, stride
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
 
@@ -51,172 +52,6 @@ def vmax(a: vec8, b: vec8):
     for z in range(BS):
         r[z] = wp.where(b[z] > a[z], b[z], a[z])
     return r
-
-
-@wp.func
-def write_sums(t: int, w: float, dw: wp.vec3, vw: wp.vec3, with_v: int, w_out: wp.array(dtype=float),
-               offset: wp.array(dtype=wp.vec3), vel: wp.array(dtype=wp.vec3)):
-    """write_field without phi: w, the offset x - xbar and the mean velocity."""
-    w_out[t] = w
-    if w <= 0.0:
-        offset[t] = wp.vec3(0.0)
-        if with_v != 0:
-            vel[t] = wp.vec3(0.0)
-        return
-    offset[t] = -dw / w
-    if with_v != 0:
-        vel[t] = vw / w
-
-
-@wp.kernel
-def gather_zhu_bridson_blocks(
-    bcoord: wp.array(dtype=wp.vec3i),
-    cells: wp.array3d(dtype=wp.int32),
-    starts: wp.array(dtype=wp.int32),
-    g: wp.array(dtype=wp.vec3),
-    v: wp.array(dtype=wp.vec3),
-    with_v: int,
-    reach: float,
-    radius_vox: float,
-    far_vox: float,
-    phi: wp.array(dtype=float),
-    w_out: wp.array(dtype=float),
-    offset: wp.array(dtype=wp.vec3),
-    vel: wp.array(dtype=wp.vec3),
-    nacc: int,
-    grad: int,
-    acc: wp.array2d(dtype=vec8),
-    base: int,
-):
-    """sparse_kernels.gather_zhu_bridson for the 512 voxels of one block (thread = active
-    block): each candidate particle of the cells within reach of the block is fetched once and
-    added to the voxels it reaches, a line of 8 voxels along z at a time. A voxel's
-    contributing particles all lie in the cells within reach of the voxel, which are a subset
-    of the block's visited in the same (cell, then slot) order, so each voxel sums the same
-    particles in the same order with the same arithmetic as the voxel kernel: the same field
-    bit for bit. g and v are in the sorted order (g[q] = the positions' [order[q]],
-    sorted_copy): the fetches run through memory in order instead of jumping.
-
-    acc: scratch, nacc (7, or 10 with velocities) vec8 sums per line of the block (w, the
-    offset's x y z, the weight gradient's x y z, the velocity's x y z; acc[line, sum]), turned
-    into the field by the block's last step. grad = 0: the weight gradient is not summed and
-    phi not written (write_sums): where the normal comes from the blurred weights
-    (SparseGrid.normal_passes > 0, every shipped setting) project_on_wide_normal_lines
-    overwrites every voxel's phi, and only w, the offset and the velocity reach it (the gather
-    alone, 100k "fine", one thread, same process: lattice sphere / torus / box 62.9 / 91.9 /
-    39.5 -> 51.7 / 74.8 / 31.9 ms, random torus 122 -> 111, with the tree for the least dz^2
-    below; w and the offset bitwise the same). Two-dimensional so that a line's sums share one
-    index: Warp wraps every negative index, and for acc[la + k] that was a compare and a
-    conditional move per sum, as many instructions as the sums' arithmetic (acc[la, k] and the
-    skipped lines below: gather 1.15-1.35x faster, 100k, all six shapes "fine", one thread).
-    One block's worth, (64, nacc), that every thread of the launch reuses: a CPU launch runs its
-    threads one after another (this kernel is the CPU path's only), so the 14 KB stay in L1,
-    where a part per thread walked through megabytes of fresh memory (the gather alone, same
-    inputs, best of 5 in one process: 1.15-1.45x faster on the lattices, 1.17x on the random
-    torus "fine"; one CPU thread's chunks share one: launch.launch_split_scratch). A particle adds to all 8 voxels of a line it reaches, the
-    weights of voxels beyond the kernel masked to 0: adding +-0 leaves a sum as it is, and
-    the mask is the voxel kernel's test d2 < r2, so the sums stay the voxel kernel's bit for
-    bit. The visits cost more than the arithmetic: a particle reaches 1.2 voxels of an
-    average line of its block (100k random torus, "fine": 21 M lines, 27 M particle-voxel
-    pairs), so a scalar loop per line paid a loop exit and a branch per voxel; the masked
-    line is fixed-length and vectorises (gather 435 -> 225 ms there, one thread; before
-    that, a line per thread fetched each candidate once per line: 419 -> 268 ms)."""
-    b = wp.tid() + base
-    c = bcoord[b] * BS
-    t0 = b * BV
-    r2 = reach * reach
-    a0 = 0  # the launch's one block of scratch: its threads run one after another (CPU)
-    for q in range(BS * BS):
-        for k in range(nacc):
-            acc[a0 + q, k] = vec8(0.0)
-    shape = wp.vec3i(cells.shape[0], cells.shape[1], cells.shape[2])
-    lo = wp.vec3i(0)
-    hi = wp.vec3i(0)
-    for a in range(3):
-        lo[a] = wp.max(int(wp.floor((float(c[a]) - reach) / float(CS))), 0)
-        hi[a] = wp.min(int(wp.floor((float(c[a] + BS - 1) + reach) / float(CS))), shape[a] - 1)
-    for bi in range(lo[0], hi[0] + 1):
-        for bj in range(lo[1], hi[1] + 1):
-            for bk in range(lo[2], hi[2] + 1):
-                cnt = cells[bi, bj, bk]
-                if cnt > 0:
-                    s = starts[(bi * shape[1] + bj) * shape[2] + bk]
-                    for q in range(s, s + cnt):
-                        gp = g[q]
-                        i0 = wp.max(int(wp.floor(gp[0] - reach)), c[0])
-                        i1 = wp.min(int(wp.floor(gp[0] + reach)) + 1, c[0] + BS - 1)
-                        j0 = wp.max(int(wp.floor(gp[1] - reach)), c[1])
-                        j1 = wp.min(int(wp.floor(gp[1] + reach)) + 1, c[1] + BS - 1)
-                        k0 = wp.max(int(wp.floor(gp[2] - reach)), c[2])
-                        k1 = wp.min(int(wp.floor(gp[2] + reach)) + 1, c[2] + BS - 1)
-                        if k0 > k1:
-                            continue
-                        vp = wp.vec3(0.0)
-                        if with_v != 0:
-                            vp = v[q]
-                        dzv = vec8(0.0)
-                        for z in range(BS):
-                            dzv[z] = gp[2] - float(c[2] + z)
-                        dz2 = wp.cw_mul(dzv, dzv)
-                        # a line whose nearest voxel lies beyond the kernel would add only zeros
-                        # (float addition is monotone, so dxy + the least dz2 >= r2 means d2 >= r2
-                        # at every voxel of it): skipped, the sums are the same bits. A particle
-                        # above or below the block reaches a smaller disc of its lines
-                        # the least of the 8 as a tree of selects (the squares are never NaN or -0,
-                        # so the same value as wp.min's chain, whose NaN checks made ~30 instructions
-                        # of one long chain)
-                        m01 = wp.where(dz2[1] < dz2[0], dz2[1], dz2[0])
-                        m23 = wp.where(dz2[3] < dz2[2], dz2[3], dz2[2])
-                        m45 = wp.where(dz2[5] < dz2[4], dz2[5], dz2[4])
-                        m67 = wp.where(dz2[7] < dz2[6], dz2[7], dz2[6])
-                        m03 = wp.where(m23 < m01, m23, m01)
-                        m47 = wp.where(m67 < m45, m67, m45)
-                        dz2min = wp.where(m47 < m03, m47, m03)
-                        # while, not range(): Warp's range() with bounds known only at run time
-                        # steps a (start, end, step) triple and tests the step's sign every
-                        # iteration, ~12 instructions per line tested (the gather alone, same
-                        # inputs, best of 7: 0.99-1.23x on five 100k cases, lattice and random; same bits)
-                        i = i0
-                        while i <= i1:
-                            dx = gp[0] - float(i)
-                            j = j0
-                            while j <= j1:
-                                dy = gp[1] - float(j)
-                                dxy = dx * dx + dy * dy
-                                if dxy + dz2min < r2:
-                                    u = vec8(0.0)
-                                    for z in range(BS):
-                                        d2 = dxy + dz2[z]
-                                        u[z] = wp.where(d2 < r2, 1.0 - d2 / r2, 0.0)
-                                    uu = wp.cw_mul(u, u)
-                                    wk = wp.cw_mul(uu, u)
-                                    la = a0 + (i - c[0]) * BS + (j - c[1])
-                                    acc[la, 0] = acc[la, 0] + wk
-                                    acc[la, 1] = acc[la, 1] + dx * wk
-                                    acc[la, 2] = acc[la, 2] + dy * wk
-                                    acc[la, 3] = acc[la, 3] + wp.cw_mul(wk, dzv)
-                                    if grad != 0:
-                                        acc[la, 4] = acc[la, 4] + dx * uu
-                                        acc[la, 5] = acc[la, 5] + dy * uu
-                                        acc[la, 6] = acc[la, 6] + wp.cw_mul(uu, dzv)
-                                    if with_v != 0:
-                                        acc[la, 7] = acc[la, 7] + vp[0] * wk
-                                        acc[la, 8] = acc[la, 8] + vp[1] * wk
-                                        acc[la, 9] = acc[la, 9] + vp[2] * wk
-                                j += 1
-                            i += 1
-    for q in range(BV):
-        lq = q // BS
-        z = q - lq * BS
-        la = a0 + lq
-        vw = wp.vec3(0.0)
-        if with_v != 0:
-            vw = wp.vec3(acc[la, 7][z], acc[la, 8][z], acc[la, 9][z])
-        if grad != 0:
-            write_field(t0 + q, acc[la, 0][z], wp.vec3(acc[la, 1][z], acc[la, 2][z], acc[la, 3][z]),
-                        wp.vec3(acc[la, 4][z], acc[la, 5][z], acc[la, 6][z]), vw, radius_vox, with_v, far_vox, phi, w_out, offset, vel)
-        else:
-            write_sums(t0 + q, acc[la, 0][z], wp.vec3(acc[la, 1][z], acc[la, 2][z], acc[la, 3][z]), vw, with_v, w_out, offset, vel)
 
 
 @wp.func
@@ -624,7 +459,18 @@ def project_on_wide_normal_lines(
 
 
 @wp.kernel
-def sorted_copy(src: wp.array(dtype=wp.vec3), order: wp.array(dtype=wp.int32), dst: wp.array(dtype=wp.vec3), base: int):
-    """dst[q] = src[order[q]]."""
-    q = wp.tid() + base
-    dst[q] = src[order[q]]
+def limit_inward_lines(bcoord: wp.array(dtype=wp.vec3i), a: wp.array(dtype=vec8), ref: wp.array(dtype=vec8), delta: float,
+                       base: int):
+    """sparse_kernels.limit_inward for the 64 rows of active block b (thread = block; bcoord
+    gives the launch its size), vec8 rows (rows): a = min(a, ref + delta) with wp.min per
+    voxel, as limit_inward (a thread per voxel cost ~2 ns each, 4.4 ms at 2.1 M voxels, one
+    thread)."""
+    b = wp.tid() + base
+    for l in range(BS * BS):
+        r = b * BS * BS + l
+        x = a[r]
+        y = ref[r]
+        out = vec8(0.0)
+        for z in range(BS):
+            out[z] = wp.min(x[z], y[z] + delta)
+        a[r] = out

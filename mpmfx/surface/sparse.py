@@ -333,6 +333,7 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
     """The raw Zhu-Bridson field at the active voxels: (phi (voxels), kernel weight sums w,
     kernel-weighted velocity or a 1-element placeholder), isotropic or with Yu & Turk's
     ellipsoids (params.anisotropic)."""
+    from mpmfx.surface import line_gather_kernels as G
     from mpmfx.surface import line_kernels as L
 
     nvox = bcoord.shape[0] * BS**3
@@ -358,11 +359,11 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
     elif _lines(phi):  # one thread per block: each candidate particle fetched once per block, in memory order
         n = g.shape[0]
         gs, vs = wp.empty(n, dtype=wp.vec3), wp.empty(n if with_v else 1, dtype=wp.vec3)
-        _split(wp, L.sorted_copy, n, [g, order, gs])
+        _split(wp, G.sorted_copy, n, [g, order, gs])
         if with_v:
-            _split(wp, L.sorted_copy, n, [v, order, vs])
+            _split(wp, G.sorted_copy, n, [v, order, vs])
         nacc = 10 if with_v else 7  # vec8 sums per line: w, offset, weight gradient (, velocity)
-        launch_split_scratch(wp, L.gather_zhu_bridson_blocks, bcoord.shape[0],
+        launch_split_scratch(wp, G.gather_zhu_bridson_blocks, bcoord.shape[0],
                              [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w,
                               offset, vel, nacc, int(grid.normal_passes == 0)],  # else phi comes from the wide normal below
                              lambda: wp.empty((BS * BS, nacc), dtype=L.vec8), device=phi.device)
@@ -388,8 +389,11 @@ def _classify(wp, S, g, counts, cells, starts, order, grid: SparseGrid):
         from mpmfx.surface import near_blocks_cpu as N
 
         nb = math.prod(grid.nblocks)
-        _split(wp, N.mark_near_certain, nb, [cells, grid.reach_vox, near])
-        _split(wp, N.mark_near_tested, nb, [cells, starts, order, g, grid.reach_vox, near])
+        # a grid block per thread, much work for those holding particles: split however few the
+        # blocks (MIN_SPLIT left these unsplit below 16384 blocks, 10976 at the 100k torus "fine")
+        kw = {"device": g.device, "min_split": 1}
+        launch_split(wp, N.mark_near_certain, nb, [cells, grid.reach_vox, near], **kw)
+        launch_split(wp, N.mark_near_tested, nb, [cells, starts, order, g, grid.reach_vox, near], **kw)
     else:
         _split(wp, S.mark_near_blocks, g.shape[0], [g, grid.reach_vox, near])  # writes 1s: any interleaving agrees
     state = wp.empty(grid.nblocks, dtype=wp.int32)
@@ -627,7 +631,10 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
             else:
                 _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
             phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)
-    _split(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
+    if _lines(phi):
+        _blocks(wp, L.limit_inward_lines, [bcoord, L.rows(phi), L.rows(dist), limit])
+    else:
+        _split(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
     return phi
 
 

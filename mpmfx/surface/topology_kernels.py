@@ -171,23 +171,11 @@ def init_inside_labels(
     labels[t] = lab
 
 
-@wp.kernel
-def sweep_min_labels(
-    bcoord: wp.array(dtype=wp.vec3i),
-    bmap: wp.array3d(dtype=wp.int32),
-    labels: wp.array(dtype=wp.int32),
-    active: wp.array(dtype=wp.int32),
-    axis: int,
-    changed: wp.array(dtype=wp.int32),
-    base: int,
-):
-    """Carry the smallest label through labelled voxels along one block line, both ways
-    (blocks with active[b] != 0)."""
-    tid = wp.tid() + base
-    b = tid // 64
-    if active[b] == 0:
-        return
-    l = tid - b * 64
+@wp.func
+def sweep_min_line(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), labels: wp.array(dtype=wp.int32),
+                   axis: int, b: int, l: int):
+    """Carry the smallest label through labelled voxels along line l of block b, both ways;
+    returns how many labels it lowered."""
     corner = bcoord[b] * BS
     first, st = line_start(axis, l)
     count = int(0)
@@ -205,6 +193,26 @@ def sweep_min_labels(
                 lab = carry
                 count += 1
             carry = lab
+    return count
+
+
+@wp.kernel
+def sweep_min_labels(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    labels: wp.array(dtype=wp.int32),
+    active: wp.array(dtype=wp.int32),
+    axis: int,
+    changed: wp.array(dtype=wp.int32),
+    base: int,
+):
+    """Carry the smallest label through labelled voxels along one block line, both ways
+    (blocks with active[b] != 0)."""
+    tid = wp.tid() + base
+    b = tid // 64
+    if active[b] == 0:
+        return
+    count = sweep_min_line(bcoord, bmap, labels, axis, b, tid - b * 64)
     if count > 0:
         wp.atomic_add(changed, 0, count)
 
