@@ -4,7 +4,7 @@ SurfaceParams.close_voids: mesh pieces, and how far the mesh reaches along the r
 analytic sphere (h; about d where the droplet is bridged to the body or kept as its own piece,
 under 1 h where it is gone). "fine" removes blobs of fewer than 8 particles, so there a lone
 droplet that is not bridged disappears; "fast" keeps it as a second piece.
-README "The distance at the crossing, and why the closing stays opt-in".
+docs/surfacing-log.md, "The distance at the crossing, and why the closing stays opt-in".
 
     PYTHONPATH=. python3 scripts/surface_droplet.py --close 0 0.5 0.75 1   # 2-core CPU: ~2 min
 """

@@ -38,9 +38,10 @@ class SurfaceParams:
     close_voids: radius of a ball rolled over the outside of the surface before smoothing (m;
         0 = off): the dents it cannot enter fill (a morphological closing), as the voids of
         random samples do, without rounding convex edges. About one particle spacing
-        (particle_radius / 0.6) measured best on random samples (README "Closing the sample
-        voids"). Only fills deeper than 0.06 of the radius are kept (sparse.CLOSE_GATE): on the
-        grid the closing shifts a flat face a little, and a lattice's faces stay where they were.
+        (particle_radius / 0.6) measured best on random samples (docs/surfacing-log.md,
+        "Closing the sample voids"). Only fills deeper than 0.06 of the radius are kept
+        (sparse.CLOSE_GATE): on the grid the closing shifts a flat face a little, and a
+        lattice's faces stay where they were.
     min_feature_particles: connected blobs holding fewer particles than this are removed.
     band_voxels: narrow-band half width in voxels; the level set is clipped to +-band*voxel.
     kernel_radius: Zhu-Bridson kernel support R in units of particle_radius. With the

@@ -594,7 +594,7 @@ def _close_voids(wp, S, bcoord, bmap, dist, rho: float, clip: float):
     of radius rho voxels, as a distance (a new array): grown by rho, redistanced, shrunk by rho.
     Dents a ball of radius rho cannot enter from outside (the voids of random samples) fill;
     convex edges stay as they are, where the blur that follows fills dents only while it rounds
-    them (SurfaceParams.close_voids; README "Closing the sample voids").
+    them (SurfaceParams.close_voids; docs/surfacing-log.md, "Closing the sample voids").
     Only where the closing fills by more than CLOSE_GATE[0] x rho (in full from CLOSE_GATE[1] x
     rho, a ramp between so that a fill growing between frames does not jump): on the grid, grow-redistance-
     shrink is not the identity on a flat face. It moved a lattice box's faces out uniformly

@@ -66,7 +66,7 @@ def test_a_random_box_face_lands_on_the_face_wherever_it_cuts_its_block(fill):
 
 def test_closing_the_voids_brings_random_surfaces_closer_without_growing_them():
     # SurfaceParams.close_voids = one spacing, "fast", 20k random sphere: a ball rolled over the
-    # outside fills the dents of sample voids before the blur (README "Closing the sample voids");
+    # outside fills the dents of sample voids before the blur (docs/surfacing-log.md, "Closing the sample voids");
     # measured 0.126 -> 0.117 h mean, 0.78 -> 0.59 h max, volume -0.6 -> -0.4 % (ungated: 0.109 h,
     # 0.57 h, -0.5 %; sparse._close_voids)
     x, h = sample_shape("sphere", 20_000, "random")
