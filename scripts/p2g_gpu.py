@@ -20,30 +20,43 @@ from mpmfx.mpm import Solver, SolverConfig, preset
 OUT = os.environ.get("OUT", "renders/bench")
 
 
+def stirred_run(name, grid_n, det, frames, p2g=None, restart=False):
+    """(state as numpy, substeps) of the `name` block, its particles stirred (random velocities:
+    runs keep changing make-up), after `frames` frames through the device stepper. p2g: the P2G
+    path to force (None: the default); restart: a fresh solver resumes from a checkpoint taken at
+    frame frames // 2."""
+    mats, parts, _ = scene(name, grid_n)
+    parts.v[:] = np.random.default_rng(1).normal(0.0, 0.5, parts.v.shape)
+    cfg = SolverConfig(grid_n=grid_n, deterministic=det)
+
+    def solver():
+        s = Solver(mats, cfg, device="cuda", stepper="device")
+        if p2g is not None:
+            s._device_advance.p2g = p2g
+        return s
+
+    s = solver()
+    st = s.init_state(parts)
+    subs = 0
+    for f in range(frames):
+        if restart and f == frames // 2:
+            s = solver()
+            st, _ = s.restore(ckpt)
+        subs += s.advance(st, f / 24, (f + 1) / 24).substeps
+        if f + 1 == frames // 2:
+            ckpt = s.checkpoint(st, (f + 1) / 24)
+    return s.state_to_numpy(st), subs
+
+
 def agreement(grid_n=32, frames=6):
-    """Max |brick P2G - reference| over x, v, F after `frames` frames, Mushy and Water, both
-    modes, the particles stirred (random velocities: runs keep changing make-up); and whether
-    the brick path replays, and resumes from a checkpoint at frame frames // 2, bit for bit."""
+    """Max |brick P2G - reference| over x, v, F after `frames` stirred frames, Mushy and Water,
+    both modes; and whether the brick path replays, and resumes from a checkpoint at frame
+    frames // 2, bit for bit."""
     rows = []
     for name in ("Mushy", "Water"):
         for det in (True, False):
             def run(p2g, restart=False):
-                mats, parts, _ = scene(name, grid_n)
-                parts.v[:] = np.random.default_rng(1).normal(0.0, 0.5, parts.v.shape)
-                cfg = SolverConfig(grid_n=grid_n, deterministic=det)
-                s = Solver(mats, cfg, device="cuda", stepper="device")
-                s._device_advance.p2g = p2g
-                st = s.init_state(parts)
-                subs = 0
-                for f in range(frames):
-                    if restart and f == frames // 2:  # a fresh solver resumes from a checkpoint
-                        s = Solver(mats, cfg, device="cuda", stepper="device")
-                        s._device_advance.p2g = p2g
-                        st, _ = s.restore(ckpt)
-                    subs += s.advance(st, f / 24, (f + 1) / 24).substeps
-                    if f + 1 == frames // 2:
-                        ckpt = s.checkpoint(st, (f + 1) / 24)
-                return s.state_to_numpy(st), subs
+                return stirred_run(name, grid_n, det, frames, p2g, restart)
             (a, na), (b, nb) = run("reference"), run("brick")
             same = lambda o: all(np.array_equal(o[0][k], b[k]) for k in b)  # noqa: E731
             rows.append({"scene": name, "det": int(det), "p2g": "brick", "substeps_ref": na, "substeps": nb,
@@ -58,7 +71,7 @@ def fast_math_agreement(grid_n=48, frames=6):
     """Max |fast-math G2P - IEEE G2P| over x, v, F after `frames` stirred frames, Mushy, Granular
     and Water in both modes; beside it the IEEE run's own run-to-run difference (0 in
     deterministic mode, the float atomics' order in fast mode)."""
-    from mpmfx.mpm.g2p import make_g2p
+    from mpmfx.mpm.g2p import G2P_FAST_MATH, make_g2p
     from mpmfx.mpm.state import SceneFlags
 
     def g2p_modules(on):
@@ -68,28 +81,20 @@ def fast_math_agreement(grid_n=48, frames=6):
                     kernel = make_g2p(SceneFlags.of(mats), device_clock=clock, sorting=sorting)
                     wp.set_module_options({"fast_math": on}, module=kernel.module)
 
-    def run(name, det):
-        mats, parts, _ = scene(name, grid_n)
-        parts.v[:] = np.random.default_rng(1).normal(0.0, 0.5, parts.v.shape)
-        s = Solver(mats, SolverConfig(grid_n=grid_n, deterministic=det), device="cuda", stepper="device")
-        st = s.init_state(parts)
-        subs = sum(s.advance(st, f / 24, (f + 1) / 24).substeps for f in range(frames))
-        return s.state_to_numpy(st), subs
-
     rows = []
     for name in ("Mushy", "Granular", "Water"):
         for det in (True, False):
             g2p_modules(False)
-            (a, na), (a2, _) = run(name, det), run(name, det)
+            (a, na), (a2, _) = (stirred_run(name, grid_n, det, frames) for _ in range(2))
             g2p_modules(True)
-            b, nb = run(name, det)
+            b, nb = stirred_run(name, grid_n, det, frames)
             row = {"scene": name, "det": int(det), "substeps_ieee": na, "substeps_fast": nb}
             for k in ("x", "v", "F"):
                 if k in a:
                     row[f"max_d{k}"] = float(np.abs(a[k] - b[k]).max())
                     row[f"ieee_replay_d{k}"] = float(np.abs(a[k] - a2[k]).max())
             rows.append(row)
-    g2p_modules(True)
+    g2p_modules(G2P_FAST_MATH)  # back to the shipped setting
     print_table(rows, list(rows[2]))
     return rows
 

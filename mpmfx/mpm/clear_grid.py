@@ -32,17 +32,23 @@ def clear_grid(grid_m, grid_mv, grid_normal, grid_fixed, *, deterministic: bool,
         grid_normal.zero_()
 
 
-@wp.kernel(enable_backward=False)
-def _clear_marked(marks: wp.array(dtype=wp.int32), nb: int, nodes: int, deterministic: int,
-                  grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
-                  grid_fixed: wp.array4d(dtype=wp.int64)):
-    node = marked_node(marks, wp.tid(), nb, nodes)
-    i, j, k = node[0], node[1], node[2]
-    if i < 0:
-        return
+@wp.func
+def zero_node(deterministic: int, grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
+              grid_fixed: wp.array4d(dtype=wp.int64), i: int, j: int, k: int):
+    """Zero node (i, j, k)'s accumulators: its fixed-point channels, or its mass and momentum.
+    Also the brick path's grid update, which clears what it has read (grid_update.py)."""
     if deterministic != 0:
         for c in range(grid_fixed.shape[3]):
             grid_fixed[i, j, k, c] = wp.int64(0)
     else:
         grid_m[i, j, k] = 0.0
         grid_mv[i, j, k] = wp.vec3(0.0)
+
+
+@wp.kernel(enable_backward=False)
+def _clear_marked(marks: wp.array(dtype=wp.int32), nb: int, nodes: int, deterministic: int,
+                  grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
+                  grid_fixed: wp.array4d(dtype=wp.int64)):
+    node = marked_node(marks, wp.tid(), nb, nodes)
+    if node[0] >= 0:
+        zero_node(deterministic, grid_m, grid_mv, grid_fixed, node[0], node[1], node[2])

@@ -17,6 +17,7 @@ import functools
 
 import warp as wp
 
+from .clear_grid import zero_node
 from .colliders import ColliderParams, apply_collider
 from .p2g_brick import BRICK, marked_node
 from .slots import Count, WallCode
@@ -215,12 +216,7 @@ def make_grid_update(*, device_clock: bool = False, sparse: bool = False, clears
                     v = boundaries(gp, colliders, sdf, counts, v, node[0], node[1], node[2])
                 grid_v[node[0], node[1], node[2]] = v
                 if wp.static(clears):
-                    if gp.deterministic != 0:
-                        for c in range(grid_fixed.shape[3]):
-                            grid_fixed[node[0], node[1], node[2], c] = wp.int64(0)
-                    else:
-                        grid_m[node[0], node[1], node[2]] = 0.0
-                        grid_mv[node[0], node[1], node[2]] = wp.vec3(0.0)
+                    zero_node(gp.deterministic, grid_m, grid_mv, grid_fixed, node[0], node[1], node[2])
         else:
             i, j, k = wp.tid()
             update_node(gp, grid_m, grid_mv, grid_normal, grid_fixed, colliders, sdf, grid_v, counts, i, j, k)
