@@ -185,6 +185,50 @@ def solid_tau(mat: MaterialParams, F: wp.mat33, jp: float) -> wp.mat33:
     return fixed_corotated_tau(F, mat.mu0 * h, mat.lambda0 * h)
 
 
+POLAR_LO = wp.constant(0.8)  # singular values the polar shortcut (snow_plastic) takes: 3 Newton
+POLAR_HI = wp.constant(1.25)  # steps from 0.8 or 1.25 leave R off by < 5e-8 (float32's own rounding)
+
+
+@wp.func
+def positive_definite(a00: float, a11: float, a22: float, a01: float, a02: float, a12: float) -> bool:
+    """Whether a symmetric 3x3 is positive definite (Sylvester: its leading minors > 0)."""
+    m2 = a00 * a11 - a01 * a01
+    det = a00 * (a11 * a22 - a12 * a12) - a01 * (a01 * a22 - a12 * a02) + a02 * (a01 * a12 - a11 * a02)
+    return a00 > 0.0 and m2 > 0.0 and det > 0.0
+
+
+@wp.func
+def singular_values_within(F: wp.mat33, lo: float, hi: float) -> bool:
+    """Whether every singular value of F lies strictly inside (lo, hi), without an SVD: the
+    eigenvalues of F^T F are the squared singular values, so both F^T F - lo^2 I and
+    hi^2 I - F^T F must be positive definite."""
+    C = wp.transpose(F) * F
+    l2 = lo * lo
+    h2 = hi * hi
+    below = positive_definite(C[0, 0] - l2, C[1, 1] - l2, C[2, 2] - l2, C[0, 1], C[0, 2], C[1, 2])
+    above = positive_definite(h2 - C[0, 0], h2 - C[1, 1], h2 - C[2, 2], -C[0, 1], -C[0, 2], -C[1, 2])
+    return below and above
+
+
+@wp.func
+def polar_rotation(F: wp.mat33) -> wp.mat33:
+    """The rotation R of F = R S (= U V^T of its SVD) by Newton's iteration R <- (R + R^-T) / 2
+    (Higham 1986), three steps from R = F. Each step maps a singular value s to (s + 1/s) / 2,
+    so it is exact to float32 rounding only for singular values in [POLAR_LO, POLAR_HI];
+    det F > 0. R^-T is the cofactor matrix over the determinant (columns: cross products)."""
+    R = F
+    for _ in range(3):
+        c0 = wp.vec3(R[0, 0], R[1, 0], R[2, 0])
+        c1 = wp.vec3(R[0, 1], R[1, 1], R[2, 1])
+        c2 = wp.vec3(R[0, 2], R[1, 2], R[2, 2])
+        k0 = wp.cross(c1, c2)
+        k1 = wp.cross(c2, c0)
+        k2 = wp.cross(c0, c1)
+        inv_det = 1.0 / wp.dot(c0, k0)
+        R = 0.5 * (R + inv_det * wp.mat33(k0[0], k1[0], k2[0], k0[1], k1[1], k2[1], k0[2], k1[2], k2[2]))
+    return R
+
+
 @wp.func
 def snow_plastic(mat: MaterialParams, F: wp.mat33, jp: float):
     """Stomakhin clamp (guide §7.2): singular values of the trial elastic F into
@@ -194,7 +238,27 @@ def snow_plastic(mat: MaterialParams, F: wp.mat33, jp: float):
     returned F and Jp (hardened fixed-corotated, = solid_tau of them), from the same SVD,
     so P2G needs none of its own.
     F is rebuilt from its SVD only when the clamp fires: each rebuild shrinks the
-    singular values by ~1e-6 (float32 SVD), which would otherwise creep in every substep."""
+    singular values by ~1e-6 (float32 SVD), which would otherwise creep in every substep.
+
+    A particle whose singular values all lie inside the clamp's range (and [POLAR_LO,
+    POLAR_HI]) keeps F and Jp, and its stress needs only the rotation R of F: 2 mu h (F - R)
+    F^T + lambda h (J - 1) J I, the same fixed-corotated stress, with R from three Newton
+    steps instead of the SVD's twelve Jacobi rotations, QR and sort. Tested first, without
+    an SVD (singular_values_within): most of a snow body at rest or in elastic motion takes
+    it; a yielding particle takes the SVD as before."""
+    lo_fast = float(POLAR_LO)
+    hi_fast = float(POLAR_HI)
+    if mat.plastic != 0:
+        lo_fast = wp.max(1.0 - mat.theta_c, lo_fast)
+        hi_fast = wp.min(1.0 + mat.theta_s, hi_fast)
+    if singular_values_within(F, lo_fast, hi_fast):
+        R = polar_rotation(F)
+        h_fast = hardening_factor(mat, jp)
+        J_fast = wp.determinant(F)
+        tau_fast = (2.0 * mat.mu0 * h_fast) * (F - R) * wp.transpose(F)
+        k = mat.lambda0 * h_fast * (J_fast - 1.0) * J_fast
+        return F, jp, vec6(tau_fast[0, 0] + k, tau_fast[1, 1] + k, tau_fast[2, 2] + k,
+                           tau_fast[0, 1], tau_fast[0, 2], tau_fast[1, 2])
     U, sig, V = wp.svd3(F)
     Fe = F
     jp_new = jp
