@@ -6,8 +6,11 @@ from mpmfx.mpm.constitutive import (
     MaterialParams,
     bspline_weights,
     fixed_corotated_tau,
+    from_sym,
     hardening_factor,
+    sand_plastic,
     sand_return_map,
+    snow_plastic,
     snow_return_map,
     unpack_f,
 )
@@ -41,3 +44,16 @@ def eval_return_map(
     jp_out[i] = r[3, 3]
     h = hardening_factor(mat, r[3, 3])
     cauchy[i] = fixed_corotated_tau(Fe, mat.mu0 * h, mat.lambda0 * h) / wp.determinant(Fe)
+
+
+@wp.kernel
+def eval_plastic_stress(mat: MaterialParams, F: wp.array(dtype=wp.mat33), jp: wp.array(dtype=float),
+                        tau: wp.array(dtype=wp.mat33)):
+    """The Kirchhoff stress a return map hands the next P2G (snow_plastic's or sand_plastic's)."""
+    i = wp.tid()
+    if mat.mode == 0:
+        Fe, jp_new, t = snow_plastic(mat, F[i], jp[i])
+        tau[i] = from_sym(t)
+    else:
+        Fe, vc_new, t = sand_plastic(mat, F[i], jp[i])
+        tau[i] = from_sym(t)

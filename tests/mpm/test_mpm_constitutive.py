@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import warp as wp
 
-from tests.mpm.mpm_wp_kernels import eval_return_map, eval_weights
+from tests.mpm.mpm_wp_kernels import eval_plastic_stress, eval_return_map, eval_weights
 from mpmfx.mpm import Material, Mode, preset
 from mpmfx.mpm.constitutive import pack_material
 
@@ -106,3 +106,43 @@ def test_cohesion_lets_sand_carry_tension():
     np.testing.assert_allclose(Fe[0], F[0], atol=1e-6)
     Fe, _, _ = _return_map(preset("Granular"), F, np.zeros(1))
     np.testing.assert_allclose(Fe[0], np.eye(3), atol=1e-6)
+
+
+def _stored_stress(mat: Material, F, jp):
+    out = wp.zeros(len(F), dtype=wp.mat33, device="cpu")
+    wp.launch(eval_plastic_stress, dim=len(F), device="cpu", inputs=[
+        pack_material(mat), wp.array(np.asarray(F, np.float32), dtype=wp.mat33, device="cpu"),
+        wp.array(np.asarray(jp, np.float32), dtype=float, device="cpu"), out])
+    return out.numpy()
+
+
+def _random_f(n, lo, hi, seed):
+    """n matrices R1 diag(s) R2^T, s uniform in [lo, hi], R1 and R2 random rotations (float64)."""
+    rng = np.random.default_rng(seed)
+    R1, R2 = [np.linalg.qr(rng.normal(size=(n, 3, 3)))[0] for _ in range(2)]
+    R1 *= np.sign(np.linalg.det(R1))[:, None, None]  # proper rotations
+    R2 *= np.sign(np.linalg.det(R2))[:, None, None]
+    s = rng.uniform(lo, hi, size=(n, 3))
+    return np.einsum("nij,nj,nkj->nik", R1, s, R2), s
+
+
+@pytest.mark.parametrize("name, lo, hi", [("Mushy", 0.97, 1.01), ("Elastic", 0.7, 1.4)])
+def test_snow_stress_for_p2g_matches_float64_inside_and_outside_the_polar_range(name, lo, hi):
+    """snow_plastic takes the stress of a particle inside the clamp's range from three Newton
+    steps of the polar rotation, of one outside it from the SVD: both must give the
+    fixed-corotated stress of the elastic F, the polar one to float32 rounding."""
+    mat = preset(name)
+    F, s = _random_f(4000, lo, hi, seed=3)
+    tau = _stored_stress(mat, F, np.ones(len(F)))
+    Fe, jp, _ = _return_map(mat, F, np.ones(len(F)))  # the elastic F and Jp: clamped where the clamp fired
+    h = np.exp(mat.hardening * (1.0 - jp.astype(np.float64)))[:, None, None]
+    U, sig, Vt = np.linalg.svd(Fe.astype(np.float64))
+    R = U @ Vt
+    J = np.linalg.det(Fe.astype(np.float64))
+    exact = h * (2 * mat.mu0 * (Fe - R) @ np.swapaxes(Fe, 1, 2) + (mat.lambda0 * (J - 1) * J)[:, None, None] * np.eye(3))
+    scale = np.abs(exact).max()
+    polar = np.all((s > max(1 - mat.theta_c, 0.8)) & (s < min(1 + mat.theta_s, 1.25)), axis=1)
+    assert 0.2 < polar.mean() < 0.8  # both branches are exercised
+    err = np.abs(tau - exact).max(axis=(1, 2)) / scale
+    assert err[polar].max() < 2e-5  # the float32 SVD's own error is ~1e-3 of the largest stress here
+    assert err[~polar].max() < 5e-3
