@@ -45,7 +45,9 @@ def g2p_launch_shape() -> tuple[int, int]:
     2.25, 72/256 2.33, 96/128 2.44, 80/128 2.25, 72/128 2.17, 64/128 2.55; sand 80/256 2.26,
     72/128 2.17; at 2.4M snow 80/256 0.307, 72/128 0.306. Water (no SVD), H200, before fast math:
     80/256 1.16, 72/128 1.065, 64/128 1.12. (Solids before fast math, H200: 80/256 2.19 was best,
-    72/128 2.29.)"""
+    72/128 2.29.) Re-measured with the polar shortcut (constitutive.snow_plastic), H200, 19.4M: snow
+    80/128 1.77, 72/128 1.71, 64/128 1.87, 80/256 1.80; sand 80/128 1.98, 72/128 2.01, 64/128 2.12,
+    80/256 2.03; 2.4M snow 80/128 0.249, 72/128 0.247, 64/128 0.270."""
     return G2P_MAX_REGISTERS, G2P_BLOCK
 
 
