@@ -322,11 +322,17 @@ def _bin_particles(wp, S, g, grid: SparseGrid):
     n = g.shape[0]
     counts = wp.zeros(grid.nblocks, dtype=wp.int32)
     cells = wp.zeros(tuple(b * CELLS_PER_BLOCK for b in grid.nblocks), dtype=wp.int32)
-    keys = wp.empty(2 * n, dtype=wp.int32)
-    order = wp.empty(2 * n, dtype=wp.int32)
+    cpu = _lines(g)
+    keys = wp.empty(n if cpu else 2 * n, dtype=wp.int32)  # radix_sort_pairs sorts through a second half
+    order = wp.empty(n if cpu else 2 * n, dtype=wp.int32)
     wp.launch(S.count_blocks, n, inputs=[g, counts, cells, keys, order])
-    wp.utils.radix_sort_pairs(keys, order, n)
     starts = _scan(wp, cells.flatten(), inclusive=False)
+    if cpu:  # the radix sort's order from the cell counts in one pass (line_gather_kernels.counting_sort)
+        from mpmfx.surface import line_gather_kernels as G
+
+        wp.launch(G.counting_sort, 1, inputs=[keys, starts, wp.zeros(starts.shape[0], dtype=wp.int32), order])
+    else:
+        wp.utils.radix_sort_pairs(keys, order, n)
     return counts, cells, starts, order
 
 
