@@ -226,8 +226,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     with_v = v is not None
     phi, w, vel = _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid, params)
     timings["field"] = _lap(wp, t0)
-    mark = wp.zeros(max(nvox, 1), dtype=wp.int32)
-    _split(wp, T.mark_particle_voxels, n, [gs, bmap, mark])  # writes 1s: any interleaving agrees
+    mark = _mark_particle_voxels(wp, T, bcoord, bmap, cells, starts, gs)
     tiles = (grid.far_vox, -grid.r_vox)  # (outside, inside) tile values of the raw field
     steps = _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH * grid.r_vox)
     timings["topology"] = _lap(wp, t0)
@@ -339,8 +338,8 @@ def _bin_particles(wp, S, g, grid: SparseGrid):
 def _sorted_positions(wp, g, order):
     """g in the gather cells' order (gs[q] = g[order[q]], (n,) vec3) on the CPU, else g itself.
 
-    On the CPU the kernels that take one particle at a time in any order (mark_particle_voxels,
-    count_component_particles, near_blocks_cpu.mark_near_tested) read this copy: in the
+    On the CPU the kernels that take one particle at a time in any order
+    (count_component_particles, near_blocks_cpu.mark_near_tested) read this copy: in the
     caller's order, random samples (what simulated particles look like) jump through the block
     map, the voxel arrays and the counters from one particle to the next, where a lattice's
     neighbours follow each other (100k random "fine", one thread: 1.4-2x those kernels' time
@@ -352,6 +351,22 @@ def _sorted_positions(wp, g, order):
     gs = wp.empty(g.shape[0], dtype=wp.vec3)
     _split(wp, G.sorted_copy, g.shape[0], [g, order, gs])
     return gs
+
+
+def _mark_particle_voxels(wp, T, bcoord, bmap, cells, starts, gs):
+    """The voxels nearest to a particle (the specks' seeds): a bit each in 8 words a block on
+    the CPU (bitfill_kernels.mark_particle_bits, what the bit flood fills read), else an int32
+    each (topology_kernels.mark_particle_voxels). gs: the grid positions (in the cells' order
+    on the CPU: _sorted_positions)."""
+    if _lines(gs):
+        from mpmfx.surface import bitfill_kernels as F
+
+        mark = wp.empty(max(bcoord.shape[0] * BS, 1), dtype=wp.uint64)
+        _blocks(wp, F.mark_particle_bits, [bcoord, cells, starts, gs, mark])
+        return mark
+    mark = wp.zeros(max(bcoord.shape[0] * BS**3, 1), dtype=wp.int32)
+    _split(wp, T.mark_particle_voxels, gs.shape[0], [gs, bmap, mark])  # writes 1s: any interleaving agrees
+    return mark
 
 
 def _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid: SparseGrid, params: SurfaceParams):
