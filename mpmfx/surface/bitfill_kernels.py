@@ -288,6 +288,18 @@ def flip_unreached_bits(reached: wp.array(dtype=wp.uint64), inside_value: float,
 
 
 @wp.kernel
+def small_blocks(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), pending: wp.array(dtype=wp.int32),
+                 base: int):
+    """pending[b] = 1 where block b holds an inside voxel the fill from the bodies (seeds 2) did
+    not reach (a voxel of a small component: labels_from_bits labels it), else 0 (thread = block)."""
+    b = wp.tid() + base
+    left = wp.uint64(0)
+    for x in range(BS):
+        left = left | ((~reached[b * BS + x]) & (~sign[b * BS + x]))
+    pending[b] = wp.where(left != wp.uint64(0), 1, 0)
+
+
+@wp.kernel
 def labels_from_bits(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), labels: wp.array(dtype=wp.int32),
                      pending: wp.array(dtype=wp.int32), base: int):
     """Labels of topology_kernels.init_inside_labels after a fill from the bodies (seeds 2) for

@@ -521,6 +521,8 @@ def _remove_small(wp, T, bcoord, bmap, phi, g, mark, min_count: int, tiles) -> N
         from mpmfx.surface import topology_cpu as C
 
         labels = C.small_labels(wp, T, bcoord, bmap, phi, mark)
+        if labels is None:  # no small component
+            return
     else:
         labels = wp.empty(nvox, dtype=wp.int32)
         _split(wp, T.init_inside_labels, nvox, [bcoord, bmap, phi, labels])
