@@ -67,7 +67,7 @@ def seed_bits(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
     phi8: wp.array(dtype=vec8),
-    mark: wp.array(dtype=wp.int32),
+    mark: wp.array(dtype=wp.uint64),
     seed_depth: float,
     seeds: int,
     sign: wp.array(dtype=wp.uint64),
@@ -78,7 +78,8 @@ def seed_bits(
     """topology_kernels.seed_reached for one block, as bit words (seeds 0: bubbles, 1:
     specks, as its `specks`; 2: bodies, every outside voxel and the inside ones next to an
     INSIDE tile, see small_labels); pending[b] = 1 where a voxel is left to reach. phi8: the
-    level set as vec8 rows along z (line_kernels.rows)."""
+    level set as vec8 rows along z (line_kernels.rows); mark: the particles' voxels as bit
+    words (mark_particle_bits; read by the specks' seeds only)."""
     b = wp.tid() + base
     bc = bcoord[b]
     left = int(0)
@@ -94,17 +95,19 @@ def seed_bits(
         # a row of 8 voxels along z (bits y * 8 + z) at a time, its bits selected without a
         # branch per voxel: the sign flips where the surface is, so those branches
         # mispredicted (4 launches, one thread, 100k "fine": lattice torus 29 -> 11 ms, sphere 21 -> 16)
+        marks = wp.uint64(0)
+        if seeds == 1:  # seeds is the launch's: this branch always goes the same way
+            marks = mark[b * BS + x]
         for y in range(BS):
             row = phi8[(b * BS + x) * BS + y]
-            t0 = b * BV + (x * BS + y) * BS
             sb = int(0)
             rb = int(0)
             for z in range(BS):
-                out = row[z] > 0.0
-                sb = sb | wp.where(out, 1 << z, 0)
-                if seeds == 1:  # seeds is the launch's: this branch always goes the same way
-                    deep = mark[t0 + z] != 0 and row[z] <= -seed_depth
-                    rb = rb | wp.where(out or deep, 1 << z, 0)
+                sb = sb | wp.where(row[z] > 0.0, 1 << z, 0)
+                if seeds == 1:
+                    rb = rb | wp.where(row[z] <= -seed_depth, 1 << z, 0)
+            if seeds == 1:  # outside, or a particle's voxel at least seed_depth deep
+                rb = sb | (rb & int((marks >> wp.uint64(y * BS)) & BYTE))
             if seeds == 0:
                 rb = (~sb) & 255
             if seeds == 2:
@@ -133,6 +136,49 @@ def seed_bits(
         if r != ALL:
             left = 1
     pending[b] = left
+
+
+@wp.kernel
+def mark_particle_bits(
+    bcoord: wp.array(dtype=wp.vec3i),
+    cells: wp.array3d(dtype=wp.int32),
+    starts: wp.array(dtype=wp.int32),
+    gs: wp.array(dtype=wp.vec3),
+    mark: wp.array(dtype=wp.uint64),
+    base: int,
+):
+    """topology_kernels.mark_particle_voxels for active block b (thread = block) as its 8 bit
+    words (seed_bits' layout): bit set at the voxel nearest to a particle (wp.round of its grid
+    coordinates, as there). A particle whose nearest voxel lies in b lies within half a voxel
+    below b's span or in it, so in the gather cells 2 bc - 1 .. 2 bc + 1 along each axis
+    (sparse.CELLS_PER_BLOCK = 2); gs: the positions in the cells' order (starts: each cell's
+    first slot), so a column of those cells is one run of slots. Only this thread writes
+    block b's words: the launch splits across CPU threads. The int32 marks cost 4 bytes a
+    voxel to clear, write and read in the specks' seeds (8 MB at 100k random torus "fine")."""
+    b = wp.tid() + base
+    bc = bcoord[b]
+    c = bc * BS
+    lo = wp.vec3i(0)
+    hi = wp.vec3i(0)
+    for a in range(3):
+        lo[a] = wp.max(2 * bc[a] - 1, 0)
+        hi[a] = wp.min(2 * bc[a] + 1, cells.shape[a] - 1)
+    words = vec8u(wp.uint64(0))
+    for ci in range(lo[0], hi[0] + 1):
+        for cj in range(lo[1], hi[1] + 1):
+            lin = (ci * cells.shape[1] + cj) * cells.shape[2]
+            q = starts[lin + lo[2]]
+            end = starts[lin + hi[2]] + cells[ci, cj, hi[2]]
+            while q < end:  # not range(): a run-time bound costs a step-sign test per iteration
+                gp = gs[q]
+                i = int(wp.round(gp[0])) - c[0]
+                j = int(wp.round(gp[1])) - c[1]
+                k = int(wp.round(gp[2])) - c[2]
+                if i >= 0 and i < BS and j >= 0 and j < BS and k >= 0 and k < BS:
+                    words[i] = words[i] | (wp.uint64(1) << wp.uint64(j * BS + k))
+                q += 1
+    for x in range(BS):
+        mark[b * BS + x] = words[x]
 
 
 @wp.func
@@ -239,6 +285,18 @@ def flip_unreached_bits(reached: wp.array(dtype=wp.uint64), inside_value: float,
                 phi[t] = inside_value
             else:
                 phi[t] = outside_value
+
+
+@wp.kernel
+def small_blocks(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), pending: wp.array(dtype=wp.int32),
+                 base: int):
+    """pending[b] = 1 where block b holds an inside voxel the fill from the bodies (seeds 2) did
+    not reach (a voxel of a small component: labels_from_bits labels it), else 0 (thread = block)."""
+    b = wp.tid() + base
+    left = wp.uint64(0)
+    for x in range(BS):
+        left = left | ((~reached[b * BS + x]) & (~sign[b * BS + x]))
+    pending[b] = wp.where(left != wp.uint64(0), 1, 0)
 
 
 @wp.kernel

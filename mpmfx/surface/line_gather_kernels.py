@@ -226,3 +226,23 @@ def sorted_copy(src: wp.array(dtype=wp.vec3), order: wp.array(dtype=wp.int32), d
     """dst[q] = src[order[q]]."""
     q = wp.tid() + base
     dst[q] = src[order[q]]
+
+
+@wp.kernel
+def counting_sort(keys: wp.array(dtype=wp.int32), starts: wp.array(dtype=wp.int32), cursor: wp.array(dtype=wp.int32),
+                  order: wp.array(dtype=wp.int32)):
+    """order = the particles sorted by cell key, ties in particle order: what
+    wp.utils.radix_sort_pairs (a stable sort) gives for (keys, order = 0 .. n - 1), from the
+    cells' first slots `starts` (the exclusive scan of their counts). keys: (n,) cell key of
+    each particle (count_blocks); cursor: (cells,) zeros, the particles placed per cell so far.
+    One thread (launch dim 1) walks the particles in order: on one CPU core that is one pass
+    over them where the radix sort made four over keys and values (100k particles: 0.5-0.7
+    against 1.9-2.8 ms)."""
+    n = keys.shape[0]
+    p = int(0)
+    while p < n:  # not range(): a run-time bound costs a step-sign test per iteration
+        k = keys[p]
+        s = cursor[k]
+        order[starts[k] + s] = p
+        cursor[k] = s + 1
+        p += 1

@@ -92,15 +92,16 @@ def mark_near_certain(cells: wp.array3d(dtype=wp.int32), reach: float, near: wp.
 def mark_near_tested(
     cells: wp.array3d(dtype=wp.int32),
     starts: wp.array(dtype=wp.int32),
-    order: wp.array(dtype=wp.int32),
-    g: wp.array(dtype=wp.vec3),
+    gs: wp.array(dtype=wp.vec3),
     reach: float,
     near: wp.array3d(dtype=wp.int32),
     base: int,
 ):
     """After mark_near_certain: the still unmarked blocks that only some points of block c's
     span reach (thread = block c of the grid), tested against c's particles as
-    mark_near_blocks tests them (its candidate range, its float32 distance)."""
+    mark_near_blocks tests them (its candidate range, its float32 distance). gs: the grid
+    positions in the cells' order (gs[k] = g[order[k]], sparse._sorted_positions), so a cell's
+    particles are read in memory order."""
     c = block_of(near, wp.tid() + base)
     if span_count(cells, c) == 0:
         return
@@ -125,7 +126,7 @@ def mark_near_tested(
                     s = starts[(ci * cells.shape[1] + cj) * cells.shape[2] + ck]
                     for k in range(s, s + cnt):
                         if hit == 0:
-                            gp = g[order[k]]
+                            gp = gs[k]
                             inside = int(1)  # mark_near_blocks' candidate range of this particle
                             d2 = float(0.0)
                             for a in range(3):

@@ -218,15 +218,15 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     g = wp.empty(n, dtype=wp.vec3)
     wp.launch(S.to_grid, n, inputs=[x, wp.vec3(*grid.origin.astype(np.float32)), 1.0 / grid.voxel, g])
     counts, cells, starts, order = _bin_particles(wp, S, g, grid)
-    bmap, bcoord = _classify(wp, S, g, counts, cells, starts, order, grid)
+    gs = _sorted_positions(wp, g, order)
+    bmap, bcoord = _classify(wp, S, g, gs, counts, cells, starts, order, grid)
     nact = bcoord.shape[0]
     nvox = nact * BS**3
     timings["blocks"] = _lap(wp, t0)
     with_v = v is not None
-    phi, w, vel = _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid, params)
+    phi, w, vel = _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid, params)
     timings["field"] = _lap(wp, t0)
-    mark = wp.zeros(max(nvox, 1), dtype=wp.int32)
-    _split(wp, T.mark_particle_voxels, n, [g, bmap, mark])  # writes 1s: any interleaving agrees
+    mark = _mark_particle_voxels(wp, T, bcoord, bmap, cells, starts, gs)
     tiles = (grid.far_vox, -grid.r_vox)  # (outside, inside) tile values of the raw field
     steps = _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH * grid.r_vox)
     timings["topology"] = _lap(wp, t0)
@@ -256,7 +256,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     seed = SEED_DEPTH_SMOOTHED if params.smooth_iters > 0 else SEED_DEPTH * grid.r_vox
     steps += _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth=seed)
     if params.min_feature_particles > 0 and nvox:
-        _remove_small(wp, T, bcoord, bmap, phi, g, mark, params.min_feature_particles, tiles)
+        _remove_small(wp, T, bcoord, bmap, phi, gs, mark, params.min_feature_particles, tiles)
     values = wp.empty_like(phi)  # renormalising keeps every sign: the topology stands
     _renormalise(wp, S, bcoord, bmap, phi, tiles, grid.voxel, grid.background, values)
     tiles = (grid.background, -grid.background)
@@ -321,18 +321,58 @@ def _bin_particles(wp, S, g, grid: SparseGrid):
     n = g.shape[0]
     counts = wp.zeros(grid.nblocks, dtype=wp.int32)
     cells = wp.zeros(tuple(b * CELLS_PER_BLOCK for b in grid.nblocks), dtype=wp.int32)
-    keys = wp.empty(2 * n, dtype=wp.int32)
-    order = wp.empty(2 * n, dtype=wp.int32)
+    cpu = _lines(g)
+    keys = wp.empty(n if cpu else 2 * n, dtype=wp.int32)  # radix_sort_pairs sorts through a second half
+    order = wp.empty(n if cpu else 2 * n, dtype=wp.int32)
     wp.launch(S.count_blocks, n, inputs=[g, counts, cells, keys, order])
-    wp.utils.radix_sort_pairs(keys, order, n)
     starts = _scan(wp, cells.flatten(), inclusive=False)
+    if cpu:  # the radix sort's order from the cell counts in one pass (line_gather_kernels.counting_sort)
+        from mpmfx.surface import line_gather_kernels as G
+
+        wp.launch(G.counting_sort, 1, inputs=[keys, starts, wp.zeros(starts.shape[0], dtype=wp.int32), order])
+    else:
+        wp.utils.radix_sort_pairs(keys, order, n)
     return counts, cells, starts, order
 
 
-def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, params: SurfaceParams):
+def _sorted_positions(wp, g, order):
+    """g in the gather cells' order (gs[q] = g[order[q]], (n,) vec3) on the CPU, else g itself.
+
+    On the CPU the kernels that take one particle at a time in any order
+    (count_component_particles, near_blocks_cpu.mark_near_tested) read this copy: in the
+    caller's order, random samples (what simulated particles look like) jump through the block
+    map, the voxel arrays and the counters from one particle to the next, where a lattice's
+    neighbours follow each other (100k random "fine", one thread: 1.4-2x those kernels' time
+    on a lattice of the same shape). Their results do not depend on the order."""
+    from mpmfx.surface import line_gather_kernels as G
+
+    if not _lines(g):
+        return g
+    gs = wp.empty(g.shape[0], dtype=wp.vec3)
+    _split(wp, G.sorted_copy, g.shape[0], [g, order, gs])
+    return gs
+
+
+def _mark_particle_voxels(wp, T, bcoord, bmap, cells, starts, gs):
+    """The voxels nearest to a particle (the specks' seeds): a bit each in 8 words a block on
+    the CPU (bitfill_kernels.mark_particle_bits, what the bit flood fills read), else an int32
+    each (topology_kernels.mark_particle_voxels). gs: the grid positions (in the cells' order
+    on the CPU: _sorted_positions)."""
+    if _lines(gs):
+        from mpmfx.surface import bitfill_kernels as F
+
+        mark = wp.empty(max(bcoord.shape[0] * BS, 1), dtype=wp.uint64)
+        _blocks(wp, F.mark_particle_bits, [bcoord, cells, starts, gs, mark])
+        return mark
+    mark = wp.zeros(max(bcoord.shape[0] * BS**3, 1), dtype=wp.int32)
+    _split(wp, T.mark_particle_voxels, gs.shape[0], [gs, bmap, mark])  # writes 1s: any interleaving agrees
+    return mark
+
+
+def _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid: SparseGrid, params: SurfaceParams):
     """The raw Zhu-Bridson field at the active voxels: (phi (voxels), kernel weight sums w,
     kernel-weighted velocity or a 1-element placeholder), isotropic or with Yu & Turk's
-    ellipsoids (params.anisotropic)."""
+    ellipsoids (params.anisotropic). gs: g in the cells' order on the CPU (_sorted_positions)."""
     from mpmfx.surface import line_gather_kernels as G
     from mpmfx.surface import line_kernels as L
 
@@ -358,8 +398,7 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
                           grid.r_vox, grid.far_vox], outputs=[phi, w, offset, vel, cov, radius])
     elif _lines(phi):  # one thread per block: each candidate particle fetched once per block, in memory order
         n = g.shape[0]
-        gs, vs = wp.empty(n, dtype=wp.vec3), wp.empty(n if with_v else 1, dtype=wp.vec3)
-        _split(wp, G.sorted_copy, n, [g, order, gs])
+        vs = wp.empty(n if with_v else 1, dtype=wp.vec3)
         if with_v:
             _split(wp, G.sorted_copy, n, [v, order, vs])
         nacc = 10 if with_v else 7  # vec8 sums per line: w, offset, weight gradient (, velocity)
@@ -381,9 +420,10 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, v, grid: SparseGrid, pa
     return phi, w, vel
 
 
-def _classify(wp, S, g, counts, cells, starts, order, grid: SparseGrid):
+def _classify(wp, S, g, gs, counts, cells, starts, order, grid: SparseGrid):
     """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates);
-    cells, starts, order: the gather cells' particles (_bin_particles)."""
+    cells, starts, order: the gather cells' particles (_bin_particles), gs: g in their order
+    (_sorted_positions)."""
     near = wp.zeros(grid.nblocks, dtype=wp.int32)
     if _lines(g):  # a block of particles per thread, most blocks decided without their particles
         from mpmfx.surface import near_blocks_cpu as N
@@ -393,7 +433,7 @@ def _classify(wp, S, g, counts, cells, starts, order, grid: SparseGrid):
         # blocks (MIN_SPLIT left these unsplit below 16384 blocks, 10976 at the 100k torus "fine")
         kw = {"device": g.device, "min_split": 1}
         launch_split(wp, N.mark_near_certain, nb, [cells, grid.reach_vox, near], **kw)
-        launch_split(wp, N.mark_near_tested, nb, [cells, starts, order, g, grid.reach_vox, near], **kw)
+        launch_split(wp, N.mark_near_tested, nb, [cells, starts, gs, grid.reach_vox, near], **kw)
     else:
         _split(wp, S.mark_near_blocks, g.shape[0], [g, grid.reach_vox, near])  # writes 1s: any interleaving agrees
     state = wp.empty(grid.nblocks, dtype=wp.int32)
@@ -481,6 +521,8 @@ def _remove_small(wp, T, bcoord, bmap, phi, g, mark, min_count: int, tiles) -> N
         from mpmfx.surface import topology_cpu as C
 
         labels = C.small_labels(wp, T, bcoord, bmap, phi, mark)
+        if labels is None:  # no small component
+            return
     else:
         labels = wp.empty(nvox, dtype=wp.int32)
         _split(wp, T.init_inside_labels, nvox, [bcoord, bmap, phi, labels])

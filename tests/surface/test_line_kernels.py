@@ -72,7 +72,7 @@ def test_cpu_near_blocks_are_mark_near_blocks(monkeypatch, sampling, voxel_h, it
     got = wp.zeros(grid.nblocks, dtype=wp.int32, device="cpu")
     nb = int(np.prod(grid.nblocks))
     sparse._split(wp, N.mark_near_certain, nb, [cells, grid.reach_vox, got])
-    sparse._split(wp, N.mark_near_tested, nb, [cells, starts, order, g, grid.reach_vox, got])
+    sparse._split(wp, N.mark_near_tested, nb, [cells, starts, sparse._sorted_positions(wp, g, order), grid.reach_vox, got])
     assert 0 < want.numpy().sum() < nb
     np.testing.assert_array_equal(got.numpy(), want.numpy())
 
