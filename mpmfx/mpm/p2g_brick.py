@@ -97,7 +97,7 @@ WIN_NODES = WIN * WIN * WIN
 BLOCK_CUDA = 128  # threads a block on CUDA, and slots parked a round
 MAX_REGISTERS = 64  # a thread's registers (the compiler takes 128 unbounded: see the docstring)
 MAX_BLOCKS = 1 << 15  # blocks at most; each walks segments block, block + MAX_BLOCKS, ...
-PARKED = 16  # floats a parked particle: m, m v (3), affine (9), fx (3)
+PARKED = 16  # floats a parked particle: m, q (3), A (9), fx (3) (the scatter's park)
 SORT_TRAVEL = 1.0  # cells the fastest particle may move between two sorts: a window's slack (travel_cadence)
 SORT_PIECES_PER_PARTICLE = 0.32  # a sort's cost in scattered pieces (sort_cadence; H200, 2.4M-19.4M particles:
 SORT_PIECES_FIXED = 2.5e5  # 0.29-1.84 ms a sort with its G2P's moves, 0.28 ns a piece)
@@ -418,37 +418,37 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
         contributions to its three nodes (the reference's numbers, particle by particle),
         summed in slot order, then added to the window once a node and channel (deterministic:
         each sum rounded to fixed point, see the module docstring)."""
-        dx = 1.0 / pp.inv_dx
         code = int(park(5, u0, 0.0))
         m_sum = wp.vec3(0.0)  # per node k = 0, 1, 2
         mv0 = wp.vec3(0.0)
         mv1 = wp.vec3(0.0)
         mv2 = wp.vec3(0.0)
+        fi = float(i)
+        fj = float(j)
         u = u0
         while u < n_park:
             if int(park(5, u, 0.0)) != code:
                 break
             m = park(2, u, 0.0)
-            mv = wp.vec3(park(2, BLOCK_CUDA + u, 0.0), park(2, 2 * BLOCK_CUDA + u, 0.0), park(2, 3 * BLOCK_CUDA + u, 0.0))
             fx = wp.vec3(park(2, 13 * BLOCK_CUDA + u, 0.0), park(2, 14 * BLOCK_CUDA + u, 0.0),
                          park(2, 15 * BLOCK_CUDA + u, 0.0))
-            aff = wp.mat33()
+            # the momentum at node (i, j, k) is q + A (i, j, k) (see the park): row (i, j)'s part once,
+            # then k steps of column 2
+            base = wp.vec3(0.0)
+            col2 = wp.vec3(0.0)
             for c in range(3):
-                for d in range(3):
-                    aff[c, d] = park(2, (4 + 3 * c + d) * BLOCK_CUDA + u, 0.0)
+                base[c] = (park(2, (1 + c) * BLOCK_CUDA + u, 0.0) + park(2, (4 + 3 * c) * BLOCK_CUDA + u, 0.0) * fi
+                           + park(2, (5 + 3 * c) * BLOCK_CUDA + u, 0.0) * fj)
+                col2[c] = park(2, (6 + 3 * c) * BLOCK_CUDA + u, 0.0)
             W = bspline_weights(fx)
             wij = row_weight(W, i, 0) * row_weight(W, j, 1)
-            for k in range(3):
-                w = wij * W[k, 2]
-                dpos = (wp.vec3(float(i), float(j), float(k)) - fx) * dx
-                mom = w * (mv + aff * dpos)
-                m_sum[k] = m_sum[k] + w * m
-                if k == 0:
-                    mv0 += mom
-                elif k == 1:
-                    mv1 += mom
-                else:
-                    mv2 += mom
+            w0 = wij * W[0, 2]
+            w1 = wij * W[1, 2]
+            w2 = wij * W[2, 2]
+            m_sum += m * wp.vec3(w0, w1, w2)
+            mv0 += w0 * base
+            mv1 += w1 * (base + col2)
+            mv2 += w2 * (base + 2.0 * col2)
             u += 1
         e = ((code // (WIN * WIN) + i) * WIN + (code // WIN) % WIN + j) * WIN + code % WIN
         for k in range(3):
@@ -529,12 +529,18 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                         loc = b - origin
                         if wp.min(loc) >= 0 and wp.max(loc) <= WIN - 3:
                             code = (loc[0] * WIN + loc[1]) * WIN + loc[2]
+                            # parked as the momentum's polynomial in the node offset (i, j, k):
+                            # m v + aff ((i, j, k) - fx) dx = q + A (i, j, k), q = m v - A fx,
+                            # A = aff dx, so a run task's 3 nodes cost 3 adds and 3 scales, not 3
+                            # matrix-vector products
+                            A = aff * (1.0 / pp.inv_dx)
+                            q = mv - A * fx
                             park(1, lane, m)
                             for c in range(3):
-                                park(1, (1 + c) * BLOCK_CUDA + lane, mv[c])
+                                park(1, (1 + c) * BLOCK_CUDA + lane, q[c])
                                 park(1, (13 + c) * BLOCK_CUDA + lane, fx[c])
                                 for d in range(3):
-                                    park(1, (4 + 3 * c + d) * BLOCK_CUDA + lane, aff[c, d])
+                                    park(1, (4 + 3 * c + d) * BLOCK_CUDA + lane, A[c, d])
                         else:
                             add_to_grid(pp, m, mv, aff, fx, b, grid_m, grid_mv, grid_fixed, marks)
                             wp.atomic_add(frag, FRAG_FALLBACKS, wp.int64(1))
