@@ -15,7 +15,9 @@ in brick order (a brick: 4^3 stencil corner nodes) and one CUDA block scatters a
        (the brick's 4^3 corners, one node of slack below and above, and the stencil's reach);
     3. in rounds of 128 consecutive slots (coalesced reads) each thread computes one
        particle's mass, momentum, MLS affine term and fx (the reference's numbers:
-       `particle_affine`, the same expressions) and parks them in shared memory;
+       `particle_affine`, the same expressions) and parks them in shared memory, the momentum
+       as its polynomial in the node offset (i, j, k): q + A (i, j, k), q = m v - A fx, A the
+       affine term times dx;
     4. nine threads per run of parked particles sharing a stencil (one per stencil row) sum
        the run's contributions to their three nodes in registers and add each sum, rounded to
        fixed point, to the window once per channel: ~8x fewer shared atomics than one per
@@ -58,7 +60,13 @@ slot order, and the sort starts from particle order each time, so ties keep part
 whatever happened before (a run resumed from a checkpoint sums as the first did). So replays
 are bit-identical in deterministic mode, while against the reference (which rounds each
 particle's contribution) a node differs by about a quantum a particle of its runs: rounding
-the sums instead is ~8x fewer float-to-int64 conversions and int64 registers. The window
+the sums instead is ~8x fewer float-to-int64 conversions and int64 registers. A run task
+(add_run) forms its row's momentum q + A (i, j, 0) once a particle and steps column 2 of A for
+k = 1, 2, where it had computed w (m v + aff dpos) for each node: P2G at 19.4M (H200, two rounds
+back to back) snow 2.222 / 2.222 -> 2.057 / 2.058 ms, water 2.255 / 2.254 -> 2.085 / 2.084,
+deterministic snow 2.234 / 2.233 -> 2.067 / 2.067; 2.4M snow 0.289 / 0.279 -> 0.261 / 0.260.
+(Parking the nine weights instead of fx, so no task recomputes them: 2.051 -> 2.223, the larger
+park leaves a multiprocessor 7 blocks where it held 8.) The window
 was float (fast) and int64 (deterministic) before, and shared memory adds both with
 compare-and-swap loops; as 32-bit words, measured on an H100 (G particle-substeps/s, bench
 blocks; ms a substep, shots; scripts/p2g_runs.py):
