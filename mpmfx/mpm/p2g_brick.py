@@ -66,7 +66,11 @@ k = 1, 2, where it had computed w (m v + aff dpos) for each node: P2G at 19.4M (
 back to back) snow 2.222 / 2.222 -> 2.057 / 2.058 ms, water 2.255 / 2.254 -> 2.085 / 2.084,
 deterministic snow 2.234 / 2.233 -> 2.067 / 2.067; 2.4M snow 0.289 / 0.279 -> 0.261 / 0.260.
 (Parking the nine weights instead of fx, so no task recomputes them: 2.051 -> 2.223, the larger
-park leaves a multiprocessor 7 blocks where it held 8.) The window
+park leaves a multiprocessor 7 blocks where it held 8. A round's work split evenly instead, 13
+threads a stencil row over chunks of 10 slots, one pass where a round of over 14 runs takes two:
+2.057 -> 2.732, water 2.085 -> 2.814: a run the chunks cut adds to the window twice, and
+neighbouring chunks add to the same window nodes at once. Register caps re-measured on this
+code, scatter alone at 19.4M snow, cap 48 / 56 / 64 / 72 / 80: 1.86 / 1.72 / 1.65 / 1.77 / 1.91 ms.) The window
 was float (fast) and int64 (deterministic) before, and shared memory adds both with
 compare-and-swap loops; as 32-bit words, measured on an H100 (G particle-substeps/s, bench
 blocks; ms a substep, shots; scripts/p2g_runs.py):
