@@ -70,8 +70,8 @@ park leaves a multiprocessor 7 blocks where it held 8. A round's work split even
 threads a stencil row over chunks of 10 slots, one pass where a round of over 14 runs takes two:
 2.057 -> 2.732, water 2.085 -> 2.814: a run the chunks cut adds to the window twice, and
 neighbouring chunks add to the same window nodes at once. Register caps re-measured on this
-code, scatter alone at 19.4M snow, cap 48 / 56 / 64 / 72 / 80: 1.86 / 1.72 / 1.65 / 1.77 / 1.91 ms.) The window
-was float (fast) and int64 (deterministic) before, and shared memory adds both with
+code, scatter alone at 19.4M snow, cap 48 / 56 / 64 / 72 / 80: 1.86 / 1.72 / 1.65 / 1.77 / 1.91
+ms.) The window was float (fast) and int64 (deterministic) before, and shared memory adds both with
 compare-and-swap loops; as 32-bit words, measured on an H100 (G particle-substeps/s, bench
 blocks; ms a substep, shots; scripts/p2g_runs.py):
 

@@ -139,7 +139,8 @@ def test_snow_stress_for_p2g_matches_float64_inside_and_outside_the_polar_range(
     U, sig, Vt = np.linalg.svd(Fe.astype(np.float64))
     R = U @ Vt
     J = np.linalg.det(Fe.astype(np.float64))
-    exact = h * (2 * mat.mu0 * (Fe - R) @ np.swapaxes(Fe, 1, 2) + (mat.lambda0 * (J - 1) * J)[:, None, None] * np.eye(3))
+    exact = h * (2 * mat.mu0 * (Fe - R) @ np.swapaxes(Fe, 1, 2)
+                 + (mat.lambda0 * (J - 1) * J)[:, None, None] * np.eye(3))
     scale = np.abs(exact).max()
     polar = np.all((s > max(1 - mat.theta_c, 0.8)) & (s < min(1 + mat.theta_s, 1.25)), axis=1)
     assert 0.2 < polar.mean() < 0.8  # both branches are exercised
