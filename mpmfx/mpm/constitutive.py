@@ -246,11 +246,9 @@ def snow_plastic(mat: MaterialParams, F: wp.mat33, jp: float):
     steps instead of the SVD's twelve Jacobi rotations, QR and sort. Tested first, without
     an SVD (singular_values_within): most of a snow body at rest or in elastic motion takes
     it; a yielding particle takes the SVD as before."""
-    lo_fast = float(POLAR_LO)
-    hi_fast = float(POLAR_HI)
-    if mat.plastic != 0:
-        lo_fast = wp.max(1.0 - mat.theta_c, lo_fast)
-        hi_fast = wp.min(1.0 + mat.theta_s, hi_fast)
+    # (a material that never yields has thetas >= 1e8: its range is [POLAR_LO, POLAR_HI])
+    lo_fast = wp.max(1.0 - mat.theta_c, POLAR_LO)
+    hi_fast = wp.min(1.0 + mat.theta_s, POLAR_HI)
     if singular_values_within(F, lo_fast, hi_fast):
         R = polar_rotation(F)
         h_fast = hardening_factor(mat, jp)
