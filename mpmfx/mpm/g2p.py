@@ -80,7 +80,11 @@ def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float, field_o
     node (9 of them multiply-adds) where w * outer(v_i, dpos) and dpos took ~40 (the outer
     products and matrix sums were 13 % of snow G2P's instructions, Nsight Compute, 19.4M
     particles, H200). Results move by float rounding only. (Tried with it: one flat row offset
-    per (i, j) instead of the 3-D index, which was slower: G2P water 1.23 -> 1.27 ms at 19.4M.)"""
+    per (i, j) instead of the 3-D index, which was slower: G2P water 1.23 -> 1.27 ms at 19.4M.)
+    Now as sum w v_i (i, j, k)^T - v fx^T: with the loops unrolled the offsets are constants, so
+    a node costs v's three adds and three to six for the columns whose offset is 1 or 2, where
+    the outer product with dpos took nine multiply-adds and dpos three subtractions (not yet
+    measured on a GPU)."""
     xg = x * inv_dx
     bi = int(wp.floor(xg[0] - 0.5))
     bj = int(wp.floor(xg[1] - 0.5))
@@ -88,14 +92,32 @@ def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float, field_o
     fx = xg - wp.vec3(float(bi), float(bj), float(bk))
     W = bspline_weights(fx)  # once per particle per transfer
     v = wp.vec3(0.0)
-    B = wp.mat33(0.0)  # sum w v_i (dpos / dx)^T: dx and D^-1 applied once, at the end
+    # sum w v_i (dpos / dx)^T = sum w v_i (i, j, k)^T - v fx^T: the node offsets are the unrolled
+    # loops' constants, so each column sums only the nodes whose offset is 1 or 2
+    s0 = wp.vec3(0.0)
+    s1 = wp.vec3(0.0)
+    s2 = wp.vec3(0.0)
     for i in range(3):
         for j in range(3):
             wij = W[i, 0] * W[j, 1]
             for k in range(3):
                 wg = (wij * W[k, 2]) * grid_v[field_offset + bi + i, bj + j, bk + k]
                 v += wg
-                B += wp.outer(wg, wp.vec3(float(i), float(j), float(k)) - fx)
+                if i == 1:
+                    s0 += wg
+                elif i == 2:
+                    s0 += 2.0 * wg
+                if j == 1:
+                    s1 += wg
+                elif j == 2:
+                    s1 += 2.0 * wg
+                if k == 1:
+                    s2 += wg
+                elif k == 2:
+                    s2 += 2.0 * wg
+    B = wp.mat33(s0[0] - v[0] * fx[0], s1[0] - v[0] * fx[1], s2[0] - v[0] * fx[2],
+                 s0[1] - v[1] * fx[0], s1[1] - v[1] * fx[1], s2[1] - v[1] * fx[2],
+                 s0[2] - v[2] * fx[0], s1[2] - v[2] * fx[1], s2[2] - v[2] * fx[2])
     return v, (4.0 * inv_dx) * B
 
 
