@@ -336,10 +336,14 @@ class Solver:
         # unless G2P reads node masses (water volume recovery); H100, 19.4M snow: the clear
         # 0.091 -> 0.013 ms a substep, the update 0.240 -> 0.255 (of 5.05 ms)
         self._grid_cleared = brick is not None and not self.flags.volume_recovery and not keep_grid
+        max_blocks = 0
         if brick is not None:
             grid = make_grid_update(device_clock=device_clock, sparse=True, clears=self._grid_cleared)
             dim = brick.marks.shape[0] * BRICK**3
-        wp.launch(grid, dim=dim, device=self.device, inputs=[
+            # a grid-stride loop over a few blocks a multiprocessor: one thread per node brick slot
+            # is ~69k short-lived blocks at grid 256, most of whose bricks are unmarked
+            max_blocks = 8 * self.device.sm_count if self.device.is_cuda else 0
+        wp.launch(grid, dim=dim, device=self.device, max_blocks=max_blocks, inputs=[
             self._grid_params(dt, state.n_fields), self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
             self._colliders_dev, self._sdf, self._grid_v, self._counts,
             brick.marks if brick is not None else self._counts, self._sub])
