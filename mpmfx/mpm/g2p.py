@@ -83,8 +83,8 @@ def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float, field_o
     per (i, j) instead of the 3-D index, which was slower: G2P water 1.23 -> 1.27 ms at 19.4M.)
     Now as sum w v_i (i, j, k)^T - v fx^T: with the loops unrolled the offsets are constants, so
     a node costs v's three adds and three to six for the columns whose offset is 1 or 2, where
-    the outer product with dpos took nine multiply-adds and dpos three subtractions (not yet
-    measured on a GPU)."""
+    the outer product with dpos took nine multiply-adds and dpos three subtractions (H200,
+    19.4M: G2P water 1.049 -> 1.034 ms, snow 1.687 -> 1.682)."""
     xg = x * inv_dx
     bi = int(wp.floor(xg[0] - 0.5))
     bj = int(wp.floor(xg[1] - 0.5))

@@ -341,7 +341,8 @@ class Solver:
             grid = make_grid_update(device_clock=device_clock, sparse=True, clears=self._grid_cleared)
             dim = brick.marks.shape[0] * BRICK**3
             # a grid-stride loop over a few blocks a multiprocessor: one thread per node brick slot
-            # is ~69k short-lived blocks at grid 256, most of whose bricks are unmarked
+            # is ~69k short-lived blocks at grid 256, most of whose bricks are unmarked (H200,
+            # 19.4M snow: 0.253 -> 0.211 ms; 2 / 4 / 16 / 32 blocks: 0.282 / 0.276 / 0.206 / 0.202)
             max_blocks = 8 * self.device.sm_count if self.device.is_cuda else 0
         wp.launch(grid, dim=dim, device=self.device, max_blocks=max_blocks, inputs=[
             self._grid_params(dt, state.n_fields), self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
