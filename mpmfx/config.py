@@ -155,7 +155,7 @@ class SurfaceGroup(str, enum.Enum):
 class Surface(_Section):
     radius_scale: Real = Field(1.0, gt=0, description="Multiplier on the particle radius (0.6 x the spacing: mpmfx.surface.PARTICLE_RADIUS_PER_SPACING).")
     voxel_size: Real | None = Field(None, gt=0, description="Level-set voxel (m); default half the particle spacing.")
-    smooth_iters: Int = Field(5, ge=0, le=50, description="Level-set smoothing passes (together they move the surface inward at most 0.3 x the particle spacing).")
+    smooth_iters: Int = Field(8, ge=0, le=50, description="Level-set smoothing steps (mean-curvature flow along the surface; together they move the surface inward at most 0.3 x the particle spacing).")
     dilate: Real = Field(0.0, description="Offset (m): + dilates, - erodes.")
     min_feature_particles: Int = Field(8, ge=0, description="Blobs of fewer particles are removed (specks).")
     group: SurfaceGroup = Field(SurfaceGroup.MATERIAL, description="One surface per material, per object, or one.")

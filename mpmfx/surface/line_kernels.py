@@ -103,51 +103,6 @@ def row_steps(axis: int):
     return wp.where(axis == 0, BS, 1), wp.where(axis == 0, 1, BS)
 
 
-@wp.kernel
-def blur_lines(
-    bcoord: wp.array(dtype=wp.vec3i),
-    bmap: wp.array3d(dtype=wp.int32),
-    src: wp.array(dtype=vec8),
-    axis: int,
-    out_v: float,
-    in_v: float,
-    dst: wp.array(dtype=vec8),
-    base: int,
-):
-    """sparse_kernels.blur_axis on one block (thread = block), 8 voxels at a time: src and dst
-    are the level set's voxels as rows of 8 along z (a vec8 view of the float array). Along x
-    or y a row's neighbours are whole rows, so 8 lines blur side by side; along z a row is a
-    line and its neighbours are the row shifted by one. Each voxel gets blur_axis's
-    0.25 prev + 0.5 cur + 0.25 next, in that order: the same bits (2.5x fewer instructions
-    than a voxel at a time)."""
-    b = wp.tid() + base
-    below = side_code(bmap, bcoord[b], axis, -1)
-    above = side_code(bmap, bcoord[b], axis, 1)
-    r0 = b * 64
-    if axis == 2:
-        for l in range(64):
-            cur = src[r0 + l]
-            lo = row_or_tile(src, below, l, out_v, in_v)[BS - 1]
-            hi = row_or_tile(src, above, l, out_v, in_v)[0]
-            prev = vec8(lo, cur[0], cur[1], cur[2], cur[3], cur[4], cur[5], cur[6])
-            nxt = vec8(cur[1], cur[2], cur[3], cur[4], cur[5], cur[6], cur[7], hi)
-            dst[r0 + l] = 0.25 * prev + 0.5 * cur + 0.25 * nxt
-        return
-    sa, so = row_steps(axis)
-    for o in range(BS):
-        prev = row_or_tile(src, below, (BS - 1) * sa + o * so, out_v, in_v)
-        cur = src[r0 + o * so]
-        for k in range(BS):
-            nxt = vec8(0.0)
-            if k < BS - 1:
-                nxt = src[r0 + (k + 1) * sa + o * so]
-            else:
-                nxt = row_or_tile(src, above, o * so, out_v, in_v)
-            dst[r0 + k * sa + o * so] = 0.25 * prev + 0.5 * cur + 0.25 * nxt
-            prev = cur
-            cur = nxt
-
-
 @wp.func
 def weight_row(src: wp.array(dtype=vec8), code: int, r: int, own: vec8):
     """weight_at for a row: row r of the block with code `code`, 0 on an OUTSIDE tile, the
@@ -169,9 +124,10 @@ def blur_weight_lines(
     base: int,
 ):
     """sparse_kernels.blur_weight_axis with step 2 on one block (thread = block), 8 voxels at a
-    time as blur_lines (src, dst: vec8 rows along z): each voxel gets 0.25 (2 before) + 0.5
-    itself + 0.25 (2 after), in that order, a tap on an OUTSIDE tile 0, on an INSIDE one the
-    voxel's own value (weight_at)."""
+    time (src, dst: the weights as vec8 rows along z; along x or y a row's neighbours are whole
+    rows, along z a row is a line and its neighbours the row shifted): each voxel gets 0.25
+    (2 before) + 0.5 itself + 0.25 (2 after), in that order, a tap on an OUTSIDE tile 0, on an
+    INSIDE one the voxel's own value (weight_at)."""
     b = wp.tid() + base
     below = side_code(bmap, bcoord[b], axis, -1)
     above = side_code(bmap, bcoord[b], axis, 1)

@@ -2,7 +2,7 @@
 
 1. blocks: particles are binned into blocks of 8^3 voxels (count, radix sort by block);
    a block is OUTSIDE (no particle within the kernel reach), INSIDE (it and its neighbours
-   are at least half full: the surface is farther than the kernel and the blur reach, see
+   are at least half full: the surface is farther than the kernel and the smoothing reach, see
    _dense_rule), or ACTIVE.
    OUTSIDE blocks the grid boundary does not reach (large voids) become INSIDE.
 2. field: Zhu-Bridson phi at each voxel of ACTIVE blocks, GATHERED from the particles of the
@@ -11,7 +11,7 @@
    voxels not connected to a particle or an INSIDE block are specks of the noisy field (->
    outside). Flood fill by line sweeps along block rows (8 voxels of progress per launch),
    which settles in a few rounds because the band is thin;
-4. dilate, renormalise, smooth, give voxels next to a tile the tile's sign, topology again,
+4. dilate, renormalise, smooth (mean-curvature flow), give voxels next to a tile the tile's sign, topology again,
    renormalise to world units;
 5. marching cubes over active cells (Warp's tables, copied in :mod:`mpmfx.surface.mc_tables`),
    normals and velocities.
@@ -19,7 +19,7 @@
 Everything runs on the Warp device (`surface_on_device`, a few host syncs for sizes); the host
 copy (`DeviceSurface.download`) is separate, so a caller or the benchmark can leave it out;
 `SurfaceResult.stats` / `DeviceSurface.stats` say how long each stage took.
-On one H100, 10M particles at voxel = r, one blur: 39-66 ms on the device (README).
+Device times at 10M particles: README, "Benchmarks".
 """
 
 from __future__ import annotations
@@ -46,6 +46,9 @@ NORMAL_STEP = 2  # voxels between the taps of the weight blur (the weights are s
 MAX_BLOCK_SWEEP_ROUNDS = 256  # block-grid flood fill (a full line per launch: settles in a few rounds)
 SEED_DEPTH = 0.5  # x particle radius: how deep a particle's voxel must be to seed a genuine inside component
 SMOOTH_LIMIT = 0.5  # x particle radius: how far smoothing may move the level set inward (see _smooth)
+FLOW_DT = 0.25  # voxel^2, one smoothing step (sparse_kernels.curvature_flow): a [1 2 1]/4 pass's spread along the surface
+FLOW_BAND = 3.0  # voxels: the smoothing moves the values this close to the zero level (fully within FLOW_BAND - 1)
+FLOW_REACH = 4  # voxels from the zero level that the smoothing reads: FLOW_BAND and its stencil
 ANISO_NORMAL_ITERS = 4  # inverse-power iterations that turn the normal towards the neighbours' thinnest axis
 ANISO_COV_EPS = 0.01  # x kernel radius^2: regularises the covariance of a flat (lattice) sheet
 ANISO_MAX_RATIO = 4.0  # Yu & Turk's k_r: an ellipsoid's axes differ by at most this factor
@@ -75,8 +78,8 @@ class SparseGrid:
         self.normal_passes = int(round(added / (0.5 * NORMAL_STEP**2)))
         self.background = params.band_voxels * self.voxel
         self.far_vox = max(self.kernel_vox, self.r_vox + params.band_voxels + 1.0)
-        self.wide = float(params.band_voxels + params.smooth_iters + 2)
-        # a voxel whose final value is not +background lies within r + dilation + band + blur of
+        self.wide = float(params.band_voxels + smooth_reach(params) + 2)
+        # a voxel whose final value is not +background lies within r + dilation + band + smoothing of
         # a particle; +2 voxels for the gradient stencils
         self.reach_vox = self.r_vox + max(params.dilate, 0.0) / self.voxel + self.wide + 2.0
         self.reach_blocks = int(math.ceil(max(self.reach_vox, self.gather_vox) / BS))
@@ -96,6 +99,12 @@ class SparseGrid:
         self.origin = self.ijk0.astype(np.float64) * self.voxel
 
 
+def smooth_reach(params: SurfaceParams) -> int:
+    """Voxels from the zero level that the smoothing's steps read (0 without smoothing): the
+    flow moves only values within FLOW_BAND and reads their neighbours, however many steps."""
+    return min(params.smooth_iters, FLOW_REACH)
+
+
 def _dense_rule(grid: SparseGrid, params: SurfaceParams) -> tuple[int, int, float]:
     """(dense_reach blocks, dense_min particles, depth voxels): a block is INSIDE when every
     block within dense_reach holds at least dense_min particles (sparse_kernels.classify_blocks);
@@ -103,8 +112,8 @@ def _dense_rule(grid: SparseGrid, params: SurfaceParams) -> tuple[int, int, floa
 
     An INSIDE block stands for the deep interior: its voxels read constant tile values (raw
     field -r, distance -grid.wide), which is right only where the surface lies at least
-    `depth` voxels away: the kernel's reach and the blur's (smooth_iters voxels), less one
-    voxel (the blur's last tap weighs 4^-smooth_iters, the kernel's outermost voxel little).
+    `depth` voxels away: the kernel's reach and the smoothing's (smooth_reach), less one
+    voxel (the kernel's outermost voxel weighs little).
     A block cut by a flat face holds the fraction of the particles of a full block (at the
     nominal spacing particle_radius / PARTICLE_RADIUS_PER_SPACING, what the pipeline passes)
     that lies inside the face. So with dense_reach rings of neighbours each holding fill x a
@@ -117,7 +126,7 @@ def _dense_rule(grid: SparseGrid, params: SurfaceParams) -> tuple[int, int, floa
     -> 0.117 h mean error, 1M 0.137 -> 0.119 h; 2-core CPU, the H100's numbers to the digit)."""
     # the kernel's reach across the surface is the round kernel's (anisotropic kernels are
     # short across it, long only along it)
-    depth = max(grid.kernel_vox, float(params.smooth_iters)) - 1.0
+    depth = max(grid.kernel_vox, float(smooth_reach(params))) - 1.0
     reach = 1 + max(0, int(math.ceil((depth - MAX_DENSE_FILL * BS) / BS)))
     fill = min(max((depth - (reach - 1) * BS) / BS, 1.0 / BS), MAX_DENSE_FILL)
     spacing = params.particle_radius / PARTICLE_RADIUS_PER_SPACING
@@ -237,16 +246,15 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     tiles = (grid.wide, -grid.wide)
     if params.close_voids > 0.0 and params.smooth_iters > 0 and nvox:
         dist = _close_voids(wp, S, bcoord, bmap, dist, params.close_voids / grid.voxel, grid.wide)
-    # the blur reads an INSIDE tile as deep as the dense rule guarantees, not -wide: from a face,
-    # its taps reach a tile's first rows, which lie about that deep. -wide (10 voxels at "fine"
-    # against 4) pulled flat faces a further +0.006 h out at five passes (100k lattice box "fine"
-    # 0.0453 -> 0.0420 h; no random row moves)
-    blur_tiles = (tiles[0], -min(grid.inside_depth, grid.wide))
-    phi = _smooth(wp, S, bcoord, bmap, dist, params.smooth_iters, blur_tiles, limit=SMOOTH_LIMIT * grid.r_vox)
+    # the smoothing reads an INSIDE tile as deep as the dense rule guarantees, not -wide: from a
+    # face, its stencil reaches a tile's first rows, which lie about that deep (with the blur it
+    # replaced, -wide pulled flat faces +0.006 h out: 100k lattice box "fine" 0.0453 -> 0.0420 h)
+    flow_tiles = (tiles[0], -min(grid.inside_depth, grid.wide))
+    phi = _smooth(wp, S, bcoord, bmap, dist, params.smooth_iters, flow_tiles, limit=SMOOTH_LIMIT * grid.r_vox)
     # marching cubes needs no crossing on a tile face; giving voxels next to a tile its sign can
     # seal an outside pocket whose only way out ran along an inside tile (a bubble, seen on
     # random samples), so it comes before the last topology pass, not after. That pass also
-    # catches what blurring did: closed thin outside tunnels (bubbles), cut inside necks (specks).
+    # catches what smoothing did: closed thin outside tunnels (bubbles), cut inside necks (specks).
     if _lines(phi):
         from mpmfx.surface import line_kernels as L
 
@@ -655,24 +663,26 @@ def _close_voids(wp, S, bcoord, bmap, dist, rho: float, clip: float):
 
 
 def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
-    """`iters` passes of the [1 2 1]/4 blur along each axis over the distance `dist` (kept),
-    the surface then moved at most `limit` voxels inward. The blur averages the surface's noise
-    on random samples away (mean error 0.14 -> 0.11 h at 5 passes); the limit keeps it from
-    eroding what is thinner than the blur is wide (a one-particle sheet: half thickness ~r).
-    Outward it is free: that is how the dents of sample voids fill (max error 1.2 -> 0.75 h on
-    the random torus at 100k; a symmetric limit kept them)."""
+    """`iters` steps of the level set's mean-curvature flow over the distance `dist` (kept;
+    sparse_kernels.curvature_flow, FLOW_DT voxel^2 a step, values within FLOW_BAND of the zero
+    level), the surface then moved at most `limit` voxels inward. The flow averages the
+    surface's noise on random samples away, as a [1 2 1]/4 blur along each axis did, but only
+    along the surface: the blur's Laplacian also averaged across it, so it ate into anything
+    thinner than it was wide, and pinched the gaps of a random sheet into more holes. 2-core
+    CPU, 100k particles, mean error in h at the same count (random sphere / torus / box, "fine",
+    8 steps): blur 0.0884 / 0.0939 / 0.1172, flow 0.0877 / 0.0928 / 0.1169; the random thin sheet's
+    holes at 8 steps: blur 540 (anisotropic 250), flow 94 (2), and with "fine"'s 5 blur passes
+    463 (136) (docs/surfacing-log.md, "Smoothing along the surface"). The limit keeps the flow
+    from shrinking a drop or a filament away (half thickness ~r). Outward it is free: that is
+    how the dents of sample voids fill."""
     from mpmfx.surface import line_kernels as L
 
     if iters == 0:
         return dist
-    phi, tmp = dist, wp.empty_like(dist)  # the first pass reads dist itself (kept: no copy), then two buffers take turns
+    phi, tmp = dist, wp.empty_like(dist)  # the first step reads dist itself (kept: no copy), then two buffers take turns
     for _ in range(iters):
-        for axis in range(3):
-            if _lines(phi):
-                _blocks(wp, L.blur_lines, [bcoord, bmap, L.rows(phi), axis, *tiles, L.rows(tmp)], light=True)
-            else:
-                _split(wp, S.blur_axis, phi.shape[0], [bcoord, bmap, phi, axis, *tiles, tmp])
-            phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)
+        _split(wp, S.curvature_flow, phi.shape[0], [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, tmp])
+        phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)
     if _lines(phi):
         _blocks(wp, L.limit_inward_lines, [bcoord, L.rows(phi), L.rows(dist), limit])
     else:

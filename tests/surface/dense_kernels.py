@@ -140,20 +140,43 @@ def axis_offset(axis: int, s: int):
 
 
 @wp.kernel
-def blur_axis(src: wp.array3d(dtype=float), axis: int, dst: wp.array3d(dtype=float)):
-    """dst = [1 2 1]/4 blur of src along `axis` (edge values repeated)."""
+def curvature_flow(src: wp.array3d(dtype=float), dt: float, band: float, dst: wp.array3d(dtype=float)):
+    """mpmfx.surface.sparse_kernels.curvature_flow on the dense grid (edge values repeated)."""
     i, j, k = wp.tid()
-    n = src.shape[axis]
-    o = axis_offset(axis, 1)
-    c = wp.vec3i(i, j, k)
-    t = c[axis]
-    lo = c - o
-    hi = c + o
-    if t == 0:
-        lo = c
-    if t == n - 1:
-        hi = c
-    dst[i, j, k] = 0.25 * src[lo[0], lo[1], lo[2]] + 0.5 * src[i, j, k] + 0.25 * src[hi[0], hi[1], hi[2]]
+    p0 = src[i, j, k]
+    taper = wp.clamp(band - wp.abs(p0), 0.0, 1.0)
+    if taper == 0.0:
+        dst[i, j, k] = p0
+        return
+    nx = src.shape[0] - 1
+    ny = src.shape[1] - 1
+    nz = src.shape[2] - 1
+    im = wp.max(i - 1, 0)
+    ip = wp.min(i + 1, nx)
+    jm = wp.max(j - 1, 0)
+    jp = wp.min(j + 1, ny)
+    km = wp.max(k - 1, 0)
+    kp = wp.min(k + 1, nz)
+    xm = src[im, j, k]
+    xp = src[ip, j, k]
+    ym = src[i, jm, k]
+    yp = src[i, jp, k]
+    zm = src[i, j, km]
+    zp = src[i, j, kp]
+    gx = 0.5 * (xp - xm)
+    gy = 0.5 * (yp - ym)
+    gz = 0.5 * (zp - zm)
+    fxx = xp - 2.0 * p0 + xm
+    fyy = yp - 2.0 * p0 + ym
+    fzz = zp - 2.0 * p0 + zm
+    fxy = 0.25 * (src[ip, jp, k] - src[ip, jm, k] - src[im, jp, k] + src[im, jm, k])
+    fxz = 0.25 * (src[ip, j, kp] - src[ip, j, km] - src[im, j, kp] + src[im, j, km])
+    fyz = 0.25 * (src[i, jp, kp] - src[i, jp, km] - src[i, jm, kp] + src[i, jm, km])
+    g2 = gx * gx + gy * gy + gz * gz
+    nhn = float(0.0)
+    if g2 > 1.0e-8:
+        nhn = (gx * gx * fxx + gy * gy * fyy + gz * gz * fzz + 2.0 * (gx * gy * fxy + gx * gz * fxz + gy * gz * fyz)) / g2
+    dst[i, j, k] = p0 + taper * dt * (fxx + fyy + fzz - nhn)
 
 
 @wp.kernel

@@ -14,9 +14,9 @@ plus the kernel support; the grid is aligned to multiples of the voxel size):
    normal_radius x the kernel (as the sparse surfacer);
 3. dilate; renormalise to a distance (the mean of phi / |grad phi| and that renormalised once
    more, straight to second order, as the sparse surfacer), kept next to the crossing and
-   redistanced (|grad phi| = 1) over the rest of the band; smooth ([1 2 1]/4 blur along each
-   axis, `smooth_iters` times, moving the surface at most SMOOTH_LIMIT r inward); fill bubbles the
-   blur sealed;
+   redistanced (|grad phi| = 1) over the rest of the band; smooth (`smooth_iters` steps of the
+   level set's mean-curvature flow, moving the surface at most SMOOTH_LIMIT r inward); fill
+   bubbles the smoothing sealed;
 4. specks: inside components holding fewer than `min_feature_particles` particles go;
 5. renormalise to world-unit signed distance, clipped to the narrow band;
 6. marching cubes (warp.geometry) of the zero level; normals and velocities at vertices.
@@ -32,7 +32,7 @@ import numpy as np
 
 from mpmfx.surface.params import LevelSet, SurfaceMesh, SurfaceParams, SurfaceResult, kernel_volume
 from mpmfx.surface.reconstruct import check_inputs
-from mpmfx.surface.sparse import NORMAL_STEP, SMOOTH_LIMIT
+from mpmfx.surface.sparse import FLOW_BAND, FLOW_DT, NORMAL_STEP, SMOOTH_LIMIT, smooth_reach
 
 log = logging.getLogger(__name__)
 
@@ -73,7 +73,7 @@ def surface_dense(
         # across the surface, and blurring a convex profile moves flat faces inward (0.04 h
         # per pass, measured on a box); a linear profile blurs without moving.
         distance = wp.empty_like(phi)
-        wide = float(params.band_voxels + params.smooth_iters + 2)
+        wide = float(params.band_voxels + smooth_reach(params) + 2)
         wp.launch(K.renormalise, phi.shape, inputs=[phi, 1.0, wide, distance])
         again = wp.empty_like(phi)
         wp.launch(K.renormalise, phi.shape, inputs=[distance, 1.0, wide, again])
@@ -84,7 +84,7 @@ def surface_dense(
             phi = wp.array(np.minimum(phi.numpy(), distance.numpy() + SMOOTH_LIMIT * grid.r_vox), dtype=float)
         timings["smooth"] = _lap(wp, t0)
         if params.smooth_iters > 0:
-            # blurring closes thin outside tunnels, sealing pockets they joined to the outside
+            # smoothing closes thin outside tunnels, sealing pockets they joined to the outside
             _fill_bubbles(wp, K, phi, inside_value=-wide)
         if params.min_feature_particles > 0:
             _remove_specks(wp, K, phi, g, params.min_feature_particles, far_value=wide)
@@ -124,8 +124,8 @@ class _Grid:
         if spheres:
             support = r_vox + params.band_voxels + 1.0
         reach = max(support, r_vox + max(params.dilate, 0.0) / voxel + params.band_voxels)
-        # +smooth_iters: each blur pass spreads the field by one voxel; +2 keeps an outside ring
-        pad = int(math.ceil(reach)) + params.smooth_iters + 2
+        # + the smoothing's reach (sparse.smooth_reach); +2 keeps an outside ring
+        pad = int(math.ceil(reach)) + smooth_reach(params) + 2
         lo = np.floor(x.min(axis=0).astype(np.float64) / voxel).astype(np.int64) - pad
         hi = np.ceil(x.max(axis=0).astype(np.float64) / voxel).astype(np.int64) + pad
         shape = tuple(int(s) for s in (hi - lo + 1))
@@ -236,9 +236,8 @@ def _redistance(d: np.ndarray, clip: float) -> np.ndarray:
 def _smooth(wp, K, phi, iters: int):
     tmp = wp.empty_like(phi)
     for _ in range(iters):
-        for axis in range(3):
-            wp.launch(K.blur_axis, phi.shape, inputs=[phi, axis, tmp])
-            phi, tmp = tmp, phi
+        wp.launch(K.curvature_flow, phi.shape, inputs=[phi, FLOW_DT, FLOW_BAND, tmp])
+        phi, tmp = tmp, phi
     return phi
 
 

@@ -12,8 +12,10 @@ pytest.importorskip("warp")
 
 
 def test_random_sphere_within_an_eighth_of_a_spacing_with_the_shot_setting():
-    # the surface stage's setting ("fine"), 20k uniformly random particles: measured 0.114 h mean,
-    # 0.97 h max, one piece (before redistancing and five limited blur passes: 0.140 h)
+    # the surface stage's setting ("fine"), 20k uniformly random particles: measured 0.105 h mean,
+    # 0.52 h max, one piece, volume -1.3 % (eight steps of the curvature flow; five limited blur
+    # passes gave 0.112 h, 0.59 h, -0.9 %; none 0.140 h): smoothing shrinks a small curved body
+    # by its curvature, here 17 spacings in radius
     x, h = sample_shape("sphere", 20_000, "random")
     setting = dict(OURS["fine"])
     params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False,
@@ -21,10 +23,10 @@ def test_random_sphere_within_an_eighth_of_a_spacing_with_the_shot_setting():
     mesh = surface_particles(x, None, params, device="cpu").mesh
     err = np.abs(shape_sdf("sphere")[0](mesh.vertices.astype(np.float64))) / h
     volume, pieces = mesh_stats(mesh.vertices, mesh.faces)
-    assert err.mean() < 0.125, f"mean vertex error {err.mean():.3f} h"
-    assert err.max() < 1.2, f"max vertex error {err.max():.2f} h"
+    assert err.mean() < 0.12, f"mean vertex error {err.mean():.3f} h"
+    assert err.max() < 1.0, f"max vertex error {err.max():.2f} h"
     assert pieces == 1
-    assert abs(volume / shape_sdf("sphere")[1] - 1.0) < 0.01
+    assert abs(volume / shape_sdf("sphere")[1] - 1.0) < 0.015
 
 
 def test_thin_random_sheet_stays_one_sheet_with_anisotropic_kernels():
@@ -36,6 +38,28 @@ def test_thin_random_sheet_stays_one_sheet_with_anisotropic_kernels():
     assert aniso["holes"] <= 3, f"{aniso['holes']} holes with anisotropic kernels"
     assert iso["holes"] > 5 * max(aniso["holes"], 1), (iso["holes"], aniso["holes"])
     assert abs(aniso["thickness_err"]) < 0.6, f"thickness error {aniso['thickness_err']:+.2f} (x h)"
+
+
+def test_thin_random_sheet_stays_nearly_whole_at_the_shot_setting():
+    # "fine", a disc one spacing thick, 3000 random particles: the curvature flow smooths along
+    # the surface only, so it closes the raw field's gaps (57 holes unsmoothed) where the blur
+    # it replaced pinched them into more (measured: flow 11 holes, anisotropic 1; blur 68 / 13)
+    iso = measure_sheet(3000, "random", label="fine", device="cpu")
+    aniso = measure_sheet(3000, "random", label="fine", device="cpu", anisotropic=True)
+    for row in (iso, aniso):
+        assert row["components"] == 1 and row["open_edges"] == 0
+    assert iso["holes"] <= 20, f"{iso['holes']} holes through the sheet"
+    assert aniso["holes"] <= 3, f"{aniso['holes']} holes with anisotropic kernels"
+
+
+def test_smoothing_does_not_thin_a_flat_sheet():
+    # one lattice layer at "fine": thirty smoothing steps move its faces by 0.03 h (thickness
+    # +0.166 -> +0.136 h); thirty passes of the blur that smoothed before took it to -0.133 h,
+    # held only by the inward limit
+    unsmoothed = measure_sheet(3000, "lattice", label="fine", device="cpu", smooth_iters=0)
+    smoothed = measure_sheet(3000, "lattice", label="fine", device="cpu", smooth_iters=30)
+    assert smoothed["holes"] == 0 and smoothed["components"] == 1
+    assert abs(smoothed["thickness_err"] - unsmoothed["thickness_err"]) < 0.1, (smoothed, unsmoothed)
 
 
 def test_anisotropic_must_be_a_bool():

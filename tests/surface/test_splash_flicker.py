@@ -71,10 +71,13 @@ def test_a_slowly_moving_block_does_not_flicker_at_the_shot_setting():
     # start the redistancing at their distance to the plane through the crossings, with the
     # other axes' zero levels extrapolated so that the start does not jump when a crossing
     # appears on another axis between frames. Measured p99 of the vertices' distance to the
-    # previous surface 0.077 h before the plane start, 0.052 h with it ("fast" 0.074 -> 0.049)
+    # previous surface 0.077 h before the plane start, 0.052 h with it ("fast" 0.074 -> 0.049).
+    # Smoothing more turns the moving box's rounded edges more between frames: p99 normal turn
+    # 4.3 / 5.4 degrees at 5 / 8 steps of the curvature flow (the stage's 8), 4.7 / 7.2 with 5 /
+    # 8 passes of the blur it replaced; p99 distance 0.049 / 0.055 h
     xs, h, step = flicker.moving_frames(3000, frames=4)
     rows, _ = flicker.flicker_run(flicker.ours("fine", h, "cpu"), xs, h, step)
     s = flicker.summarise("mpmfx fine", rows, len(xs[0]), h)
     assert s["normal_jitter_h"] < 0.01, s
     assert s["normal_jitter_p99_h"] < 0.062, s
-    assert s["normal_turn_p99_deg"] < 5.3, s
+    assert s["normal_turn_p99_deg"] < 5.8, s
