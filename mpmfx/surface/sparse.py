@@ -681,7 +681,10 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
         return dist
     phi, tmp = dist, wp.empty_like(dist)  # the first step reads dist itself (kept: no copy), then two buffers take turns
     for _ in range(iters):
-        _split(wp, S.curvature_flow, phi.shape[0], [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, tmp])
+        if _lines(phi):
+            _blocks(wp, S.curvature_flow_blocks, [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, tmp])
+        else:
+            _split(wp, S.curvature_flow, phi.shape[0], [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, tmp])
         phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)
     if _lines(phi):
         _blocks(wp, L.limit_inward_lines, [bcoord, L.rows(phi), L.rows(dist), limit])

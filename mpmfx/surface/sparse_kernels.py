@@ -498,6 +498,49 @@ def limit_inward(a: wp.array(dtype=float), ref: wp.array(dtype=float), delta: fl
     a[t] = wp.min(a[t], ref[t] + delta)
 
 
+@wp.func
+def flow_step(p0: float, xm: float, xp: float, ym: float, yp: float, zm: float, zp: float, fxy: float, fxz: float,
+              fyz: float, dt: float, taper: float):
+    """p0 after one step of curvature_flow, from its six axis neighbours and the mixed second
+    differences (voxels)."""
+    gx = 0.5 * (xp - xm)
+    gy = 0.5 * (yp - ym)
+    gz = 0.5 * (zp - zm)
+    fxx = xp - 2.0 * p0 + xm
+    fyy = yp - 2.0 * p0 + ym
+    fzz = zp - 2.0 * p0 + zm
+    g2 = gx * gx + gy * gy + gz * gz
+    nhn = float(0.0)
+    if g2 > 1.0e-8:
+        nhn = (gx * gx * fxx + gy * gy * fyy + gz * gz * fzz + 2.0 * (gx * gy * fxy + gx * gz * fxz + gy * gz * fyz)) / g2
+    return p0 + taper * dt * (fxx + fyy + fzz - nhn)
+
+
+@wp.func
+def flow_taper(p0: float, band: float):
+    """The share of a full flow step a value p0 (voxels from the zero level) takes: full steps
+    within band - 1 voxel of the zero level, none beyond band, linear between (a hard edge
+    made voxels start and stop moving as the surface drifted between frames: p99 normal turn
+    7.2 degrees at a 1.5-voxel band)."""
+    return wp.clamp(band - wp.abs(p0), 0.0, 1.0)
+
+
+@wp.func
+def flow_at(bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float), p0: float, i: int, j: int, k: int,
+            out_v: float, in_v: float, dt: float, taper: float):
+    """flow_step of voxel (i, j, k), its neighbours read through the block map."""
+    fxy = 0.25 * (get(bmap, src, i + 1, j + 1, k, out_v, in_v) - get(bmap, src, i + 1, j - 1, k, out_v, in_v)
+                  - get(bmap, src, i - 1, j + 1, k, out_v, in_v) + get(bmap, src, i - 1, j - 1, k, out_v, in_v))
+    fxz = 0.25 * (get(bmap, src, i + 1, j, k + 1, out_v, in_v) - get(bmap, src, i + 1, j, k - 1, out_v, in_v)
+                  - get(bmap, src, i - 1, j, k + 1, out_v, in_v) + get(bmap, src, i - 1, j, k - 1, out_v, in_v))
+    fyz = 0.25 * (get(bmap, src, i, j + 1, k + 1, out_v, in_v) - get(bmap, src, i, j + 1, k - 1, out_v, in_v)
+                  - get(bmap, src, i, j - 1, k + 1, out_v, in_v) + get(bmap, src, i, j - 1, k - 1, out_v, in_v))
+    return flow_step(p0, get(bmap, src, i - 1, j, k, out_v, in_v), get(bmap, src, i + 1, j, k, out_v, in_v),
+                     get(bmap, src, i, j - 1, k, out_v, in_v), get(bmap, src, i, j + 1, k, out_v, in_v),
+                     get(bmap, src, i, j, k - 1, out_v, in_v), get(bmap, src, i, j, k + 1, out_v, in_v),
+                     fxy, fxz, fyz, dt, taper)
+
+
 @wp.kernel
 def curvature_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
                    out_v: float, in_v: float, dt: float, band: float, dst: wp.array(dtype=float), base: int):
@@ -505,45 +548,69 @@ def curvature_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.i
     n^T H n) (voxels; n = grad phi / |grad phi|, H the Hessian): the blur's Laplacian without
     its part along the normal, so a flat sheet stays where it is (at a thin part's midplane,
     where the normal flips, n^T H n takes the kink). Only voxels within `band` of the zero level
-    move (the surface is what the flow is about; a 2-voxel band instead of 3 made the moving
-    box's p99 normal turn between frames 6.8 degrees instead of 5.4)."""
+    move (flow_taper: the surface is what the flow is about; a 2-voxel band instead of 3 made
+    the moving box's p99 normal turn between frames 6.8 degrees instead of 5.4)."""
     t = wp.tid() + base
     c = voxel_of(t, bcoord)
     p0 = src[t]
-    # full steps within band - 1 voxel of the zero level, none beyond band, linear between: a
-    # hard edge made voxels start and stop moving as the surface drifted between frames (p99
-    # normal turn 7.2 degrees at a 1.5-voxel band)
-    taper = wp.clamp(band - wp.abs(p0), 0.0, 1.0)
+    taper = flow_taper(p0, band)
     if taper == 0.0:
         dst[t] = p0
-        return
-    i = c[0]
-    j = c[1]
-    k = c[2]
-    xm = get(bmap, src, i - 1, j, k, out_v, in_v)
-    xp = get(bmap, src, i + 1, j, k, out_v, in_v)
-    ym = get(bmap, src, i, j - 1, k, out_v, in_v)
-    yp = get(bmap, src, i, j + 1, k, out_v, in_v)
-    zm = get(bmap, src, i, j, k - 1, out_v, in_v)
-    zp = get(bmap, src, i, j, k + 1, out_v, in_v)
-    gx = 0.5 * (xp - xm)
-    gy = 0.5 * (yp - ym)
-    gz = 0.5 * (zp - zm)
-    fxx = xp - 2.0 * p0 + xm
-    fyy = yp - 2.0 * p0 + ym
-    fzz = zp - 2.0 * p0 + zm
-    fxy = 0.25 * (get(bmap, src, i + 1, j + 1, k, out_v, in_v) - get(bmap, src, i + 1, j - 1, k, out_v, in_v)
-                  - get(bmap, src, i - 1, j + 1, k, out_v, in_v) + get(bmap, src, i - 1, j - 1, k, out_v, in_v))
-    fxz = 0.25 * (get(bmap, src, i + 1, j, k + 1, out_v, in_v) - get(bmap, src, i + 1, j, k - 1, out_v, in_v)
-                  - get(bmap, src, i - 1, j, k + 1, out_v, in_v) + get(bmap, src, i - 1, j, k - 1, out_v, in_v))
-    fyz = 0.25 * (get(bmap, src, i, j + 1, k + 1, out_v, in_v) - get(bmap, src, i, j + 1, k - 1, out_v, in_v)
-                  - get(bmap, src, i, j - 1, k + 1, out_v, in_v) + get(bmap, src, i, j - 1, k - 1, out_v, in_v))
-    g2 = gx * gx + gy * gy + gz * gz
-    lap = fxx + fyy + fzz
-    nhn = float(0.0)
-    if g2 > 1.0e-8:
-        nhn = (gx * gx * fxx + gy * gy * fyy + gz * gz * fzz + 2.0 * (gx * gy * fxy + gx * gz * fxz + gy * gz * fyz)) / g2
-    dst[t] = p0 + taper * dt * (lap - nhn)
+    else:
+        dst[t] = flow_at(bmap, src, p0, c[0], c[1], c[2], out_v, in_v, dt, taper)
+
+
+@wp.func
+def block_nb(bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float), t: int, c0: wp.vec3i, x: int, y: int,
+             z: int, dx: int, dy: int, dz: int, out_v: float, in_v: float):
+    """src at voxel (x + dx, y + dy, z + dz) of the block whose first voxel is c0 (t: the index
+    of (x, y, z)): read directly when it lies in the block, else through the block map."""
+    xx = x + dx
+    yy = y + dy
+    zz = z + dz
+    if xx >= 0 and xx < BS and yy >= 0 and yy < BS and zz >= 0 and zz < BS:
+        return src[t + dx * 64 + dy * 8 + dz]
+    return get(bmap, src, c0[0] + xx, c0[1] + yy, c0[2] + zz, out_v, in_v)
+
+
+@wp.kernel
+def curvature_flow_blocks(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
+                          out_v: float, in_v: float, dt: float, band: float, dst: wp.array(dtype=float), base: int):
+    """curvature_flow for the 512 voxels of active block b (thread = block; the CPU path, where
+    a thread a voxel costs its launch overhead 512 times): neighbours inside the block are read
+    directly, only those across its faces through the block map. The same numbers."""
+    b = wp.tid() + base
+    t0 = b * BV
+    c0 = bcoord[b] * BS
+    for l in range(BV):
+        t = t0 + l
+        p0 = src[t]
+        taper = flow_taper(p0, band)
+        if taper == 0.0:
+            dst[t] = p0
+            continue
+        x = l // 64
+        y = (l // 8) % 8
+        z = l % 8
+        fxy = 0.25 * (block_nb(bmap, src, t, c0, x, y, z, 1, 1, 0, out_v, in_v)
+                      - block_nb(bmap, src, t, c0, x, y, z, 1, -1, 0, out_v, in_v)
+                      - block_nb(bmap, src, t, c0, x, y, z, -1, 1, 0, out_v, in_v)
+                      + block_nb(bmap, src, t, c0, x, y, z, -1, -1, 0, out_v, in_v))
+        fxz = 0.25 * (block_nb(bmap, src, t, c0, x, y, z, 1, 0, 1, out_v, in_v)
+                      - block_nb(bmap, src, t, c0, x, y, z, 1, 0, -1, out_v, in_v)
+                      - block_nb(bmap, src, t, c0, x, y, z, -1, 0, 1, out_v, in_v)
+                      + block_nb(bmap, src, t, c0, x, y, z, -1, 0, -1, out_v, in_v))
+        fyz = 0.25 * (block_nb(bmap, src, t, c0, x, y, z, 0, 1, 1, out_v, in_v)
+                      - block_nb(bmap, src, t, c0, x, y, z, 0, 1, -1, out_v, in_v)
+                      - block_nb(bmap, src, t, c0, x, y, z, 0, -1, 1, out_v, in_v)
+                      + block_nb(bmap, src, t, c0, x, y, z, 0, -1, -1, out_v, in_v))
+        dst[t] = flow_step(p0, block_nb(bmap, src, t, c0, x, y, z, -1, 0, 0, out_v, in_v),
+                           block_nb(bmap, src, t, c0, x, y, z, 1, 0, 0, out_v, in_v),
+                           block_nb(bmap, src, t, c0, x, y, z, 0, -1, 0, out_v, in_v),
+                           block_nb(bmap, src, t, c0, x, y, z, 0, 1, 0, out_v, in_v),
+                           block_nb(bmap, src, t, c0, x, y, z, 0, 0, -1, out_v, in_v),
+                           block_nb(bmap, src, t, c0, x, y, z, 0, 0, 1, out_v, in_v),
+                           fxy, fxz, fyz, dt, taper)
 
 
 @wp.kernel
