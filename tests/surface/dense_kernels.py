@@ -12,6 +12,8 @@ LABEL_BIG = wp.constant(2147483647)  # region voxel not (yet) reached by any see
 
 # The flood fill's line sweep is the product's (the same kernel over any 3-D label grid, the same labels).
 from mpmfx.surface.sparse_kernels import sweep_block_labels as sweep_labels  # noqa: E402,F401
+# ... and the smoothing's arithmetic (the dense grid reads its neighbours its own way)
+from mpmfx.surface.sparse_kernels import flow_step, flow_taper  # noqa: E402
 
 
 @wp.func
@@ -144,7 +146,7 @@ def curvature_flow(src: wp.array3d(dtype=float), dt: float, band: float, dst: wp
     """mpmfx.surface.sparse_kernels.curvature_flow on the dense grid (edge values repeated)."""
     i, j, k = wp.tid()
     p0 = src[i, j, k]
-    taper = wp.clamp(band - wp.abs(p0), 0.0, 1.0)
+    taper = flow_taper(p0, band)
     if taper == 0.0:
         dst[i, j, k] = p0
         return
@@ -163,20 +165,10 @@ def curvature_flow(src: wp.array3d(dtype=float), dt: float, band: float, dst: wp
     yp = src[i, jp, k]
     zm = src[i, j, km]
     zp = src[i, j, kp]
-    gx = 0.5 * (xp - xm)
-    gy = 0.5 * (yp - ym)
-    gz = 0.5 * (zp - zm)
-    fxx = xp - 2.0 * p0 + xm
-    fyy = yp - 2.0 * p0 + ym
-    fzz = zp - 2.0 * p0 + zm
     fxy = 0.25 * (src[ip, jp, k] - src[ip, jm, k] - src[im, jp, k] + src[im, jm, k])
     fxz = 0.25 * (src[ip, j, kp] - src[ip, j, km] - src[im, j, kp] + src[im, j, km])
     fyz = 0.25 * (src[i, jp, kp] - src[i, jp, km] - src[i, jm, kp] + src[i, jm, km])
-    g2 = gx * gx + gy * gy + gz * gz
-    nhn = float(0.0)
-    if g2 > 1.0e-8:
-        nhn = (gx * gx * fxx + gy * gy * fyy + gz * gz * fzz + 2.0 * (gx * gy * fxy + gx * gz * fxz + gy * gz * fyz)) / g2
-    dst[i, j, k] = p0 + taper * dt * (fxx + fyy + fzz - nhn)
+    dst[i, j, k] = flow_step(p0, xm, xp, ym, yp, zm, zp, fxy, fxz, fyz, dt, taper)
 
 
 @wp.kernel
