@@ -670,7 +670,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     along the surface: the blur's Laplacian also averaged across it, so it ate into anything
     thinner than it was wide, and pinched the gaps of a random sheet into more holes. 2-core
     CPU, 100k particles, mean error in h at the same count (random sphere / torus / box, "fine",
-    8 steps): blur 0.0884 / 0.0939 / 0.1172, flow 0.0877 / 0.0928 / 0.1169; the random thin sheet's
+    8 steps): blur 0.0884 / 0.0939 / 0.1172, flow 0.0915 / 0.0959 / 0.1185; the random thin sheet's
     holes at 8 steps: blur 540 (anisotropic 250), flow 97 (2), and with "fine"'s 5 blur passes
     463 (136) (docs/surfacing-log.md, "Smoothing along the surface"). The limit keeps the flow
     from shrinking a drop or a filament away (half thickness ~r). Outward it is free: that is
