@@ -15,7 +15,7 @@ threads (Warp's CPU launches release the GIL; mpmfx.surface.launch).
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, line_voxel, stride
+from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, flow_taper, line_voxel, stride
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
 
@@ -101,6 +101,129 @@ def row_steps(axis: int):
     """(row step along `axis`, row step along the other axis of the block's rows) for axis 0
     or 1: a block's row (x, y) is its 8 voxels along z, row x * 8 + y."""
     return wp.where(axis == 0, BS, 1), wp.where(axis == 0, 1, BS)
+
+
+vec27i = wp.types.vector(length=27, dtype=wp.int32)
+
+
+@wp.func
+def block_codes27(bmap: wp.array3d(dtype=wp.int32), bc: wp.vec3i):
+    """block_code of block bc and its 26 neighbours, at (dx + 1) * 9 + (dy + 1) * 3 + dz + 1."""
+    codes = vec27i()
+    for n in range(27):
+        codes[n] = block_code(bmap, wp.vec3i(bc[0] + n // 9 - 1, bc[1] + (n // 3) % 3 - 1, bc[2] + n % 3 - 1))
+    return codes
+
+
+@wp.func
+def ext_row(src: wp.array(dtype=vec8), codes: vec27i, x: int, y: int, dz: int, out_v: float, in_v: float):
+    """Row (x, y) (x, y in -1..8: the block's own or a neighbour's along x and y) of the block
+    dz (-1, 0, 1) along z, as row_or_tile reads it."""
+    dx = int(0)
+    dy = int(0)
+    if x < 0:
+        dx = -1
+    elif x >= BS:
+        dx = 1
+    if y < 0:
+        dy = -1
+    elif y >= BS:
+        dy = 1
+    r = (x - dx * BS) * BS + (y - dy * BS)
+    return row_or_tile(src, codes[(dx + 1) * 9 + (dy + 1) * 3 + dz + 1], r, out_v, in_v)
+
+
+@wp.func
+def shift_down(row: vec8, lo: float):
+    """The row's values at z - 1: lo, row[0], ..., row[6]."""
+    return vec8(lo, row[0], row[1], row[2], row[3], row[4], row[5], row[6])
+
+
+@wp.func
+def shift_up(row: vec8, hi: float):
+    """The row's values at z + 1: row[1], ..., row[7], hi."""
+    return vec8(row[1], row[2], row[3], row[4], row[5], row[6], row[7], hi)
+
+
+@wp.func
+def z_pair(src: wp.array(dtype=vec8), codes: vec27i, x: int, y: int, row: vec8, out_v: float, in_v: float):
+    """(row at z - 1, row at z + 1) of row (x, y), its ends from the blocks below and above."""
+    lo = ext_row(src, codes, x, y, -1, out_v, in_v)[BS - 1]
+    hi = ext_row(src, codes, x, y, 1, out_v, in_v)[0]
+    return shift_down(row, lo), shift_up(row, hi)
+
+
+@wp.kernel
+def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=vec8),
+                         out_v: float, in_v: float, dt: float, band: float, dst: wp.array(dtype=vec8), base: int):
+    """sparse_kernels.curvature_flow on one block (thread = block), a row of 8 voxels along z at
+    a time: the 26 neighbour blocks are looked up once, a row's neighbour rows read once, the
+    differences formed 8 at a time; each voxel then takes flow_step as the voxel kernel does,
+    so the results are its bit for bit."""
+    b = wp.tid() + base
+    r0 = b * 64
+    moves = bool(False)  # a block with no value within `band` of the zero level stays as it is
+    for r in range(64):
+        row = src[r0 + r]
+        for k in range(BS):
+            if wp.abs(row[k]) < band:
+                moves = True
+    if not moves:
+        for r in range(64):
+            dst[r0 + r] = src[r0 + r]
+        return
+    codes = block_codes27(bmap, bcoord[b])
+    for r in range(64):
+        x = r // BS
+        y = r % BS
+        c = src[r0 + r]
+        xm = vec8()
+        xp = vec8()
+        ym = vec8()
+        yp = vec8()
+        fxy = vec8()
+        if x > 0 and x < BS - 1 and y > 0 and y < BS - 1:  # its row's x and y neighbours are in the block
+            xm = src[r0 + r - BS]
+            xp = src[r0 + r + BS]
+            ym = src[r0 + r - 1]
+            yp = src[r0 + r + 1]
+            fxy = 0.25 * (src[r0 + r + BS + 1] - src[r0 + r + BS - 1] - src[r0 + r - BS + 1] + src[r0 + r - BS - 1])
+        else:
+            xm = ext_row(src, codes, x - 1, y, 0, out_v, in_v)
+            xp = ext_row(src, codes, x + 1, y, 0, out_v, in_v)
+            ym = ext_row(src, codes, x, y - 1, 0, out_v, in_v)
+            yp = ext_row(src, codes, x, y + 1, 0, out_v, in_v)
+            fxy = 0.25 * (ext_row(src, codes, x + 1, y + 1, 0, out_v, in_v) - ext_row(src, codes, x + 1, y - 1, 0, out_v, in_v)
+                          - ext_row(src, codes, x - 1, y + 1, 0, out_v, in_v) + ext_row(src, codes, x - 1, y - 1, 0, out_v, in_v))
+        zm, zp = z_pair(src, codes, x, y, c, out_v, in_v)
+        xm_down, xm_up = z_pair(src, codes, x - 1, y, xm, out_v, in_v)
+        xp_down, xp_up = z_pair(src, codes, x + 1, y, xp, out_v, in_v)
+        ym_down, ym_up = z_pair(src, codes, x, y - 1, ym, out_v, in_v)
+        yp_down, yp_up = z_pair(src, codes, x, y + 1, yp, out_v, in_v)
+        fxz = 0.25 * (xp_up - xp_down - xm_up + xm_down)
+        fyz = 0.25 * (yp_up - yp_down - ym_up + ym_down)
+        # flow_step, 8 voxels at a time (the same operations in the same order for each)
+        gx = 0.5 * (xp - xm)
+        gy = 0.5 * (yp - ym)
+        gz = 0.5 * (zp - zm)
+        fxx = xp - 2.0 * c + xm
+        fyy = yp - 2.0 * c + ym
+        fzz = zp - 2.0 * c + zm
+        gxx = wp.cw_mul(gx, gx)
+        gyy = wp.cw_mul(gy, gy)
+        gzz = wp.cw_mul(gz, gz)
+        g2 = gxx + gyy + gzz
+        num = (wp.cw_mul(gxx, fxx) + wp.cw_mul(gyy, fyy) + wp.cw_mul(gzz, fzz)
+               + 2.0 * (wp.cw_mul(wp.cw_mul(gx, gy), fxy) + wp.cw_mul(wp.cw_mul(gx, gz), fxz) + wp.cw_mul(wp.cw_mul(gy, gz), fyz)))
+        lap = fxx + fyy + fzz
+        out = vec8()
+        for k in range(BS):
+            taper = flow_taper(c[k], band)
+            nhn = float(0.0)
+            if g2[k] > 1.0e-8:
+                nhn = num[k] / g2[k]
+            out[k] = wp.where(taper == 0.0, c[k], c[k] + taper * dt * (lap[k] - nhn))
+        dst[b * 64 + r] = out
 
 
 @wp.func

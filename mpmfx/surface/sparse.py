@@ -682,7 +682,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
     phi, tmp = dist, wp.empty_like(dist)  # the first step reads dist itself (kept: no copy), then two buffers take turns
     for _ in range(iters):
         if _lines(phi):
-            _blocks(wp, S.curvature_flow_blocks, [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, tmp])
+            _blocks(wp, L.curvature_flow_lines, [bcoord, bmap, L.rows(phi), *tiles, FLOW_DT, FLOW_BAND, L.rows(tmp)])
         else:
             _split(wp, S.curvature_flow, phi.shape[0], [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, tmp])
         phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)
