@@ -560,59 +560,6 @@ def curvature_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.i
         dst[t] = flow_at(bmap, src, p0, c[0], c[1], c[2], out_v, in_v, dt, taper)
 
 
-@wp.func
-def block_nb(bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float), t: int, c0: wp.vec3i, x: int, y: int,
-             z: int, dx: int, dy: int, dz: int, out_v: float, in_v: float):
-    """src at voxel (x + dx, y + dy, z + dz) of the block whose first voxel is c0 (t: the index
-    of (x, y, z)): read directly when it lies in the block, else through the block map."""
-    xx = x + dx
-    yy = y + dy
-    zz = z + dz
-    if xx >= 0 and xx < BS and yy >= 0 and yy < BS and zz >= 0 and zz < BS:
-        return src[t + dx * 64 + dy * 8 + dz]
-    return get(bmap, src, c0[0] + xx, c0[1] + yy, c0[2] + zz, out_v, in_v)
-
-
-@wp.kernel
-def curvature_flow_blocks(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
-                          out_v: float, in_v: float, dt: float, band: float, dst: wp.array(dtype=float), base: int):
-    """curvature_flow for the 512 voxels of active block b (thread = block; the CPU path, where
-    a thread a voxel costs its launch overhead 512 times): neighbours inside the block are read
-    directly, only those across its faces through the block map. The same numbers."""
-    b = wp.tid() + base
-    t0 = b * BV
-    c0 = bcoord[b] * BS
-    for l in range(BV):
-        t = t0 + l
-        p0 = src[t]
-        taper = flow_taper(p0, band)
-        if taper == 0.0:
-            dst[t] = p0
-            continue
-        x = l // 64
-        y = (l // 8) % 8
-        z = l % 8
-        fxy = 0.25 * (block_nb(bmap, src, t, c0, x, y, z, 1, 1, 0, out_v, in_v)
-                      - block_nb(bmap, src, t, c0, x, y, z, 1, -1, 0, out_v, in_v)
-                      - block_nb(bmap, src, t, c0, x, y, z, -1, 1, 0, out_v, in_v)
-                      + block_nb(bmap, src, t, c0, x, y, z, -1, -1, 0, out_v, in_v))
-        fxz = 0.25 * (block_nb(bmap, src, t, c0, x, y, z, 1, 0, 1, out_v, in_v)
-                      - block_nb(bmap, src, t, c0, x, y, z, 1, 0, -1, out_v, in_v)
-                      - block_nb(bmap, src, t, c0, x, y, z, -1, 0, 1, out_v, in_v)
-                      + block_nb(bmap, src, t, c0, x, y, z, -1, 0, -1, out_v, in_v))
-        fyz = 0.25 * (block_nb(bmap, src, t, c0, x, y, z, 0, 1, 1, out_v, in_v)
-                      - block_nb(bmap, src, t, c0, x, y, z, 0, 1, -1, out_v, in_v)
-                      - block_nb(bmap, src, t, c0, x, y, z, 0, -1, 1, out_v, in_v)
-                      + block_nb(bmap, src, t, c0, x, y, z, 0, -1, -1, out_v, in_v))
-        dst[t] = flow_step(p0, block_nb(bmap, src, t, c0, x, y, z, -1, 0, 0, out_v, in_v),
-                           block_nb(bmap, src, t, c0, x, y, z, 1, 0, 0, out_v, in_v),
-                           block_nb(bmap, src, t, c0, x, y, z, 0, -1, 0, out_v, in_v),
-                           block_nb(bmap, src, t, c0, x, y, z, 0, 1, 0, out_v, in_v),
-                           block_nb(bmap, src, t, c0, x, y, z, 0, 0, -1, out_v, in_v),
-                           block_nb(bmap, src, t, c0, x, y, z, 0, 0, 1, out_v, in_v),
-                           fxy, fxz, fyz, dt, taper)
-
-
 @wp.kernel
 def average_into(a: wp.array(dtype=float), b: wp.array(dtype=float)):
     """a = (a + b) / 2."""
