@@ -301,11 +301,11 @@ def small_blocks(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uin
 
 @wp.kernel
 def labels_from_bits(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), labels: wp.array(dtype=wp.int32),
-                     pending: wp.array(dtype=wp.int32), base: int):
+                     base: int):
     """Labels of topology_kernels.init_inside_labels after a fill from the bodies (seeds 2) for
     the 64 voxels of word w: outside -1, reached inside 0 (connected to an INSIDE tile: the
-    label the min-label sweeps would end at), the other inside voxels their own t + 1;
-    pending[block] = 1 (zeroed before) where such a voxel is."""
+    label the min-label sweeps would end at), the other inside voxels their own t + 1 (the
+    blocks holding those: small_blocks)."""
     w = wp.tid() + base
     s = sign[w]
     left = (~reached[w]) & (~s)
@@ -317,8 +317,6 @@ def labels_from_bits(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp
             if ((left >> wp.uint64(q)) & wp.uint64(1)) != wp.uint64(0):
                 lab = t + 1
         labels[t] = lab
-    if left != wp.uint64(0):
-        pending[w // BS] = 1
 
 
 @wp.kernel

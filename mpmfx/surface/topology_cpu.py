@@ -73,7 +73,7 @@ def small_labels(wp, T, bcoord, bmap, phi, mark):
     if not pending.numpy().any():
         return None
     labels = wp.empty(nvox, dtype=wp.int32)
-    launch_split(wp, F.labels_from_bits, sign.shape[0], [sign, reached, labels, pending], device=phi.device)
+    launch_split(wp, F.labels_from_bits, sign.shape[0], [sign, reached, labels], device=phi.device)
     changed = wp.zeros(1, dtype=wp.int32)
     for _ in range(MAX_SWEEP_ROUNDS):
         changed.zero_()
