@@ -525,22 +525,6 @@ def flow_taper(p0: float, band: float):
     return wp.clamp(band - wp.abs(p0), 0.0, 1.0)
 
 
-@wp.func
-def flow_at(bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float), p0: float, i: int, j: int, k: int,
-            out_v: float, in_v: float, dt: float, taper: float):
-    """flow_step of voxel (i, j, k), its neighbours read through the block map."""
-    fxy = 0.25 * (get(bmap, src, i + 1, j + 1, k, out_v, in_v) - get(bmap, src, i + 1, j - 1, k, out_v, in_v)
-                  - get(bmap, src, i - 1, j + 1, k, out_v, in_v) + get(bmap, src, i - 1, j - 1, k, out_v, in_v))
-    fxz = 0.25 * (get(bmap, src, i + 1, j, k + 1, out_v, in_v) - get(bmap, src, i + 1, j, k - 1, out_v, in_v)
-                  - get(bmap, src, i - 1, j, k + 1, out_v, in_v) + get(bmap, src, i - 1, j, k - 1, out_v, in_v))
-    fyz = 0.25 * (get(bmap, src, i, j + 1, k + 1, out_v, in_v) - get(bmap, src, i, j + 1, k - 1, out_v, in_v)
-                  - get(bmap, src, i, j - 1, k + 1, out_v, in_v) + get(bmap, src, i, j - 1, k - 1, out_v, in_v))
-    return flow_step(p0, get(bmap, src, i - 1, j, k, out_v, in_v), get(bmap, src, i + 1, j, k, out_v, in_v),
-                     get(bmap, src, i, j - 1, k, out_v, in_v), get(bmap, src, i, j + 1, k, out_v, in_v),
-                     get(bmap, src, i, j, k - 1, out_v, in_v), get(bmap, src, i, j, k + 1, out_v, in_v),
-                     fxy, fxz, fyz, dt, taper)
-
-
 @wp.kernel
 def curvature_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
                    out_v: float, in_v: float, dt: float, band: float, dst: wp.array(dtype=float), base: int):
@@ -551,13 +535,25 @@ def curvature_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.i
     move (flow_taper: the surface is what the flow is about; a 2-voxel band instead of 3 made
     the moving box's p99 normal turn between frames 6.8 degrees instead of 5.4)."""
     t = wp.tid() + base
-    c = voxel_of(t, bcoord)
     p0 = src[t]
     taper = flow_taper(p0, band)
     if taper == 0.0:
         dst[t] = p0
-    else:
-        dst[t] = flow_at(bmap, src, p0, c[0], c[1], c[2], out_v, in_v, dt, taper)
+        return
+    c = voxel_of(t, bcoord)
+    i = c[0]
+    j = c[1]
+    k = c[2]
+    fxy = 0.25 * (get(bmap, src, i + 1, j + 1, k, out_v, in_v) - get(bmap, src, i + 1, j - 1, k, out_v, in_v)
+                  - get(bmap, src, i - 1, j + 1, k, out_v, in_v) + get(bmap, src, i - 1, j - 1, k, out_v, in_v))
+    fxz = 0.25 * (get(bmap, src, i + 1, j, k + 1, out_v, in_v) - get(bmap, src, i + 1, j, k - 1, out_v, in_v)
+                  - get(bmap, src, i - 1, j, k + 1, out_v, in_v) + get(bmap, src, i - 1, j, k - 1, out_v, in_v))
+    fyz = 0.25 * (get(bmap, src, i, j + 1, k + 1, out_v, in_v) - get(bmap, src, i, j + 1, k - 1, out_v, in_v)
+                  - get(bmap, src, i, j - 1, k + 1, out_v, in_v) + get(bmap, src, i, j - 1, k - 1, out_v, in_v))
+    dst[t] = flow_step(p0, get(bmap, src, i - 1, j, k, out_v, in_v), get(bmap, src, i + 1, j, k, out_v, in_v),
+                       get(bmap, src, i, j - 1, k, out_v, in_v), get(bmap, src, i, j + 1, k, out_v, in_v),
+                       get(bmap, src, i, j, k - 1, out_v, in_v), get(bmap, src, i, j, k + 1, out_v, in_v),
+                       fxy, fxz, fyz, dt, taper)
 
 
 @wp.kernel
