@@ -32,6 +32,10 @@ class DeviceAdvance:
             self.clk = wp.zeros(len(Clock), dtype=wp.float64)
             self.last_bad = wp.zeros(Count.size(len(solver.materials)), dtype=wp.int32)
             self.waves = wp.array(wave_table(solver.materials), dtype=WaveParams)
+        # where each chunk's clock (and the brick P2G's wear counts) land on the host: page-locked
+        # on a GPU, so both copies queue behind the chunk and one wait reads them
+        self._clk_host = wp.empty(len(Clock), dtype=wp.float64, device="cpu", pinned=solver.device.is_cuda)
+        self._frag_host = None
         sp = StepperParams()
         sp.cfl, sp.dx, sp.dt_max, sp.dt_min = cfg.cfl, cfg.dx, cfg.dt_max, cfg.dt_min
         sp.damping, sp.drag = cfg.damping, cfg.drag
@@ -95,7 +99,7 @@ class DeviceAdvance:
         wp.capture_launch(graph)
 
     # ------------------------------------------------------------------ advance
-    def _upload(self, state, t0: float, t1: float) -> None:
+    def _upload(self, state, t0: float, t1: float) -> np.ndarray:
         ck = state.clock
         total = (t1 - t0) * self.s.config.time_scale
         c = np.zeros(len(Clock), np.float64)
@@ -108,6 +112,21 @@ class DeviceAdvance:
         c[Clock.J_MIN], c[Clock.J_MAX] = math.inf, -math.inf
         c[Clock.STATUS] = Status.RUNNING if 0.0 < total else Status.FINISHED
         self.clk.assign(c)
+        return c
+
+    def _read_back(self):
+        """After a chunk: (the clock, the brick P2G's wear counts or None), in one wait for the
+        device; the wear counters are zeroed for the next chunk. (Two read-backs, each its own
+        wait, took 0.19 ms an advance more at 2.4M particles, H200.)"""
+        wp.copy(self._clk_host, self.clk)
+        if self._brick is not None:
+            if self._frag_host is None:
+                self._frag_host = wp.empty_like(self._brick.frag, device="cpu", pinned=self.s.device.is_cuda)
+            wp.copy(self._frag_host, self._brick.frag)
+            self._brick.frag.zero_()
+        wp.synchronize_device(self.s.device)
+        frag = self._frag_host.numpy().copy() if self._brick is not None else None
+        return self._clk_host.numpy().copy(), frag
 
     @staticmethod
     def _to_clock(state, c: np.ndarray) -> None:
@@ -147,10 +166,9 @@ class DeviceAdvance:
             self._brick = BrickP2G(s.flags, state.n, s.device, nodes=cfg.grid_n + 1)  # before any capture: it allocates
         if self.p2g == "brick":
             state.spare_consts()  # where sorting substeps store the constants: allocated before any capture
-        self._upload(state, t0, t1)
+        c = self._upload(state, t0, t1)
         if self.keys is not None:  # the fields no substep changes (kind, shape, friction, ...)
             s._colliders_dev.assign(pack_colliders(s.colliders, t0, t0, 1.0))
-        c = self.clk.numpy()
         frag, cadence = None, 0  # the brick P2G's wear counts of the last chunk (none yet in this advance)
         if self._brick is not None:
             self._brick.frag.zero_()
@@ -166,15 +184,13 @@ class DeviceAdvance:
             self.last_sort_every = min(k, cadence)  # (a chunk no longer than it sorts at its start only: one graph)
             consts = (state.consts(), state.spare)  # (spare: allocated above where the brick P2G runs)
             self._chunk(state, k, self.last_sort_every)
-            c = self.clk.numpy()
+            c, frag = self._read_back()
             if self._brick is not None:
                 # each accepted sorting substep moved the constants into their other copy
                 # (launching or capturing the chunk swapped them once per sorting substep)
                 sorts = -(-int(c[Clock.N_SUB] - before) // self.last_sort_every)
                 if state.mass is not consts[sorts % 2][0]:
                     state.swap_consts()
-                frag = self._brick.frag.numpy().copy()  # (on the CPU numpy() views the array zeroed next)
-                self._brick.frag.zero_()
                 self.frag_total = self.frag_total + frag
             if int(c[Clock.N_SUB] - before) % 2:
                 state.swap()

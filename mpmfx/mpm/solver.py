@@ -24,14 +24,14 @@ from .clear_grid import clear_grid
 from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
 from .constitutive import MaterialParams, pack_material
-from .energy import ENERGY_CHUNK, make_energy
+from .energy import ENERGY_CHUNK, SUMS, make_report
 from .g2p import G2PParams, g2p_launch_shape, make_g2p, solid_stress
 from .grid_update import GridParams, make_grid_update
 from .materials import Material, Mode
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
 from .p2g_brick import BRICK
 from .chunked import DeviceAdvance
-from .stepper import SubstepDev, report_sums, sum_partials
+from .stepper import SubstepDev, sum_partials
 from .slots import REJECTING, Count, Stat
 from .order import in_particle_order, to_slots
 from .state import ParticleBuffers, SceneFlags, State, StepperClock, m33_assign, m33_to_host
@@ -136,7 +136,7 @@ class Solver:
         if stepper not in ("device", "host"):
             raise ValueError(f"Solver: stepper={stepper!r}; use 'device' (default) or 'host' (the reference loop)")
         self.stepper = stepper
-        self._energy = make_energy(self.flags)
+        self._report_partials = make_report(self.flags)
         self._n_fields = 0
         self._grid_writer = None  # the brick P2G that wrote the grid last (its marks are valid), if one did
         self._grid_cleared = False  # whether the last grid update zeroed the nodes it read (_phases)
@@ -495,27 +495,33 @@ class Solver:
         return f"material {i} ({m.mode.name}, youngs_modulus={m.youngs_modulus:g})"
 
     def _report(self, state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0) -> StepReport:
-        mass, momentum, kinetic = report_sums(state, self.device)  # on the device: no particle copy
+        sums = self.report_sums(state)
         return StepReport(
             substeps=substeps, rejected_substeps=rejected,
             dt_min=min(dts) if dts else 0.0, dt_max=max(dts) if dts else 0.0,
-            max_speed=vmax, cfl_used=cfl_used, particles_lost=lost, mass=mass,
-            momentum=momentum, kinetic_energy=kinetic,
-            elastic_energy=self.elastic_energy(state),
+            max_speed=vmax, cfl_used=cfl_used, particles_lost=lost, mass=float(sums[0]),
+            momentum=sums[1:4].copy(), kinetic_energy=float(0.5 * sums[4]),
+            elastic_energy=float(sums[5]),
             j_min=jmin if dts else 1.0, j_max=jmax if dts else 1.0,
             wall_time_s=time.perf_counter() - wall0)
+
+    def report_sums(self, state: State) -> np.ndarray:
+        """(6,) float64 over the live particles, summed on the device in a fixed order (replays
+        give the same bits; only a few partial sums come to the host): mass, momentum (3),
+        mass * |v|^2 (twice the kinetic energy) and the elastic energy (`elastic_energy`)."""
+        cur = state.cur
+        part = wp.empty(((state.n + ENERGY_CHUNK - 1) // ENERGY_CHUNK, SUMS), dtype=wp.float64, device=self.device)
+        wp.launch(self._report_partials, dim=part.shape[0], device=self.device, inputs=[
+            self._materials_dev, state.material, state.mass, state.volume, cur.v, cur.F, cur.J, cur.Jp, cur.alive,
+            state.n, int(self.device.is_cuda), part])
+        return sum_partials(part, self.device)
 
     def elastic_energy(self, state: State) -> float:
         """Energy stored in the particles' elastic state, mass*domain^2/s^2 (same units as
         kinetic energy): sum of rest volume * energy density, with the hardened moduli of
-        snow, Hencky StVK for sand, the Tait potential for water, 0 for tracers. One
-        reduction kernel; `advance` calls it once per frame for the report."""
-        cur = state.cur
-        part = wp.empty(((state.n + ENERGY_CHUNK - 1) // ENERGY_CHUNK, 1), dtype=wp.float64, device=self.device)
-        wp.launch(self._energy, dim=part.shape[0], device=self.device, inputs=[
-            self._materials_dev, state.material, state.volume, cur.F, cur.J, cur.Jp, cur.alive, state.n,
-            int(self.device.is_cuda), part])
-        return float(sum_partials(part, self.device)[0])
+        snow, Hencky StVK for sand, the Tait potential for water, 0 for tracers. `advance`
+        reports it once per frame, with the other sums of `report_sums`."""
+        return float(self.report_sums(state)[5])
 
     # ------------------------------------------------------------------ I/O
     def state_to_numpy(self, state: State) -> dict[str, np.ndarray]:

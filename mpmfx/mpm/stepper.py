@@ -30,8 +30,8 @@ from .colliders import ColliderParams, pose_collider
 from .materials import Mode
 from .slots import REJECTING, Clock, Count, Stat, Status
 
-__all__ = ["SubstepDev", "StepperParams", "WaveParams", "make_clock_kernels", "pose_colliders", "report_sums",
-           "CHUNKS", "sum_partials"]
+__all__ = ["SubstepDev", "StepperParams", "WaveParams", "make_clock_kernels", "pose_colliders", "CHUNKS",
+           "sum_partials"]
 
 CHUNKS = (1, 2, 4, 8, 16, 32)  # substeps per chunk: each length is one captured graph
 REJECT_MASK = wp.constant(sum(1 << int(c) for c in REJECTING))  # counters that reject a substep
@@ -224,7 +224,7 @@ def pose_colliders(sp: StepperParams, clk: wp.array(dtype=wp.float64), keys_t: w
     pose_collider(wp.tid(), keys_t, keys_p, keys_q, offsets, counts, ts0, ts1, clk[Clock.DT], out)
 
 
-REPORT_CHUNK = 256  # particles summed in order by one thread: the sums do not depend on scheduling
+REPORT_CHUNK = 256  # partial sums summed in order by one thread: the sums do not depend on scheduling
 
 
 @wp.func
@@ -238,31 +238,6 @@ def chunk_particle(b: int, i: int, chunk: int, threads: int, coalesced: int) -> 
     if coalesced != 0:
         return b + i * threads
     return b * chunk + i
-
-
-@wp.kernel(enable_backward=False)
-def _report_partials(v: wp.array(dtype=wp.vec3), mass: wp.array(dtype=float), alive: wp.array(dtype=wp.int32),
-                     n: int, coalesced: int, out: wp.array2d(dtype=wp.float64)):
-    """Per thread's set of REPORT_CHUNK particles (chunk_particle), in order: mass, momentum
-    (3), kinetic energy x 2."""
-    b = wp.tid()
-    rows = out.shape[0]
-    acc = wp.vector(length=5, dtype=wp.float64)
-    for i in range(REPORT_CHUNK):
-        p = chunk_particle(b, i, REPORT_CHUNK, rows, coalesced)
-        if p >= n:
-            break
-        if alive[p] > 0:
-            m = wp.float64(mass[p])
-            vp = v[p]
-            vx, vy, vz = wp.float64(vp[0]), wp.float64(vp[1]), wp.float64(vp[2])
-            acc[0] = acc[0] + m
-            acc[1] = acc[1] + m * vx
-            acc[2] = acc[2] + m * vy
-            acc[3] = acc[3] + m * vz
-            acc[4] = acc[4] + m * (vx * vx + vy * vy + vz * vz)
-    for c in range(5):
-        out[b, c] = acc[c]
 
 
 @wp.kernel(enable_backward=False)
@@ -285,14 +260,3 @@ def sum_partials(part, device) -> np.ndarray:
         wp.launch(_sum_rows, dim=(nxt, cols), device=device, inputs=[part, rows, out])
         part, rows = out, nxt
     return part.numpy().sum(axis=0)
-
-
-def report_sums(state, device) -> tuple[float, np.ndarray, float]:
-    """(mass, momentum (3,), kinetic energy) of the live particles, summed on the device in a
-    fixed order (replays give the same bits). Only the few partial sums come to the host."""
-    rows = (state.n + REPORT_CHUNK - 1) // REPORT_CHUNK
-    part = wp.empty((rows, 5), dtype=wp.float64, device=device)
-    wp.launch(_report_partials, dim=rows, device=device,
-              inputs=[state.cur.v, state.mass, state.cur.alive, state.n, int(wp.get_device(device).is_cuda), part])
-    s = sum_partials(part, device)
-    return float(s[0]), s[1:4].copy(), float(0.5 * s[4])
