@@ -204,6 +204,8 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
     has_solid = flags.solid
     has_water = flags.water
     recovery = flags.volume_recovery
+    multi = flags.multi_field
+    one = flags.one_material
 
     # registers capped (g2p_launch_shape): a solid's return map took the compiler to 128, which
     # leaves a multiprocessor 512 threads (H100, snow, 2.4M particles, before fast math: G2P
@@ -282,9 +284,18 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
             v_new = v[p]
             C_new = load_m33(C, p)
         else:
-            v_new, C_new = gather(grid_v, x[p], gp.inv_dx, field_id[p] * gp.nodes)
+            # a scene of one field or one material reads neither index: 8 bytes of the 32 a
+            # water particle reads here, 64 a snow one, and the material row's load no longer
+            # waits on a per-particle load (H200, 19.4M, G2P ms a substep: snow 1.70 -> 1.57,
+            # water 1.051 -> 1.011)
+            fo = int(0)
+            if wp.static(multi):
+                fo = field_id[p] * gp.nodes
+            v_new, C_new = gather(grid_v, x[p], gp.inv_dx, fo)
             C_new = gp.affine_keep * C_new  # drag: blend toward PIC at a rate (guide §6 trap)
-            mid = material[p]
+            mid = int(0)
+            if wp.static(not one):
+                mid = material[p]
             mat = materials[mid]
             j_now = float(1.0)
             finite = bool(True)
@@ -306,7 +317,7 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
                     J_new = J_new * wp.determinant(wp.identity(n=3, dtype=float) + gp.dt * C_new)
                     if wp.static(recovery):
                         if mat.volume_recovery != 0:
-                            J_new = recover_volume(gp, mat, grid_m, grid_fixed, x[p], field_id[p] * gp.nodes, J_new)
+                            J_new = recover_volume(gp, mat, grid_m, grid_fixed, x[p], fo, J_new)
                     if mat.clamp_pressure != 0:
                         # no tension: a separating splash must not remember its expansion,
                         # or it lands fluffy and stress-free until squeezed back to J = 1

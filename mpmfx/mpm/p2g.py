@@ -100,6 +100,7 @@ def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
     device_clock: read dt from `sub` (the device stepper, stepper.py) and do nothing when
     the substep is inactive; otherwise `sub` is unused (the reference path)."""
     multi = flags.multi_field
+    one = flags.one_material
     particle_affine = make_particle_affine(flags)
 
     @wp.kernel(enable_backward=False, module=flags.key + ("_dev" if device_clock else ""))
@@ -127,7 +128,10 @@ def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
         m = mass[p]
         if alive[p] == 0 or m == 0.0:
             return  # tracers and removed particles add nothing
-        affine = particle_affine(pp, materials[material[p]], tau, J, C, volume, p, m)
+        mid = int(0)  # (the only material's, where the scene has one: not read)
+        if wp.static(not one):
+            mid = material[p]
+        affine = particle_affine(pp, materials[mid], tau, J, C, volume, p, m)
         inv_dx = pp.inv_dx
         dx = 1.0 / inv_dx
         mv = m * v[p]
@@ -138,7 +142,8 @@ def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
         fx = xg - wp.vec3(float(bi), float(bj), float(bk))
         W = bspline_weights(fx)  # once per particle per transfer
         dW = bspline_gradients(fx)
-        bi += field_id[p] * pp.nodes  # this body's block of nodes (0 unless multi-field)
+        if wp.static(multi):
+            bi += field_id[p] * pp.nodes  # this body's block of nodes
         for i in range(3):
             for j in range(3):
                 for k in range(3):

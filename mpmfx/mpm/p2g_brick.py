@@ -391,6 +391,7 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
     """The scatter kernel for the scene's materials; fast mode adds the window to the float
     grid, deterministic mode to the fixed-point one."""
     particle_affine = make_particle_affine(flags)
+    one = flags.one_material
     det = deterministic
 
     @wp.func
@@ -533,7 +534,10 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                         p = idx[p]
                     m = mass[p]
                     if alive[p] != 0 and m != 0.0:
-                        aff = particle_affine(pp, materials[material[p]], tau, J, C, volume, p, m)
+                        mid = int(0)  # (the only material's, where the scene has one: not read)
+                        if wp.static(not one):
+                            mid = material[p]
+                        aff = particle_affine(pp, materials[mid], tau, J, C, volume, p, m)
                         mv = m * v[p]
                         xg = x[p] * pp.inv_dx
                         b = base_node(x[p], pp.inv_dx)

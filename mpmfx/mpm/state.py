@@ -19,7 +19,8 @@ class SceneFlags:
     """Which constitutive branches a scene compiles (guide: model only what the scene needs).
 
     A water-only scene compiles no SVD and keeps no F; a snow-only scene keeps no J;
-    only a scene with water volume recovery compiles the grid-density gather.
+    only a scene with water volume recovery compiles the grid-density gather; a scene of one
+    material reads no particle's material index (it is 0), and one of one field no field index.
     """
 
     snow: bool
@@ -27,12 +28,14 @@ class SceneFlags:
     water: bool
     multi_field: bool = False
     volume_recovery: bool = False
+    one_material: bool = False
 
     @classmethod
     def of(cls, materials, *, multi_field: bool = False) -> "SceneFlags":
         modes = {m.mode for m in materials}
         recovery = any(m.mode == Mode.WATER and m.volume_recovery for m in materials)
-        return cls(Mode.SNOW in modes, Mode.SAND in modes, Mode.WATER in modes, bool(multi_field), recovery)
+        return cls(Mode.SNOW in modes, Mode.SAND in modes, Mode.WATER in modes, bool(multi_field), recovery,
+                   len(materials) == 1)
 
     @property
     def solid(self) -> bool:
@@ -43,7 +46,7 @@ class SceneFlags:
     def key(self) -> str:
         """Prefix of the Warp modules holding this scene's specialised P2G and G2P kernels."""
         flags = (("s", self.snow), ("g", self.sand), ("w", self.water), ("m", self.multi_field),
-                 ("r", self.volume_recovery))
+                 ("r", self.volume_recovery), ("1", self.one_material))
         tag = "".join(c for c, on in flags if on)
         return f"mpmfx_mpm_scene_{tag or 'tracer'}"
 
