@@ -63,19 +63,14 @@ def test_a_non_finite_frame_writes_nothing(tmp_path):
         def frame_path(frame, ext):
             return tmp_path / "frames" / f"{frame:04d}.{ext}"
 
-    class Solver:  # the J of a frame: the solver's (host work, on the writer thread)
-        @staticmethod
-        def volume_ratio(arrays):
-            return np.ones(len(arrays["material"]), np.float32)
-
     n = 4
     state = {"x": np.full((n, 3), 0.5, np.float32), "v": np.zeros((n, 3), np.float32), "alive": np.ones(n, np.int32),
-             "material": np.zeros(n, np.int32), "body": np.zeros(n, np.int32)}
+             "material": np.zeros(n, np.int32), "body": np.zeros(n, np.int32), "J": np.ones(n, np.float32)}
     state["v"][2, 1] = np.nan
     with pytest.raises(StageError, match="frame 7: the solver returned non-finite values"):
-        _write_frame(Entry, 7, {"substeps": 3}, {"x": state["x"]}, (Solver, state), np.zeros(3), 2.0)
+        _write_frame(Entry, 7, {"substeps": 3}, {"x": state["x"]}, state, np.zeros(3), 2.0)
     assert not any(tmp_path.rglob("*.*"))  # no QA, no checkpoint (a NaN resume point), no frame
     state["v"][2, 1] = 0.0
-    _write_frame(Entry, 7, {"substeps": 3}, {"x": state["x"]}, (Solver, state), np.zeros(3), 2.0)
+    _write_frame(Entry, 7, {"substeps": 3}, {"x": state["x"]}, state, np.zeros(3), 2.0)
     assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.*")) == [
         "checkpoints/0007.npz", "frames/0007.npz", "qa/0007.json"]

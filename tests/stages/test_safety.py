@@ -240,7 +240,9 @@ def test_status_reports_sizes_and_prune_keeps_the_newest_and_the_published(tmp_p
 
 
 def test_frames_are_stored_compactly_and_byte_deterministic(tmp_path):
-    """Issue 18's measured choices: deflate what shrinks (ints, leaves, faces, vertices)."""
+    """Issue 18's measured choices: deflate what shrinks much and fast (material and body
+    indices, Jp, leaves, faces, vertices); ids and noisy floats are stored as they are (deflating
+    them cost a 2.6M-particle frame 450 ms of the writer for 10 % of its size: io/frames.py)."""
     import zipfile
 
     import numpy as np
@@ -256,7 +258,8 @@ def test_frames_are_stored_compactly_and_byte_deterministic(tmp_path):
     assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
     with zipfile.ZipFile(tmp_path / "a.npz") as z:
         stored = {i.filename: i.compress_size / i.file_size for i in z.infolist() if i.file_size > 1000}
-    assert stored["id.npy"] < 0.5 and stored["body.npy"] < 0.1 and stored["Jp.npy"] < 0.1
+    assert stored["body.npy"] < 0.1 and stored["material.npy"] < 0.1 and stored["Jp.npy"] < 0.1
+    assert stored["id.npy"] > 0.99 and stored["x.npy"] > 0.99
     g = GroupSurface(vertices=rng.random((900, 3)).astype(np.float32), faces=np.arange(2700, dtype=np.int32).reshape(-1, 3),
                      normals=rng.random((900, 3)).astype(np.float32), velocities=rng.random((900, 3)).astype(np.float32),
                      block_ijk=np.zeros((4, 3), np.int64), blocks=np.full((4, 8, 8, 8), 0.1, np.float32),
