@@ -353,11 +353,10 @@ def solid_energy_density(mat: MaterialParams, F: wp.mat33, jp: float) -> float:
     polar_rotation, without the SVD: the once-a-frame report's reduction at 19.4M particles was
     mostly the SVD's arithmetic."""
     if mat.mode == MODE_SNOW:
-        if wp.determinant(F) > 0.0 and singular_values_within(F, POLAR_LO, POLAR_HI):
-            h_fast = hardening_factor(mat, jp)
+        j_fast = wp.determinant(F)
+        if j_fast > 0.0 and singular_values_within(F, POLAR_LO, POLAR_HI):
             D = F - polar_rotation(F)
-            J_fast = wp.determinant(F)
-            return h_fast * (mat.mu0 * wp.ddot(D, D) + 0.5 * mat.lambda0 * (J_fast - 1.0) * (J_fast - 1.0))
+            return hardening_factor(mat, jp) * (mat.mu0 * wp.ddot(D, D) + 0.5 * mat.lambda0 * (j_fast - 1.0) * (j_fast - 1.0))
     U, sig, V = wp.svd3(F)
     if mat.mode == MODE_SAND:
         eps = log_strain(sig)

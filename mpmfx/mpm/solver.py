@@ -572,8 +572,8 @@ class Solver:
 
     def volume_ratios(self, state: State) -> np.ndarray:
         """J (n,) float32 in particle order, what `volume_ratio` makes of host arrays, computed on
-        the device: a frame needs 4 bytes a particle off the device instead of F's 36 (hero_castle,
-        2.6M particles: its frames' host copies were ~0.18 s each, most of it F and its transpose)."""
+        the device: a frame takes 4 bytes a particle off the device instead of F's 36, and the
+        host neither transposes F nor takes its determinant."""
         out = wp.empty(state.n, dtype=float, device=self.device)
         wp.launch(_volume_ratio, dim=state.n, device=self.device, inputs=[
             self._materials_dev, state.material, state.cur.F, state.cur.J, int(self.flags.solid),

@@ -98,7 +98,6 @@ def run(ctx: Context) -> dict:
     start, fps = shot.shot.frame_start, shot.shot.fps
     last = max(ctx.frames)
     ckpt = _latest_checkpoint(entry.root / "checkpoints", entry.done_frames(FRAME_EXT), start)
-    consts = None  # material and body in particle order: the same every frame, copied once
     with FrameWriter() as writer:
         if ckpt is None:
             p = SeedParticles.read(ctx.upstream["voxelise"].root)
@@ -109,7 +108,7 @@ def run(ctx: Context) -> dict:
             state, frame = solver.init_state(parts), start
             qa0 = _qa(solver.advance(state, 0.0, 0.0), size)  # a zero-length advance: the initial observables
             qa0["max_speed"] = float(np.linalg.norm(p.v, axis=1).max())  # m/s; no substep measured it
-            consts = _consts(solver, state)
+            consts = _consts(solver, state)  # material and body: the same every frame, copied once
             writer.submit(_write_frame, entry, frame, qa0, None, _host(solver, state, consts), origin, size)
         else:
             frame = ckpt
