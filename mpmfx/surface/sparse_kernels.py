@@ -462,7 +462,10 @@ def project_on_wide_normal(
     is the voxel's own `radius`. Inside a one-particle-thick sheet the blurred weights have no
     gradient across the sheet, so the wide normal lies in the sheet, and projecting xbar's
     sideways offset on it opened holes (88 in the bench's random sheet); the thinnest axis is
-    the sheet's normal there, and the surface's normal on bodies."""
+    the sheet's normal there, and the surface's normal on bodies. (The iterations start from
+    the wide normal; inside a sheet its only component across the sheet comes from the 2-voxel
+    ripple the weight blur's 2-voxel taps keep: a blur without it left n in the sheet's plane,
+    docs/surfacing-log.md, sixteenth step.)"""
     t = wp.tid() + base
     if w[t] <= 0.0:
         phi[t] = far_vox
