@@ -110,7 +110,7 @@ def _pow2_at_least(x: float) -> float:
 def _volume_ratio(materials: wp.array(dtype=MaterialParams), material: wp.array(dtype=wp.int32),
                   F: wp.array2d(dtype=wp.vec3), J: wp.array(dtype=float), solid: int, water: int,
                   out: wp.array(dtype=float)):
-    """out[p] = det F (snow, sand; the cofactor expansion of Solver.volume_ratio), J (water) or 1."""
+    """out[p] = det F (snow, sand), J (water) or 1 (tracers)."""
     p = wp.tid()
     mode = materials[material[p]].mode
     j = float(1.0)
@@ -545,15 +545,13 @@ class Solver:
         """Host copy: x (n,3), v (n,3), C (n,3,3), F (n,3,3) if any solid, J (n,) (det F for
         solids, J for water, 1 for tracers), Jp (n,), mass, volume (n,), material, body,
         alive (n,) int32."""
-        out = self.host_arrays(state)
-        out["J"] = self.volume_ratio(out)
-        return out
+        return {**self.host_arrays(state), "J": self.volume_ratios(state)}
 
     def host_arrays(self, state: State, names=None) -> dict[str, np.ndarray]:
         """Host copies of the particle arrays as the solver stores them (`names`: a subset):
         x, v, C, Jp, alive, mass, volume, material, body, F (if any solid) and J (water's
-        volume ratio, if any water; other particles' entries unused). `volume_ratio` turns
-        them into every particle's J."""
+        volume ratio, if any water; other particles' entries unused). `volume_ratios` gives every
+        particle's J."""
         cur = state.cur
         arrays = {"x": cur.x, "v": cur.v, "C": cur.C, "Jp": cur.Jp, "alive": cur.alive, "mass": state.mass,
                   "volume": state.volume, "material": state.material, "body": state.body}
@@ -571,29 +569,14 @@ class Solver:
         return {k: m33_to_host(a) if k in ParticleBuffers.MATRICES else a.numpy() for k, a in arrays.items()}
 
     def volume_ratios(self, state: State) -> np.ndarray:
-        """J (n,) float32 in particle order, what `volume_ratio` makes of host arrays, computed on
-        the device: a frame takes 4 bytes a particle off the device instead of F's 36, and the
-        host neither transposes F nor takes its determinant."""
+        """J (n,) float32 in particle order: det F for snow and sand, J for water, 1 for tracers,
+        computed on the device (a frame takes 4 bytes a particle off the device instead of F's
+        36, and the host neither transposes F nor takes its determinant)."""
         out = wp.empty(state.n, dtype=float, device=self.device)
         wp.launch(_volume_ratio, dim=state.n, device=self.device, inputs=[
             self._materials_dev, state.material, state.cur.F, state.cur.J, int(self.flags.solid),
             int(self.flags.water), out])
         return self._to_host(state, {"J": out})["J"]
-
-    def volume_ratio(self, arrays: dict[str, np.ndarray]) -> np.ndarray:
-        """J (n,) float32 from `host_arrays` (material, F, J): det F for solids, J for water,
-        1 for tracers. Host work only: safe on another thread."""
-        J = np.ones(len(arrays["material"]), np.float32)
-        if self.flags.solid:
-            F = arrays["F"]  # the cofactor expansion: np.linalg.det (an LU a matrix) took 1.6 s at 2.6M
-            J = (F[:, 0, 0] * (F[:, 1, 1] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 1])
-                 - F[:, 0, 1] * (F[:, 1, 0] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 0])
-                 + F[:, 0, 2] * (F[:, 1, 0] * F[:, 2, 1] - F[:, 1, 1] * F[:, 2, 0])).astype(np.float32)
-        if self.flags.water:
-            water = np.array([m.mode == Mode.WATER for m in self.materials])[arrays["material"]]
-            J = np.where(water, arrays["J"], J)
-        tracer = np.array([m.mode == Mode.TRACER for m in self.materials])[arrays["material"]]
-        return np.where(tracer, 1.0, J).astype(np.float32)
 
     def checkpoint(self, state: State, t: float) -> dict[str, np.ndarray]:
         """Full state + stepper clock, as numpy arrays in particle order, and `pid`: the particle

@@ -15,7 +15,7 @@ threads (Warp's CPU launches release the GIL; mpmfx.surface.launch).
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, flow_taper, line_voxel, stride
+from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, flow_taper
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
 
