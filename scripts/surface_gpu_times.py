@@ -2,7 +2,7 @@
 table that the code under them moves): per shape, sampling and setting at one count, the
 device time and the time with the copy of the mesh and sparse leaves to the host (end to
 end, M particles/s, as the surface stage asks: no dense level set),
-and the mean / max vertex error. `scripts/surface_gpu.py` (the full bench: pieces, jitter,
+and the mean / max vertex error and the area-weighted surface error (surface_cases.surface_error). `scripts/surface_gpu.py` (the full bench: pieces, jitter,
 peers, the sheet) takes longer than one device call at 10M.
 
     python3 scripts/surface_gpu_times.py [count] [--sheet N]     # default 10M; $OUT/surface_times.csv
@@ -15,7 +15,7 @@ import numpy as np
 import warp as wp
 
 from mpmfx.bench.report import print_table, write_rows
-from mpmfx.bench.surface_cases import OURS, PARTICLE_RADIUS_PER_SPACING, bench_sheet, sample_shape, shape_sdf
+from mpmfx.bench.surface_cases import OURS, PARTICLE_RADIUS_PER_SPACING, bench_sheet, sample_shape, shape_sdf, surface_error
 from mpmfx.surface import SurfaceParams, surface_particles
 
 args = sys.argv[1:]
@@ -50,6 +50,7 @@ for shape in ("sphere", "torus", "box"):
             rows.append({"shape": shape, "sampling": sampling, "particles": len(x), "method": f"mpmfx {label}",
                          "device_ms": 1e3 * d, "with_host_ms": 1e3 * t, "Mps_device": len(x) / d / 1e6,
                          "Mps_end_to_end": len(x) / t / 1e6, "err_mean_h": float(err.mean()),
+                         "err_surface_h": surface_error(res.mesh.vertices, res.mesh.faces, sdf) / h,
                          "err_max_h": float(err.max()), "vertices": len(res.mesh.vertices), "device": dev.name})
             print_table(rows[-1:], list(rows[-1]))
 print_table(rows, list(rows[0]))

@@ -32,3 +32,38 @@ def test_a_row_reports_stage_times_and_the_shipped_radius():
     # (particles creeping 0.01 h per frame) moves its surface about as little
     assert row["repeat_h"] == 0.0
     assert row["jitter_h"] < 0.03, f"vertex jitter {row['jitter_h']:.4f} h"  # measured ~0.01 h
+
+
+def test_surface_error_is_the_area_weighted_distance():
+    from mpmfx.bench.surface_cases import surface_error
+
+    plane = lambda p: p[:, 2]  # noqa: E731  signed distance to z = 0
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
+    quads = np.array([[0, 1, 2], [0, 2, 3]])
+    assert np.isclose(surface_error(square + [0, 0, 0.3], quads, plane), 0.3)
+    # a square rising from z = 0 to z = 1 along x: |z| averages 0.5 over its area
+    ramp = square.copy()
+    ramp[:, 2] = ramp[:, 0]
+    assert np.isclose(surface_error(ramp, quads, plane), 0.5)
+    # one big triangle at 0 and one of a hundredth of its area at 1: the mean is by area, not by triangle
+    tris = np.array([[0, 0, 0], [10, 0, 0], [0, 10, 0], [0, 0, 1], [1, 0, 1], [0, 1, 1]], float)
+    assert np.isclose(surface_error(tris, np.array([[0, 1, 2], [3, 4, 5]]), plane), 1 / 101)
+
+
+def test_surface_error_does_not_move_with_the_voxel_grid():
+    """The same random box surfaced at three sub-voxel offsets: its surface error holds to
+    0.002 h (the vertex mean, which samples the surface where marching cubes puts vertices,
+    moved 0.130-0.137 h here and 0.104-0.123 h at 1M; docs/surfacing-log.md, seventeenth step)."""
+    from mpmfx.bench.surface_cases import shape_sdf, surface_error
+    from mpmfx.surface import SurfaceParams, surface_particles
+
+    x, h = sample_shape("box", 20_000, "random")
+    sdf = shape_sdf("box")[0]
+    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=0.6 * h, smooth_iters=4, dense_output=False)
+    errors = []
+    for offset in (0.0, 0.25, 0.5):  # voxels
+        shift = np.float32(offset * params.voxel_size)
+        mesh = surface_particles(x + shift, None, params, device="cpu").mesh
+        errors.append(surface_error(mesh.vertices.astype(np.float64) - shift, mesh.faces, sdf) / h)
+    assert max(errors) - min(errors) < 0.002, errors  # measured 0.1293-0.1295 h
+    assert max(errors) < 0.15, errors
