@@ -1,0 +1,46 @@
+"""The download's pool of page-locked buffers (sparse_output.PinnedPool) lends a buffer to one
+result's arrays and reuses it only once they and every view of them are gone: a frame's mesh
+must never change under a caller still holding it. Page-locked memory needs CUDA; here the
+pool allocates ordinary host memory, the bookkeeping is the same."""
+
+import gc
+
+import numpy as np
+import warp as wp
+
+from mpmfx.surface.sparse_output import PinnedPool
+
+
+class HostPool(PinnedPool):
+    def _allocate(self, wp, size):
+        return wp.empty(size, dtype=wp.uint8, device="cpu")
+
+
+def test_a_buffer_comes_back_only_when_every_view_is_gone():
+    pool = HostPool(limit=64 << 20)
+    buf = pool.take(wp, 4000)
+    a = pool.lend(wp, buf, (100, 3), np.float32)
+    a[:] = 7.0
+    view = a[10:20]
+    del a
+    gc.collect()
+    other = pool.take(wp, 4000)  # the first buffer is still lent (view): a new one
+    assert other.ptr != buf.ptr
+    b = pool.lend(wp, other, (1000,), np.float32)
+    b[:] = -1.0
+    assert np.all(view == 7.0)  # untouched by the second lend
+    del view
+    gc.collect()
+    again = pool.take(wp, 4000)
+    assert again.ptr == buf.ptr  # back, and reused
+
+
+def test_the_limit_falls_back_to_no_buffer():
+    pool = HostPool(limit=3 << 20)
+    first = pool.take(wp, 2 << 20)  # rounded up with room to grow: 3 MiB
+    held = pool.lend(wp, first, (2 << 20,), np.uint8)
+    assert pool.take(wp, 1 << 20) is None  # lent buffers count against the limit
+    del held
+    gc.collect()
+    assert pool.take(wp, 1 << 20).ptr == first.ptr  # free again: lent out once more
+    assert pool.take(wp, 2 << 20) is None
