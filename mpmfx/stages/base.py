@@ -31,11 +31,12 @@ class Context:
     def job(self) -> FrameJob:
         return FrameJob.of(self.shot, self.entry, self.upstream, self.device)
 
-    def map_frames(self, fn, frames: list[int], *, desc: str = "", auto: bool = True) -> list:
+    def map_frames(self, fn, frames: list[int], *, desc: str = "", auto: bool = True, serial=None) -> list:
         """fn(self.job(), f) for each frame, serially or as Dask tasks (`mpmfx.stages.parallel`;
-        auto=False: tasks only when workers or a scheduler were asked for)."""
+        auto=False: tasks only when workers or a scheduler were asked for; serial: how they run
+        here then, see Frames.map)."""
         job = self.job()
-        return (self.executor or Frames(workers=1)).map(fn, [(job, f) for f in frames], auto=auto,
+        return (self.executor or Frames(workers=1)).map(fn, [(job, f) for f in frames], auto=auto, serial=serial,
                                                         desc=desc or self.entry.stage, quiet=self.quiet)
 
     def progress(self, iterable, *, total: int | None = None, desc: str = "", unit: str = "frame"):

@@ -142,16 +142,21 @@ class Frames:
             self._client = self._cluster = None
 
     def map(self, fn: Callable[[FrameJob, int], Any], calls: list[tuple[FrameJob, int]], *,
-            desc: str = "", quiet: bool = False, auto: bool = True) -> list[Any]:
+            desc: str = "", quiet: bool = False, auto: bool = True,
+            serial: Callable[[list[tuple[FrameJob, int]], Any], list[Any]] | None = None) -> list[Any]:
         """fn(job, frame) for each call; results in call order. The first failure is raised
         (the other tasks are cancelled; frames already written stay, a re-run resumes).
         auto=False: stay serial unless workers or a scheduler were asked for (work that a GPU
-        does in a fraction of a second a frame, where starting workers costs more)."""
+        does in a fraction of a second a frame, where starting workers costs more).
+        serial(calls, bar): how the calls run here when they stay serial (default: fn on each,
+        in order); it returns the results in call order and updates the progress bar."""
         if not calls:
             return []
         bar = _bar(len(calls), desc, quiet)
         try:
             if not self.parallel(len(calls), auto_min=AUTO_MIN_TASKS if auto else sys.maxsize):
+                if serial is not None:
+                    return serial(calls, bar)
                 out = []
                 for job, f in calls:
                     out.append(fn(job, f))

@@ -22,6 +22,7 @@ from mpmfx.cache import file_hash, write_json
 from mpmfx.config import ColliderShape, Shot, ShotError
 from mpmfx.io.frames import ParticleFrame, SeedParticles, read_arrays, write_arrays
 from mpmfx.stages.base import Context, StageError, quiet_warp
+from mpmfx.stages.writer import FrameWriter
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "simulate", 1, True, ParticleFrame.EXT
 CODE = ("mpmfx.stages.simulate", "mpmfx.mpm", "mpmfx.geometry.colliders", "mpmfx.geometry.mesh",
@@ -211,41 +212,6 @@ def _write_frame(entry, frame: int, qa: dict | None, checkpoint: dict | None, st
         for old in sorted(folder.glob("[0-9]*.npz"))[:-KEEP_CHECKPOINTS]:
             old.unlink()
     particles.write(entry.frame_path(frame, FRAME_EXT))
-
-
-class FrameWriter:
-    """Writes each frame's files on one background thread while the solver runs the next
-    frame: on a GPU the host's compression and disk writes (~1 s a frame at 3.4M particles)
-    would otherwise add to every frame. Jobs run in order, one at a time (so at most two
-    frames' host copies are held: the one being written and the next); a job's error is raised at the next submit or on
-    leaving the block, and leaving the block always finishes the pending job first (a frame
-    simulated before an error is still written)."""
-
-    def __init__(self):
-        from concurrent.futures import ThreadPoolExecutor
-        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="mpmfx-frames")
-        self._pending = None
-
-    def submit(self, fn, *args) -> None:
-        self.wait()
-        self._pending = self._pool.submit(fn, *args)
-
-    def wait(self) -> None:
-        pending, self._pending = self._pending, None
-        if pending is not None:
-            pending.result()
-
-    def __enter__(self) -> FrameWriter:
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        try:
-            if exc_type is None:
-                self.wait()
-            elif self._pending is not None:
-                self._pending.exception()  # finish it; the error already raised is the one to report
-        finally:
-            self._pool.shutdown(wait=True)
 
 
 def _qa(report, size: float) -> dict:

@@ -1,4 +1,4 @@
-"""The simulate stage writes frames on a background thread (`FrameWriter`): in order, one at
+"""The stages write frames on background threads (`FrameWriter`): with one thread in order, one at
 a time, a failed write reported (not lost), and a frame simulated before an error still
 written."""
 
@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from mpmfx.stages.simulate import FrameWriter
+from mpmfx.stages.writer import FrameWriter
 
 
 def test_jobs_run_in_order_off_the_main_thread():
@@ -74,3 +74,31 @@ def test_a_non_finite_frame_writes_nothing(tmp_path):
     _write_frame(Entry, 7, {"substeps": 3}, {"x": state["x"]}, state, np.zeros(3), 2.0)
     assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.*")) == [
         "checkpoints/0007.npz", "frames/0007.npz", "qa/0007.json"]
+
+
+def test_several_threads_write_at_once_and_hold_at_most_that_many():
+    running, peak, lock = [0], [0], threading.Lock()
+
+    def job():
+        with lock:
+            running[0] += 1
+            peak[0] = max(peak[0], running[0])
+        time.sleep(0.05)
+        with lock:
+            running[0] -= 1
+
+    with FrameWriter(threads=3) as w:
+        for _ in range(7):
+            w.submit(job)
+            assert len(w._pending) <= 3  # the frames held for writing
+    assert peak[0] == 3
+
+
+def test_with_several_threads_every_pending_frame_is_written_before_a_failure_is_raised():
+    written = []
+    with pytest.raises(OSError, match="0002.npz"):
+        with FrameWriter(threads=3) as w:
+            w.submit(lambda: (_ for _ in ()).throw(OSError("frames/0002.npz")))
+            w.submit(lambda: (time.sleep(0.1), written.append(3)))
+            w.submit(lambda: (time.sleep(0.1), written.append(4)))
+    assert sorted(written) == [3, 4]
