@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from mpmfx.cache import atomic_path
+from mpmfx.io.npz import write_npz
 
 FRAME_FORMAT = 1
 
@@ -25,7 +26,8 @@ def write_arrays(path: str | Path, arrays: dict[str, np.ndarray], *,
 
     compress: True, False, or the names of the arrays worth deflating (a level set is mostly
     +-background and shrinks 10x; noisy float data barely shrinks and costs ~0.5 s a frame).
-    The zip entries carry a fixed date, so equal arrays give byte-identical files.
+    The zip entries carry a fixed date, so equal arrays give byte-identical files (with any
+    number of deflating threads: mpmfx.io.npz).
     """
     path = Path(path)
     squeeze = set(arrays) if compress is True else set(compress or ())
@@ -33,16 +35,10 @@ def write_arrays(path: str | Path, arrays: dict[str, np.ndarray], *,
         with zipfile.ZipFile(tmp) as zf:
             return len(zf.namelist()) == len(arrays) + 1
 
-    with atomic_path(path, verify=readable) as tmp, zipfile.ZipFile(tmp, "w") as zf:
-        for name, value in {"_format": np.int32(FRAME_FORMAT), **arrays}.items():
-            value = np.asanyarray(value)
-            info = zipfile.ZipInfo(f"{name}.npy", date_time=(1980, 1, 1, 0, 0, 0))
-            info.compress_type = zipfile.ZIP_DEFLATED if name in squeeze else zipfile.ZIP_STORED
-            setattr(info, "compress_level" if hasattr(info, "compress_level") else "_compresslevel", 1)  # 3.13 renamed it
-            info.file_size = value.nbytes + 128  # ~ the .npy header; zipfile picks zip64 from it
-            # streamed into the entry (a BytesIO first would copy a 3M-particle frame twice)
-            with zf.open(info, "w") as f:
-                np.lib.format.write_array(f, value, allow_pickle=False)
+    entries = [(name, np.asanyarray(value), name in squeeze)
+               for name, value in {"_format": np.int32(FRAME_FORMAT), **arrays}.items()]
+    with atomic_path(path, verify=readable) as tmp, open(tmp, "wb") as f:
+        write_npz(f, entries)  # big entries deflated on several threads (mpmfx.io.npz)
     return path
 
 
