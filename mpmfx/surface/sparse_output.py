@@ -50,7 +50,14 @@ class PinnedPool:
             if self._held + size > self.limit:
                 return None
             self._held += size
-        return self._allocate(wp, size)
+        try:
+            return self._allocate(wp, size)
+        except RuntimeError as exc:  # page-locked memory refused (a container's memlock limit): pageable from now on
+            log.warning("surface download: no page-locked host memory (%s); copying to pageable memory", exc)
+            with self._lock:
+                self._held -= size
+                self.limit = 0
+            return None
 
     def _allocate(self, wp, size: int):
         return wp.empty(size, dtype=wp.uint8, device="cpu", pinned=True)

@@ -44,3 +44,13 @@ def test_the_limit_falls_back_to_no_buffer():
     gc.collect()
     assert pool.take(wp, 1 << 20).ptr == first.ptr  # free again: lent out once more
     assert pool.take(wp, 2 << 20) is None
+
+
+def test_a_refused_allocation_falls_back_to_pageable_copies():
+    class Refused(PinnedPool):
+        def _allocate(self, wp, size):
+            raise RuntimeError(f"Failed to allocate {size} bytes on device 'cpu'")
+
+    pool = Refused(limit=64 << 20)
+    assert pool.take(wp, 4000) is None
+    assert pool.limit == 0 and pool.take(wp, 10) is None  # not asked again
