@@ -67,20 +67,21 @@ def count_label(n: int) -> str:
 
 
 def surface_plot(rows: list[dict], out: str | Path, *, name: str = "surface") -> Path:
-    """`mpmfx bench surface`: x = particles per second, y = mean vertex distance to the analytic
-    surface in particle spacings h (both log10). One colour per method, one marker per particle
+    """`mpmfx bench surface`: x = particles per second, y = mean distance of the mesh's surface to
+    the analytic one in particle spacings h (area-weighted, `surface_cases.surface_error`; the
+    vertex mean for rows written before it was measured), both log10. One colour per method, one marker per particle
     count (legend "method @ count"); each series holds every shape and sampling. Rows with a
     non-positive or non-finite value are left out. Writes `<out>/<name>.png` (1000 x 700)."""
     from mpmfx.render import import_pyvista
     pv = import_pyvista()
-    chart = pv.Chart2D(x_label="particles per second (log)", y_label="mean vertex error / h (log)")
+    chart = pv.Chart2D(x_label="particles per second (log)", y_label="mean surface error / h (log)")
     chart.title = "mpmfx bench surface: speed against error"
     methods = list(dict.fromkeys(r["method"] for r in rows))
     counts = sorted({int(r.get("count", r["particles"])) for r in rows})
     drawn = 0
     for i, method in enumerate(methods):
         for j, count in enumerate(counts):
-            pts = [(float(r["particles_per_s"]), float(r["err_mean_h"])) for r in rows
+            pts = [(float(r["particles_per_s"]), float(r.get("err_surface_h", r["err_mean_h"]))) for r in rows
                    if r["method"] == method and int(r.get("count", r["particles"])) == count]
             pts = [(x, y) for x, y in pts if np.isfinite(x) and np.isfinite(y) and x > 0 and y > 0]
             if not pts:

@@ -4,7 +4,7 @@ Thin wrapper over `mpmfx.bench.surface_cases`: --quick runs 100k particles (CPU-
 splashsurf where it is installed; the full run 1M and 10M (GPU) with every peer that is
 installed (splashsurf on the CPU, Newton isotropic and anisotropic on the GPU), each method
 timed as the median of 3 calls after a warm-up. All methods see the same particles. Prints one
-table; writes surface.csv/json and surface.png (particles per second against mean vertex
+table; writes surface.csv/json and surface.png (particles per second against mean surface
 error, log-log; needs pyvista, skipped with a message without it) under --out. Then the
 thin-sheet case (a disc one particle spacing thick, isotropic and anisotropic kernels, and
 every installed peer): surface_sheet.csv/json; a real splash frame of water_dam

@@ -75,6 +75,9 @@ def test_bench_surface_writes_a_splashsurf_row_per_case(tmp_path):
         assert (peer["particles"], peer["h"]) == (mine["particles"], mine["h"])
     for r in theirs:
         assert np.isfinite(float(r["err_mean_h"])) and int(r["components"]) >= 1 and r["settings"]
+    # everyone's surface error, area-weighted (what surface.png plots)
+    assert all(0 < float(r["err_surface_h"]) < 5 for r in rows)
+    assert (tmp_path / "surface.png").stat().st_size > 0
     # ours: timed until the result is on the device; the copy to the host is reported apart
     assert {r["method"] for r in ours} == {"mpmfx fast", "mpmfx fine"}
     assert all(0 < float(r["seconds"]) <= float(r["seconds_host"]) for r in ours)
