@@ -269,3 +269,32 @@ def test_frames_are_stored_compactly_and_byte_deterministic(tmp_path):
     with zipfile.ZipFile(tmp_path / "s.npz") as z:
         stored = {i.filename: i.compress_size / i.file_size for i in z.infolist() if i.file_size > 1000}
     assert stored["g.vel_blocks.npy"] < 0.1 and stored["g.faces.npy"] < 0.5
+
+
+def test_a_surfacing_error_keeps_the_frames_before_it_and_a_rerun_resumes(tmp_path, monkeypatch):
+    """Serial frames are written behind on a thread (surface._pipelined): when frame 3 fails, the
+    frames surfaced before it are on disk, complete, and the next run does only what is missing."""
+    import mpmfx.stages.surface as surface_stage
+    from mpmfx.io.frames import SurfaceFrame
+
+    shot = write_tiny_shot(tmp_path, frame_end=4)
+    run = mpmfx.load_shot(shot, cache_root=tmp_path / "c", quiet=True)
+    run.run(until="simulate")
+    real, calls = surface_stage._surfaces, []
+
+    def failing(job, particles):
+        calls.append(1)
+        if len(calls) == 3:
+            raise RuntimeError("frame 3: the surfacer failed")
+        return real(job, particles)
+
+    monkeypatch.setattr(surface_stage, "_surfaces", failing)
+    with pytest.raises(RuntimeError, match="frame 3"):
+        run.run(until="surface")
+    entry = run.entries()["surface"]
+    written = sorted(int(p.stem) for p in entry.frames_dir.glob("[0-9]*.npz"))
+    assert len(written) == 2 and all(SurfaceFrame.read(entry.frame_path(f, "npz")).groups for f in written)
+    assert not list(entry.frames_dir.glob(".*tmp*"))  # no half-written file left behind
+    monkeypatch.setattr(surface_stage, "_surfaces", real)
+    assert {r.stage: r.state for r in run.run(until="surface")}["surface"] == "resumed"
+    assert len(list(entry.frames_dir.glob("[0-9]*.npz"))) == len(run.entries()["simulate"].done_frames("npz"))
