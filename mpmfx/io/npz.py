@@ -29,9 +29,14 @@ ZIP64_LIMIT = _U32  # sizes and offsets from this on go in zip64 records (tests 
 
 
 def threads() -> int:
-    """Deflating threads: half the usable cores, at most MAX_THREADS (1 = in the caller: on a
-    2-core machine the cores are the surfacer's and the solver's)."""
+    """Deflating threads: half this process's cores, at most MAX_THREADS (1 = in the caller: on a
+    2-core machine the cores are the surfacer's and the solver's). A Dask worker's share of the
+    cores is the MPMFX_SURFACE_THREADS its cluster sets (mpmfx.stages.parallel), so many workers
+    writing at once do not each start threads for every core."""
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    share = os.environ.get("MPMFX_SURFACE_THREADS", "")
+    if share.isdigit():
+        cores = min(cores, int(share))
     return max(1, min(MAX_THREADS, cores // 2))
 
 

@@ -54,3 +54,11 @@ def test_python_objects_are_refused(tmp_path):
     with pytest.raises(ValueError, match="plain arrays"):
         write_arrays(tmp_path / "o.npz", {"o": np.array([{}, 1], dtype=object)})
     assert not list(tmp_path.iterdir())  # nothing left behind
+
+
+def test_deflating_threads_follow_the_process_share_of_the_cores(monkeypatch):
+    monkeypatch.setattr(npz.os, "sched_getaffinity", lambda pid: set(range(16)), raising=False)
+    monkeypatch.delenv("MPMFX_SURFACE_THREADS", raising=False)
+    assert npz.threads() == 8  # half the cores, at most MAX_THREADS
+    monkeypatch.setenv("MPMFX_SURFACE_THREADS", "2")  # a Dask worker's share (parallel._worker_env)
+    assert npz.threads() == 1
