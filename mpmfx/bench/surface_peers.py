@@ -107,8 +107,8 @@ def _splashsurf_threads(threads: int | None) -> str:
     if threads is not None and fixed is None:
         os.environ["RAYON_NUM_THREADS"] = str(threads)
         fixed = threads
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    _rayon_threads = fixed or cores
+    from mpmfx.surface.launch import usable_cores
+    _rayon_threads = fixed or usable_cores()
     return f"cpu x{_rayon_threads}"
 
 

@@ -34,10 +34,9 @@ def threads() -> int:
     2-core machine the cores are the surfacer's and the solver's). A Dask worker's share of the
     cores is the MPMFX_SURFACE_THREADS its cluster sets (mpmfx.stages.parallel), so many workers
     writing at once do not each start threads for every core."""
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    share = os.environ.get("MPMFX_SURFACE_THREADS", "")
-    if share.isdigit():
-        cores = min(cores, int(share))
+    from mpmfx.surface.launch import THREADS_ENV, cpu_threads, usable_cores  # (no Warp import)
+
+    cores = min(usable_cores(), cpu_threads()) if THREADS_ENV in os.environ else usable_cores()
     return max(1, min(MAX_THREADS, cores // 2))
 
 

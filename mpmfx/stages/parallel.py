@@ -36,7 +36,6 @@ if TYPE_CHECKING:
 
 SCHEDULER_ENV = "MPMFX_SCHEDULER"   # a farm scheduler's address, e.g. tcp://farm-head:8786
 WORKERS_ENV = "MPMFX_WORKERS"       # worker processes of the LocalCluster; 1 = serial
-THREADS_ENV = "MPMFX_SURFACE_THREADS"  # CPU threads of the surfacer's kernels (mpmfx.surface.launch)
 # Below this many frames to make, `workers=None` (auto) stays serial: a two-worker LocalCluster
 # costs ~20 CPU seconds (start, Warp kernels loaded in each worker), about 7 frames of CPU
 # surfacing at the default shot's size, so on an idle 2-core machine it pays from ~10 frames
@@ -196,10 +195,11 @@ def _worker_env(workers: int) -> dict[str, str]:
     (mpmfx.surface.launch): without it each of n workers splits its kernels across every core,
     and two workers on two cores surfaced the default shot 10 % slower (44.0-46.1 s against
     40.4-41.2 s with one thread each). A value the user set is inherited as it is."""
+    from mpmfx.surface.launch import THREADS_ENV, usable_cores  # (no Warp import)
+
     if THREADS_ENV in os.environ:
         return {}
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return {THREADS_ENV: str(max(1, cores // max(1, workers)))}
+    return {THREADS_ENV: str(max(1, usable_cores() // max(1, workers)))}
 
 
 def _gather(client, futures: list, bar) -> list[Any]:

@@ -27,6 +27,7 @@ import queue
 from concurrent.futures import ThreadPoolExecutor
 
 MAX_THREADS = 8
+THREADS_ENV = "MPMFX_SURFACE_THREADS"  # the CPU thread count, where set (a Dask worker's share: mpmfx.stages.parallel)
 CHUNKS_PER_THREAD = 4
 MIN_SPLIT = 1 << 14  # threads of a launch below which splitting costs more than it gains
 # blocks below which a light block kernel (a few hundred ns a block: the blurs, a flood round) runs
@@ -38,19 +39,23 @@ _pool: ThreadPoolExecutor | None = None
 _pool_key = (0, 0)  # (workers, pid): a forked child must not reuse its parent's pool (no threads behind it)
 
 
+def usable_cores() -> int:
+    """The cores this process may run on (its affinity mask where the OS has one)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
 def cpu_threads() -> int:
     """Threads a CPU launch is split into (MPMFX_SURFACE_THREADS, else the usable cores, capped)."""
-    env = os.environ.get("MPMFX_SURFACE_THREADS")
+    env = os.environ.get(THREADS_ENV)
     if env:
         try:
             n = int(env)
         except ValueError:
-            raise ValueError(f"MPMFX_SURFACE_THREADS={env!r}: give a whole number of threads (1 = no splitting)") from None
+            raise ValueError(f"{THREADS_ENV}={env!r}: give a whole number of threads (1 = no splitting)") from None
         if n < 1:
-            raise ValueError(f"MPMFX_SURFACE_THREADS={env!r}: give at least 1 thread")
+            raise ValueError(f"{THREADS_ENV}={env!r}: give at least 1 thread")
         return n
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-    return max(1, min(cores, MAX_THREADS))
+    return max(1, min(usable_cores(), MAX_THREADS))
 
 
 def _executor(n: int) -> ThreadPoolExecutor:
