@@ -115,9 +115,7 @@ def _volume_ratio(materials: wp.array(dtype=MaterialParams), material: wp.array(
     mode = materials[material[p]].mode
     j = float(1.0)
     if solid != 0 and (mode == MODE_SNOW or mode == MODE_SAND):
-        f = load_m33(F, p)
-        j = (f[0, 0] * (f[1, 1] * f[2, 2] - f[1, 2] * f[2, 1]) - f[0, 1] * (f[1, 0] * f[2, 2] - f[1, 2] * f[2, 0])
-             + f[0, 2] * (f[1, 0] * f[2, 1] - f[1, 1] * f[2, 0]))
+        j = wp.determinant(load_m33(F, p))
     if water != 0 and mode == MODE_WATER:
         j = J[p]
     out[p] = j
