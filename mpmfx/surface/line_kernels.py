@@ -15,7 +15,7 @@ threads (Warp's CPU launches release the GIL; mpmfx.surface.launch).
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, flow_taper
+from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, edge_limit, flow_taper, gate_cell
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
 
@@ -539,18 +539,18 @@ def project_on_wide_normal_lines(
 
 
 @wp.kernel
-def limit_inward_lines(bcoord: wp.array(dtype=wp.vec3i), a: wp.array(dtype=vec8), ref: wp.array(dtype=vec8), delta: float,
-                       base: int):
+def limit_inward_lines(bcoord: wp.array(dtype=wp.vec3i), a: wp.array(dtype=vec8), ref: wp.array(dtype=vec8), full: float,
+                       gate: wp.array(dtype=float), noise: wp.array(dtype=float), base: int):
     """sparse_kernels.limit_inward for the 64 rows of active block b (thread = block; bcoord
-    gives the launch its size), vec8 rows (rows): a = min(a, ref + delta) with wp.min per
-    voxel, as limit_inward (a thread per voxel cost ~2 ns each, 4.4 ms at 2.1 M voxels, one
-    thread)."""
+    gives the launch its size), vec8 rows (rows): a = min(a, ref + edge_limit) per voxel, as
+    limit_inward (a thread per voxel cost ~2 ns each, 4.4 ms at 2.1 M voxels, one thread)."""
     b = wp.tid() + base
+    nb = noise[b]
     for l in range(BS * BS):
         r = b * BS * BS + l
         x = a[r]
         y = ref[r]
         out = vec8(0.0)
         for z in range(BS):
-            out[z] = wp.min(x[z], y[z] + delta)
+            out[z] = wp.min(x[z], y[z] + edge_limit(full, gate[gate_cell(b, l // BS, l % BS, z)], nb))
         a[r] = out

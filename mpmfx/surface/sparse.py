@@ -46,6 +46,9 @@ NORMAL_STEP = 2  # voxels between the taps of the weight blur (the weights are s
 MAX_BLOCK_SWEEP_ROUNDS = 256  # block-grid flood fill (a full line per launch: settles in a few rounds)
 SEED_DEPTH = 0.5  # x particle radius: how deep a particle's voxel must be to seed a genuine inside component
 SMOOTH_LIMIT = 0.5  # x particle radius: how far smoothing may move the level set inward (see _smooth)
+EDGE_CURVATURE = (0.35, 0.5)  # x 1 / the wide normal's blur width: a convex edge starts / is whole (edge_kernels)
+EDGE_NOISE = 2.0  # x the samples' noise (standard deviation): how far the smoothing may move an edge inward
+EDGE_BAND = 2.0  # voxels from the raw zero level where edges are looked for
 FLOW_DT = 0.25  # voxel^2, one smoothing step (sparse_kernels.curvature_flow): a [1 2 1]/4 pass's spread along the surface
 FLOW_BAND = 3.0  # voxels: the smoothing moves the values this close to the zero level (fully within FLOW_BAND - 1)
 FLOW_REACH = 4  # voxels from the zero level that the smoothing reads: FLOW_BAND and its stencil
@@ -76,6 +79,7 @@ class SparseGrid:
         # adds 0.5 NORMAL_STEP^2 voxel^2
         added = (params.normal_radius**2 - 1.0) * 0.0909 * self.kernel_vox**2
         self.normal_passes = int(round(added / (0.5 * NORMAL_STEP**2)))
+        self.wide_sigma = math.sqrt(0.0909 * self.kernel_vox**2 + self.normal_passes * 0.5 * NORMAL_STEP**2)  # voxels
         self.background = params.band_voxels * self.voxel
         self.far_vox = max(self.kernel_vox, self.r_vox + params.band_voxels + 1.0)
         self.wide = float(params.band_voxels + smooth_reach(params) + 2)
@@ -234,7 +238,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     nvox = nact * BS**3
     timings["blocks"] = _lap(wp, t0)
     with_v = v is not None
-    phi, w, vel = _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid, params)
+    phi, w, vel, edges = _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid, params)
     timings["field"] = _lap(wp, t0)
     mark = _mark_particle_voxels(wp, T, bcoord, bmap, cells, starts, gs)
     tiles = (grid.far_vox, -grid.r_vox)  # (outside, inside) tile values of the raw field
@@ -251,7 +255,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     # face, its stencil reaches a tile's first rows, which lie about that deep (with the blur it
     # replaced, -wide pulled flat faces +0.006 h out: 100k lattice box "fine" 0.0453 -> 0.0420 h)
     flow_tiles = (tiles[0], -min(grid.inside_depth, grid.wide))
-    phi = _smooth(wp, S, bcoord, bmap, dist, params.smooth_iters, flow_tiles, limit=SMOOTH_LIMIT * grid.r_vox)
+    phi = _smooth(wp, S, bcoord, bmap, dist, params.smooth_iters, flow_tiles, limit=SMOOTH_LIMIT * grid.r_vox, edges=edges)
     # marching cubes needs no crossing on a tile face; giving voxels next to a tile its sign can
     # seal an outside pocket whose only way out ran along an inside tile (a bubble, seen on
     # random samples), so it comes before the last topology pass, not after. That pass also
@@ -380,8 +384,9 @@ def _mark_particle_voxels(wp, T, bcoord, bmap, cells, starts, gs):
 
 def _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid: SparseGrid, params: SurfaceParams):
     """The raw Zhu-Bridson field at the active voxels: (phi (voxels), kernel weight sums w,
-    kernel-weighted velocity or a 1-element placeholder), isotropic or with Yu & Turk's
-    ellipsoids (params.anisotropic). gs: g in the cells' order on the CPU (_sorted_positions)."""
+    kernel-weighted velocity or a 1-element placeholder, the edges for the smoothing's limit
+    (_edges; None without smoothing)), isotropic or with Yu & Turk's ellipsoids
+    (params.anisotropic). gs: g in the cells' order on the CPU (_sorted_positions)."""
     from mpmfx.surface import line_gather_kernels as G
     from mpmfx.surface import line_kernels as L
 
@@ -391,7 +396,7 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid: SparseGrid
     phi, w = wp.empty(nvox, dtype=float), wp.empty(nvox, dtype=float)
     vel = wp.empty(nvox if with_v else 1, dtype=wp.vec3)
     if nvox == 0:
-        return phi, w, vel
+        return phi, w, vel, None
     offset = wp.empty(nvox, dtype=wp.vec3)
     aniso = params.anisotropic
     cov = wp.empty(nvox if aniso else 1, dtype=wp.mat33)
@@ -419,14 +424,33 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid: SparseGrid
         wp.launch(S.gather_zhu_bridson, nvox,
                   inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
                   outputs=[phi, w, offset, vel])
+    wide = w
     if grid.normal_passes > 0:
         wide = _blur_weights(wp, S, bcoord, bmap, w, grid.normal_passes)
         if _lines(phi) and not aniso:
             _blocks(wp, L.project_on_wide_normal_lines, [bcoord, bmap, wide, w, offset, grid.r_vox, grid.far_vox, phi])
-            return phi, w, vel
-        _split(wp, S.project_on_wide_normal, nvox, [bcoord, bmap, wide, w, offset, grid.r_vox, grid.far_vox, int(aniso), cov, ANISO_NORMAL_ITERS,
-                          ANISO_COV_EPS * grid.kernel_vox**2, radius, phi])
-    return phi, w, vel
+        else:
+            _split(wp, S.project_on_wide_normal, nvox, [bcoord, bmap, wide, w, offset, grid.r_vox, grid.far_vox, int(aniso),
+                                                        cov, ANISO_NORMAL_ITERS, ANISO_COV_EPS * grid.kernel_vox**2, radius, phi])
+    edges = _edges(wp, bcoord, bmap, wide, offset, phi, grid) if params.smooth_iters > 0 else None
+    return phi, w, vel, edges
+
+
+def _edges(wp, bcoord, bmap, wide, offset, phi, grid: SparseGrid) -> tuple:
+    """(gate per voxel, noise per active block) for the smoothing's inward limit
+    (mpmfx.surface.edge_kernels): where the blurred weights' level set bends like an edge, and
+    how noisy the samples are around each block (voxels). `wide`: the weights the normal came
+    from, of blur width grid.wide_sigma voxels."""
+    from mpmfx.surface import edge_kernels as E
+
+    nact = bcoord.shape[0]
+    gate, sample = wp.empty(nact * 64, dtype=float), wp.empty(nact * 64, dtype=float)  # a 2^3-voxel cell each
+    k0, k1 = (c / grid.wide_sigma for c in EDGE_CURVATURE)
+    _split(wp, E.edge_gate, nact * 64, [bcoord, bmap, wide, offset, phi, EDGE_BAND + 1.0, k0, k1, gate, sample])
+    sums, noise = wp.empty(nact, dtype=wp.vec2), wp.empty(nact, dtype=float)
+    _split(wp, E.block_samples, nact, [sample, sums])
+    _split(wp, E.block_noise, nact, [bcoord, bmap, sums, EDGE_NOISE, noise])
+    return gate, noise
 
 
 def _classify(wp, S, g, gs, counts, cells, starts, order, grid: SparseGrid):
@@ -663,7 +687,7 @@ def _close_voids(wp, S, bcoord, bmap, dist, rho: float, clip: float):
     return closed
 
 
-def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
+def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float, edges: tuple):
     """`iters` steps of the level set's mean-curvature flow over the distance `dist` (kept;
     sparse_kernels.curvature_flow, FLOW_DT voxel^2 a step, values within FLOW_BAND of the zero
     level), the surface then moved at most `limit` voxels inward. The flow averages the
@@ -687,10 +711,11 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float):
         else:
             _split(wp, S.curvature_flow, phi.shape[0], [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, tmp])
         phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)
+    gate, noise = edges
     if _lines(phi):
-        _blocks(wp, L.limit_inward_lines, [bcoord, L.rows(phi), L.rows(dist), limit])
+        _blocks(wp, L.limit_inward_lines, [bcoord, L.rows(phi), L.rows(dist), limit, gate, noise])
     else:
-        _split(wp, S.limit_inward, phi.shape[0], [phi, dist, limit])
+        _split(wp, S.limit_inward, phi.shape[0], [phi, dist, limit, gate, noise])
     return phi
 
 

@@ -493,12 +493,33 @@ def project_on_wide_normal(
     phi[t] = dist - r
 
 
+@wp.func
+def edge_limit(full: float, gate: float, noise: float):
+    """How far (voxels) the smoothing may move a voxel's surface inward: `full` on faces and
+    curves; at an edge (gate 1, mpmfx.surface.edge_kernels) no further than the noise of its
+    block's samples, or `full` where the block saw none (noise < 0)."""
+    lim = full
+    if noise >= 0.0:
+        lim = wp.min(full, noise)
+    return full + (lim - full) * gate
+
+
+@wp.func
+def gate_cell(b: int, i: int, j: int, k: int):
+    """Index of the 2^3-voxel cell (edge_kernels.edge_gate) of voxel (i, j, k) of active block b."""
+    return b * 64 + (i // 2) * 16 + (j // 2) * 4 + k // 2
+
+
 @wp.kernel
-def limit_inward(a: wp.array(dtype=float), ref: wp.array(dtype=float), delta: float, base: int):
-    """a = min(a, ref + delta): the level set a (signed distance, negative inside) lies at most
-    delta inside ref's."""
+def limit_inward(a: wp.array(dtype=float), ref: wp.array(dtype=float), full: float, gate: wp.array(dtype=float),
+                 noise: wp.array(dtype=float), base: int):
+    """a = min(a, ref + edge_limit): the level set a (signed distance, negative inside) lies at
+    most that far inside ref's; gate is per 2^3-voxel cell, noise per active block."""
     t = wp.tid() + base
-    a[t] = wp.min(a[t], ref[t] + delta)
+    b = t // BV
+    l = t - b * BV
+    g = gate[gate_cell(b, l // 64, (l // 8) % 8, l % 8)]
+    a[t] = wp.min(a[t], ref[t] + edge_limit(full, g, noise[b]))
 
 
 @wp.func
