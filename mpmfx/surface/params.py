@@ -34,7 +34,9 @@ class SurfaceParams:
     smooth_iters: steps of the level set's mean-curvature flow (sparse._smooth: each spreads the
         surface's noise along it as a [1 2 1]/4 blur pass would, without eroding a thin sheet),
         after it is made a signed distance over the band; together they move the surface at most
-        0.5 particle_radius inward (so a drop or a filament is not shrunk away). The surface
+        0.5 particle_radius inward (so a drop or a filament is not shrunk away), and an edge no
+        further than twice the noise of its samples (a lattice's edges stay sharp, random
+        samples' are smoothed as before: mpmfx.surface.edge_kernels). The surface
         stage runs 8 at voxel_size = r / 2 (README: random samples 0.14 -> 0.09-0.12 h mean error;
         more steps shrink small curved bodies: a 20k random sphere loses 1.3 % of its volume at
         8, 1.9 % at 12).

@@ -690,7 +690,10 @@ def _close_voids(wp, S, bcoord, bmap, dist, rho: float, clip: float):
 def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float, edges: tuple):
     """`iters` steps of the level set's mean-curvature flow over the distance `dist` (kept;
     sparse_kernels.curvature_flow, FLOW_DT voxel^2 a step, values within FLOW_BAND of the zero
-    level), the surface then moved at most `limit` voxels inward. The flow averages the
+    level), the surface then moved at most `limit` voxels inward, and at an edge at most
+    EDGE_NOISE x the noise of its samples (`edges`: _edges' gate and noise; on a lattice the raw
+    field already holds an edge, and the flow only rounded it: 100k lattice box 0.027 / 0.033 ->
+    0.016 / 0.020 h, docs/surfacing-log.md, eighteenth step). The flow averages the
     surface's noise on random samples away, as a [1 2 1]/4 blur along each axis did, but only
     along the surface: the blur's Laplacian also averaged across it, so it ate into anything
     thinner than it was wide, and pinched the gaps of a random sheet into more holes. 2-core

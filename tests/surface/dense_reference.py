@@ -80,7 +80,8 @@ def surface_dense(
         wp.launch(K.average_into, phi.shape, inputs=[distance, again])
         distance = wp.array(_redistance(distance.numpy(), wide), dtype=float)
         phi = _smooth(wp, K, wp.clone(distance), params.smooth_iters)
-        if params.smooth_iters > 0:  # at most SMOOTH_LIMIT r inward, as the sparse surfacer
+        if params.smooth_iters > 0:  # at most SMOOTH_LIMIT r inward, as the sparse surfacer on bodies without edges (its
+            # edges' limit, mpmfx.surface.edge_kernels, is not modelled here: the cases compared have none)
             phi = wp.array(np.minimum(phi.numpy(), distance.numpy() + SMOOTH_LIMIT * grid.r_vox), dtype=float)
         timings["smooth"] = _lap(wp, t0)
         if params.smooth_iters > 0:
