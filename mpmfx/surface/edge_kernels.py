@@ -1,9 +1,9 @@
-"""Warp kernels that say how far the smoothing may round each part of the surface (sparse._edge_limit).
+"""Warp kernels that say how far the smoothing may round each part of the surface (sparse._edges).
 
 The mean-curvature flow moves a convex edge inward wherever it runs, noise or not. Where the
 samples are regular (a lattice, a freshly voxelised body) the raw field already holds the edge,
-and the flow only rounds it: the 100k lattice box lost 0.027 -> 0.017 h of accuracy that way
-(docs/surfacing-log.md, eighteenth step). So at an edge the flow may move the surface inward
+and the flow only rounds it: the 100k lattice box's error went from 0.018 h unsmoothed to 0.027 h
+smoothed ("fast"; docs/surfacing-log.md, eighteenth step). So at an edge the flow may move the surface inward
 only as far as the samples' own noise there, measured from the particles: the kernel centroid's
 offset along the edge, which a regular sampling keeps at ~0 and random samples do not.
 
@@ -43,8 +43,8 @@ def tangent_hessian(bmap: wp.array3d(dtype=wp.int32), f: wp.array(dtype=float), 
            - weight_at(bmap, f, t, i - 2, j, k + 2) + weight_at(bmap, f, t, i - 2, j, k - 2)) / 16.0
     hyz = (weight_at(bmap, f, t, i, j + 2, k + 2) - weight_at(bmap, f, t, i, j + 2, k - 2)
            - weight_at(bmap, f, t, i, j - 2, k + 2) + weight_at(bmap, f, t, i, j - 2, k - 2)) / 16.0
-    h = wp.mat33(xp - 2.0 * f0 + xm, 4.0 * hxy, 4.0 * hxz, 4.0 * hxy, yp - 2.0 * f0 + ym, 4.0 * hyz,
-                 4.0 * hxz, 4.0 * hyz, zp - 2.0 * f0 + zm) / 4.0
+    h = wp.mat33(0.25 * (xp - 2.0 * f0 + xm), hxy, hxz, hxy, 0.25 * (yp - 2.0 * f0 + ym), hyz,
+                 hxz, hyz, 0.25 * (zp - 2.0 * f0 + zm))
     n = g / gl
     p = wp.identity(n=3, dtype=float) - wp.outer(n, n)
     return n, p * h * p / gl, gl
@@ -55,8 +55,8 @@ def edge_gate(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32)
               offset: wp.array(dtype=wp.vec3), phi: wp.array(dtype=float), band: float, k0: float, k1: float,
               gate: wp.array(dtype=float), sample: wp.array(dtype=float), base: int):
     """Per cell of 2^3 voxels (thread u: its first voxel, the even one, in block u // 64; gate and
-    sample hold 64 cells a block, gate_cell maps a voxel to its cell), where that voxel lies
-    within `band` of the raw field's zero level (phi): gate = how much of an edge it
+    sample hold 64 cells a block, sparse_kernels.gate_cell maps a voxel to its cell), where that
+    voxel lies within `band` of the raw field's zero level (phi): gate = how much of an edge it
     is, 0 below the convex curvature k0 of the blurred weights' level set, 1 above k1 (1/voxel;
     smooth between); sample = |offset . e| (voxels), the centroid offset x - xbar along the edge
     direction e, where the level set bends one way only (an edge, not a corner), else -1.

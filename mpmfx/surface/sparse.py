@@ -48,7 +48,7 @@ SEED_DEPTH = 0.5  # x particle radius: how deep a particle's voxel must be to se
 SMOOTH_LIMIT = 0.5  # x particle radius: how far smoothing may move the level set inward (see _smooth)
 EDGE_CURVATURE = (0.35, 0.5)  # x 1 / the wide normal's blur width: a convex edge starts / is whole (edge_kernels)
 EDGE_NOISE = 2.0  # x the samples' noise (standard deviation): how far the smoothing may move an edge inward
-EDGE_BAND = 2.0  # voxels from the raw zero level where edges are looked for
+EDGE_BAND = 3.0  # voxels from the raw zero level where a 2^3 cell's corner looks for an edge (its voxels within ~2)
 FLOW_DT = 0.25  # voxel^2, one smoothing step (sparse_kernels.curvature_flow): a [1 2 1]/4 pass's spread along the surface
 FLOW_BAND = 3.0  # voxels: the smoothing moves the values this close to the zero level (fully within FLOW_BAND - 1)
 FLOW_REACH = 4  # voxels from the zero level that the smoothing reads: FLOW_BAND and its stencil
@@ -437,7 +437,7 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid: SparseGrid
 
 
 def _edges(wp, bcoord, bmap, wide, offset, phi, grid: SparseGrid) -> tuple:
-    """(gate per voxel, noise per active block) for the smoothing's inward limit
+    """(gate per 2^3-voxel cell, noise per active block) for the smoothing's inward limit
     (mpmfx.surface.edge_kernels): where the blurred weights' level set bends like an edge, and
     how noisy the samples are around each block (voxels). `wide`: the weights the normal came
     from, of blur width grid.wide_sigma voxels."""
@@ -446,7 +446,7 @@ def _edges(wp, bcoord, bmap, wide, offset, phi, grid: SparseGrid) -> tuple:
     nact = bcoord.shape[0]
     gate, sample = wp.empty(nact * 64, dtype=float), wp.empty(nact * 64, dtype=float)  # a 2^3-voxel cell each
     k0, k1 = (c / grid.wide_sigma for c in EDGE_CURVATURE)
-    _split(wp, E.edge_gate, nact * 64, [bcoord, bmap, wide, offset, phi, EDGE_BAND + 1.0, k0, k1, gate, sample])
+    _split(wp, E.edge_gate, nact * 64, [bcoord, bmap, wide, offset, phi, EDGE_BAND, k0, k1, gate, sample])
     sums, noise = wp.empty(nact, dtype=wp.vec2), wp.empty(nact, dtype=float)
     _split(wp, E.block_samples, nact, [sample, sums])
     _split(wp, E.block_noise, nact, [bcoord, bmap, sums, EDGE_NOISE, noise])
