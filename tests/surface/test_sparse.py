@@ -147,3 +147,17 @@ def test_a_lattice_block_keeps_its_edges_at_both_settings():
         edge_err = np.abs(sdf(v[near_edge])).mean() / h
         assert edge_err < 0.15, f"{label}: edges {edge_err:.3f} h off the box"
         assert surface_error(v, mesh.faces, sdf) / h < 0.03, label
+
+
+def test_random_samples_edges_are_smoothed_as_without_the_edge_limit(monkeypatch):
+    # random samples are noisy at every edge (the centroid wanders ~0.2 h along it), so twice the
+    # noise exceeds the 0.5 r limit and their surface is the one the plain flow gives
+    from mpmfx.surface import sparse
+
+    x, h = sample_shape("box", 20000, "random")
+    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=0.5 * h, smooth_iters=8, dense_output=False)
+    kept = surface_particles(x, None, params, device=DEVICE).mesh
+    monkeypatch.setattr(sparse, "EDGE_CURVATURE", (1e30, 2e30))  # no edge anywhere: the limit is 0.5 r
+    plain = surface_particles(x, None, params, device=DEVICE).mesh
+    assert np.array_equal(kept.faces, plain.faces)
+    assert np.abs(kept.vertices - plain.vertices).max() < 1e-3 * h
