@@ -705,7 +705,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float, edges
     how the dents of sample voids fill."""
     from mpmfx.surface import line_kernels as L
 
-    if iters == 0:
+    if iters == 0 or dist.shape[0] == 0:  # no active voxel: no edges measured either (_field)
         return dist
     phi, tmp = dist, wp.empty_like(dist)  # the first step reads dist itself (kept: no copy), then two buffers take turns
     for _ in range(iters):
