@@ -30,7 +30,9 @@ class SurfaceParams:
     radius_scale: artist multiplier on r (grows / shrinks the surface; the kernel support stays).
     voxel_size: level-set voxel edge; None -> 0.5 * particle_radius (independent of the sim dx).
         voxel_size = particle_radius with smooth_iters = 4 is the benchmark's "fast" (README).
-        The default, 2, keeps a lone particle's drop at 0.68 r (unsmoothed 1.0 r, 4 steps 0.47 r).
+        The default, 2, keeps a lone particle's drop at 0.68 r (unsmoothed 1.0 r) wherever it sits;
+        at 3 or 4 steps it survives only near a voxel corner (3 of 20 random places; 0.47 r there),
+        and at voxel_size = r not even at 1 step: spray of single particles goes.
     smooth_iters: steps of the level set's mean-curvature flow (sparse._smooth: each spreads the
         surface's noise along it as a [1 2 1]/4 blur pass would, without eroding a thin sheet),
         after it is made a signed distance over the band; together they move the surface at most
