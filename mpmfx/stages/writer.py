@@ -30,8 +30,12 @@ class FrameWriter:
             while self._pending:
                 self._pending.popleft().result()
         finally:
-            for p in self._pending:
-                p.exception()
+            self._finish_rest()
+
+    def _finish_rest(self) -> None:
+        """Let every pending job finish, its error (if any) left unraised."""
+        for p in self._pending:
+            p.exception()
 
     def __enter__(self) -> FrameWriter:
         return self
@@ -41,7 +45,6 @@ class FrameWriter:
             if exc_type is None:
                 self.wait()
             else:
-                for p in self._pending:
-                    p.exception()  # finish it; the error already raised is the one to report
+                self._finish_rest()  # the error already raised is the one to report
         finally:
             self._pool.shutdown(wait=True)
