@@ -23,6 +23,7 @@ ap.add_argument("--shapes", nargs="+", default=["sphere"])
 ap.add_argument("--samplings", nargs="+", default=["lattice", "random"])
 ap.add_argument("--configs", nargs="+", default=["0.6:1", "0.5:2"])
 ap.add_argument("--device", default="cuda")
+ap.add_argument("--top", type=int, default=10, help="kernels listed per case")
 args = ap.parse_args()
 wp.config.quiet = True
 wp.init()
@@ -61,4 +62,4 @@ for shape in args.shapes:
                     a[0] += 1
                     a[1] += r.elapsed
             print("   ", "; ".join(f"{k.replace('forward kernel ', '')} {ms:.1f}ms x{c}" for k, (c, ms) in
-                                 sorted(agg.items(), key=lambda kv: -kv[1][1])[:10]), flush=True)
+                                 sorted(agg.items(), key=lambda kv: -kv[1][1])[:args.top]), flush=True)

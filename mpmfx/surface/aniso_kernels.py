@@ -13,15 +13,14 @@ Units: grid (voxel) coordinates throughout, as in :mod:`mpmfx.surface.sparse_ker
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import cell_range, voxel_of, write_field
+from mpmfx.surface.sparse_kernels import cell_range, column_slots, voxel_of, write_field
 
 
 @wp.kernel
 def particle_shape(
-    g: wp.array(dtype=wp.vec3),
+    gs: wp.array(dtype=wp.vec3),
     cells: wp.array3d(dtype=wp.int32),
     starts: wp.array(dtype=wp.int32),
-    order: wp.array(dtype=wp.int32),
     reach: float,
     max_ratio: float,
     max_stretch: float,
@@ -29,14 +28,14 @@ def particle_shape(
     gmat: wp.array(dtype=wp.mat33),
     thin: wp.array(dtype=float),
 ):
-    """gmat maps an offset from particle p (voxels) to its kernel's unit ball: I / reach for
+    """gmat[p] maps an offset from particle p (voxels; gs, the particles in the cells' order) to its kernel's unit ball: I / reach for
     fewer than min_neighbours neighbours within `reach` voxels (spray stays round), else
     Q diag(1 / (reach a_i)) Q^T with Q the principal axes of the neighbours' covariance (weights
     (1 - d^2/reach^2)^3) and a_i their standard deviations, the smallest raised to the largest /
     max_ratio, scaled to a_1 a_2 a_3 = 1 (the ellipsoid keeps the ball's volume), each at most
     max_stretch. thin = the shortest a_i (1 when round)."""
     p = wp.tid()
-    x = g[p]
+    x = gs[p]
     r2 = reach * reach
     lo, hi = cell_range(x, reach, wp.vec3i(cells.shape[0], cells.shape[1], cells.shape[2]))
     w = float(0.0)
@@ -45,20 +44,18 @@ def particle_shape(
     count = int(0)
     for bi in range(lo[0], hi[0] + 1):
         for bj in range(lo[1], hi[1] + 1):
-            for bk in range(lo[2], hi[2] + 1):
-                cnt = cells[bi, bj, bk]
-                if cnt > 0:
-                    s = starts[(bi * cells.shape[1] + bj) * cells.shape[2] + bk]
-                    for q in range(s, s + cnt):
-                        d = g[order[q]] - x
-                        d2 = wp.dot(d, d)
-                        if d2 < r2:
-                            u = 1.0 - d2 / r2
-                            wk = u * u * u
-                            w += wk
-                            m += wk * d
-                            c += wk * wp.outer(d, d)
-                            count += 1
+            q, end = column_slots(x, r2, bi, bj, lo[2], hi[2], cells, starts)
+            while q < end:
+                d = gs[q] - x
+                d2 = wp.dot(d, d)
+                if d2 < r2:
+                    u = 1.0 - d2 / r2
+                    wk = u * u * u
+                    w += wk
+                    m += wk * d
+                    c += wk * wp.outer(d, d)
+                    count += 1
+                q += 1
     m = m / w  # w > 0: the particle itself counts
     iso = wp.identity(n=3, dtype=float) / reach
     thin[p] = 1.0
@@ -90,11 +87,10 @@ def gather_zhu_bridson_aniso(
     bcoord: wp.array(dtype=wp.vec3i),
     cells: wp.array3d(dtype=wp.int32),
     starts: wp.array(dtype=wp.int32),
-    order: wp.array(dtype=wp.int32),
-    g: wp.array(dtype=wp.vec3),
+    gs: wp.array(dtype=wp.vec3),
     gmat: wp.array(dtype=wp.mat33),
     thin: wp.array(dtype=float),
-    v: wp.array(dtype=wp.vec3),
+    vs: wp.array(dtype=wp.vec3),
     with_v: int,
     reach: float,
     kernel_vox: float,
@@ -130,28 +126,25 @@ def gather_zhu_bridson_aniso(
     tw = float(0.0)
     for bi in range(lo[0], hi[0] + 1):
         for bj in range(lo[1], hi[1] + 1):
-            for bk in range(lo[2], hi[2] + 1):
-                cnt = cells[bi, bj, bk]
-                if cnt > 0:
-                    s = starts[(bi * cells.shape[1] + bj) * cells.shape[2] + bk]
-                    for q in range(s, s + cnt):
-                        p = order[q]
-                        d = g[p] - x
-                        if wp.dot(d, d) < r2:
-                            G = gmat[p]
-                            e = G * d
-                            s2 = wp.dot(e, e)
-                            if s2 < 1.0:
-                                u = 1.0 - s2
-                                scale = wp.determinant(G) * k3
-                                wk = u * u * u * scale
-                                w += wk
-                                dw += wk * d
-                                gw += (u * u * scale * kernel_vox * kernel_vox) * (wp.transpose(G) * e)
-                                cw += wk * wp.outer(d, d)
-                                tw += wk * thin[p]
-                                if with_v != 0:
-                                    vw += wk * v[p]
+            q, end = column_slots(x, r2, bi, bj, lo[2], hi[2], cells, starts)
+            while q < end:
+                d = gs[q] - x
+                if wp.dot(d, d) < r2:
+                    G = gmat[q]
+                    e = G * d
+                    s2 = wp.dot(e, e)
+                    if s2 < 1.0:
+                        u = 1.0 - s2
+                        scale = wp.determinant(G) * k3
+                        wk = u * u * u * scale
+                        w += wk
+                        dw += wk * d
+                        gw += (u * u * scale * kernel_vox * kernel_vox) * (wp.transpose(G) * e)
+                        cw += wk * wp.outer(d, d)
+                        tw += wk * thin[q]
+                        if with_v != 0:
+                            vw += wk * vs[q]
+                q += 1
     radius = radius_vox
     cov[t] = wp.mat33(0.0)
     if w > 0.0:

@@ -152,7 +152,7 @@ def gather_zhu_bridson_blocks(
     subset of the block's visited in the same (cell, then slot) order, so each voxel sums the
     same particles in the same order with the same arithmetic as the voxel kernel: the same
     field bit for bit. g and v are in the sorted order (g[q] = the positions' [order[q]],
-    sorted_copy): the fetches run through memory in order instead of jumping.
+    sparse_kernels.sorted_copy): the fetches run through memory in order instead of jumping.
 
     A candidate goes on only if its kernel reaches a line of the block, tested exactly at the
     nearest line (lane_d2min; the test is monotone in the distance): 42 % of the candidates
@@ -219,13 +219,6 @@ def gather_zhu_bridson_blocks(
             vw = wp.vec3(acc[la, 7][z], acc[la, 8][z], acc[la, 9][z])
         write_field(t0 + q, acc[la, 0][z], wp.vec3(acc[la, 1][z], acc[la, 2][z], acc[la, 3][z]),
                     wp.vec3(acc[la, 4][z], acc[la, 5][z], acc[la, 6][z]), vw, radius_vox, with_v, far_vox, phi, w_out, offset, vel)
-
-
-@wp.kernel
-def sorted_copy(src: wp.array(dtype=wp.vec3), order: wp.array(dtype=wp.int32), dst: wp.array(dtype=wp.vec3), base: int):
-    """dst[q] = src[order[q]]."""
-    q = wp.tid() + base
-    dst[q] = src[order[q]]
 
 
 @wp.kernel

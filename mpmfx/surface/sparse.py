@@ -174,7 +174,7 @@ class DeviceSurface:
         pinned = PINNED_DOWNLOAD if pinned is None else pinned
         stats = dict(self.stats)
         t0 = time.perf_counter()
-        mesh = O.download_mesh(wp, self.mesh, with_v=self.vel is not None, pinned=pinned)
+        mesh = O.download_mesh(wp, M, self.mesh, with_v=self.vel is not None, pinned=pinned)
         t1 = time.perf_counter()
         sparse = O.sparse_output(wp, M, self, params, pinned=pinned)
         t2 = time.perf_counter()
@@ -232,13 +232,13 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     g = wp.empty(n, dtype=wp.vec3)
     wp.launch(S.to_grid, n, inputs=[x, wp.vec3(*grid.origin.astype(np.float32)), 1.0 / grid.voxel, g])
     counts, cells, starts, order = _bin_particles(wp, S, g, grid)
-    gs = _sorted_positions(wp, g, order)
-    bmap, bcoord = _classify(wp, S, g, gs, counts, cells, starts, order, grid)
+    gs = _sorted_positions(wp, S, g, order)
+    bmap, bcoord = _classify(wp, S, gs, counts, cells, starts, grid)
     nact = bcoord.shape[0]
     nvox = nact * BS**3
     timings["blocks"] = _lap(wp, t0)
     with_v = v is not None
-    phi, w, vel, edges = _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid, params)
+    phi, w, vel, edges = _field(wp, S, bcoord, bmap, cells, starts, order, gs, v, grid, params)
     timings["field"] = _lap(wp, t0)
     mark = _mark_particle_voxels(wp, T, bcoord, bmap, cells, starts, gs)
     tiles = (grid.far_vox, -grid.r_vox)  # (outside, inside) tile values of the raw field
@@ -348,21 +348,19 @@ def _bin_particles(wp, S, g, grid: SparseGrid):
     return counts, cells, starts, order
 
 
-def _sorted_positions(wp, g, order):
-    """g in the gather cells' order (gs[q] = g[order[q]], (n,) vec3) on the CPU, else g itself.
+def _sorted_positions(wp, S, g, order):
+    """g in the gather cells' order (gs[q] = g[order[q]], (n,) vec3).
 
-    On the CPU the kernels that take one particle at a time in any order
-    (count_component_particles, near_blocks_cpu.mark_near_tested) read this copy: in the
-    caller's order, random samples (what simulated particles look like) jump through the block
-    map, the voxel arrays and the counters from one particle to the next, where a lattice's
-    neighbours follow each other (100k random "fine", one thread: 1.4-2x those kernels' time
-    on a lattice of the same shape). Their results do not depend on the order."""
-    from mpmfx.surface import line_gather_kernels as G
-
-    if not _lines(g):
-        return g
+    The kernels that read a cell's particles (the gathers) then read consecutive memory instead
+    of following `order`, and those that take one particle at a time in any order
+    (mark_near_blocks, count_component_particles) touch the block map, the voxel arrays and the
+    counters in space order: in the caller's order random samples (what simulated particles look
+    like) jump from one block to the next, where a lattice's neighbours follow each other (100k
+    random "fine", CPU, one thread: 1.4-2x those kernels' time on a lattice of the same shape;
+    10M random torus "fine", one H200: the GPU gather 27.4 ms against 20.7 on the lattice).
+    Their results do not depend on the order."""
     gs = wp.empty(g.shape[0], dtype=wp.vec3)
-    _split(wp, G.sorted_copy, g.shape[0], [g, order, gs])
+    _split(wp, S.sorted_copy, g.shape[0], [g, order, gs])
     return gs
 
 
@@ -382,17 +380,17 @@ def _mark_particle_voxels(wp, T, bcoord, bmap, cells, starts, gs):
     return mark
 
 
-def _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid: SparseGrid, params: SurfaceParams):
+def _field(wp, S, bcoord, bmap, cells, starts, order, gs, v, grid: SparseGrid, params: SurfaceParams):
     """The raw Zhu-Bridson field at the active voxels: (phi (voxels), kernel weight sums w,
     kernel-weighted velocity or a 1-element placeholder, the edges for the smoothing's limit
     (_edges; None without smoothing)), isotropic or with Yu & Turk's ellipsoids
-    (params.anisotropic). gs: g in the cells' order on the CPU (_sorted_positions)."""
+    (params.anisotropic). gs: the particles' grid positions in the cells' order (_sorted_positions),
+    v: their velocities in the caller's order (or None)."""
     from mpmfx.surface import line_gather_kernels as G
     from mpmfx.surface import line_kernels as L
 
     nvox = bcoord.shape[0] * BS**3
     with_v = v is not None
-    va = v if with_v else wp.zeros(1, dtype=wp.vec3)
     phi, w = wp.empty(nvox, dtype=float), wp.empty(nvox, dtype=float)
     vel = wp.empty(nvox if with_v else 1, dtype=wp.vec3)
     if nvox == 0:
@@ -401,20 +399,19 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid: SparseGrid
     aniso = params.anisotropic
     cov = wp.empty(nvox if aniso else 1, dtype=wp.mat33)
     radius = wp.empty(nvox if aniso else 1, dtype=float)
+    n = gs.shape[0]
+    vs = wp.empty(n if with_v else 1, dtype=wp.vec3)  # v in the cells' order, as gs
+    if with_v:
+        _split(wp, S.sorted_copy, n, [v, order, vs])
     if aniso:
         from mpmfx.surface import aniso_kernels as A
-        n = g.shape[0]
         gmat, thin = wp.empty(n, dtype=wp.mat33), wp.empty(n, dtype=float)
-        wp.launch(A.particle_shape, n, inputs=[g, cells, starts, order, grid.kernel_vox, ANISO_MAX_RATIO,
+        wp.launch(A.particle_shape, n, inputs=[gs, cells, starts, grid.kernel_vox, ANISO_MAX_RATIO,
                                                ANISO_MAX_STRETCH, ANISO_MIN_NEIGHBOURS, gmat, thin])
         wp.launch(A.gather_zhu_bridson_aniso, nvox,
-                  inputs=[bcoord, cells, starts, order, g, gmat, thin, va, int(with_v), grid.gather_vox, grid.kernel_vox,
+                  inputs=[bcoord, cells, starts, gs, gmat, thin, vs, int(with_v), grid.gather_vox, grid.kernel_vox,
                           grid.r_vox, grid.far_vox], outputs=[phi, w, offset, vel, cov, radius])
-    elif _lines(phi):  # one thread per block: each candidate particle fetched once per block, in memory order
-        n = g.shape[0]
-        vs = wp.empty(n if with_v else 1, dtype=wp.vec3)
-        if with_v:
-            _split(wp, G.sorted_copy, n, [v, order, vs])
+    elif _lines(phi):  # one thread per block: each candidate particle fetched once per block
         nacc = 10 if with_v else 7  # vec8 sums per line: w, offset, weight gradient (, velocity)
         launch_split_scratch(wp, G.gather_zhu_bridson_blocks, bcoord.shape[0],
                              [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w,
@@ -422,7 +419,7 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, g, gs, v, grid: SparseGrid
                              lambda: wp.empty((BS * BS, nacc), dtype=L.vec8), device=phi.device)
     else:
         wp.launch(S.gather_zhu_bridson, nvox,
-                  inputs=[bcoord, cells, starts, order, g, va, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
+                  inputs=[bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox],
                   outputs=[phi, w, offset, vel])
     wide = w
     if grid.normal_passes > 0:
@@ -453,22 +450,22 @@ def _edges(wp, bcoord, bmap, wide, offset, phi, grid: SparseGrid) -> tuple:
     return gate, noise
 
 
-def _classify(wp, S, g, gs, counts, cells, starts, order, grid: SparseGrid):
+def _classify(wp, S, gs, counts, cells, starts, grid: SparseGrid):
     """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates);
-    cells, starts, order: the gather cells' particles (_bin_particles), gs: g in their order
-    (_sorted_positions)."""
+    cells, starts: the gather cells' particles (_bin_particles), gs: their grid positions in the
+    cells' order (_sorted_positions)."""
     near = wp.zeros(grid.nblocks, dtype=wp.int32)
-    if _lines(g):  # a block of particles per thread, most blocks decided without their particles
+    if _lines(gs):  # a block of particles per thread, most blocks decided without their particles
         from mpmfx.surface import near_blocks_cpu as N
 
         nb = math.prod(grid.nblocks)
         # a grid block per thread, much work for those holding particles: split however few the
         # blocks (MIN_SPLIT left these unsplit below 16384 blocks, 10976 at the 100k torus "fine")
-        kw = {"device": g.device, "min_split": 1}
+        kw = {"device": gs.device, "min_split": 1}
         launch_split(wp, N.mark_near_certain, nb, [cells, grid.reach_vox, near], **kw)
         launch_split(wp, N.mark_near_tested, nb, [cells, starts, gs, grid.reach_vox, near], **kw)
     else:
-        _split(wp, S.mark_near_blocks, g.shape[0], [g, grid.reach_vox, near])  # writes 1s: any interleaving agrees
+        _split(wp, S.mark_near_blocks, gs.shape[0], [gs, grid.reach_vox, near])  # writes 1s: any interleaving agrees
     state = wp.empty(grid.nblocks, dtype=wp.int32)
     wp.launch(S.classify_blocks, grid.nblocks, inputs=[counts, near, grid.dense_reach, grid.dense_min, state])
     labels = wp.empty(grid.nblocks, dtype=wp.int32)

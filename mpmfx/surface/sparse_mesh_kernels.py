@@ -230,6 +230,38 @@ def gather_blocks_vec(
 
 
 @wp.kernel
+def count_negative(a: wp.array(dtype=wp.int32), count: wp.array(dtype=wp.int32)):
+    """count[0] += the entries of a below 0 (count zeroed by the caller)."""
+    t = wp.tid()
+    if a[t] < 0:
+        wp.atomic_add(count, 0, 1)
+
+
+@wp.kernel
+def inside_tiles(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32)):
+    """flags = 1 on INSIDE tiles of the block grid, flattened in C order (as numpy's argwhere)."""
+    i, j, k = wp.tid()
+    flags[(i * bmap.shape[1] + j) * bmap.shape[2] + k] = wp.where(bmap[i, j, k] == TILE_INSIDE, 1, 0)
+
+
+@wp.kernel
+def compact_inside_tiles(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32),
+                         offsets: wp.array(dtype=wp.int32), out: wp.array(dtype=wp.vec3i)):
+    """out[offsets[b]] = the block coordinates of INSIDE tile b (exclusive scan of flags)."""
+    i, j, k = wp.tid()
+    b = (i * bmap.shape[1] + j) * bmap.shape[2] + k
+    if flags[b] != 0:
+        out[offsets[b]] = wp.vec3i(i, j, k)
+
+
+@wp.kernel
+def scan_totals(flags: wp.array(dtype=wp.int32), offsets: wp.array(dtype=wp.int32), slot: int, out: wp.array(dtype=wp.int32)):
+    """out[slot] = the sum of flags, from its exclusive scan (one thread)."""
+    n = flags.shape[0]
+    out[slot] = offsets[n - 1] + flags[n - 1]
+
+
+@wp.kernel
 def kind_equals(kind: wp.array(dtype=wp.int32), value: int, out: wp.array(dtype=wp.int32)):
     b = wp.tid()
     out[b] = wp.where(kind[b] == value, 1, 0)

@@ -14,6 +14,7 @@ import numpy as np
 from mpmfx.surface.params import LevelSet, SparseLevelSet, SurfaceMesh, SurfaceParams, SurfaceResult, kernel_volume
 from mpmfx.surface.sparse import BS, DeviceSurface
 from mpmfx.surface.sparse import _launch as launch
+from mpmfx.surface.sparse import _lines as host_path
 from mpmfx.surface.sparse import _scan as scan
 
 log = logging.getLogger(__name__)
@@ -107,33 +108,49 @@ def to_host(wp, arrays: list, *, pinned: bool) -> list:
     return out
 
 
-def download_mesh(wp, mesh: tuple | None, *, with_v: bool, pinned: bool) -> SurfaceMesh:
+def download_mesh(wp, M, mesh: tuple | None, *, with_v: bool, pinned: bool) -> SurfaceMesh:
     if mesh is None:
         return SurfaceMesh.empty()
     world, normals, velocities, faces = mesh
+    # a crossing on a tile face leaves a triangle a -1 corner (match_tiles should make that
+    # impossible): on a GPU counted there, where a host pass over the faces cost 3 ms at 10M
+    on_host = host_path(faces)
+    bad = None
+    if not on_host:
+        bad = wp.zeros(1, dtype=wp.int32, device=faces.device)
+        launch(wp, M.count_negative, faces.shape[0], [faces, bad])
     # without particle velocities the vertex velocities are zeros: made here, not copied
-    world, normals, velocities, faces = to_host(wp, [world, normals, velocities if with_v else None, faces], pinned=pinned)
+    world, normals, velocities, faces, bad = to_host(wp, [world, normals, velocities if with_v else None, faces, bad],
+                                                     pinned=pinned)
     if velocities is None:
-        velocities = np.zeros_like(world)
+        velocities = np.zeros(world.shape, np.float32)  # untouched pages: zeros_like wrote 24 MB at 10M (7 ms)
     f = faces.reshape(-1, 3)
-    if f.min() < 0:  # a crossing on a tile face: match_tiles should make this impossible
-        bad = (f < 0).any(axis=1)
-        log.warning("sparse marching cubes: %d triangles touched a constant tile and were dropped", int(bad.sum()))
-        f = f[~bad]
+    if (f.size and f.min() < 0) if on_host else bad[0] > 0:
+        drop = (f < 0).any(axis=1)
+        log.warning("sparse marching cubes: %d triangles touched a constant tile and were dropped", int(drop.sum()))
+        f = f[~drop]
     return SurfaceMesh(world, f.astype(np.int32, copy=False), normals, velocities)
 
 
 def sparse_output(wp, M, d: DeviceSurface, params: SurfaceParams, *, pinned: bool) -> SparseLevelSet:
     """Blocks holding a voxel inside the band; blocks wholly at -background join the inside tiles,
     wholly at +background are dropped (what OpenVDB's pruning would do). params.density adds
-    the fog density of the kept blocks."""
+    the fog density of the kept blocks. The kept blocks and the inside tiles are compacted on
+    the device: a host pass over the block grid (numpy's argwhere) cost more than the copy."""
     grid, nact = d.grid, d.bcoord.shape[0]
-    if d.values.device.is_cpu:
+    if host_path(d.values):
         return _sparse_output_host(wp, M, d, params)
     keep = wp.empty(max(nact, 1), dtype=wp.int32)
+    keep.zero_()
     launch(wp, M.kind_equals, nact, [d.kind, 2, keep])
     offsets = scan(wp, keep, inclusive=False)
-    m = int(offsets[-1:].numpy()[0] + keep[-1:].numpy()[0]) if nact else 0
+    flags = wp.empty(d.bmap.size, dtype=wp.int32)
+    wp.launch(M.inside_tiles, d.bmap.shape, inputs=[d.bmap, flags])
+    ioffsets = scan(wp, flags, inclusive=False)
+    totals = wp.empty(2, dtype=wp.int32)
+    wp.launch(M.scan_totals, 1, inputs=[keep, offsets, 0, totals])
+    wp.launch(M.scan_totals, 1, inputs=[flags, ioffsets, 1, totals])
+    m, ninside = (int(c) for c in totals.numpy())
     size = m * BS**3
     out = wp.empty(max(size, 1), dtype=float)
     launch(wp, M.gather_blocks, nact * BS**3, [keep, offsets, d.values, out])
@@ -145,17 +162,20 @@ def sparse_output(wp, M, d: DeviceSurface, params: SurfaceParams, *, pinned: boo
         fog = wp.empty(max(size, 1), dtype=float)
         launch(wp, M.gather_blocks, nact * BS**3, [keep, offsets, d.w, fog])
         launch(wp, M.scale_clamp01, size, [fog, 1.0 / bulk_weight(d, params)])
-    values, velocity, density, kinds, bcoord, bmap = to_host(wp, [out, vout, fog, d.kind, d.bcoord, d.bmap], pinned=pinned)
-    return _leaves(grid, kinds[:nact], bcoord, bmap, values[:size].reshape(m, BS, BS, BS),
+    inside = wp.empty(max(ninside, 1), dtype=wp.vec3i)
+    wp.launch(M.compact_inside_tiles, d.bmap.shape, inputs=[d.bmap, flags, ioffsets, inside])
+    values, velocity, density, kinds, bcoord, inside = to_host(wp, [out, vout, fog, d.kind, d.bcoord, inside], pinned=pinned)
+    return _leaves(grid, kinds[:nact], bcoord[:nact], inside[:ninside], values[:size].reshape(m, BS, BS, BS),
                    None if velocity is None else velocity[:size].reshape(m, BS, BS, BS, 3),
                    None if density is None else density[:size].reshape(m, BS, BS, BS))
 
 
-def _leaves(grid, kinds: np.ndarray, bcoord: np.ndarray, bmap: np.ndarray, values, velocity, density) -> SparseLevelSet:
+def _leaves(grid, kinds: np.ndarray, bcoord: np.ndarray, tiles: np.ndarray, values, velocity, density) -> SparseLevelSet:
     """The level set of the kept blocks' voxels (values, velocity, density: (m, BS, BS, BS[, 3])),
-    kinds / bcoord: the active blocks' kinds and block coordinates, bmap the block map (-2 inside)."""
+    kinds / bcoord: the active blocks' kinds and block coordinates, tiles: (k, 3) the block
+    coordinates of the INSIDE tiles (C order)."""
     blocks = bcoord.astype(np.int64).reshape(-1, 3)
-    inside = np.concatenate([np.argwhere(bmap == -2).astype(np.int64), blocks[kinds == 1]])
+    inside = np.concatenate([tiles.astype(np.int64).reshape(-1, 3), blocks[kinds == 1]])
     return SparseLevelSet(
         block_ijk=blocks[kinds == 2] * BS + grid.ijk0,
         values=values,
@@ -185,7 +205,8 @@ def _sparse_output_host(wp, M, d: DeviceSurface, params: SurfaceParams) -> Spars
         density = kept(d.w)
         launch(wp, M.scale_clamp01, m * BS**3, [wp.array(density.reshape(-1), dtype=float, device=d.w.device, copy=False),
                                                 1.0 / bulk_weight(d, params)])
-    return _leaves(grid, kinds, d.bcoord.numpy()[:nact], d.bmap.numpy(), kept(d.values), velocity, density)
+    tiles = np.argwhere(d.bmap.numpy() == -2)
+    return _leaves(grid, kinds, d.bcoord.numpy()[:nact], tiles, kept(d.values), velocity, density)
 
 
 def bulk_weight(d: DeviceSurface, params: SurfaceParams) -> float:

@@ -1,6 +1,6 @@
 """The CPU path (mpmfx.surface.line_kernels and its siblings: a block per thread, the topology
 fills on bit words, launches split across CPU threads) surfaces exactly as the voxel kernels a
-GPU runs: same mesh, same leaves."""
+GPU runs: same mesh, same leaves (compacted as on a GPU: sparse_output.sparse_output)."""
 
 import numpy as np
 import pytest
@@ -32,7 +32,8 @@ def test_cpu_line_kernels_and_threads_give_the_voxel_kernels_surface(monkeypatch
     assert len(lines.mesh.faces) > 1000
     for a, b in [(lines.mesh.vertices, voxels.mesh.vertices), (lines.mesh.faces, voxels.mesh.faces),
                  (lines.mesh.velocities, voxels.mesh.velocities), (lines.sparse.values, voxels.sparse.values),
-                 (lines.sparse.block_ijk, voxels.sparse.block_ijk)]:
+                 (lines.sparse.block_ijk, voxels.sparse.block_ijk), (lines.sparse.velocity, voxels.sparse.velocity),
+                 (lines.sparse.inside_ijk, voxels.sparse.inside_ijk)]:
         np.testing.assert_array_equal(a, b)
 
 
@@ -72,7 +73,7 @@ def test_cpu_near_blocks_are_mark_near_blocks(monkeypatch, sampling, voxel_h, it
     got = wp.zeros(grid.nblocks, dtype=wp.int32, device="cpu")
     nb = int(np.prod(grid.nblocks))
     sparse._split(wp, N.mark_near_certain, nb, [cells, grid.reach_vox, got])
-    sparse._split(wp, N.mark_near_tested, nb, [cells, starts, sparse._sorted_positions(wp, g, order), grid.reach_vox, got])
+    sparse._split(wp, N.mark_near_tested, nb, [cells, starts, sparse._sorted_positions(wp, S, g, order), grid.reach_vox, got])
     assert 0 < want.numpy().sum() < nb
     np.testing.assert_array_equal(got.numpy(), want.numpy())
 
