@@ -16,6 +16,7 @@ threads (Warp's CPU launches release the GIL; mpmfx.surface.launch).
 import warp as wp
 
 from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, edge_limit, flow_taper, gate_cell
+from mpmfx.surface.sparse_kernels import block_tile as block_code
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
 
@@ -52,14 +53,6 @@ def vmax(a: vec8, b: vec8):
     for z in range(BS):
         r[z] = wp.where(b[z] > a[z], b[z], a[z])
     return r
-
-
-@wp.func
-def block_code(bmap: wp.array3d(dtype=wp.int32), bc: wp.vec3i):
-    """Active index of block bc, or its tile code (OUTSIDE beyond the grid), as `slot` gives."""
-    if bc[0] < 0 or bc[1] < 0 or bc[2] < 0 or bc[0] >= bmap.shape[0] or bc[1] >= bmap.shape[1] or bc[2] >= bmap.shape[2]:
-        return TILE_OUTSIDE
-    return bmap[bc[0], bc[1], bc[2]]
 
 
 @wp.func

@@ -580,7 +580,7 @@ def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
             if _lines(w) and NORMAL_STEP == 2:  # the line kernel is written out for step 2
                 _blocks(wp, L.blur_weight_lines, [bcoord, bmap, L.rows(a), axis, L.rows(b)], light=True)
             else:
-                _split(wp, S.blur_weight_axis, w.shape[0], [bcoord, bmap, a, axis, NORMAL_STEP, b])
+                _split(wp, S.blur_weight_axis, bcoord.shape[0] * BS * BS, [bcoord, bmap, a, axis, NORMAL_STEP, b])  # a line each
             a, b = b, (wp.empty_like(w) if a is w else a)
     return a
 
