@@ -18,31 +18,40 @@ from mpmfx.surface.sparse_kernels import BS, BV, slot, voxel_of, weight_at
 
 
 @wp.func
+def tap(bmap: wp.array3d(dtype=wp.int32), f: wp.array(dtype=float), t: int, c: wp.vec3i, dx: int, dy: int, dz: int):
+    """weight_at of voxel c + (dx, dy, dz), c being active voxel t: read directly when it lies in
+    c's block (half the taps of an even voxel; the block map is looked up for the rest)."""
+    x = c[0] % BS + dx
+    y = c[1] % BS + dy
+    z = c[2] % BS + dz
+    if x >= 0 and x < BS and y >= 0 and y < BS and z >= 0 and z < BS:
+        return f[t + (dx * BS + dy) * BS + dz]
+    return weight_at(bmap, f, t, c[0] + dx, c[1] + dy, c[2] + dz)
+
+
+@wp.func
 def tangent_hessian(bmap: wp.array3d(dtype=wp.int32), f: wp.array(dtype=float), t: int, c: wp.vec3i):
     """(unit gradient direction of f at voxel t, the Hessian of f projected on the plane across it
     and divided by |grad f| (the curvature matrix of f's level set, 1/voxel), |grad f|), from taps
     2 voxels apart: they cancel the 2-voxel ripple that the weight blur's taps keep (a lattice of
     2 voxels' spacing leaves one, which 1-voxel differences read as edges on the lattice sphere)."""
-    i = c[0]
-    j = c[1]
-    k = c[2]
     f0 = f[t]
-    xp = weight_at(bmap, f, t, i + 2, j, k)
-    xm = weight_at(bmap, f, t, i - 2, j, k)
-    yp = weight_at(bmap, f, t, i, j + 2, k)
-    ym = weight_at(bmap, f, t, i, j - 2, k)
-    zp = weight_at(bmap, f, t, i, j, k + 2)
-    zm = weight_at(bmap, f, t, i, j, k - 2)
+    xp = tap(bmap, f, t, c, 2, 0, 0)
+    xm = tap(bmap, f, t, c, -2, 0, 0)
+    yp = tap(bmap, f, t, c, 0, 2, 0)
+    ym = tap(bmap, f, t, c, 0, -2, 0)
+    zp = tap(bmap, f, t, c, 0, 0, 2)
+    zm = tap(bmap, f, t, c, 0, 0, -2)
     g = wp.vec3(xp - xm, yp - ym, zp - zm) / 4.0
     gl = wp.length(g)
     if gl < 1.0e-20:
         return wp.vec3(0.0), wp.mat33(0.0), 0.0
-    hxy = (weight_at(bmap, f, t, i + 2, j + 2, k) - weight_at(bmap, f, t, i + 2, j - 2, k)
-           - weight_at(bmap, f, t, i - 2, j + 2, k) + weight_at(bmap, f, t, i - 2, j - 2, k)) / 16.0
-    hxz = (weight_at(bmap, f, t, i + 2, j, k + 2) - weight_at(bmap, f, t, i + 2, j, k - 2)
-           - weight_at(bmap, f, t, i - 2, j, k + 2) + weight_at(bmap, f, t, i - 2, j, k - 2)) / 16.0
-    hyz = (weight_at(bmap, f, t, i, j + 2, k + 2) - weight_at(bmap, f, t, i, j + 2, k - 2)
-           - weight_at(bmap, f, t, i, j - 2, k + 2) + weight_at(bmap, f, t, i, j - 2, k - 2)) / 16.0
+    hxy = (tap(bmap, f, t, c, 2, 2, 0) - tap(bmap, f, t, c, 2, -2, 0)
+           - tap(bmap, f, t, c, -2, 2, 0) + tap(bmap, f, t, c, -2, -2, 0)) / 16.0
+    hxz = (tap(bmap, f, t, c, 2, 0, 2) - tap(bmap, f, t, c, 2, 0, -2)
+           - tap(bmap, f, t, c, -2, 0, 2) + tap(bmap, f, t, c, -2, 0, -2)) / 16.0
+    hyz = (tap(bmap, f, t, c, 0, 2, 2) - tap(bmap, f, t, c, 0, 2, -2)
+           - tap(bmap, f, t, c, 0, -2, 2) + tap(bmap, f, t, c, 0, -2, -2)) / 16.0
     h = wp.mat33(0.25 * (xp - 2.0 * f0 + xm), hxy, hxz, hxy, 0.25 * (yp - 2.0 * f0 + ym), hyz,
                  hxz, hyz, 0.25 * (zp - 2.0 * f0 + zm))
     n = g / gl
