@@ -656,7 +656,7 @@ def _eikonal_sweeps(wp, bcoord, bmap, a, b, frozen, was, fbits, clip: float):
             _blocks(wp, L.eikonal_lines, [bcoord, bmap, LK.rows(a), fbits, clip, -clip, clip, LK.rows(b), was, now])
             was, now = now, was
         else:
-            _split(wp, R.eikonal_sweep, nvox, [bcoord, bmap, a, frozen, clip, -clip, clip, b])
+            _split(wp, R.eikonal_sweep, nvox // BS, [bcoord, bmap, a, frozen, clip, -clip, clip, b])  # a line each
         a, b = b, a
     return a
 
