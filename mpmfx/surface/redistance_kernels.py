@@ -9,7 +9,7 @@ upwind, one voxel of progress per sweep), so the smoothing that follows sees a t
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, block_tile, step_get, voxel_of
+from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, block_tile, line_value, side_line, step_get, voxel_of
 
 
 @wp.func
@@ -94,29 +94,6 @@ def init_eikonal(
         dist[t] = wp.where(v > 0.0, clip, -clip)
 
 
-@wp.func
-def side_line(bmap: wp.array3d(dtype=wp.int32), bc: wp.vec3i, b: int, x: int, y: int):
-    """First data index of the z line (x, y) of block b (bc its coordinates) when x and y lie in
-    0..BS-1, else of that line in the block next to it along x or y, or that block's tile code
-    (-1 OUTSIDE, -2 INSIDE) shifted below -BV (so any index >= 0 is data)."""
-    bx = wp.where(x < 0, -1, wp.where(x >= BS, 1, 0))
-    by = wp.where(y < 0, -1, wp.where(y >= BS, 1, 0))
-    if bx == 0 and by == 0:
-        return b * BV + (x * BS + y) * BS
-    code = block_tile(bmap, wp.vec3i(bc[0] + bx, bc[1] + by, bc[2]))
-    if code < 0:
-        return code - BV
-    return code * BV + ((x - bx * BS) * BS + (y - by * BS)) * BS
-
-
-@wp.func
-def line_value(src: wp.array(dtype=float), line: int, k: int, out_v: float, in_v: float):
-    """Voxel k of the line side_line gave (a tile's value on a tile)."""
-    if line >= 0:
-        return src[line + k]
-    return wp.where(line + BV == TILE_INSIDE, in_v, out_v)
-
-
 @wp.kernel
 def eikonal_sweep(
     bcoord: wp.array(dtype=wp.vec3i),
@@ -140,10 +117,10 @@ def eikonal_sweep(
     y = l - x * BS
     bc = bcoord[b]
     t0 = b * BV + l * BS
-    xm = side_line(bmap, bc, b, x - 1, y)
-    xp = side_line(bmap, bc, b, x + 1, y)
-    ym = side_line(bmap, bc, b, x, y - 1)
-    yp = side_line(bmap, bc, b, x, y + 1)
+    xm = side_line(bmap, bc, b, x - 1, y, 0)
+    xp = side_line(bmap, bc, b, x + 1, y, 0)
+    ym = side_line(bmap, bc, b, x, y - 1, 0)
+    yp = side_line(bmap, bc, b, x, y + 1, 0)
     zm = block_tile(bmap, wp.vec3i(bc[0], bc[1], bc[2] - 1))
     zp = block_tile(bmap, wp.vec3i(bc[0], bc[1], bc[2] + 1))
     for k in range(BS):

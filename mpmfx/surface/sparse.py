@@ -709,7 +709,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float, edges
         if _lines(phi):
             _blocks(wp, L.curvature_flow_lines, [bcoord, bmap, L.rows(phi), *tiles, FLOW_DT, FLOW_BAND, L.rows(tmp)])
         else:
-            _split(wp, S.curvature_flow, phi.shape[0], [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, tmp])
+            _split(wp, S.curvature_flow, phi.shape[0] // BS, [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, tmp])  # a line each
         phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)
     gate, noise = edges
     if _lines(phi):
