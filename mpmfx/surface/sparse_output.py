@@ -140,8 +140,7 @@ def sparse_output(wp, M, d: DeviceSurface, params: SurfaceParams, *, pinned: boo
     grid, nact = d.grid, d.bcoord.shape[0]
     if host_path(d.values):
         return _sparse_output_host(wp, M, d, params)
-    keep = wp.empty(max(nact, 1), dtype=wp.int32)
-    keep.zero_()
+    keep = wp.zeros(max(nact, 1), dtype=wp.int32)  # without active blocks, one 0 to scan
     launch(wp, M.kind_equals, nact, [d.kind, 2, keep])
     offsets = scan(wp, keep, inclusive=False)
     flags = wp.empty(d.bmap.size, dtype=wp.int32)
@@ -170,12 +169,12 @@ def sparse_output(wp, M, d: DeviceSurface, params: SurfaceParams, *, pinned: boo
                    None if density is None else density[:size].reshape(m, BS, BS, BS))
 
 
-def _leaves(grid, kinds: np.ndarray, bcoord: np.ndarray, tiles: np.ndarray, values, velocity, density) -> SparseLevelSet:
+def _leaves(grid, kinds: np.ndarray, bcoord: np.ndarray, inside_tiles: np.ndarray, values, velocity, density) -> SparseLevelSet:
     """The level set of the kept blocks' voxels (values, velocity, density: (m, BS, BS, BS[, 3])),
-    kinds / bcoord: the active blocks' kinds and block coordinates, tiles: (k, 3) the block
-    coordinates of the INSIDE tiles (C order)."""
+    kinds / bcoord: the active blocks' kinds and block coordinates, inside_tiles: (k, 3) the
+    block coordinates of the INSIDE tiles of the block grid (C order)."""
     blocks = bcoord.astype(np.int64).reshape(-1, 3)
-    inside = np.concatenate([tiles.astype(np.int64).reshape(-1, 3), blocks[kinds == 1]])
+    inside = np.concatenate([inside_tiles.astype(np.int64).reshape(-1, 3), blocks[kinds == 1]])
     return SparseLevelSet(
         block_ijk=blocks[kinds == 2] * BS + grid.ijk0,
         values=values,
@@ -205,8 +204,7 @@ def _sparse_output_host(wp, M, d: DeviceSurface, params: SurfaceParams) -> Spars
         density = kept(d.w)
         launch(wp, M.scale_clamp01, m * BS**3, [wp.array(density.reshape(-1), dtype=float, device=d.w.device, copy=False),
                                                 1.0 / bulk_weight(d, params)])
-    tiles = np.argwhere(d.bmap.numpy() == -2)
-    return _leaves(grid, kinds, d.bcoord.numpy()[:nact], tiles, kept(d.values), velocity, density)
+    return _leaves(grid, kinds, d.bcoord.numpy()[:nact], np.argwhere(d.bmap.numpy() == -2), kept(d.values), velocity, density)
 
 
 def bulk_weight(d: DeviceSurface, params: SurfaceParams) -> float:
