@@ -9,7 +9,7 @@ upwind, one voxel of progress per sweep), so the smoothing that follows sees a t
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, block_tile, line_value, side_line, step_get, voxel_of
+from mpmfx.surface.sparse_kernels import BS, BV, line_value, line_z, side_line, step_get, voxel_of
 
 
 @wp.func
@@ -121,31 +121,17 @@ def eikonal_sweep(
     xp = side_line(bmap, bc, b, x + 1, y, 0)
     ym = side_line(bmap, bc, b, x, y - 1, 0)
     yp = side_line(bmap, bc, b, x, y + 1, 0)
-    zm = block_tile(bmap, wp.vec3i(bc[0], bc[1], bc[2] - 1))
-    zp = block_tile(bmap, wp.vec3i(bc[0], bc[1], bc[2] + 1))
+    zm = side_line(bmap, bc, b, x, y, -1)
+    zp = side_line(bmap, bc, b, x, y, 1)
     for k in range(BS):
         t = t0 + k
         v = src[t]
         if frozen[t] != 0:
             dst[t] = v
             continue
-        lo = float(0.0)
-        if k > 0:
-            lo = src[t - 1]
-        elif zm >= 0:
-            lo = src[zm * BV + l * BS + BS - 1]
-        else:
-            lo = wp.where(zm == TILE_INSIDE, in_v, out_v)
-        hi = float(0.0)
-        if k < BS - 1:
-            hi = src[t + 1]
-        elif zp >= 0:
-            hi = src[zp * BV + l * BS]
-        else:
-            hi = wp.where(zp == TILE_INSIDE, in_v, out_v)
         a = wp.vec3(wp.min(wp.abs(line_value(src, xm, k, out_v, in_v)), wp.abs(line_value(src, xp, k, out_v, in_v))),
                     wp.min(wp.abs(line_value(src, ym, k, out_v, in_v)), wp.abs(line_value(src, yp, k, out_v, in_v))),
-                    wp.min(wp.abs(lo), wp.abs(hi)))
+                    wp.min(wp.abs(line_z(src, t0, zm, zp, k - 1, out_v, in_v)), wp.abs(line_z(src, t0, zm, zp, k + 1, out_v, in_v))))
         dst[t] = eikonal_update(a, v, clip)
 
 
