@@ -15,7 +15,7 @@ threads (Warp's CPU launches release the GIL; mpmfx.surface.launch).
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, edge_limit, flow_taper, gate_cell
+from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, edge_flow_step, edge_limit, flow_taper, gate_cell
 from mpmfx.surface.sparse_kernels import block_tile as block_code
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
@@ -148,7 +148,8 @@ def z_pair(src: wp.array(dtype=vec8), codes: vec27i, x: int, y: int, row: vec8, 
 
 @wp.kernel
 def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=vec8),
-                         out_v: float, in_v: float, dt: float, band: float, dst: wp.array(dtype=vec8), base: int):
+                         out_v: float, in_v: float, dt: float, band: float, gate: wp.array(dtype=float), pit: float,
+                         dst: wp.array(dtype=vec8), base: int):
     """sparse_kernels.curvature_flow on one block (thread = block), a row of 8 voxels along z at
     a time: the 26 neighbour blocks are looked up once, a row's neighbour rows read once, and
     sparse_kernels.flow_step's arithmetic runs 8 voxels at a time, the same operations in the
@@ -226,6 +227,11 @@ def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtyp
             if g2[k] > 1.0e-8:
                 nhn = num[k] / g2[k]
             out[k] = wp.where(taper == 0.0, c[k], c[k] + taper * dt * (lap[k] - nhn))
+            if taper > 0.0:  # at an edge, sparse_kernels.edge_flow_step from the same neighbour values
+                g8 = gate[gate_cell(b, x, y, k)]
+                if g8 > 0.0:
+                    out[k] = edge_flow_step(c[k], xm[k], xp[k], ym[k], yp[k], zm[k], zp[k], fxy[k], fxz[k], fyz[k], dt, taper,
+                                            g8, pit)
         dst[r0 + r] = out
 
 

@@ -48,6 +48,7 @@ SEED_DEPTH = 0.5  # x particle radius: how deep a particle's voxel must be to se
 SMOOTH_LIMIT = 0.5  # x particle radius: how far smoothing may move the level set inward (see _smooth)
 EDGE_CURVATURE = (0.35, 0.5)  # x 1 / the wide normal's blur width: a convex edge starts / is whole (edge_kernels)
 EDGE_NOISE = 2.0  # x the samples' noise (standard deviation): how far the smoothing may move an edge inward
+EDGE_PIT = 0.25  # 1/voxel: a pit along an edge this sharply curved (or more) stops the flow rounding the edge there (sparse_kernels.edge_flow_step); 0.1 filled more but flickered more (docs/surfacing-log.md, nineteenth step)
 EDGE_BAND = 3.0  # voxels from the raw zero level where a 2^3 cell's corner looks for an edge (its voxels within ~2)
 FLOW_DT = 0.25  # voxel^2, one smoothing step (sparse_kernels.curvature_flow): a [1 2 1]/4 pass's spread along the surface
 FLOW_BAND = 3.0  # voxels: the smoothing moves the values this close to the zero level (fully within FLOW_BAND - 1)
@@ -704,14 +705,14 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float, edges
 
     if iters == 0 or dist.shape[0] == 0:  # no active voxel: no edges measured either (_field)
         return dist
+    gate, noise = edges
     phi, tmp = dist, wp.empty_like(dist)  # the first step reads dist itself (kept: no copy), then two buffers take turns
     for _ in range(iters):
         if _lines(phi):
-            _blocks(wp, L.curvature_flow_lines, [bcoord, bmap, L.rows(phi), *tiles, FLOW_DT, FLOW_BAND, L.rows(tmp)])
-        else:
-            _split(wp, S.curvature_flow, phi.shape[0] // BS, [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, tmp])  # a line each
+            _blocks(wp, L.curvature_flow_lines, [bcoord, bmap, L.rows(phi), *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, L.rows(tmp)])
+        else:  # a line each
+            _split(wp, S.curvature_flow, phi.shape[0] // BS, [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, tmp])
         phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)
-    gate, noise = edges
     if _lines(phi):
         _blocks(wp, L.limit_inward_lines, [bcoord, L.rows(phi), L.rows(dist), limit, gate, noise])
     else:
