@@ -15,7 +15,7 @@ threads (Warp's CPU launches release the GIL; mpmfx.surface.launch).
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, edge_flow_step, edge_limit, flow_taper, gate_cell
+from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, edge_flow_step, edge_limit, flow_taper, gate_cell, get, voxel_of
 from mpmfx.surface.sparse_kernels import block_tile as block_code
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
@@ -148,15 +148,15 @@ def z_pair(src: wp.array(dtype=vec8), codes: vec27i, x: int, y: int, row: vec8, 
 
 @wp.kernel
 def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=vec8),
-                         out_v: float, in_v: float, dt: float, band: float, gate: wp.array(dtype=float), pit: float,
-                         dst: wp.array(dtype=vec8), base: int):
+                         out_v: float, in_v: float, dt: float, band: float, dst: wp.array(dtype=vec8), base: int):
     """sparse_kernels.curvature_flow on one block (thread = block), a row of 8 voxels along z at
     a time: the 26 neighbour blocks are looked up once, a row's neighbour rows read once, and
     sparse_kernels.flow_step's arithmetic runs 8 voxels at a time, the same operations in the
     same order, so the results are the voxel kernel's bit for bit (a block a thread voxel by
     voxel took 19 ms a step at 100k torus lattice "fine", this 10 ms; skipping the rows with no
     value in the band, 14-16 % less again: one step on captured inputs, one thread, best of 21,
-    lattice / random torus 7.8 / 13.0 -> 6.7 / 11.3 ms)."""
+    lattice / random torus 7.8 / 13.0 -> 6.7 / 11.3 ms). The voxels where the edge gate is open
+    are stepped again by edge_flow_lines."""
     b = wp.tid() + base
     r0 = b * 64
     moves = bool(False)  # a block with no value within `band` of the zero level stays as it is
@@ -227,12 +227,58 @@ def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtyp
             if g2[k] > 1.0e-8:
                 nhn = num[k] / g2[k]
             out[k] = wp.where(taper == 0.0, c[k], c[k] + taper * dt * (lap[k] - nhn))
-            if taper > 0.0:  # at an edge, sparse_kernels.edge_flow_step from the same neighbour values
-                g8 = gate[gate_cell(b, x, y, k)]
-                if g8 > 0.0:
-                    out[k] = edge_flow_step(c[k], xm[k], xp[k], ym[k], yp[k], zm[k], zp[k], fxy[k], fxz[k], fyz[k], dt, taper,
-                                            g8, pit)
         dst[r0 + r] = out
+
+
+@wp.func
+def near(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), t: int, c: wp.vec3i, dx: int, dy: int, dz: int,
+         out_v: float, in_v: float):
+    """`get` of voxel c + (dx, dy, dz) (each -1..1), c being active voxel t: read directly when it
+    lies in c's block."""
+    x = c[0] % BS + dx
+    y = c[1] % BS + dy
+    z = c[2] % BS + dz
+    if x >= 0 and x < BS and y >= 0 and y < BS and z >= 0 and z < BS:
+        return data[t + (dx * BS + dy) * BS + dz]
+    return get(bmap, data, c[0] + dx, c[1] + dy, c[2] + dz, out_v, in_v)
+
+
+@wp.kernel
+def edge_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
+                    out_v: float, in_v: float, dt: float, band: float, gate: wp.array(dtype=float), pit: float,
+                    dst: wp.array(dtype=float), base: int):
+    """After curvature_flow_lines (thread = block): the voxels where the edge gate is open take
+    sparse_kernels.edge_flow_step instead, from the same neighbour values (`get`), as the GPU's
+    curvature_flow does in place. A block with no open gate returns at once. Kept out of the
+    row kernel: there the edge step's code, even in a branch never taken, made the flow twice
+    as slow (one step, captured inputs, one thread)."""
+    b = wp.tid() + base
+    g0 = b * 64
+    open_ = bool(False)
+    for u in range(64):
+        if gate[g0 + u] > 0.0:
+            open_ = True
+    if not open_:
+        return
+    t = b * BV
+    while t < (b + 1) * BV:
+        l = t - b * BV
+        g8 = gate[gate_cell(b, l // 64, (l // 8) % 8, l % 8)]
+        p0 = src[t]
+        taper = flow_taper(p0, band)
+        if g8 > 0.0 and taper > 0.0:
+            c = voxel_of(t, bcoord)
+            fxy = 0.25 * (near(bmap, src, t, c, 1, 1, 0, out_v, in_v) - near(bmap, src, t, c, 1, -1, 0, out_v, in_v)
+                          - near(bmap, src, t, c, -1, 1, 0, out_v, in_v) + near(bmap, src, t, c, -1, -1, 0, out_v, in_v))
+            fxz = 0.25 * (near(bmap, src, t, c, 1, 0, 1, out_v, in_v) - near(bmap, src, t, c, 1, 0, -1, out_v, in_v)
+                          - near(bmap, src, t, c, -1, 0, 1, out_v, in_v) + near(bmap, src, t, c, -1, 0, -1, out_v, in_v))
+            fyz = 0.25 * (near(bmap, src, t, c, 0, 1, 1, out_v, in_v) - near(bmap, src, t, c, 0, 1, -1, out_v, in_v)
+                          - near(bmap, src, t, c, 0, -1, 1, out_v, in_v) + near(bmap, src, t, c, 0, -1, -1, out_v, in_v))
+            dst[t] = edge_flow_step(p0, near(bmap, src, t, c, -1, 0, 0, out_v, in_v), near(bmap, src, t, c, 1, 0, 0, out_v, in_v),
+                                    near(bmap, src, t, c, 0, -1, 0, out_v, in_v), near(bmap, src, t, c, 0, 1, 0, out_v, in_v),
+                                    near(bmap, src, t, c, 0, 0, -1, out_v, in_v), near(bmap, src, t, c, 0, 0, 1, out_v, in_v),
+                                    fxy, fxz, fyz, dt, taper, g8, pit)
+        t += 1
 
 
 @wp.func

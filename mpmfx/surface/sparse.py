@@ -709,7 +709,8 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float, edges
     phi, tmp = dist, wp.empty_like(dist)  # the first step reads dist itself (kept: no copy), then two buffers take turns
     for _ in range(iters):
         if _lines(phi):
-            _blocks(wp, L.curvature_flow_lines, [bcoord, bmap, L.rows(phi), *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, L.rows(tmp)])
+            _blocks(wp, L.curvature_flow_lines, [bcoord, bmap, L.rows(phi), *tiles, FLOW_DT, FLOW_BAND, L.rows(tmp)])
+            _blocks(wp, L.edge_flow_lines, [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, tmp], light=True)
         else:  # a line each
             _split(wp, S.curvature_flow, phi.shape[0] // BS, [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, tmp])
         phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)

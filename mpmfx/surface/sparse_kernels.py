@@ -648,12 +648,14 @@ def edge_flow_step(p0: float, xm: float, xp: float, ym: float, yp: float, zm: fl
     fzz = zp - 2.0 * p0 + zm
     gl = wp.sqrt(g2)
     n = wp.vec3(gx, gy, gz) / gl
-    p = wp.identity(n=3, dtype=float) - wp.outer(n, n)
-    m = p * wp.mat33(fxx, fxy, fxz, fxy, fyy, fyz, fxz, fyz, fzz) * p / gl
-    tr = m[0, 0] + m[1, 1] + m[2, 2]
-    m2 = m * m
-    det = 0.5 * (tr * tr - (m2[0, 0] + m2[1, 1] + m2[2, 2]))  # the two tangent eigenvalues' product
-    disc = wp.sqrt(wp.max(tr * tr - 4.0 * det, 0.0))
+    # the curvature matrix P H P / |grad| (P = I - n n^T) through its trace and that of its
+    # square, tr(P H P P H P) = tr(H^2) - 2 |H n|^2 + (n^T H n)^2, without forming it
+    hn = wp.vec3(fxx * n[0] + fxy * n[1] + fxz * n[2], fxy * n[0] + fyy * n[1] + fyz * n[2], fxz * n[0] + fyz * n[1] + fzz * n[2])
+    a = wp.dot(n, hn)
+    h2 = fxx * fxx + fyy * fyy + fzz * fzz + 2.0 * (fxy * fxy + fxz * fxz + fyz * fyz)
+    tr = (fxx + fyy + fzz - a) / gl
+    tr2 = (h2 - 2.0 * wp.dot(hn, hn) + a * a) / g2
+    disc = wp.sqrt(wp.max(2.0 * tr2 - tr * tr, 0.0))  # the two eigenvalues' difference
     lo = 0.5 * (tr - disc)
     hi = 0.5 * (tr + disc)
     keep = 1.0 - gate * wp.clamp(-lo / pit, 0.0, 1.0)
