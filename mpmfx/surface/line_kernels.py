@@ -249,36 +249,31 @@ def edge_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.
                     dst: wp.array(dtype=float), base: int):
     """After curvature_flow_lines (thread = block): the voxels where the edge gate is open take
     sparse_kernels.edge_flow_step instead, from the same neighbour values (`get`), as the GPU's
-    curvature_flow does in place. A block with no open gate returns at once. Kept out of the
+    curvature_flow does in place; only the open gate cells' voxels are visited. Kept out of the
     row kernel: there the edge step's code, even in a branch never taken, made the flow twice
     as slow (one step, captured inputs, one thread)."""
     b = wp.tid() + base
-    g0 = b * 64
-    open_ = bool(False)
-    for u in range(64):
-        if gate[g0 + u] > 0.0:
-            open_ = True
-    if not open_:
-        return
-    t = b * BV
-    while t < (b + 1) * BV:
-        l = t - b * BV
-        g8 = gate[gate_cell(b, l // 64, (l // 8) % 8, l % 8)]
-        p0 = src[t]
-        taper = flow_taper(p0, band)
-        if g8 > 0.0 and taper > 0.0:
-            c = voxel_of(t, bcoord)
-            fxy = 0.25 * (near(bmap, src, t, c, 1, 1, 0, out_v, in_v) - near(bmap, src, t, c, 1, -1, 0, out_v, in_v)
-                          - near(bmap, src, t, c, -1, 1, 0, out_v, in_v) + near(bmap, src, t, c, -1, -1, 0, out_v, in_v))
-            fxz = 0.25 * (near(bmap, src, t, c, 1, 0, 1, out_v, in_v) - near(bmap, src, t, c, 1, 0, -1, out_v, in_v)
-                          - near(bmap, src, t, c, -1, 0, 1, out_v, in_v) + near(bmap, src, t, c, -1, 0, -1, out_v, in_v))
-            fyz = 0.25 * (near(bmap, src, t, c, 0, 1, 1, out_v, in_v) - near(bmap, src, t, c, 0, 1, -1, out_v, in_v)
-                          - near(bmap, src, t, c, 0, -1, 1, out_v, in_v) + near(bmap, src, t, c, 0, -1, -1, out_v, in_v))
-            dst[t] = edge_flow_step(p0, near(bmap, src, t, c, -1, 0, 0, out_v, in_v), near(bmap, src, t, c, 1, 0, 0, out_v, in_v),
-                                    near(bmap, src, t, c, 0, -1, 0, out_v, in_v), near(bmap, src, t, c, 0, 1, 0, out_v, in_v),
-                                    near(bmap, src, t, c, 0, 0, -1, out_v, in_v), near(bmap, src, t, c, 0, 0, 1, out_v, in_v),
-                                    fxy, fxz, fyz, dt, taper, g8, pit)
-        t += 1
+    for u in range(64):  # the block's 2^3-voxel cells: most are closed
+        g8 = gate[b * 64 + u]
+        if g8 > 0.0:
+            q = int(0)
+            while q < 8:  # not unrolled (a range() of constant length is): one copy of the edge step
+                t = b * BV + ((2 * (u // 16) + q // 4) * BS + 2 * ((u // 4) % 4) + (q // 2) % 2) * BS + 2 * (u % 4) + q % 2
+                p0 = src[t]
+                taper = flow_taper(p0, band)
+                if taper > 0.0:
+                    c = voxel_of(t, bcoord)
+                    fxy = 0.25 * (near(bmap, src, t, c, 1, 1, 0, out_v, in_v) - near(bmap, src, t, c, 1, -1, 0, out_v, in_v)
+                                  - near(bmap, src, t, c, -1, 1, 0, out_v, in_v) + near(bmap, src, t, c, -1, -1, 0, out_v, in_v))
+                    fxz = 0.25 * (near(bmap, src, t, c, 1, 0, 1, out_v, in_v) - near(bmap, src, t, c, 1, 0, -1, out_v, in_v)
+                                  - near(bmap, src, t, c, -1, 0, 1, out_v, in_v) + near(bmap, src, t, c, -1, 0, -1, out_v, in_v))
+                    fyz = 0.25 * (near(bmap, src, t, c, 0, 1, 1, out_v, in_v) - near(bmap, src, t, c, 0, 1, -1, out_v, in_v)
+                                  - near(bmap, src, t, c, 0, -1, 1, out_v, in_v) + near(bmap, src, t, c, 0, -1, -1, out_v, in_v))
+                    dst[t] = edge_flow_step(p0, near(bmap, src, t, c, -1, 0, 0, out_v, in_v), near(bmap, src, t, c, 1, 0, 0, out_v, in_v),
+                                            near(bmap, src, t, c, 0, -1, 0, out_v, in_v), near(bmap, src, t, c, 0, 1, 0, out_v, in_v),
+                                            near(bmap, src, t, c, 0, 0, -1, out_v, in_v), near(bmap, src, t, c, 0, 0, 1, out_v, in_v),
+                                            fxy, fxz, fyz, dt, taper, g8, pit)
+                q += 1
 
 
 @wp.func
