@@ -29,15 +29,16 @@ EDGE_BINS = ((0, 0.5), (0.5, 1), (1, 2), (2, 3), (3, 5), (5, np.inf))  # distanc
 
 class Stages:
     """Wraps sparse._smooth: records the distance it starts from and its result (voxels, by
-    active block), and the blur without the inward limit; `mesh` = "raw" / "blur" makes the
-    surfacer mesh that stage instead of the limited blur."""
+    active block), and the flow without the 0.5 r inward limit (an edge keeps its own: twice its
+    samples' noise); `mesh` = "raw" / "blur" makes the surfacer mesh that stage instead of the
+    limited flow."""
 
     def __init__(self):
         self.inner, self.mesh, self.fields, self.origin = sparse._smooth, None, {}, np.zeros(3)
 
-    def __call__(self, wp, S, bcoord, bmap, dist, iters, tiles, *, limit):
-        out = self.inner(wp, S, bcoord, bmap, dist, iters, tiles, limit=limit)
-        blur = self.inner(wp, S, bcoord, bmap, dist, iters, tiles, limit=1e9)
+    def __call__(self, wp, S, bcoord, bmap, dist, iters, tiles, *, limit, edges):
+        out = self.inner(wp, S, bcoord, bmap, dist, iters, tiles, limit=limit, edges=edges)
+        blur = self.inner(wp, S, bcoord, bmap, dist, iters, tiles, limit=1e9, edges=edges)
         self.fields = {"bcoord": bcoord.numpy(), "raw": dist.numpy().copy(), "blur": blur.numpy(), "limited": out.numpy()}
         return {"raw": dist, "blur": blur}.get(self.mesh, out)
 
