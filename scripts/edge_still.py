@@ -1,11 +1,12 @@
-"""Cross-section of the bench's box at one edge, with and without the smoothing's edge limit (the
-README's figure; mpmfx.surface.edge_kernels).
+"""Cross-section of the bench's box at one edge, with and without the smoothing's edge handling
+(the README's figure; mpmfx.surface.edge_kernels, sparse_kernels.edge_flow_step).
 
 The box's mesh at "fine" (the surface stage's setting) is cut by the plane z = 0 near the edge
-at x = +0.3, y = +0.2 m. Left: a lattice (a freshly voxelised body), the surface with the limit
-(solid) and with the edge gate shut (dashed: the flow rounds the edge, as before the ninth
-session). Right: random samples, where the limit lets the flow smooth the edge as before (the
-two meshes are the same). Dots: the particles within h / 2 of the plane (a lattice's two layers at +-h / 2 coincide).
+at x = +0.3, y = +0.2 m. Solid: the shipped surface; dashed: the edge gate shut (the flow rounds
+every edge, as before the ninth session). Left: a lattice (a freshly voxelised body), whose
+edge the limit keeps. Right: random samples, where the limit lets the flow smooth the edge as
+before, but pits along it are filled (tenth session). Dots: the particles within h / 2 of the
+plane (a lattice's two layers at +-h / 2 coincide).
 
     python scripts/edge_still.py [--count 20000] [--out renders/readme/surface_edge.png]
 """
@@ -34,7 +35,7 @@ def surface(x: np.ndarray, h: float, *, gate: bool):
                            **setting)
     kept = sparse.EDGE_CURVATURE
     if not gate:
-        sparse.EDGE_CURVATURE = (1e30, 2e30)  # no curvature opens the gate: the limit is 0.5 r everywhere
+        sparse.EDGE_CURVATURE = (1e30, 2e30)  # no curvature opens the gate: the limit is 0.5 r everywhere, no pit is filled
     try:
         return surface_particles(x, None, params, device="cpu").mesh
     finally:
@@ -65,7 +66,7 @@ def main() -> None:
         for gate, style, colour in ((False, "--", "tab:red"), (True, "-", "tab:blue")):
             mesh = surface(x, h, gate=gate)
             err = surface_error(mesh.vertices, mesh.faces, sdf) / h
-            what = "edge limit (shipped)" if gate else "flow rounds the edge (before)"
+            what = "edge limit, pits filled (shipped)" if gate else "flow rounds the edge (before)"
             ax.add_collection(LineCollection(section(mesh), colors=colour, linestyles=style, lw=2, zorder=3,
                                              label=f"{what}: surface error {err:.4f} h"))
         ax.set_xlim(lo[0], hi[0])
@@ -76,7 +77,7 @@ def main() -> None:
         ax.set_title(f"{sampling} samples, {len(x)} particles, \"fine\", h = {h * 1000:.1f} mm")
         ax.legend(loc="lower left", fontsize=8)
     fig.suptitle("The bench's box cut at z = 0 beside one edge: the smoothing moves an edge inward only as far "
-                 "as its samples' noise", fontsize=10)
+                 "as its samples' noise, and fills pits along it", fontsize=10)
     fig.tight_layout()
     fig.savefig(args.out, dpi=110)
     print(args.out)
