@@ -14,17 +14,14 @@ sparse_kernels."""
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, slot, voxel_of, weight_at
+from mpmfx.surface.sparse_kernels import BS, BV, in_block, slot, voxel_of, weight_at
 
 
 @wp.func
 def tap(bmap: wp.array3d(dtype=wp.int32), f: wp.array(dtype=float), t: int, c: wp.vec3i, dx: int, dy: int, dz: int):
     """weight_at of voxel c + (dx, dy, dz), c being active voxel t: read directly when it lies in
     c's block (half the taps of an even voxel; the block map is looked up for the rest)."""
-    x = c[0] % BS + dx
-    y = c[1] % BS + dy
-    z = c[2] % BS + dz
-    if x >= 0 and x < BS and y >= 0 and y < BS and z >= 0 and z < BS:
+    if in_block(c, wp.vec3i(dx, dy, dz)):
         return f[t + (dx * BS + dy) * BS + dz]
     return weight_at(bmap, f, t, c[0] + dx, c[1] + dy, c[2] + dz)
 

@@ -15,7 +15,8 @@ threads (Warp's CPU launches release the GIL; mpmfx.surface.launch).
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, edge_flow_step, edge_limit, flow_taper, gate_cell, get, voxel_of
+from mpmfx.surface.sparse_kernels import (BS, BV, TILE_INSIDE, TILE_OUTSIDE, edge_flow_step, edge_limit, flow_taper, gate_cell, get,
+                                          in_block, voxel_of)
 from mpmfx.surface.sparse_kernels import block_tile as block_code
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
@@ -235,10 +236,7 @@ def near(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), t: int, 
          out_v: float, in_v: float):
     """`get` of voxel c + (dx, dy, dz) (each -1..1), c being active voxel t: read directly when it
     lies in c's block."""
-    x = c[0] % BS + dx
-    y = c[1] % BS + dy
-    z = c[2] % BS + dz
-    if x >= 0 and x < BS and y >= 0 and y < BS and z >= 0 and z < BS:
+    if in_block(c, wp.vec3i(dx, dy, dz)):
         return data[t + (dx * BS + dy) * BS + dz]
     return get(bmap, data, c[0] + dx, c[1] + dy, c[2] + dz, out_v, in_v)
 
