@@ -15,8 +15,7 @@ threads (Warp's CPU launches release the GIL; mpmfx.surface.launch).
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import (BS, BV, TILE_INSIDE, TILE_OUTSIDE, edge_flow_step, edge_limit, flow_taper, gate_cell, get,
-                                          in_block, voxel_of)
+from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, edge_flow_cell, edge_limit, flow_taper, gate_cell
 from mpmfx.surface.sparse_kernels import block_tile as block_code
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
@@ -231,47 +230,19 @@ def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtyp
         dst[r0 + r] = out
 
 
-@wp.func
-def near(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), t: int, c: wp.vec3i, dx: int, dy: int, dz: int,
-         out_v: float, in_v: float):
-    """`get` of voxel c + (dx, dy, dz) (each -1..1), c being active voxel t: read directly when it
-    lies in c's block."""
-    if in_block(c, wp.vec3i(dx, dy, dz)):
-        return data[t + (dx * BS + dy) * BS + dz]
-    return get(bmap, data, c[0] + dx, c[1] + dy, c[2] + dz, out_v, in_v)
-
-
 @wp.kernel
 def edge_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
                     out_v: float, in_v: float, dt: float, band: float, gate: wp.array(dtype=float), pit: float,
                     dst: wp.array(dtype=float), base: int):
-    """After curvature_flow_lines (thread = block): the voxels where the edge gate is open take
-    sparse_kernels.edge_flow_step instead, from the same neighbour values (`get`), as the GPU's
-    curvature_flow does in place; only the open gate cells' voxels are visited. Kept out of the
-    row kernel: there the edge step's code, even in a branch never taken, made the flow twice
-    as slow (one step, captured inputs, one thread)."""
+    """sparse_kernels.edge_flow after curvature_flow_lines, a block per thread: only the open
+    gate cells' voxels are visited. Kept out of the row kernel: there the edge step's code,
+    even in a branch never taken, made the flow twice as slow (one step, captured inputs, one
+    thread)."""
     b = wp.tid() + base
     for u in range(64):  # the block's 2^3-voxel cells: most are closed
         g8 = gate[b * 64 + u]
         if g8 > 0.0:
-            q = int(0)
-            while q < 8:  # not unrolled (a range() of constant length is): one copy of the edge step
-                t = b * BV + ((2 * (u // 16) + q // 4) * BS + 2 * ((u // 4) % 4) + (q // 2) % 2) * BS + 2 * (u % 4) + q % 2
-                p0 = src[t]
-                taper = flow_taper(p0, band)
-                if taper > 0.0:
-                    c = voxel_of(t, bcoord)
-                    fxy = 0.25 * (near(bmap, src, t, c, 1, 1, 0, out_v, in_v) - near(bmap, src, t, c, 1, -1, 0, out_v, in_v)
-                                  - near(bmap, src, t, c, -1, 1, 0, out_v, in_v) + near(bmap, src, t, c, -1, -1, 0, out_v, in_v))
-                    fxz = 0.25 * (near(bmap, src, t, c, 1, 0, 1, out_v, in_v) - near(bmap, src, t, c, 1, 0, -1, out_v, in_v)
-                                  - near(bmap, src, t, c, -1, 0, 1, out_v, in_v) + near(bmap, src, t, c, -1, 0, -1, out_v, in_v))
-                    fyz = 0.25 * (near(bmap, src, t, c, 0, 1, 1, out_v, in_v) - near(bmap, src, t, c, 0, 1, -1, out_v, in_v)
-                                  - near(bmap, src, t, c, 0, -1, 1, out_v, in_v) + near(bmap, src, t, c, 0, -1, -1, out_v, in_v))
-                    dst[t] = edge_flow_step(p0, near(bmap, src, t, c, -1, 0, 0, out_v, in_v), near(bmap, src, t, c, 1, 0, 0, out_v, in_v),
-                                            near(bmap, src, t, c, 0, -1, 0, out_v, in_v), near(bmap, src, t, c, 0, 1, 0, out_v, in_v),
-                                            near(bmap, src, t, c, 0, 0, -1, out_v, in_v), near(bmap, src, t, c, 0, 0, 1, out_v, in_v),
-                                            fxy, fxz, fyz, dt, taper, g8, pit)
-                q += 1
+            edge_flow_cell(bcoord, bmap, src, out_v, in_v, dt, band, g8, pit, dst, b, u)
 
 
 @wp.func

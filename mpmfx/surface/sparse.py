@@ -712,7 +712,8 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float, edges
             _blocks(wp, L.curvature_flow_lines, [bcoord, bmap, L.rows(phi), *tiles, FLOW_DT, FLOW_BAND, L.rows(tmp)])
             _blocks(wp, L.edge_flow_lines, [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, tmp], light=True)
         else:  # a line each
-            _split(wp, S.curvature_flow, phi.shape[0] // BS, [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, tmp])
+            _split(wp, S.curvature_flow, phi.shape[0] // BS, [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, tmp])
+            _split(wp, S.edge_flow, gate.shape[0], [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, tmp])
         phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)
     if _lines(phi):
         _blocks(wp, L.limit_inward_lines, [bcoord, L.rows(phi), L.rows(dist), limit, gate, noise])
