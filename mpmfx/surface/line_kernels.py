@@ -15,7 +15,7 @@ threads (Warp's CPU launches release the GIL; mpmfx.surface.launch).
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, edge_flow_cell, edge_limit, flow_taper, gate_cell
+from mpmfx.surface.sparse_kernels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, edge_flow_step, edge_limit, flow_taper, gate_cell
 from mpmfx.surface.sparse_kernels import block_tile as block_code
 
 vec8 = wp.types.vector(length=8, dtype=wp.float32)
@@ -146,6 +146,41 @@ def z_pair(src: wp.array(dtype=vec8), codes: vec27i, x: int, y: int, row: vec8, 
     return shift_down(row, lo), shift_up(row, hi)
 
 
+@wp.func
+def flow_rows(src: wp.array(dtype=vec8), codes: vec27i, r0: int, r: int, c: vec8, out_v: float, in_v: float):
+    """The neighbour values flow_step reads, for the 8 voxels of row r of the block whose rows
+    start at r0 (c: the row itself): (x - 1, x + 1, y - 1, y + 1, z - 1, z + 1 rows, fxy, fxz,
+    fyz), each the same float as sparse_kernels' `get` reads and combines per voxel."""
+    x = r // BS
+    y = r % BS
+    xm = vec8()
+    xp = vec8()
+    ym = vec8()
+    yp = vec8()
+    fxy = vec8()
+    if x > 0 and x < BS - 1 and y > 0 and y < BS - 1:  # its row's x and y neighbours are in the block
+        xm = src[r0 + r - BS]
+        xp = src[r0 + r + BS]
+        ym = src[r0 + r - 1]
+        yp = src[r0 + r + 1]
+        fxy = 0.25 * (src[r0 + r + BS + 1] - src[r0 + r + BS - 1] - src[r0 + r - BS + 1] + src[r0 + r - BS - 1])
+    else:
+        xm = ext_row(src, codes, x - 1, y, 0, out_v, in_v)
+        xp = ext_row(src, codes, x + 1, y, 0, out_v, in_v)
+        ym = ext_row(src, codes, x, y - 1, 0, out_v, in_v)
+        yp = ext_row(src, codes, x, y + 1, 0, out_v, in_v)
+        fxy = 0.25 * (ext_row(src, codes, x + 1, y + 1, 0, out_v, in_v) - ext_row(src, codes, x + 1, y - 1, 0, out_v, in_v)
+                      - ext_row(src, codes, x - 1, y + 1, 0, out_v, in_v) + ext_row(src, codes, x - 1, y - 1, 0, out_v, in_v))
+    zm, zp = z_pair(src, codes, x, y, c, out_v, in_v)
+    xm_down, xm_up = z_pair(src, codes, x - 1, y, xm, out_v, in_v)
+    xp_down, xp_up = z_pair(src, codes, x + 1, y, xp, out_v, in_v)
+    ym_down, ym_up = z_pair(src, codes, x, y - 1, ym, out_v, in_v)
+    yp_down, yp_up = z_pair(src, codes, x, y + 1, yp, out_v, in_v)
+    fxz = 0.25 * (xp_up - xp_down - xm_up + xm_down)
+    fyz = 0.25 * (yp_up - yp_down - ym_up + ym_down)
+    return xm, xp, ym, yp, zm, zp, fxy, fxz, fyz
+
+
 @wp.kernel
 def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=vec8),
                          out_v: float, in_v: float, dt: float, band: float, dst: wp.array(dtype=vec8), base: int):
@@ -179,33 +214,7 @@ def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtyp
         if not near:
             dst[r0 + r] = c
             continue
-        x = r // BS
-        y = r % BS
-        xm = vec8()
-        xp = vec8()
-        ym = vec8()
-        yp = vec8()
-        fxy = vec8()
-        if x > 0 and x < BS - 1 and y > 0 and y < BS - 1:  # its row's x and y neighbours are in the block
-            xm = src[r0 + r - BS]
-            xp = src[r0 + r + BS]
-            ym = src[r0 + r - 1]
-            yp = src[r0 + r + 1]
-            fxy = 0.25 * (src[r0 + r + BS + 1] - src[r0 + r + BS - 1] - src[r0 + r - BS + 1] + src[r0 + r - BS - 1])
-        else:
-            xm = ext_row(src, codes, x - 1, y, 0, out_v, in_v)
-            xp = ext_row(src, codes, x + 1, y, 0, out_v, in_v)
-            ym = ext_row(src, codes, x, y - 1, 0, out_v, in_v)
-            yp = ext_row(src, codes, x, y + 1, 0, out_v, in_v)
-            fxy = 0.25 * (ext_row(src, codes, x + 1, y + 1, 0, out_v, in_v) - ext_row(src, codes, x + 1, y - 1, 0, out_v, in_v)
-                          - ext_row(src, codes, x - 1, y + 1, 0, out_v, in_v) + ext_row(src, codes, x - 1, y - 1, 0, out_v, in_v))
-        zm, zp = z_pair(src, codes, x, y, c, out_v, in_v)
-        xm_down, xm_up = z_pair(src, codes, x - 1, y, xm, out_v, in_v)
-        xp_down, xp_up = z_pair(src, codes, x + 1, y, xp, out_v, in_v)
-        ym_down, ym_up = z_pair(src, codes, x, y - 1, ym, out_v, in_v)
-        yp_down, yp_up = z_pair(src, codes, x, y + 1, yp, out_v, in_v)
-        fxz = 0.25 * (xp_up - xp_down - xm_up + xm_down)
-        fyz = 0.25 * (yp_up - yp_down - ym_up + ym_down)
+        xm, xp, ym, yp, zm, zp, fxy, fxz, fyz = flow_rows(src, codes, r0, r, c, out_v, in_v)
         # flow_step, 8 voxels at a time (the same operations in the same order for each)
         gx = 0.5 * (xp - xm)
         gy = 0.5 * (yp - ym)
@@ -231,18 +240,47 @@ def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtyp
 
 
 @wp.kernel
-def edge_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
+def edge_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=vec8),
                     out_v: float, in_v: float, dt: float, band: float, gate: wp.array(dtype=float), pit: float,
-                    dst: wp.array(dtype=float), base: int):
-    """sparse_kernels.edge_flow after curvature_flow_lines, a block per thread: only the open
-    gate cells' voxels are visited. Kept out of the row kernel: there the edge step's code,
-    even in a branch never taken, made the flow twice as slow (one step, captured inputs, one
-    thread)."""
+                    dst: wp.array(dtype=vec8), base: int):
+    """sparse_kernels.edge_flow after curvature_flow_lines (thread = block): the rows that cross
+    an open gate cell read their neighbour rows as curvature_flow_lines does (flow_rows), and
+    their voxels in an open cell take sparse_kernels.edge_flow_step, the same values in the
+    same operations as the voxel kernel. Kept out of the row kernel: there the edge step's
+    code, even in a branch never taken, made the flow twice as slow (one step, captured
+    inputs, one thread). A voxel per neighbour read (`get`) instead of rows took 16 ms a step
+    on the default shot's water at frame 12 (18k particles, a splash: open gates all over)."""
     b = wp.tid() + base
-    for u in range(64):  # the block's 2^3-voxel cells: most are closed
-        g8 = gate[b * 64 + u]
-        if g8 > 0.0:
-            edge_flow_cell(bcoord, bmap, src, out_v, in_v, dt, band, g8, pit, dst, b, u)
+    shut = bool(True)
+    u = int(0)
+    while u < 64:  # the block's 2^3-voxel cells: most blocks have no open one
+        if gate[b * 64 + u] > 0.0:
+            shut = False
+        u += 1
+    if shut:
+        return
+    codes = block_codes27(bmap, bcoord[b])
+    r0 = b * 64
+    for r in range(64):
+        g0 = b * 64 + ((r // BS) // 2) * 16 + ((r % BS) // 2) * 4  # the row's first cell (z 0, 1)
+        c = src[r0 + r]
+        todo = bool(False)
+        k = int(0)
+        while k < BS:
+            if gate[g0 + k // 2] > 0.0 and flow_taper(c[k], band) > 0.0:
+                todo = True
+            k += 1
+        if todo:
+            xm, xp, ym, yp, zm, zp, fxy, fxz, fyz = flow_rows(src, codes, r0, r, c, out_v, in_v)
+            out = dst[r0 + r]
+            k = int(0)
+            while k < BS:  # not unrolled: one copy of the edge step
+                g8 = gate[g0 + k // 2]
+                taper = flow_taper(c[k], band)
+                if g8 > 0.0 and taper > 0.0:
+                    out[k] = edge_flow_step(c[k], xm[k], xp[k], ym[k], yp[k], zm[k], zp[k], fxy[k], fxz[k], fyz[k], dt, taper, g8, pit)
+                k += 1
+            dst[r0 + r] = out
 
 
 @wp.func

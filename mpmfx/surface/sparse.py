@@ -710,7 +710,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float, edges
     for _ in range(iters):
         if _lines(phi):
             _blocks(wp, L.curvature_flow_lines, [bcoord, bmap, L.rows(phi), *tiles, FLOW_DT, FLOW_BAND, L.rows(tmp)])
-            _blocks(wp, L.edge_flow_lines, [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, tmp], light=True)
+            _blocks(wp, L.edge_flow_lines, [bcoord, bmap, L.rows(phi), *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, L.rows(tmp)])
         else:  # a line each
             _split(wp, S.curvature_flow, phi.shape[0] // BS, [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, tmp])
             _split(wp, S.edge_flow, gate.shape[0], [bcoord, bmap, phi, *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, tmp])

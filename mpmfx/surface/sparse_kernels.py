@@ -751,11 +751,22 @@ def near(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), t: int, 
     return get(bmap, data, c[0] + dx, c[1] + dy, c[2] + dz, out_v, in_v)
 
 
-@wp.func
-def edge_flow_cell(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
-                   out_v: float, in_v: float, dt: float, band: float, g8: float, pit: float, dst: wp.array(dtype=float),
-                   b: int, u: int):
-    """edge_flow's 8 voxels of 2^3-voxel cell u of active block b (gate g8 > 0)."""
+@wp.kernel
+def edge_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
+              out_v: float, in_v: float, dt: float, band: float, gate: wp.array(dtype=float), pit: float,
+              dst: wp.array(dtype=float), base: int):
+    """After curvature_flow (thread = 2^3-voxel cell, edge_kernels.edge_gate's): the 8 voxels of a
+    cell whose edge gate is open take edge_flow_step instead, from the same neighbour values
+    (`get`; the CPU: line_kernels.edge_flow_lines).
+    Its own launch: inside curvature_flow the edge step's code cost every voxel registers (10M
+    "fine" random torus, which has no open gate, on an H200: 8 steps 4.3 -> 6.5 ms; on the CPU
+    twice the time)."""
+    cell = wp.tid() + base
+    g8 = gate[cell]
+    if g8 <= 0.0:
+        return
+    b = cell // 64
+    u = cell - b * 64
     q = int(0)
     while q < 8:  # not unrolled (a range() of constant length is): one copy of the edge step
         t = b * BV + ((2 * (u // 16) + q // 4) * BS + 2 * ((u // 4) % 4) + (q // 2) % 2) * BS + 2 * (u % 4) + q % 2
@@ -774,21 +785,6 @@ def edge_flow_cell(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.i
                                     near(bmap, src, t, c, 0, 0, -1, out_v, in_v), near(bmap, src, t, c, 0, 0, 1, out_v, in_v),
                                     fxy, fxz, fyz, dt, taper, g8, pit)
         q += 1
-
-
-@wp.kernel
-def edge_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
-              out_v: float, in_v: float, dt: float, band: float, gate: wp.array(dtype=float), pit: float,
-              dst: wp.array(dtype=float), base: int):
-    """After curvature_flow (thread = 2^3-voxel cell, edge_kernels.edge_gate's): the voxels where
-    the edge gate is open take edge_flow_step instead, from the same neighbour values (`get`).
-    Its own launch: inside curvature_flow the edge step's code cost every voxel registers (10M
-    "fine" random torus, which has no open gate, on an H200: 8 steps 4.3 -> 6.5 ms; on the CPU
-    twice the time)."""
-    q = wp.tid() + base
-    g8 = gate[q]
-    if g8 > 0.0:
-        edge_flow_cell(bcoord, bmap, src, out_v, in_v, dt, band, g8, pit, dst, q // 64, q % 64)
 
 
 @wp.kernel
