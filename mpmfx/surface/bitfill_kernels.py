@@ -325,21 +325,31 @@ def sweep_min_labels_blocks(
     bmap: wp.array3d(dtype=wp.int32),
     labels: wp.array(dtype=wp.int32),
     active: wp.array(dtype=wp.int32),
-    axis: int,
     changed: wp.array(dtype=wp.int32),
+    moved: wp.array(dtype=wp.int32),
     base: int,
 ):
-    """topology_kernels.sweep_min_labels for the 64 lines of block b (thread = block): the
-    blocks left out (active[b] == 0, all but the few holding small components) cost a thread
+    """topology_kernels.sweep_min_labels along x, y and z for the 64 lines of block b (thread =
+    block), again until no label in the block moves (a label then crosses the block in one
+    round, not one line sweep a round). The blocks left out (active[b] == 0: those without a
+    small component, and after the first round those where nothing moved nearby) cost a thread
     each instead of 64 (a thread per line cost ~1 ms a launch over 2.1 M voxels' lines, one
-    thread). The lines run in another order than on a GPU, which the min-label sweeps allow:
-    they end at each component's least label whatever the order (sparse._remove_small)."""
+    thread); moved[b] = 1 where a label was lowered. The lines run in another order than on a
+    GPU, which the min-label sweeps allow: they end at each component's least label whatever
+    the order (sparse._remove_small)."""
     b = wp.tid() + base
     if active[b] == 0:
         return
     count = int(0)
-    for l in range(BS * BS):
-        count += sweep_min_line(bcoord, bmap, labels, axis, b, l)
+    while True:  # the block's own fixpoint: the three axes' sweeps until none lowers a label
+        now = int(0)
+        for ax in range(3):
+            for l in range(BS * BS):
+                now += sweep_min_line(bcoord, bmap, labels, ax, b, l)
+        count += now
+        if now == 0:
+            break
     if count > 0:
         wp.atomic_add(changed, 0, count)
+        moved[b] = 1
 

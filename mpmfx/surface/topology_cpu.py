@@ -61,7 +61,10 @@ def small_labels(wp, T, bcoord, bmap, phi, mark):
     component is small (then no label is above 0 and nothing is removed): a fill from the
     inside voxels next to an INSIDE tile gives the components the min-label sweeps would label
     0 at once; the sweeps then run only over the blocks holding other inside voxels (the small
-    components, few), and label those as the sweeps over every block would."""
+    components, few), and label those as the sweeps over every block would. A thin water sheet
+    has no INSIDE tile, so all of it is swept: each block to its own fixpoint, and after the
+    first round only the blocks near the last round's changes (the default shot's 24 frames,
+    both cores: 1.13 -> 0.52 s of its 5-6 s of surfacing, the same labels)."""
     from mpmfx.surface import bitfill_kernels as F
 
     nvox = phi.shape[0]
@@ -74,12 +77,18 @@ def small_labels(wp, T, bcoord, bmap, phi, mark):
         return None
     labels = wp.empty(nvox, dtype=wp.int32)
     launch_split(wp, F.labels_from_bits, sign.shape[0], [sign, reached, labels], device=phi.device)
+    nact = bcoord.shape[0]
     changed = wp.zeros(1, dtype=wp.int32)
-    for _ in range(MAX_SWEEP_ROUNDS):
+    active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
+    for rounds in range(MAX_SWEEP_ROUNDS):
+        # after the first round only the blocks where a label moved, or next to one (T.active_blocks: a
+        # block whose own labels and face neighbours' did not change would sweep to the same labels)
+        wp.launch(T.active_blocks, nact, inputs=[bcoord, bmap, pending, was, int(rounds == 0), active])
         changed.zero_()
-        for axis in range(3):
-            launch_split(wp, F.sweep_min_labels_blocks, bcoord.shape[0], [bcoord, bmap, labels, pending, axis, changed],
-                         device=phi.device)  # a block per thread: the blocks left out cost ~nothing
+        moved.zero_()
+        launch_split(wp, F.sweep_min_labels_blocks, nact, [bcoord, bmap, labels, active, changed, moved],
+                     device=phi.device)  # a block per thread: the blocks left out cost ~nothing
+        moved, was = was, moved
         if int(changed.numpy()[0]) == 0:
             break
     return labels

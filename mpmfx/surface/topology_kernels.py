@@ -123,7 +123,9 @@ def active_blocks(
     after seeding (pending) and, after the first round (first == 0), where the block or a face
     neighbour reached a voxel in the previous round (moved). A voxel reached in round k can
     only reach others through blocks swept in round k + 1, and a line sweep carries reach along
-    its whole line from either end, so the fill still ends closed, as if every block were swept."""
+    its whole line from either end, so the fill still ends closed, as if every block were swept.
+    The CPU's component labels (topology_cpu.small_labels) take their rounds the same way: a
+    block whose labels and face neighbours' did not move sweeps to the labels it holds."""
     b = wp.tid()
     a = pending[b]
     if a != 0 and first == 0:

@@ -11,14 +11,27 @@ from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_pa
 pytest.importorskip("warp")
 
 
+def splash(count: int) -> tuple[np.ndarray, float]:
+    """A thin random sheet (no INSIDE tile: every inside voxel goes through the component labels)
+    with 40 drops of 1-12 particles above it, some of them under min_feature_particles."""
+    x, h = sample_shape("box", count, "random")
+    x[:, 1] *= 0.12
+    rng = np.random.default_rng(3)
+    drops = [c + rng.uniform(-0.5 * h, 0.5 * h, size=(n, 3)) for c, n in
+             zip(rng.uniform([-0.3, 0.1, -0.25], [0.3, 0.7, 0.25], size=(40, 3)), rng.integers(1, 13, size=40))]
+    return np.concatenate([x, *drops]).astype(np.float32), h
+
+
 # the box holds INSIDE tiles (the bodies' fill, tile neighbours in every stencil), the torus none;
-# close_voids runs one more redistance (sparse._close_voids)
+# close_voids runs one more redistance (sparse._close_voids); the splash's sheet and drops go
+# through the component labels of sparse._remove_small
 @pytest.mark.parametrize("shape, count, voxel_h, iters, close", [("torus", 6000, 0.6, 2, 0.0), ("torus", 6000, 0.5, 5, 0.0),
-                                                                 ("box", 8000, 0.5, 5, 0.0), ("torus", 6000, 0.6, 2, 1.0)])
+                                                                 ("box", 8000, 0.5, 5, 0.0), ("torus", 6000, 0.6, 2, 1.0),
+                                                                 ("splash", 6000, 0.5, 5, 0.0)])
 def test_cpu_line_kernels_and_threads_give_the_voxel_kernels_surface(monkeypatch, shape, count, voxel_h, iters, close):
     import mpmfx.surface.sparse as sparse
 
-    x, h = sample_shape(shape, count, "random")
+    x, h = splash(count) if shape == "splash" else sample_shape(shape, count, "random")
     v = np.random.default_rng(1).normal(size=x.shape).astype(np.float32)
     params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel_h * h, smooth_iters=iters,
                            min_feature_particles=8, dense_output=False, close_voids=close * h)
