@@ -62,6 +62,40 @@ def by_tile(code: int, face: wp.uint64, out_face: wp.uint64, inside_face: wp.uin
     return out_face, inside_face
 
 
+@wp.func
+def spread(s: vec8u, r: vec8u):
+    """r grown to its fixpoint inside one block: each set bit spreads to the 6-neighbours of
+    the same sign (s) within the block's 8 words."""
+    grow = int(1)
+    while grow != 0:
+        grow = int(0)
+        for x in range(BS):  # along z and y inside each word
+            ez = (~(s[x] ^ (s[x] >> wp.uint64(1)))) & Z_LOW  # bit q: voxels q and q + 1 (z) share a sign
+            ey = (~(s[x] ^ (s[x] >> wp.uint64(8)))) & Y_LOW  # voxels q and q + 8 (y)
+            w = r[x]
+            more = int(1)
+            while more != 0:
+                v = w | ((w & ez) << wp.uint64(1)) | ((w >> wp.uint64(1)) & ez) | ((w & ey) << wp.uint64(8)) | (
+                    (w >> wp.uint64(8)) & ey)
+                more = wp.where(v != w, 1, 0)
+                w = v
+            r[x] = w
+        for x in range(BS - 1):  # along x, up then down
+            ex = ~(s[x] ^ s[x + 1])
+            v = r[x + 1] | (r[x] & ex)
+            if v != r[x + 1]:
+                r[x + 1] = v
+                grow = int(1)
+        for k in range(BS - 1):
+            x = BS - 2 - k
+            ex = ~(s[x] ^ s[x + 1])
+            v = r[x] | (r[x + 1] & ex)
+            if v != r[x]:
+                r[x] = v
+                grow = int(1)
+    return r
+
+
 @wp.kernel
 def seed_bits(
     bcoord: wp.array(dtype=wp.vec3i),
@@ -70,19 +104,24 @@ def seed_bits(
     mark: wp.array(dtype=wp.uint64),
     seed_depth: float,
     seeds: int,
+    min_count: int,
     sign: wp.array(dtype=wp.uint64),
     reached: wp.array(dtype=wp.uint64),
     pending: wp.array(dtype=wp.int32),
     base: int,
 ):
     """topology_kernels.seed_reached for one block, as bit words (seeds 0: bubbles, 1:
-    specks, as its `specks`; 2: bodies, every outside voxel and the inside ones next to an
-    INSIDE tile, see small_labels); pending[b] = 1 where a voxel is left to reach. phi8: the
-    level set as vec8 rows along z (line_kernels.rows); mark: the particles' voxels as bit
-    words (mark_particle_bits; read by the specks' seeds only)."""
+    specks, as its `specks`; 2: bodies, every outside voxel, the inside ones next to an
+    INSIDE tile, and with min_count > 0 a block's inside voxels where they are one piece
+    within the block that holds at least min_count particles' voxels: see small_labels);
+    pending[b] = 1 where a voxel is left to reach. phi8: the level set as vec8 rows along z
+    (line_kernels.rows); mark: the particles' voxels as bit words (mark_particle_bits; read by
+    the specks' and the bodies' seeds)."""
     b = wp.tid() + base
     bc = bcoord[b]
     left = int(0)
+    sv = vec8u(wp.uint64(0))
+    rv = vec8u(wp.uint64(0))
     xm = side_code(bmap, bc, 0, -1)
     xp = side_code(bmap, bc, 0, 1)
     ym = side_code(bmap, bc, 1, -1)
@@ -131,9 +170,29 @@ def seed_bits(
             out_face, inside_face = by_tile(zm, face_mask(2, 0), out_face, inside_face)
             out_face, inside_face = by_tile(zp, face_mask(2, 1), out_face, inside_face)
             r = r | (out_face & s) | (inside_face & (~s))
-        sign[b * BS + x] = s
-        reached[b * BS + x] = r
-        if r != ALL:
+        sv[x] = s
+        rv[x] = r
+    if seeds == 2 and min_count > 0:
+        # a piece of a component holding at least min_count particles (count_component_particles
+        # counts a particle at its nearest voxel, as mark does): the component is not small
+        inside = vec8u(wp.uint64(0))
+        first = vec8u(wp.uint64(0))
+        marked = int(0)
+        for x in range(BS):
+            inside[x] = ~sv[x]
+            marked += wp.bit_count(mark[b * BS + x] & inside[x])
+        if marked >= min_count:
+            x0 = int(0)
+            while x0 < BS - 1 and inside[x0] == wp.uint64(0):
+                x0 += 1
+            first[x0] = inside[x0] & (~inside[x0] + wp.uint64(1))  # its lowest inside voxel
+            if spread(sv, first) == inside:  # one piece within the block
+                for x in range(BS):
+                    rv[x] = rv[x] | inside[x]
+    for x in range(BS):
+        sign[b * BS + x] = sv[x]
+        reached[b * BS + x] = rv[x]
+        if rv[x] != ALL:
             left = 1
     pending[b] = left
 
@@ -233,33 +292,7 @@ def flood_bits(
                         nr = nr << sh
                         ns = ns << sh
                     r[x] = take_face(r[x], s[x], nr, ns, face_mask(axis, side))
-    grow = int(1)
-    while grow != 0:
-        grow = int(0)
-        for x in range(BS):  # along z and y inside each word
-            ez = (~(s[x] ^ (s[x] >> wp.uint64(1)))) & Z_LOW  # bit q: voxels q and q + 1 (z) share a sign
-            ey = (~(s[x] ^ (s[x] >> wp.uint64(8)))) & Y_LOW  # voxels q and q + 8 (y)
-            w = r[x]
-            more = int(1)
-            while more != 0:
-                v = w | ((w & ez) << wp.uint64(1)) | ((w >> wp.uint64(1)) & ez) | ((w & ey) << wp.uint64(8)) | (
-                    (w >> wp.uint64(8)) & ey)
-                more = wp.where(v != w, 1, 0)
-                w = v
-            r[x] = w
-        for x in range(BS - 1):  # along x, up then down
-            ex = ~(s[x] ^ s[x + 1])
-            v = r[x + 1] | (r[x] & ex)
-            if v != r[x + 1]:
-                r[x + 1] = v
-                grow = int(1)
-        for k in range(BS - 1):
-            x = BS - 2 - k
-            ex = ~(s[x] ^ s[x + 1])
-            v = r[x] | (r[x + 1] & ex)
-            if v != r[x]:
-                r[x] = v
-                grow = int(1)
+    r = spread(s, r)
     any_new = int(0)
     for x in range(BS):
         if r[x] != reached[b * BS + x]:  # only this thread writes block b's words
@@ -303,9 +336,9 @@ def small_blocks(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uin
 def labels_from_bits(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), labels: wp.array(dtype=wp.int32),
                      base: int):
     """Labels of topology_kernels.init_inside_labels after a fill from the bodies (seeds 2) for
-    the 64 voxels of word w: outside -1, reached inside 0 (connected to an INSIDE tile: the
-    label the min-label sweeps would end at), the other inside voxels their own t + 1 (the
-    blocks holding those: small_blocks)."""
+    the 64 voxels of word w: outside -1, reached inside 0 (a component that is not small:
+    seed_bits' bodies), the other inside voxels their own t + 1 (the blocks holding those:
+    small_blocks)."""
     w = wp.tid() + base
     s = sign[w]
     left = (~reached[w]) & (~s)

@@ -551,7 +551,7 @@ def _remove_small(wp, T, bcoord, bmap, phi, g, mark, min_count: int, tiles) -> N
     if _lines(phi):
         from mpmfx.surface import topology_cpu as C
 
-        labels = C.small_labels(wp, T, bcoord, bmap, phi, mark)
+        labels = C.small_labels(wp, T, bcoord, bmap, phi, mark, min_count)
         if labels is None:  # no small component
             return
     else:

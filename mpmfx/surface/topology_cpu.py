@@ -18,7 +18,7 @@ log = logging.getLogger(__name__)
 SEEDS = {"bubbles": 0, "specks": 1, "bodies": 2}  # bitfill_kernels.seed_bits' modes
 
 
-def flood_bits(wp, T, bcoord, bmap, phi, mark, seed_depth: float, seeds: str):
+def flood_bits(wp, T, bcoord, bmap, phi, mark, seed_depth: float, seeds: str, min_count: int = 0):
     """(sign, reached, rounds): bit words of a block each (8 per block) after filling from
     the `seeds` (SEEDS) through same-sign active voxels, a block per thread per round, over
     the blocks near those that changed in the previous round (T.active_blocks)."""
@@ -28,7 +28,8 @@ def flood_bits(wp, T, bcoord, bmap, phi, mark, seed_depth: float, seeds: str):
     sign, reached = wp.empty(nact * BS, dtype=wp.uint64), wp.empty(nact * BS, dtype=wp.uint64)
     pending = wp.empty(nact, dtype=wp.int32)
     blocks = {"device": phi.device, "min_split": 1}  # a block per thread: few threads, much work each
-    launch_split(wp, F.seed_bits, nact, [bcoord, bmap, rows(phi), mark, seed_depth, SEEDS[seeds], sign, reached, pending], **blocks)
+    launch_split(wp, F.seed_bits, nact, [bcoord, bmap, rows(phi), mark, seed_depth, SEEDS[seeds], min_count, sign, reached, pending],
+                 **blocks)
     changed = wp.zeros(1, dtype=wp.int32)
     active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
     rounds = 0
@@ -56,19 +57,22 @@ def flip_unreached(wp, reached, phi, tiles) -> None:
                  light=BS)  # a word per block line
 
 
-def small_labels(wp, T, bcoord, bmap, phi, mark):
+def small_labels(wp, T, bcoord, bmap, phi, mark, min_count: int):
     """The component labels of sparse._remove_small (int32 per voxel), or None where no
-    component is small (then no label is above 0 and nothing is removed): a fill from the
-    inside voxels next to an INSIDE tile gives the components the min-label sweeps would label
-    0 at once; the sweeps then run only over the blocks holding other inside voxels (the small
-    components, few), and label those as the sweeps over every block would. A thin water sheet
-    has no INSIDE tile, so all of it is swept: each block to its own fixpoint, and after the
-    first round only the blocks near the last round's changes (the default shot's 24 frames,
-    both cores: 1.13 -> 0.52 s of its 5-6 s of surfacing, the same labels)."""
+    component is small (then no label is above 0 and nothing is removed). A fill from the
+    bodies labels 0 at once the components that cannot be small: those touching an INSIDE tile,
+    and those holding a block whose inside voxels are one piece within it with at least
+    min_count particles' voxels (bitfill_kernels.seed_bits; a water sheet has no INSIDE tile,
+    and before these seeds all of it went through the sweeps: the default shot's 24 frames
+    spent 1.13 s of their 5-6 s of surfacing there). The min-label sweeps then run only over
+    the blocks holding other inside voxels (drops, filaments: few), each block to its own
+    fixpoint, after the first round only near the last round's changes. The labels differ
+    from the GPU's sweeps over every block (0 where those end at a component's least index),
+    the components removed do not: 0 is never removed, and a label's count is its component's."""
     from mpmfx.surface import bitfill_kernels as F
 
     nvox = phi.shape[0]
-    sign, reached, _ = flood_bits(wp, T, bcoord, bmap, phi, mark, 0.0, "bodies")
+    sign, reached, _ = flood_bits(wp, T, bcoord, bmap, phi, mark, 0.0, "bodies", min_count)
     pending = wp.empty(bcoord.shape[0], dtype=wp.int32)
     launch_split(wp, F.small_blocks, bcoord.shape[0], [sign, reached, pending], device=phi.device, light=1)
     # bodies alone (every block of the bench's twelve cases): the labels (8 MB at 100k "fine"),

@@ -12,14 +12,19 @@ pytest.importorskip("warp")
 
 
 def splash(count: int) -> tuple[np.ndarray, float]:
-    """A thin random sheet (no INSIDE tile: every inside voxel goes through the component labels)
-    with 40 drops of 1-12 particles above it, some of them under min_feature_particles."""
+    """A thin random sheet (no INSIDE tile) with 40 drops of 1-12 particles above it, some of
+    them under min_feature_particles, and 6 filaments of 12 particles 0.8 h apart: each spans
+    blocks that hold too few of its particles to pass as a body, so only labels carried from
+    block to block count them whole."""
     x, h = sample_shape("box", count, "random")
     x[:, 1] *= 0.12
     rng = np.random.default_rng(3)
     drops = [c + rng.uniform(-0.5 * h, 0.5 * h, size=(n, 3)) for c, n in
              zip(rng.uniform([-0.3, 0.1, -0.25], [0.3, 0.7, 0.25], size=(40, 3)), rng.integers(1, 13, size=40))]
-    return np.concatenate([x, *drops]).astype(np.float32), h
+    axes = rng.normal(size=(6, 3))
+    threads = [c + np.outer(0.8 * h * np.arange(12), a / np.linalg.norm(a)) for c, a in
+               zip(rng.uniform([-0.2, 0.75, -0.2], [0.2, 0.9, 0.2], size=(6, 3)), axes)]
+    return np.concatenate([x, *drops, *threads]).astype(np.float32), h
 
 
 # the box holds INSIDE tiles (the bodies' fill, tile neighbours in every stencil), the torus none;
