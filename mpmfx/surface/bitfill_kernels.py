@@ -96,6 +96,27 @@ def spread(s: vec8u, r: vec8u):
     return r
 
 
+@wp.func
+def large_piece(s: vec8u, marked: int, min_count: int):
+    """Whether a block's inside voxels (the bits clear in its sign words s) are one piece within
+    the block (6-connected) holding at least min_count particles' voxels (marked of them): its
+    component then holds at least min_count particles (count_component_particles counts a
+    particle at its nearest voxel, as the marks are set), so it is not small."""
+    if marked < min_count:
+        return False
+    x0 = int(0)
+    while x0 < BS - 1 and s[x0] == ALL:
+        x0 += 1
+    inside = ~s[x0]
+    first = vec8u(wp.uint64(0))
+    first[x0] = inside & (~inside + wp.uint64(1))  # the block's first inside voxel
+    r = spread(s, first)
+    for x in range(BS):
+        if r[x] != ~s[x]:
+            return False
+    return True
+
+
 @wp.kernel
 def seed_bits(
     bcoord: wp.array(dtype=wp.vec3i),
@@ -173,22 +194,12 @@ def seed_bits(
         sv[x] = s
         rv[x] = r
     if seeds == 2 and min_count > 0:
-        # a piece of a component holding at least min_count particles (count_component_particles
-        # counts a particle at its nearest voxel, as mark does): the component is not small
-        inside = vec8u(wp.uint64(0))
-        first = vec8u(wp.uint64(0))
         marked = int(0)
         for x in range(BS):
-            inside[x] = ~sv[x]
-            marked += wp.bit_count(mark[b * BS + x] & inside[x])
-        if marked >= min_count:
-            x0 = int(0)
-            while x0 < BS - 1 and inside[x0] == wp.uint64(0):
-                x0 += 1
-            first[x0] = inside[x0] & (~inside[x0] + wp.uint64(1))  # its lowest inside voxel
-            if spread(sv, first) == inside:  # one piece within the block
-                for x in range(BS):
-                    rv[x] = rv[x] | inside[x]
+            marked += wp.bit_count(mark[b * BS + x] & (~sv[x]))
+        if large_piece(sv, marked, min_count):
+            for x in range(BS):
+                rv[x] = rv[x] | (~sv[x])
     for x in range(BS):
         sign[b * BS + x] = sv[x]
         reached[b * BS + x] = rv[x]
@@ -350,6 +361,32 @@ def labels_from_bits(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp
             if ((left >> wp.uint64(q)) & wp.uint64(1)) != wp.uint64(0):
                 lab = t + 1
         labels[t] = lab
+
+
+@wp.kernel
+def seed_large_labels(phi: wp.array(dtype=float), mark: wp.array(dtype=wp.int32), min_count: int,
+                      labels: wp.array(dtype=wp.int32), base: int):
+    """The voxel path's counterpart of seed_bits' large pieces (thread = block; its int32 marks
+    and topology_kernels.init_inside_labels' labels): label 0 for the inside voxels of a block
+    whose inside voxels are one piece holding at least min_count particles' voxels, so the
+    min-label sweeps start from 0 across a water sheet instead of carrying one least index
+    over all of it (a 1M-particle random sheet on an H200: 158 rounds, 271 ms)."""
+    b = wp.tid() + base
+    s = vec8u(wp.uint64(0))
+    marked = int(0)
+    for x in range(BS):
+        w = wp.uint64(0)
+        for q in range(BS * BS):
+            t = b * BV + x * BS * BS + q
+            if phi[t] > 0.0:
+                w = w | bit(q)
+            elif mark[t] != 0:
+                marked += 1
+        s[x] = w
+    if large_piece(s, marked, min_count):
+        for q in range(BV):
+            if phi[b * BV + q] <= 0.0:
+                labels[b * BV + q] = 0
 
 
 @wp.kernel

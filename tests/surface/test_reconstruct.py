@@ -152,3 +152,13 @@ def test_bad_positions_are_rejected():
         surface_particles(np.zeros((4, 2)), None, SurfaceParams(0.01), device=DEVICE)
     with pytest.raises(ValueError, match="NaN"):
         surface_particles(np.full((4, 3), np.nan), None, SurfaceParams(0.01), device=DEVICE)
+
+
+def test_too_many_active_blocks_names_the_voxel_size(monkeypatch):
+    """A surface too big for one call's int32-indexed arrays (a 10M-particle sheet one spacing
+    thick at voxel h / 2 needs 2.6M blocks) is refused with the field to change, before any
+    work, not by Warp's array-shape error deep in the marching cubes."""
+    monkeypatch.setattr("mpmfx.surface.sparse.MAX_ACTIVE_BLOCKS", 10)
+    x, h = sample_shape("sphere", 3000, "lattice")
+    with pytest.raises(ValueError, match=r"SurfaceParams.voxel_size: these 3\d+ particles need \d+ active blocks.*raise voxel_size"):
+        surface_particles(x, None, SurfaceParams(0.6 * h, voxel_size=0.5 * h), device=DEVICE)
