@@ -124,8 +124,8 @@ def active_blocks(
     neighbour reached a voxel in the previous round (moved). A voxel reached in round k can
     only reach others through blocks swept in round k + 1, and a line sweep carries reach along
     its whole line from either end, so the fill still ends closed, as if every block were swept.
-    The CPU's component labels (topology_cpu.small_labels) take their rounds the same way: a
-    block whose labels and face neighbours' did not move sweeps to the labels it holds."""
+    The component labels' rounds (sparse._remove_small) are taken the same way: a block whose
+    labels and face neighbours' did not move sweeps to the labels it holds."""
     b = wp.tid()
     a = pending[b]
     if a != 0 and first == 0:
@@ -206,17 +206,19 @@ def sweep_min_labels(
     active: wp.array(dtype=wp.int32),
     axis: int,
     changed: wp.array(dtype=wp.int32),
+    moved: wp.array(dtype=wp.int32),
     base: int,
 ):
     """Carry the smallest label through labelled voxels along one block line, both ways
-    (blocks with active[b] != 0)."""
+    (blocks with active[b] != 0); moved[b] = 1 where a label of block b was lowered."""
     tid = wp.tid() + base
     b = tid // 64
     if active[b] == 0:
         return
     count = sweep_min_line(bcoord, bmap, labels, axis, b, tid - b * 64)
     if count > 0:
-        changed[0] = 1  # a flag: every writer stores the same value, no atomic contention
+        changed[0] = 1  # flags: every writer stores the same value, no atomic contention
+        moved[b] = 1
 
 
 @wp.kernel
