@@ -11,7 +11,7 @@ import logging
 
 from mpmfx.surface.launch import launch_split
 from mpmfx.surface.line_kernels import rows
-from mpmfx.surface.sparse import BS, MAX_SWEEP_ROUNDS
+from mpmfx.surface.sparse import BS, MAX_SWEEP_ROUNDS, active_rounds
 
 log = logging.getLogger(__name__)
 
@@ -30,20 +30,12 @@ def flood_bits(wp, T, bcoord, bmap, phi, mark, seed_depth: float, seeds: str, mi
     blocks = {"device": phi.device, "min_split": 1}  # a block per thread: few threads, much work each
     launch_split(wp, F.seed_bits, nact, [bcoord, bmap, rows(phi), mark, seed_depth, SEEDS[seeds], min_count, sign, reached, pending],
                  **blocks)
-    changed = wp.zeros(1, dtype=wp.int32)
-    active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
-    rounds = 0
-    while rounds < MAX_SWEEP_ROUNDS:
-        wp.launch(T.active_blocks, nact, inputs=[bcoord, bmap, pending, was, int(rounds == 0), active])
-        changed.zero_()
-        moved.zero_()
-        # a round visits only the blocks near the last round's changes: light
+
+    def sweep(active, changed, moved):  # a round visits only the blocks near the last round's changes: light
         launch_split(wp, F.flood_bits, nact, [bcoord, bmap, sign, reached, active, changed, moved], **blocks, light=1)
-        rounds += 1
-        moved, was = was, moved
-        if int(changed.numpy()[0]) == 0:
-            break
-    else:
+
+    rounds, settled = active_rounds(wp, T, bcoord, bmap, pending, sweep)
+    if not settled:
         log.warning("topology flood fill did not settle in %d rounds; some bubbles may remain", MAX_SWEEP_ROUNDS)
     return sign, reached, rounds
 
@@ -81,18 +73,10 @@ def small_labels(wp, T, bcoord, bmap, phi, mark, min_count: int):
         return None
     labels = wp.empty(nvox, dtype=wp.int32)
     launch_split(wp, F.labels_from_bits, sign.shape[0], [sign, reached, labels], device=phi.device)
-    nact = bcoord.shape[0]
-    changed = wp.zeros(1, dtype=wp.int32)
-    active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
-    for rounds in range(MAX_SWEEP_ROUNDS):
-        # after the first round only the blocks where a label moved, or next to one (T.active_blocks: a
-        # block whose own labels and face neighbours' did not change would sweep to the same labels)
-        wp.launch(T.active_blocks, nact, inputs=[bcoord, bmap, pending, was, int(rounds == 0), active])
-        changed.zero_()
-        moved.zero_()
-        launch_split(wp, F.sweep_min_labels_blocks, nact, [bcoord, bmap, labels, active, changed, moved],
-                     device=phi.device)  # a block per thread: the blocks left out cost ~nothing
-        moved, was = was, moved
-        if int(changed.numpy()[0]) == 0:
-            break
+
+    def sweep(active, changed, moved):  # a block per thread: the blocks left out cost ~nothing
+        launch_split(wp, F.sweep_min_labels_blocks, bcoord.shape[0], [bcoord, bmap, labels, active, changed, moved],
+                     device=phi.device)
+
+    active_rounds(wp, T, bcoord, bmap, pending, sweep)
     return labels
