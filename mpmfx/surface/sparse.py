@@ -548,22 +548,13 @@ def _flood(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks: 
     reached = wp.empty(nvox, dtype=wp.int32)
     pending = wp.zeros(bcoord.shape[0], dtype=wp.int32)
     _split(wp, T.seed_reached, nvox, [bcoord, bmap, phi, mark, seed_depth, int(specks), reached, pending])
-    changed = wp.zeros(1, dtype=wp.int32)
-    nact = bcoord.shape[0]
-    active, moved, was = wp.empty(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32), wp.zeros(nact, dtype=wp.int32)
-    rounds = 0
-    while rounds < MAX_SWEEP_ROUNDS:
-        # a round sweeps only blocks near what the previous round reached (all pending ones first)
-        wp.launch(T.active_blocks, nact, inputs=[bcoord, bmap, pending, was, int(rounds == 0), active])
-        changed.zero_()
-        moved.zero_()
+
+    def sweep(active, changed, moved):
         for axis in range(3):
-            _split(wp, T.sweep_reached, nact * 64, [bcoord, bmap, phi, reached, active, axis, changed, moved])
-        rounds += 1
-        moved, was = was, moved
-        if int(changed.numpy()[0]) == 0:
-            break
-    else:
+            _split(wp, T.sweep_reached, bcoord.shape[0] * 64, [bcoord, bmap, phi, reached, active, axis, changed, moved])
+
+    rounds, settled = active_rounds(wp, T, bcoord, bmap, pending, sweep)  # all pending blocks first, then near what moved
+    if not settled:
         log.warning("topology flood fill did not settle in %d rounds; some bubbles may remain", MAX_SWEEP_ROUNDS)
     # unreached outside voxels are bubbles (-> inside), unreached inside ones specks (-> outside)
     wp.launch(T.flip_unreached, nvox, inputs=[phi, reached, tiles[1], tiles[0]])
