@@ -7,9 +7,9 @@ neighbour lines are read once into registers instead of through a block-map look
 
 import warp as wp
 
-from mpmfx.surface.line_kernels import block_faces, fmax, fmin, line_neighbours, line_sides, neighbour_rows, read, vec8, vmax, vmin
-from mpmfx.surface.redistance_kernels import axis_inv2, crossing_fraction, eikonal_update, frozen_distance
-from mpmfx.surface.sparse_kernels import BS, BV
+from mpmfx.surface.line_kernels import block_faces, fmax, fmin, line_neighbours, line_sides, neighbour_rows, vec8, vmax, vmin
+from mpmfx.surface.redistance_kernels import axis_inv2, crossing_fraction, frozen_distance
+from mpmfx.surface.sparse_kernels import BS
 
 vec64i = wp.types.vector(length=64, dtype=wp.int32)
 vec8u = wp.types.vector(length=8, dtype=wp.uint64)
