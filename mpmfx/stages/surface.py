@@ -14,13 +14,14 @@ import numpy as np
 
 from mpmfx.config import Shot
 from mpmfx.io.frames import GroupSurface, ParticleFrame, SurfaceFrame
-from mpmfx.stages.base import Context, quiet_warp
+from mpmfx.stages.base import Context, StageError, quiet_warp
 from mpmfx.stages.parallel import FrameJob
 from mpmfx.stages.writer import FrameWriter
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "surface", 2, True, SurfaceFrame.EXT
 CODE = ("mpmfx.stages.surface", "mpmfx.surface", "mpmfx.io.frames")
 GPU_WRITE_THREADS = 4  # frames deflated and written at once while the GPU surfaces the next
+VOXEL_ERROR = "SurfaceParams.voxel_size"  # how the surfacer's too-big-a-grid errors begin
 
 
 def params(shot: Shot) -> dict:
@@ -69,7 +70,7 @@ def finish(ctx: Context, results: list[dict]) -> dict:
 
 def frame(job: FrameJob, f: int) -> dict:
     """Surface frame `f` into the entry (a task: runs on any worker); returns its mesh size."""
-    surfaces, stats = _surfaces(job, _read(job, f))
+    surfaces, stats = _surfaces(job, _read(job, f), f)
     surfaces.write(job.entry.frame_path(f, FRAME_EXT))
     return stats
 
@@ -86,7 +87,7 @@ def _pipelined(calls: list[tuple[FrameJob, int]], bar, *, write_threads: int) ->
             particles = ahead.result()
             if i + 1 < len(calls):
                 ahead = reader.submit(_read, *calls[i + 1])
-            surfaces, stats = _surfaces(job, particles)
+            surfaces, stats = _surfaces(job, particles, f)
             del particles
             writer.submit(surfaces.write, job.entry.frame_path(f, FRAME_EXT))
             out.append(stats)
@@ -98,8 +99,8 @@ def _read(job: FrameJob, f: int) -> ParticleFrame:
     return ParticleFrame.read(job.upstream["simulate"].frame_path(f, ParticleFrame.EXT))
 
 
-def _surfaces(job: FrameJob, p: ParticleFrame) -> tuple[SurfaceFrame, dict]:
-    """(the frame's surfaces, one GroupSurface a surface group; its mesh size)."""
+def _surfaces(job: FrameJob, p: ParticleFrame, f: int) -> tuple[SurfaceFrame, dict]:
+    """(frame f's surfaces, one GroupSurface a surface group; its mesh size)."""
     from mpmfx.surface import surface_particles
 
     quiet_warp(job.device)
@@ -112,7 +113,13 @@ def _surfaces(job: FrameJob, p: ParticleFrame) -> tuple[SurfaceFrame, dict]:
     out = {}
     for gi, g in enumerate(groups):
         sel = group_of == gi
-        res = surface_particles(p.x[sel], p.v[sel], sp, device=job.device)
+        try:
+            res = surface_particles(p.x[sel], p.v[sel], sp, device=job.device)
+        except ValueError as exc:  # the surfacer names its own parameter; the shot has a key for voxel_size
+            if not str(exc).startswith(VOXEL_ERROR):
+                raise
+            raise StageError(f"{shot.source or shot.shot.name}: surface.voxel_size, frame {f}, group {g!r}"
+                             f"{str(exc)[len(VOXEL_ERROR):]} (--set surface.voxel_size=...)") from None
         m, ls = res.mesh, res.sparse
         out[g] = GroupSurface(
             vertices=m.vertices, faces=m.faces, normals=m.normals, velocities=m.velocities,

@@ -305,3 +305,22 @@ def test_density_off_writes_no_density(first_run):
     assert set(read_vdb(exp / "vdb" / "Elastic" / "0003.vdb")["grids"]) == {"surface", "vel"}
     stage = Usd.Stage.Open(str(exp / "shot.usda"))
     assert set(UsdVol.Volume(stage.GetPrimAtPath("/World/Elastic/volume")).GetFieldPaths()) == {"surface", "vel"}
+
+
+def test_a_surface_too_big_for_one_call_names_the_shot_key_and_keeps_the_cache(first_run, monkeypatch, capsys):
+    """The surfacer's "too many blocks" error reaches the user as the shot file, the key to
+    change and the frame, with exit code 1; the cached stages stay as they were."""
+    from mpmfx.cli import main
+
+    shot, cache, first = first_run
+    sim_before = _bytes(first[1].entry / "frames")
+    monkeypatch.setattr("mpmfx.surface.sparse.MAX_ACTIVE_BLOCKS", 1)
+    rc = main(["run", str(shot), "--cache", str(cache), "--until", "surface", "--set", "surface.radius_scale=1.45",
+               "--workers", "1", "-q"])
+    err = capsys.readouterr().err
+    assert rc == 1
+    assert f"error: {shot}: surface.voxel_size, frame 1, group" in err
+    assert "raise voxel_size" in err and "--set surface.voxel_size=" in err
+    assert _bytes(first[1].entry / "frames") == sim_before
+    run = mpmfx.load_shot(shot, overrides=["surface.radius_scale=1.45"], cache_root=cache, quiet=True)
+    assert not run.entries()["surface"].root.exists()  # no half-made entry left
