@@ -282,11 +282,11 @@ def test_a_surfacing_error_keeps_the_frames_before_it_and_a_rerun_resumes(tmp_pa
     run.run(until="simulate")
     real, calls = surface_stage._surfaces, []
 
-    def failing(job, particles):
+    def failing(job, particles, f):
         calls.append(1)
         if len(calls) == 3:
             raise RuntimeError("frame 3: the surfacer failed")
-        return real(job, particles)
+        return real(job, particles, f)
 
     monkeypatch.setattr(surface_stage, "_surfaces", failing)
     with pytest.raises(RuntimeError, match="frame 3"):
