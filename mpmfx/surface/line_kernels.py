@@ -467,6 +467,7 @@ def renormalise_lines(
     in_v: float,
     scale: float,
     clip: float,
+    far: float,
     out: wp.array(dtype=vec8),
     base: int,
 ):
@@ -486,7 +487,8 @@ def renormalise_lines(
         res = vec8(0.0)
         for z in range(BS):
             grad = 0.5 * wp.length(wp.vec3(dx[z], dy[z], dz[z]))
-            res[z] = wp.clamp(own[z] / wp.max(grad, 0.05) * scale, -clip, clip)
+            v = own[z]
+            res[z] = wp.where(wp.abs(v) >= far, wp.where(v > 0.0, clip, -clip), wp.clamp(v / wp.max(grad, 0.05) * scale, -clip, clip))
         out[r] = res
 
 

@@ -828,10 +828,12 @@ def renormalise(
     in_v: float,
     scale: float,
     clip: float,
+    far: float,
     out: wp.array(dtype=float),
     base: int,
 ):
-    """out = clip(phi / |grad phi| * scale, +-clip): a signed distance near the zero level.
+    """out = clip(phi / |grad phi| * scale, +-clip): a signed distance near the zero level;
+    +-clip where |phi| >= far (phi is a distance there already, but may step to a constant).
 
     The raw field keeps its sign (so its zero level) but its slope is not 1 (Zhu-Bridson is
     ~0.7 at the surface and 0 deep inside); dividing by the central-difference gradient
@@ -842,7 +844,8 @@ def renormalise(
     gy = step_get(bmap, phi, t, c, 1, 1, out_v, in_v) - step_get(bmap, phi, t, c, 1, -1, out_v, in_v)
     gz = step_get(bmap, phi, t, c, 2, 1, out_v, in_v) - step_get(bmap, phi, t, c, 2, -1, out_v, in_v)
     grad = 0.5 * wp.length(wp.vec3(gx, gy, gz))
-    out[t] = wp.clamp(phi[t] / wp.max(grad, 0.05) * scale, -clip, clip)
+    v = phi[t]
+    out[t] = wp.where(wp.abs(v) >= far, wp.where(v > 0.0, clip, -clip), wp.clamp(v / wp.max(grad, 0.05) * scale, -clip, clip))
 
 
 @wp.kernel
