@@ -21,7 +21,6 @@ from mpmfx.stages.writer import FrameWriter
 NAME, VERSION, PER_FRAME, FRAME_EXT = "surface", 2, True, SurfaceFrame.EXT
 CODE = ("mpmfx.stages.surface", "mpmfx.surface", "mpmfx.io.frames")
 GPU_WRITE_THREADS = 4  # frames deflated and written at once while the GPU surfaces the next
-VOXEL_ERROR = "SurfaceParams.voxel_size"  # how the surfacer's too-big-a-grid errors begin
 
 
 def params(shot: Shot) -> dict:
@@ -101,7 +100,7 @@ def _read(job: FrameJob, f: int) -> ParticleFrame:
 
 def _surfaces(job: FrameJob, p: ParticleFrame, f: int) -> tuple[SurfaceFrame, dict]:
     """(frame f's surfaces, one GroupSurface a surface group; its mesh size)."""
-    from mpmfx.surface import surface_particles
+    from mpmfx.surface import GridTooLarge, surface_particles
 
     quiet_warp(job.device)
     shot = job.shot
@@ -115,11 +114,9 @@ def _surfaces(job: FrameJob, p: ParticleFrame, f: int) -> tuple[SurfaceFrame, di
         sel = group_of == gi
         try:
             res = surface_particles(p.x[sel], p.v[sel], sp, device=job.device)
-        except ValueError as exc:  # the surfacer names its own parameter; the shot has a key for voxel_size
-            if not str(exc).startswith(VOXEL_ERROR):
-                raise
-            raise StageError(f"{shot.source or shot.shot.name}: surface.voxel_size, frame {f}, group {g!r}"
-                             f"{str(exc)[len(VOXEL_ERROR):]} (--set surface.voxel_size=...)") from None
+        except GridTooLarge as exc:  # the surfacer names its own parameter; the shot has a key for voxel_size
+            raise StageError(f"{shot.source or shot.shot.name}: surface.voxel_size, frame {f}, group {g!r}: "
+                             f"{exc.detail} (--set surface.voxel_size=...)") from None
         m, ls = res.mesh, res.sparse
         out[g] = GroupSurface(
             vertices=m.vertices, faces=m.faces, normals=m.normals, velocities=m.velocities,

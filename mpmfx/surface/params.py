@@ -21,6 +21,15 @@ def kernel_volume(radius: float) -> float:
     return 4.0 * math.pi * radius**3 * 16.0 / 315.0
 
 
+class GridTooLarge(ValueError):
+    """The particles need a grid one surfacing call cannot hold at this voxel_size; `detail` says
+    how much and what to do (the message is "SurfaceParams.voxel_size: " + detail)."""
+
+    def __init__(self, detail: str):
+        super().__init__(f"SurfaceParams.voxel_size: {detail}")
+        self.detail = detail
+
+
 @dataclass(frozen=True)
 class SurfaceParams:
     """Settings of :func:`mpmfx.surface.surface_particles`. Lengths are world units (m).

@@ -33,7 +33,7 @@ import numpy as np
 
 from mpmfx.surface.cpu_memory import keep_freed_memory
 from mpmfx.surface.launch import launch_split, launch_split_scratch
-from mpmfx.surface.params import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, SurfaceResult
+from mpmfx.surface.params import PARTICLE_RADIUS_PER_SPACING, GridTooLarge, SurfaceParams, SurfaceResult
 
 log = logging.getLogger(__name__)
 
@@ -103,8 +103,8 @@ class SparseGrid:
         bhi = np.floor(hi / BS).astype(np.int64) + margin
         self.nblocks = tuple(int(s) for s in (bhi - blo + 1))
         if math.prod(self.nblocks) > MAX_BLOCKS:
-            raise ValueError(
-                f"SurfaceParams.voxel_size: a block grid of {self.nblocks} would cover these particles; "
+            raise GridTooLarge(
+                f"a block grid of {self.nblocks} would cover these particles; "
                 f"raise voxel_size (now {self.voxel:g} m) or drop far-flung particles before surfacing"
             )
         self.ijk0 = blo * BS  # voxel index of grid coordinate 0
@@ -244,8 +244,8 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     bmap, bcoord = _classify(wp, S, gs, counts, cells, starts, grid)
     nact = bcoord.shape[0]
     if nact > MAX_ACTIVE_BLOCKS:  # (a 10M-particle sheet one spacing thick at voxel h / 2: 2.6M blocks)
-        raise ValueError(
-            f"SurfaceParams.voxel_size: these {n} particles need {nact} active blocks of 8^3 voxels, more "
+        raise GridTooLarge(
+            f"these {n} particles need {nact} active blocks of 8^3 voxels, more "
             f"than one surfacing call can index ({MAX_ACTIVE_BLOCKS}); raise voxel_size (now {grid.voxel:g} m) "
             f"or surface the particles in parts")
     nvox = nact * BS**3
