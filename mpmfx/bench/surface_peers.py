@@ -128,8 +128,20 @@ def run_splashsurf(
     threads: CPU threads (None: all cores; see `_splashsurf_threads`).
     Timed: reconstruct_surface (includes copying x into Rust); not timed: mesh to numpy.
     """
-    ss = _import_splashsurf()
     device = _splashsurf_threads(threads)
+    call = splashsurf_call(x, h, kernel=kernel, cube=cube, threshold=threshold)
+    seconds, rec = _median_time(call, repeats)
+    mesh = rec.mesh
+    vertices = np.asarray(mesh.vertices, dtype=np.float32).reshape(-1, 3)
+    faces = np.asarray(mesh.triangles, dtype=np.int64).reshape(-1, 3)
+    settings = f"smoothing {kernel:g}r cube {cube:g}r iso {threshold:g}"
+    return PeerResult("splashsurf", settings, device, seconds, vertices, faces)
+
+
+def splashsurf_call(x: np.ndarray, h: float, *, kernel: float, cube: float, threshold: float = 0.6):
+    """A call of splashsurf's reconstruction on `x` (run_splashsurf's settings; its thread pool as
+    sized by RAYON_NUM_THREADS or the first call); returns its reconstruction."""
+    ss = _import_splashsurf()
     pts = np.ascontiguousarray(x, dtype=np.float32)
     r = PEER_RADIUS_PER_SPACING * h
 
@@ -139,12 +151,7 @@ def run_splashsurf(
             iso_surface_threshold=threshold,
         )
 
-    seconds, rec = _median_time(call, repeats)
-    mesh = rec.mesh
-    vertices = np.asarray(mesh.vertices, dtype=np.float32).reshape(-1, 3)
-    faces = np.asarray(mesh.triangles, dtype=np.int64).reshape(-1, 3)
-    settings = f"smoothing {kernel:g}r cube {cube:g}r iso {threshold:g}"
-    return PeerResult("splashsurf", settings, device, seconds, vertices, faces)
+    return call
 
 
 def _import_newton():
