@@ -432,7 +432,9 @@ def bench_sheet(count: int, device: str | None = None, *, peers: Sequence[str] =
     settings, isotropic and anisotropic, and each peer on the same particles (`measure_sheet_peer`;
     one that fails at run time is reported and left out): pieces, holes, open edges, thickness
     error, time."""
-    measure_sheet(500, "random", label="fast", device=device, anisotropic=True)  # compile
+    for label in OURS:  # load every setting's kernels first: on a fresh GPU machine a module's first
+        for aniso in (False, True):  # load compiles it (the 1M sheet's first "fine" row took 65 s on an H200)
+            measure_sheet(500, "random", label=label, device=device, anisotropic=aniso)
     rows = Table(SHEET_HEADER, format_sheet_row, echo=echo)
     for sampling in ("lattice", "random"):
         for label in OURS:
