@@ -26,6 +26,7 @@ import dataclasses
 import logging
 import os
 import sys
+import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable
 
@@ -37,10 +38,27 @@ if TYPE_CHECKING:
 SCHEDULER_ENV = "MPMFX_SCHEDULER"   # a farm scheduler's address, e.g. tcp://farm-head:8786
 WORKERS_ENV = "MPMFX_WORKERS"       # worker processes of the LocalCluster; 1 = serial
 # Below this many frames to make, `workers=None` (auto) stays serial: a two-worker LocalCluster
-# costs ~20 CPU seconds (start, Warp kernels loaded in each worker), about 7 frames of CPU
-# surfacing at the default shot's size, so on an idle 2-core machine it pays from ~10 frames
-# (docs/scale-out.md has the measurement).
+# costs ~20 CPU seconds (start, Warp kernels loaded in each worker; docs/scale-out.md).
 AUTO_MIN_TASKS = 10
+# From AUTO_MIN_TASKS frames on, auto runs PROBE_CALLS frames here first and starts workers for
+# the rest only if the probe says they would finish sooner (worth_a_cluster). CLUSTER_COST_S: the
+# wall seconds a LocalCluster costs before it gains any: the default shot's 24 frames on the idle
+# 2-core CPU (scripts/bench_frames.py, thirteenth session): surface 3.9 s serial, 5.9-6.1 on two
+# workers; export 3.3 against 3.6-3.8; Cycles renders 40.6-42.4 against 42.9-43.3 (Cycles already
+# uses every core), where with the sixth session's surfacer two workers took 34.6 s against 61.8.
+PROBE_CALLS = 2
+CLUSTER_COST_S = 4.0
+
+
+def worth_a_cluster(remaining: int, wall: float, cpu: float, cores: int) -> bool:
+    """Whether `remaining` more calls like the probe's (`wall` seconds, `cpu` seconds of this
+    process's threads) would finish sooner on `cores` one-thread workers, CLUSTER_COST_S
+    included. Serial: remaining x wall. On workers each call needs its CPU seconds and no call
+    gets shorter than it ran alone, so at best remaining x max(wall, cpu) / cores: a call that
+    already kept every core busy (a Cycles frame) gains nothing from more processes."""
+    if remaining <= 0 or cores < 2:
+        return False
+    return remaining * (wall - max(wall, cpu) / cores) > CLUSTER_COST_S
 
 
 @dataclass(frozen=True)
@@ -148,22 +166,38 @@ class Frames:
         auto=False: stay serial unless workers or a scheduler were asked for (work that a GPU
         does in a fraction of a second a frame, where starting workers costs more).
         serial(calls, bar): how the calls run here when they stay serial (default: fn on each,
-        in order); it returns the results in call order and updates the progress bar."""
+        in order); it returns the results in call order and updates the progress bar.
+        Auto (no workers, no scheduler asked for, no cluster running): from AUTO_MIN_TASKS calls
+        on, the first PROBE_CALLS run here, timed, and the rest go to a LocalCluster only if
+        worth_a_cluster says it would finish them sooner."""
         if not calls:
             return []
         bar = _bar(len(calls), desc, quiet)
+
+        def here(part: list[tuple[FrameJob, int]]) -> list[Any]:
+            if serial is not None:
+                return serial(part, bar) if part else []
+            out = []
+            for job, f in part:
+                out.append(fn(job, f))
+                bar.update()
+            return out
+
         try:
             if not self.parallel(len(calls), auto_min=AUTO_MIN_TASKS if auto else sys.maxsize):
-                if serial is not None:
-                    return serial(calls, bar)
-                out = []
-                for job, f in calls:
-                    out.append(fn(job, f))
-                    bar.update()
-                return out
+                return here(calls)
+            done: list[Any] = []
+            if self.workers is None and self._client is None and not self.scheduler:  # auto: probe first
+                done = here(calls[:PROBE_CALLS - 1])  # the first call loads (or compiles) the kernels: not timed
+                t0, c0 = time.perf_counter(), time.process_time()
+                done += here(calls[PROBE_CALLS - 1:PROBE_CALLS])
+                wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+                calls = calls[PROBE_CALLS:]
+                if not worth_a_cluster(len(calls), wall, cpu, os.cpu_count() or 1):
+                    return done + here(calls)
             client = self.client()
             futures = [client.submit(fn, job, f, key=task_key(job.entry, f), pure=False) for job, f in calls]
-            return _gather(client, futures, bar)
+            return done + _gather(client, futures, bar)
         finally:
             bar.close()
 

@@ -12,7 +12,7 @@ from distributed import WorkerPlugin
 
 from mpmfx.config import ShotError, load_shot_config
 from mpmfx.cache import TEMP_GLOB
-from mpmfx.stages.parallel import Frames
+from mpmfx.stages.parallel import Frames, worth_a_cluster
 from mpmfx.stages.runner import ShotRun
 from mpmfx.wedge import parse_vary, pick, run_wedge, variant_shots, write_sheets
 from tests.conftest import write_tiny_shot
@@ -176,3 +176,27 @@ def test_a_bad_surfacer_thread_count_is_bad_input_not_a_traceback(tiny_shot, tmp
     assert main(["run", str(tiny_shot), "--cache", str(tmp_path / "cache"), "--until", "voxelise"]) == 2
     err = capsys.readouterr().err
     assert f"$MPMFX_SURFACE_THREADS='{value}'" in err and fix in err and "Traceback" not in err
+
+
+def test_auto_starts_workers_only_where_they_would_finish_sooner():
+    # measured on the 2-core CPU (scripts/bench_frames.py): the default shot's surface frames,
+    # 0.16 s a frame on 1.7 cores, took 3.9 s serial and ~6 s on two workers; the sixth session's
+    # heavier ones (5 s on one core) 61.8 s against 34.6; a Cycles frame already uses both cores
+    assert not worth_a_cluster(22, wall=0.16, cpu=0.27, cores=2)
+    assert worth_a_cluster(10, wall=5.0, cpu=5.0, cores=2)
+    assert not worth_a_cluster(6, wall=5.0, cpu=10.0, cores=2)
+    assert not worth_a_cluster(100, wall=5.0, cpu=5.0, cores=1)
+
+
+def test_auto_keeps_light_frames_serial(monkeypatch):
+    # 12 frames (over the auto threshold) that take no time: the probe keeps them here, in
+    # order, and no cluster starts
+    monkeypatch.setattr(os, "cpu_count", lambda: 2)
+    monkeypatch.delenv("MPMFX_WORKERS", raising=False)
+    monkeypatch.delenv("MPMFX_SCHEDULER", raising=False)
+    seen = []
+    with Frames() as ex:
+        out = ex.map(lambda job, f: seen.append(f) or f * 2, [(None, f) for f in range(12)], quiet=True)
+        assert ex._cluster is None and ex._client is None
+    assert out == [f * 2 for f in range(12)] and seen == list(range(12))
+
