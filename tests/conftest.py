@@ -5,6 +5,20 @@ from pathlib import Path
 
 import pytest
 
+@pytest.fixture(scope="session", autouse=True)
+def _run_in_tmp(tmp_path_factory):
+    """The suite runs in a folder of its own: a run publishes renders/<shot>/ and
+    published/<shot> relative to the working directory, and the suite must not leave them in
+    the checkout (it used to leave renders/tiny and published/tiny there). Session-wide, so
+    module fixtures that run shots are covered too."""
+    import os
+
+    cwd = os.getcwd()
+    os.chdir(tmp_path_factory.mktemp("cwd"))
+    yield
+    os.chdir(cwd)
+
+
 TINY = """
 [shot]
 name = "tiny"
