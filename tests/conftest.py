@@ -5,6 +5,7 @@ from pathlib import Path
 
 import pytest
 
+
 @pytest.fixture(scope="session", autouse=True)
 def _run_in_tmp(tmp_path_factory):
     """The suite runs in a folder of its own: a run publishes renders/<shot>/ and
