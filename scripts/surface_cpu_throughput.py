@@ -1,7 +1,8 @@
 """Frames per second over a sequence on this machine's cores, ours against splashsurf, both ways
 a sequence can use the cores: one frame at a time on all of them, or one frame per core at a
-time (as the surface stage's Dask workers run them, one thread each: mpmfx.stages.parallel). The frames are one 100k-particle case (mpmfx bench surface), each
-moved by a different sub-voxel offset so no two frames are the same particles.
+time (as the surface stage's Dask workers run them, one thread each: mpmfx.stages.parallel).
+The frames are one 100k-particle case (mpmfx bench surface), each moved by a different
+sub-voxel offset so no two frames are the same particles.
 
     python scripts/surface_cpu_throughput.py [--shape torus] [--sampling lattice] [--frames 16] [--out X.json]
 
