@@ -116,11 +116,16 @@ class Frames:
     def __exit__(self, *exc) -> None:
         self.close()
 
+    @property
+    def size(self) -> int:
+        """Worker processes of a LocalCluster started here: the workers asked for, else all cores."""
+        return self.workers or os.cpu_count() or 1
+
     def parallel(self, n_calls: int, *, auto_min: int = AUTO_MIN_TASKS) -> bool:
         """Whether `n_calls` calls go to Dask (auto: only `auto_min` calls or more)."""
         if self._client is not None or self.scheduler:
             return True
-        n = self.workers if self.workers is not None else (os.cpu_count() or 1)
+        n = self.size
         if n < 2 or n_calls < 2:
             return False
         return self.workers is not None or n_calls >= auto_min
@@ -138,7 +143,7 @@ class Frames:
                                     f"answers there ({exc}); start one (dask scheduler) or check the address, "
                                     f"or run without it") from None
             else:
-                n = self.workers or os.cpu_count() or 1
+                n = self.size
                 self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, env=_worker_env(n),
                                              dashboard_address=":0", silence_logs=logging.ERROR)
                 self._client = Client(self._cluster)
@@ -193,7 +198,7 @@ class Frames:
                 done += here(calls[PROBE_CALLS - 1:PROBE_CALLS])
                 wall, cpu = time.perf_counter() - t0, time.process_time() - c0
                 calls = calls[PROBE_CALLS:]
-                if not worth_a_cluster(len(calls), wall, cpu, os.cpu_count() or 1):
+                if not worth_a_cluster(len(calls), wall, cpu, self.size):
                     return done + here(calls)
             client = self.client()
             futures = [client.submit(fn, job, f, key=task_key(job.entry, f), pure=False) for job, f in calls]

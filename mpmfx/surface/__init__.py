@@ -7,5 +7,5 @@ from mpmfx.surface.params import (PARTICLE_RADIUS_PER_SPACING, GridTooLarge, Lev
                                   SurfaceParams, SurfaceResult)
 from mpmfx.surface.reconstruct import surface_particles
 
-__all__ = ["PARTICLE_RADIUS_PER_SPACING", "GridTooLarge", "LevelSet", "SparseLevelSet", "SurfaceMesh", "SurfaceParams", "SurfaceResult",
-           "surface_particles"]
+__all__ = ["PARTICLE_RADIUS_PER_SPACING", "GridTooLarge", "LevelSet", "SparseLevelSet", "SurfaceMesh", "SurfaceParams",
+           "SurfaceResult", "surface_particles"]
