@@ -164,6 +164,10 @@ class Surface(_Section):
                                                     "particle spacing; 0 = off; slower, random sheets get thicker).")
     anisotropic: Bool = Field(False, description="Yu & Turk anisotropic kernels: thin sheets of water stay sheets "
                                                  "(no holes); slower, and sharp box edges round off more.")
+    sharp_edges: Bool = Field(False, description="Give convex edges and corners back the sharpness the "
+                                                 "particles lost there (the faces' planes meet again; outward "
+                                                 "only; round bodies unchanged). For hard-edged bodies at rest or "
+                                                 "in stills: on a moving body the sharp crest's shading flickers.")
     density: Bool = Field(False, description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "
                                              "the material) for granular / volume looks.")
 

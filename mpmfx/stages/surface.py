@@ -42,7 +42,7 @@ def surface_params(shot: Shot):
     return SurfaceParams(particle_radius=PARTICLE_RADIUS_PER_SPACING * h, radius_scale=s.radius_scale,
                          voxel_size=s.voxel_size or 0.5 * h, dense_output=False, smooth_iters=s.smooth_iters, dilate=s.dilate,
                          min_feature_particles=s.min_feature_particles, density=s.density,
-                         anisotropic=s.anisotropic, close_voids=s.close_voids)
+                         anisotropic=s.anisotropic, close_voids=s.close_voids, sharp_edges=s.sharp_edges)
 
 
 def todo(ctx: Context) -> list[int]:

@@ -50,6 +50,19 @@ SMOOTH_LIMIT = 0.5  # x particle radius: how far smoothing may move the level se
 EDGE_CURVATURE = (0.35, 0.5)  # x 1 / the wide normal's blur width: a convex edge starts / is whole (edge_kernels)
 EDGE_NOISE = 2.0  # x the samples' noise (standard deviation): how far the smoothing may move an edge inward
 EDGE_PIT = 0.25  # 1/voxel: a pit along an edge this sharply curved (or more) stops the flow rounding the edge there (sparse_kernels.edge_flow_step); 0.1 filled more but flickered more (docs/surfacing-log.md, nineteenth step)
+SHARP = {  # sparse._sharpen (sharp_kernels); lengths in particle spacings h unless said
+    "band": 3.0,  # voxels: cells whose centre lies this near the zero level
+    "near": 2.5, "far": 5.5,  # where a direction's two points look for a face
+    "width": 1.5,  # the points to each side whose normals must agree too
+    "cos_flat": math.cos(math.radians(12.0)),  # normals that agree
+    "plane_tol": 0.5,  # each point this near the other's tangent plane
+    "cos_same": math.cos(math.radians(15.0)),  # planes closer than this are one
+    "votes": 2.0,  # directions that must find a plane
+    "support": 0.3,  # voxels: a plane's points this far over another's at most (convex)
+    "cos_apart": math.cos(math.radians(65.0)),  # at least two planes this far apart (an edge, not a face)
+    "cos_open": math.cos(math.radians(120.0)),  # and none further (faces back to back: a sheet's rim)
+    "limit": 1.5,  # the most the field moves outward
+}
 EDGE_BAND = 3.0  # voxels from the raw zero level where a 2^3 cell's corner looks for an edge (its voxels within ~2)
 FLOW_DT = 0.25  # voxel^2, one smoothing step (sparse_kernels.curvature_flow): a [1 2 1]/4 pass's spread along the surface
 FLOW_BAND = 3.0  # voxels: the smoothing moves the values this close to the zero level (fully within FLOW_BAND - 1)
@@ -269,6 +282,8 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     # replaced, -wide pulled flat faces +0.006 h out: 100k lattice box "fine" 0.0453 -> 0.0420 h)
     flow_tiles = (tiles[0], -min(grid.inside_depth, grid.wide))
     phi = _smooth(wp, S, bcoord, bmap, dist, params.smooth_iters, flow_tiles, limit=SMOOTH_LIMIT * grid.r_vox, edges=edges)
+    if params.sharp_edges and edges is not None:
+        _sharpen(wp, bcoord, bmap, phi, flow_tiles, edges[0], edges[2], params.particle_radius / PARTICLE_RADIUS_PER_SPACING / grid.voxel)
     # marching cubes needs no crossing on a tile face; giving voxels next to a tile its sign can
     # seal an outside pocket whose only way out ran along an inside tile (a bubble, seen on
     # random samples), so it comes before the last topology pass, not after. That pass also
@@ -476,7 +491,7 @@ def _field(wp, S, bcoord, bmap, cells, starts, order, gs, v, grid: SparseGrid, p
 
 
 def _edges(wp, bcoord, bmap, wide, offset, phi, grid: SparseGrid) -> tuple:
-    """(gate per 2^3-voxel cell, noise per active block) for the smoothing's inward limit
+    """(gate per 2^3-voxel cell, noise per active block, sample per cell) for the smoothing's inward limit
     (mpmfx.surface.edge_kernels): where the blurred weights' level set bends like an edge, and
     how noisy the samples are around each block (voxels). `wide`: the weights the normal came
     from, of blur width grid.wide_sigma voxels."""
@@ -489,7 +504,7 @@ def _edges(wp, bcoord, bmap, wide, offset, phi, grid: SparseGrid) -> tuple:
     sums, noise = wp.empty(nact, dtype=wp.vec2), wp.empty(nact, dtype=float)
     _split(wp, E.block_samples, nact, [sample, sums])
     _split(wp, E.block_noise, nact, [bcoord, bmap, sums, EDGE_NOISE, noise])
-    return gate, noise
+    return gate, noise, sample  # sample < 0 where a gate is open: a corner or a blob (_sharpen)
 
 
 def _classify(wp, S, gs, counts, cells, starts, grid: SparseGrid):
@@ -753,7 +768,7 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float, edges
 
     if iters == 0 or dist.shape[0] == 0:  # no active voxel: no edges measured either (_field)
         return dist
-    gate, noise = edges
+    gate, noise, _ = edges
     phi, tmp = dist, wp.empty_like(dist)  # the first step reads dist itself (kept: no copy), then two buffers take turns
     for _ in range(iters):
         if _lines(phi):
@@ -768,6 +783,37 @@ def _smooth(wp, S, bcoord, bmap, dist, iters: int, tiles, *, limit: float, edges
     else:
         _split(wp, S.limit_inward, phi.shape[0], [phi, dist, limit, gate, noise])
     return phi
+
+
+def _sharpen(wp, bcoord, bmap, phi, tiles, gate, sample, h: float) -> None:
+    """Convex edges and corners of the smoothed field `phi` made sharp again, in place
+    (mpmfx.surface.sharp_kernels; SHARP's settings; gate, sample: _edges'; h: the particle
+    spacing in voxels). The cells whose edge gate is open and that lie near the zero level are
+    numbered (a scan); every other one of them on each axis, and every corner, finds the faces
+    around it; each takes its neighbours' faces' intersection where they form a convex edge or
+    corner. A body with no open gate costs a launch over its cells and one host read."""
+    from mpmfx.surface import sharp_kernels as K
+
+    ncell = gate.shape[0]
+    if ncell == 0:
+        return
+    c = SHARP
+    flags = wp.empty(ncell, dtype=wp.int32)
+    _split(wp, K.flag_cells, ncell, [phi, gate, c["band"], flags])
+    slots = _scan(wp, flags, inclusive=False)
+    count = int(slots[ncell - 1 : ncell].numpy()[0] + flags[ncell - 1 : ncell].numpy()[0])
+    if count == 0:
+        return
+    cells = wp.empty(count, dtype=wp.int32)
+    pn, pp = wp.empty(count * K.CELL_PLANES, dtype=wp.vec3), wp.empty(count * K.CELL_PLANES, dtype=wp.vec3)
+    pw = wp.empty(count * K.CELL_PLANES, dtype=float)
+    _split(wp, K.cell_planes, ncell, [bcoord, bmap, phi, *tiles, sample, flags, slots, c["near"] * h, c["far"] * h, c["width"] * h,
+                                      c["cos_flat"], c["plane_tol"] * h, c["cos_same"], cells, pn, pp, pw])
+    qn, qp = wp.empty(count * K.NEAR_PLANES, dtype=wp.vec3), wp.empty(count * K.NEAR_PLANES, dtype=wp.vec3)
+    qw = wp.empty(count * K.NEAR_PLANES, dtype=float)
+    launch_split(wp, K.sharpen_cells, count, [bcoord, bmap, phi, gate, sample, flags, slots, cells, pn, pp, pw, c["cos_same"],
+                                              c["votes"], c["support"], c["cos_apart"], c["cos_open"], c["limit"] * h, qn, qp, qw],
+                 device=phi.device, min_split=256)
 
 
 def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, w, grid: SparseGrid) -> tuple | None:

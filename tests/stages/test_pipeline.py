@@ -146,6 +146,23 @@ def test_close_voids_is_a_surface_knob(first_run, tmp_path, capsys):
     assert not (tmp_path / "c").exists()
 
 
+def test_sharp_edges_is_a_surface_knob(first_run, tmp_path, capsys):
+    """surface.sharp_edges reaches the surfacer: the shot's block keeps its edges in the first
+    frame (only surface re-runs); a value that is not a boolean is a config error naming the field."""
+    from mpmfx.cli import main
+    from mpmfx.io.frames import SurfaceFrame
+    shot, cache, first = first_run
+    run = mpmfx.load_shot(shot, overrides=["surface.sharp_edges=true"], cache_root=cache, quiet=True)
+    results = run.run(until="surface")
+    assert _states(results) == {"voxelise": "cached", "simulate": "cached", "surface": "ran"}
+    before = SurfaceFrame.read(first[2].entry / "frames" / "0001.npz").groups["Elastic"].vertices
+    after = SurfaceFrame.read(results[2].entry / "frames" / "0001.npz").groups["Elastic"].vertices
+    assert len(after) > 0 and (len(after) != len(before) or not np.array_equal(after, before))
+    assert main(["run", str(shot), "--set", "surface.sharp_edges=maybe", "--cache", str(tmp_path / "c")]) == 2
+    assert "surface.sharp_edges" in capsys.readouterr().err
+    assert not (tmp_path / "c").exists()
+
+
 def test_cli_bad_config_exit_2(tmp_path, capsys):
     from mpmfx.cli import main
     shot = write_tiny_shot(tmp_path, extra="\n[solver]\n")  # duplicate table: invalid TOML
