@@ -83,7 +83,7 @@ class SurfaceParams:
         of 300 particles: not a vertex moves). For bodies with hard edges that hold still or
         are rendered as stills: on a moving body marching cubes cuts a sharp crest differently
         every frame, and the crest's shading normals turn twice as much between frames (p99
-        24 -> 52 degrees on the moving block). Random box, 100k, "fine": vertex mean 0.116-0.119
+        24 -> 52 degrees on the moving block). Random box, 100k, "fine": vertex mean 0.115-0.122
         -> 0.105-0.111 h, max 0.78-1.23 -> 0.65-0.96 h (docs/surfacing-log.md, twenty-third step).
     dense_output: also return the level set (and velocity, density) as dense
         arrays over the band's bounding box; False returns only `SurfaceResult.sparse` (the

@@ -9,14 +9,21 @@ fitted on the smoothed field and the field is set to the planes' intersection (t
 their signed distances, a convex wedge or corner) before marching cubes, which then needs no
 change.
 
-Only where the edge gate is open (edge_kernels.edge_gate: the blurred weights curve like an edge;
-no gate opens on a body that is round at the kernel's scale), only outward (material is added
-at a convex crest, never removed), and only where the planes found around a cell support each
-other (every plane's points lie under the others') and are at least two. Planes come from
-points on the zero level a few spacings from the cell along its tangent plane, kept only where
-the surface is flat there (two points along a direction and one to each side of each agree), so
-a curved crest is not taken for a face. Lengths are voxels; a cell is 2^3 voxels
-(sparse_kernels.gate_cell), voxel (i, j, k)'s value sits at the point (i, j, k)."""
+Only where the edge gate is open (edge_kernels.edge_gate: the blurred weights curve like an
+edge), only outward (material is added at a convex crest, never removed), and only where the
+planes found around a cell support each other (every plane's points lie under the others'), at
+least two (three at a corner) and not back to back (a sheet's rim). Planes come from pairs of
+points on the zero level, 2.5 and 5.5 spacings out from the cell along the surface, kept only
+where the surface is flat there: both points' normals, and the normals 1.5 spacings to each side
+of each, agree within 12 degrees. A round body is flat nowhere over those spans (a torus whose
+tube is 5 spacings across, blobs of 300 particles: no plane found, not a vertex moved), where
+shorter spans (4 spacings, 1 to the sides) found "faces" around such a tube and moved 73 % of
+its vertices by up to 1.2 h. Lengths are voxels; a cell is 2^3 voxels (sparse_kernels.gate_cell),
+voxel (i, j, k)'s value sits at the point (i, j, k).
+
+On a moving body marching cubes cuts a sharp crest differently every frame (the gliding
+block's edges: p99 shading turn 23 -> 52 degrees between frames), so SurfaceParams.sharp_edges
+is off by default."""
 
 import warp as wp
 
@@ -131,17 +138,20 @@ def flag_cells(phi: wp.array(dtype=float), gate: wp.array(dtype=float), band: fl
 @wp.kernel
 def cell_planes(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
                 out_v: float, in_v: float, sample: wp.array(dtype=float), flags: wp.array(dtype=wp.int32),
-                slots: wp.array(dtype=wp.int32), near: float, far: float, width: float, cos_flat: float, plane_tol: float, cos_same: float,
+                slots: wp.array(dtype=wp.int32), near: float, far: float, width: float, cos_flat: float,
+                plane_tol: float, cos_same: float,
                 cells: wp.array(dtype=wp.int32), pn: wp.array(dtype=wp.vec3), pp: wp.array(dtype=wp.vec3),
                 pw: wp.array(dtype=float), base: int):
     """For each flagged cell u (its slot s = slots[u]; cells[s] = u) whose cell coordinates are
-    all even (one cell in 8: the faces change over a few spacings, not from cell to cell): the faces around it, as up to
-    CELL_PLANES planes (pn: summed unit normals, pp: summed points on the zero level, pw: how many
-    directions found each). Along each of DIRECTIONS directions d in the tangent plane at the
-    cell's centre, the points `near` and `far` voxels out are moved onto the zero level; they make
-    a plane where their normals agree within cos_flat, each lies within plane_tol of the other's
-    tangent plane, and the normals `width` to either side agree too (a face, not a rounded crest
-    or a curved body). Planes within cos_same of each other are one."""
+    all even (one cell in 8: faces change over spacings, not from cell to cell) or that
+    edge_gate saw as a corner (sample < 0; twice the directions there, its faces being narrower
+    wedges): the faces around it, as up to CELL_PLANES planes (pn: summed unit normals, pp:
+    summed points on the zero level, pw: how many directions found each). Along each direction
+    d in the tangent plane at the cell's centre, the point `near` voxels out is moved onto the
+    zero level, and from it the point `far` - `near` further along the surface; they make a
+    plane where their normals agree within cos_flat, each lies within plane_tol of the other's
+    tangent plane, and the normals `width` to either side of each agree too (a face, not a
+    rounded crest or a curved body). Planes within cos_same of each other are one."""
     u = wp.tid() + base
     if flags[u] == 0:
         return
@@ -243,20 +253,20 @@ def edge_both_sides(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.i
 @wp.kernel
 def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
                   gate: wp.array(dtype=float), sample: wp.array(dtype=float), flags: wp.array(dtype=wp.int32),
-                  slots: wp.array(dtype=wp.int32), cells: wp.array(dtype=wp.int32), pn: wp.array(dtype=wp.vec3), pp: wp.array(dtype=wp.vec3),
-                  pw: wp.array(dtype=float), cos_same: float, votes: float, support: float, cos_apart: float,
-                  cos_open: float, limit: float, qn: wp.array(dtype=wp.vec3), qp: wp.array(dtype=wp.vec3), qw: wp.array(dtype=float),
-                  base: int):
-    """Flagged cell cells[s]: the planes of the flagged cells within REACH cells that look for
-    planes (cell_planes: every other cell on each axis), merged into at
-    most NEAR_PLANES (qn, qp, qw: this thread's scratch), those found `votes` times or more kept;
-    where at least two are kept (three where edge_kernels.edge_gate saw a corner), apart by more than cos_apart somewhere and nowhere by more than
-    cos_open (two faces nearly back to back are a sheet's rim: their intersection would run the
-    sheet on past it), and every kept plane's
-    mean point lies under every other kept plane (within `support`: a convex edge or corner),
-    each of the cell's voxels takes the largest of their signed distances where that is lower
-    (outward), by at most `limit`, blended by the cell's gate. Writes only the cell's own voxels
-    and reads no other value of phi: it runs in place."""
+                  slots: wp.array(dtype=wp.int32), cells: wp.array(dtype=wp.int32), pn: wp.array(dtype=wp.vec3),
+                  pp: wp.array(dtype=wp.vec3), pw: wp.array(dtype=float), cos_same: float, votes: float,
+                  support: float, cos_apart: float, cos_open: float, limit: float, qn: wp.array(dtype=wp.vec3),
+                  qp: wp.array(dtype=wp.vec3), qw: wp.array(dtype=float), base: int):
+    """Flagged cell cells[s]: the planes found by the cells within REACH cells (CORNER_REACH at a
+    corner) merged into at most NEAR_PLANES (qn, qp, qw: this thread's scratch), those found
+    `votes` times or more kept. Where at least two are kept (three where edge_gate saw a
+    corner), apart by more than cos_apart somewhere and nowhere by more than cos_open (faces
+    nearly back to back are a sheet's rim: their intersection would run the sheet on past it),
+    every kept plane's mean point lies under every other kept plane (within `support`: a convex
+    edge or corner), and, for two, cells that saw them lie on both sides along their edge
+    (edge_both_sides), each of the cell's voxels takes the largest of their signed distances
+    where that is lower (outward), by at most `limit`, blended by the cell's gate. Writes only
+    the cell's own voxels and reads no other value of phi: it runs in place."""
     s = wp.tid() + base
     u = cells[s]
     for m in range(NEAR_PLANES):

@@ -52,7 +52,7 @@ EDGE_NOISE = 2.0  # x the samples' noise (standard deviation): how far the smoot
 EDGE_PIT = 0.25  # 1/voxel: a pit along an edge this sharply curved (or more) stops the flow rounding the edge there (sparse_kernels.edge_flow_step); 0.1 filled more but flickered more (docs/surfacing-log.md, nineteenth step)
 SHARP = {  # sparse._sharpen (sharp_kernels); lengths in particle spacings h unless said
     "band": 3.0,  # voxels: cells whose centre lies this near the zero level
-    "near": 2.5, "far": 5.5,  # where a direction's two points look for a face
+    "near": 2.5, "far": 5.5,  # a direction's two points: near out from the cell, then on along the surface to far
     "width": 1.5,  # the points to each side whose normals must agree too
     "cos_flat": math.cos(math.radians(12.0)),  # normals that agree
     "plane_tol": 0.5,  # each point this near the other's tangent plane
@@ -282,8 +282,9 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     # replaced, -wide pulled flat faces +0.006 h out: 100k lattice box "fine" 0.0453 -> 0.0420 h)
     flow_tiles = (tiles[0], -min(grid.inside_depth, grid.wide))
     phi = _smooth(wp, S, bcoord, bmap, dist, params.smooth_iters, flow_tiles, limit=SMOOTH_LIMIT * grid.r_vox, edges=edges)
-    if params.sharp_edges and edges is not None:
-        _sharpen(wp, bcoord, bmap, phi, flow_tiles, edges[0], edges[2], params.particle_radius / PARTICLE_RADIUS_PER_SPACING / grid.voxel)
+    if params.sharp_edges and edges is not None:  # the faces' planes back at convex edges and corners
+        spacing = params.particle_radius / PARTICLE_RADIUS_PER_SPACING / grid.voxel
+        _sharpen(wp, bcoord, bmap, phi, flow_tiles, edges[0], edges[2], spacing)
     # marching cubes needs no crossing on a tile face; giving voxels next to a tile its sign can
     # seal an outside pocket whose only way out ran along an inside tile (a bubble, seen on
     # random samples), so it comes before the last topology pass, not after. That pass also
@@ -807,13 +808,14 @@ def _sharpen(wp, bcoord, bmap, phi, tiles, gate, sample, h: float) -> None:
     cells = wp.empty(count, dtype=wp.int32)
     pn, pp = wp.empty(count * K.CELL_PLANES, dtype=wp.vec3), wp.empty(count * K.CELL_PLANES, dtype=wp.vec3)
     pw = wp.empty(count * K.CELL_PLANES, dtype=float)
-    _split(wp, K.cell_planes, ncell, [bcoord, bmap, phi, *tiles, sample, flags, slots, c["near"] * h, c["far"] * h, c["width"] * h,
-                                      c["cos_flat"], c["plane_tol"] * h, c["cos_same"], cells, pn, pp, pw])
+    _split(wp, K.cell_planes, ncell, [bcoord, bmap, phi, *tiles, sample, flags, slots, c["near"] * h, c["far"] * h,
+                                      c["width"] * h, c["cos_flat"], c["plane_tol"] * h, c["cos_same"], cells, pn, pp, pw])
     qn, qp = wp.empty(count * K.NEAR_PLANES, dtype=wp.vec3), wp.empty(count * K.NEAR_PLANES, dtype=wp.vec3)
     qw = wp.empty(count * K.NEAR_PLANES, dtype=float)
-    launch_split(wp, K.sharpen_cells, count, [bcoord, bmap, phi, gate, sample, flags, slots, cells, pn, pp, pw, c["cos_same"],
-                                              c["votes"], c["support"], c["cos_apart"], c["cos_open"], c["limit"] * h, qn, qp, qw],
-                 device=phi.device, min_split=256)
+    launch_split(wp, K.sharpen_cells, count, [bcoord, bmap, phi, gate, sample, flags, slots, cells, pn, pp, pw,
+                                              c["cos_same"], c["votes"], c["support"], c["cos_apart"], c["cos_open"],
+                                              c["limit"] * h, qn, qp, qw],
+                 device=phi.device, min_split=256)  # a few hundred cells already: each thread does much
 
 
 def _extract_mesh(wp, M, bcoord, bmap, values, tiles, vel, w, grid: SparseGrid) -> tuple | None:
