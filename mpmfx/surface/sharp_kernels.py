@@ -16,14 +16,16 @@ least two (three at a corner) and not back to back (a sheet's rim). Planes come 
 points on the zero level, 2.5 and 5.5 spacings out from the cell along the surface, kept only
 where the surface is flat there: both points' normals, and the normals 1.5 spacings to each side
 of each, agree within 12 degrees. A round body is flat nowhere over those spans (a torus whose
-tube is 5 spacings across, blobs of 300 particles: no plane found, not a vertex moved), where
+tube is 5 spacings across, blobs of 300 particles: not a vertex moved; random spheres and tori:
+at most 0.14 % of vertices, by at most 0.09 h, where isolated spots pass), where
 shorter spans (4 spacings, 1 to the sides) found "faces" around such a tube and moved 73 % of
 its vertices by up to 1.2 h. Lengths are voxels; a cell is 2^3 voxels (sparse_kernels.gate_cell),
 voxel (i, j, k)'s value sits at the point (i, j, k).
 
-On a moving body marching cubes cuts a sharp crest differently every frame (the gliding
-block's edges: p99 shading turn 23 -> 52 degrees between frames), so SurfaceParams.sharp_edges
-is off by default."""
+On a moving body marching cubes cuts a sharp crest differently as it crosses voxel planes, and
+the gliding block's edges flicker more (p99 shading turn between frames 23 -> 28 degrees with
+the crest rounded within 2 voxels, 52 without), so SurfaceParams.sharp_edges is off by
+default."""
 
 import warp as wp
 
@@ -32,8 +34,11 @@ from mpmfx.surface.sparse_kernels import BS, BV, gate_cell, get, slot
 DIRECTIONS = wp.constant(8)  # directions around a cell's normal that look for a face
 CELL_PLANES = wp.constant(3)  # planes a cell keeps (a corner's three faces)
 NEAR_PLANES = wp.constant(4)  # planes a cell's neighbourhood may hold
-REACH = wp.constant(2)  # cells on each side whose planes a cell takes (planes are looked for in every other cell)
-CORNER_REACH = wp.constant(6)  # the same at a corner, whose faces pass the flatness tests only further out
+# cells on each side whose planes a cell takes (planes are looked for in every other cell): at 2 a
+# cell near a corner missed its third face, and cells along an edge dropped out frame to frame
+# where the few planes within reach failed (100k random box "fine", 12 seeds: corners 0.24 h;
+# the moving block's vertices p99 0.19 h off the previous frame); at 6, 0.16 h and 0.08 h
+REACH = wp.constant(6)
 
 
 @wp.func
@@ -99,13 +104,17 @@ def cell_corner(bcoord: wp.array(dtype=wp.vec3i), u: int):
 
 
 @wp.func
+def even_step(c: int, n: int):
+    """The n-th of the REACH + 1 offsets from cell coordinate c, from -REACH up, to a coordinate
+    that is even (the cells that look for planes; the last one passes REACH where c is odd)."""
+    return -REACH + (c + REACH) % 2 + 2 * n
+
+
+@wp.func
 def plane_cell(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32), slots: wp.array(dtype=wp.int32),
                e: wp.vec3i, di: int, dj: int, dk: int):
-    """Slot of the cell (di, dj, dk) cells from the one at even voxel e where that cell looked for
-    planes (cell_planes: flagged, and its cell coordinates all even, or the cell itself), else -1."""
-    if not (di == 0 and dj == 0 and dk == 0):
-        if (e[0] // 2 + di) % 2 != 0 or (e[1] // 2 + dj) % 2 != 0 or (e[2] // 2 + dk) % 2 != 0:
-            return -1
+    """Slot of the cell (di, dj, dk) cells from the one at even voxel e where that cell is
+    flagged, else -1."""
     t = slot(bmap, e[0] + 2 * di, e[1] + 2 * dj, e[2] + 2 * dk)
     if t < 0:
         return -1
@@ -114,6 +123,26 @@ def plane_cell(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32)
     if flags[v] == 0:
         return -1
     return slots[v]
+
+
+@wp.func
+def merge_planes(v: int, s: int, pn: wp.array(dtype=wp.vec3), pp: wp.array(dtype=wp.vec3), pw: wp.array(dtype=float),
+                 qn: wp.array(dtype=wp.vec3), qp: wp.array(dtype=wp.vec3), qw: wp.array(dtype=float), cos_same: float):
+    """The planes cell slot v found merged into thread s's (the first it matches within
+    cos_same, else the first free one; none where all NEAR_PLANES are taken)."""
+    for m in range(CELL_PLANES):
+        i = v * CELL_PLANES + m
+        if pw[i] == 0.0:
+            continue
+        nk = wp.normalize(pn[i])
+        for c in range(NEAR_PLANES):
+            o = s * NEAR_PLANES + c
+            if qw[o] == 0.0 or wp.dot(wp.normalize(qn[o]), nk) > cos_same:
+                qn[o] = qn[o] + pn[i]
+                qp[o] = qp[o] + pp[i]
+                qw[o] = qw[o] + pw[i]
+                break
+    return 0
 
 
 @wp.kernel
@@ -233,9 +262,16 @@ def edge_both_sides(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.i
     t = wp.normalize(wp.cross(na, nb))
     lo = float(1.0e30)
     hi = float(-1.0e30)
-    for di in range(-REACH, REACH + 1):
-        for dj in range(-REACH, REACH + 1):
-            for dk in range(-REACH, REACH + 1):
+    # nested loops over the cells that look for planes (one loop over all 7^3 offsets, each
+    # decoded by division, made the boxes' calls 8-11 ms longer on the CPU at 100k)
+    for ii in range(REACH + 1):
+        di = even_step(e[0] // 2, ii)
+        for jj in range(REACH + 1):
+            dj = even_step(e[1] // 2, jj)
+            for kk in range(REACH + 1):
+                dk = even_step(e[2] // 2, kk)
+                if di > REACH or dj > REACH or dk > REACH:
+                    continue
                 v = plane_cell(bmap, flags, slots, e, di, dj, dk)
                 if v < 0:
                     continue
@@ -255,18 +291,21 @@ def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.in
                   gate: wp.array(dtype=float), sample: wp.array(dtype=float), flags: wp.array(dtype=wp.int32),
                   slots: wp.array(dtype=wp.int32), cells: wp.array(dtype=wp.int32), pn: wp.array(dtype=wp.vec3),
                   pp: wp.array(dtype=wp.vec3), pw: wp.array(dtype=float), cos_same: float, votes: float,
-                  support: float, cos_apart: float, cos_open: float, limit: float, qn: wp.array(dtype=wp.vec3),
-                  qp: wp.array(dtype=wp.vec3), qw: wp.array(dtype=float), base: int):
-    """Flagged cell cells[s]: the planes found by the cells within REACH cells (CORNER_REACH at a
-    corner) merged into at most NEAR_PLANES (qn, qp, qw: this thread's scratch), those found
+                  support: float, cos_apart: float, cos_open: float, limit: float, rounding: float,
+                  qn: wp.array(dtype=wp.vec3), qp: wp.array(dtype=wp.vec3), qw: wp.array(dtype=float), base: int):
+    """Flagged cell cells[s]: the planes found by the cells within REACH cells merged into at
+    most NEAR_PLANES (qn, qp, qw: this thread's scratch), those found
     `votes` times or more kept. Where at least two are kept (three where edge_gate saw a
     corner), apart by more than cos_apart somewhere and nowhere by more than cos_open (faces
     nearly back to back are a sheet's rim: their intersection would run the sheet on past it),
     every kept plane's mean point lies under every other kept plane (within `support`: a convex
     edge or corner), and, for two, cells that saw them lie on both sides along their edge
-    (edge_both_sides), each of the cell's voxels takes the largest of their signed distances
-    where that is lower (outward), by at most `limit`, blended by the cell's gate. Writes only
-    the cell's own voxels and reads no other value of phi: it runs in place."""
+    (edge_both_sides), each of the cell's voxels takes their intersection's signed distance
+    (the largest of theirs, rounded within `rounding` of the crest: marching cubes cuts a crest
+    sharper than a voxel or two differently wherever it falls between voxel planes, and a moving
+    body's edges then flicker) where that is lower (outward), by at most `limit`, blended by
+    the cell's gate. Writes only the cell's own voxels and reads no other value of phi: it runs
+    in place."""
     s = wp.tid() + base
     u = cells[s]
     for m in range(NEAR_PLANES):
@@ -274,27 +313,21 @@ def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.in
         qp[s * NEAR_PLANES + m] = wp.vec3(0.0)
         qw[s * NEAR_PLANES + m] = 0.0
     e = cell_corner(bcoord, u)  # even voxel: its cell's coordinates are e / 2
-    reach = REACH
-    if sample[u] < 0.0:
-        reach = CORNER_REACH
-    for di in range(-reach, reach + 1):
-        for dj in range(-reach, reach + 1):
-            for dk in range(-reach, reach + 1):
-                v = plane_cell(bmap, flags, slots, e, di, dj, dk)
-                if v < 0:
+    if (e[0] // 2) % 2 != 0 or (e[1] // 2) % 2 != 0 or (e[2] // 2) % 2 != 0:
+        v = plane_cell(bmap, flags, slots, e, 0, 0, 0)  # its own planes, where a corner looked for them
+        if v >= 0:
+            merge_planes(v, s, pn, pp, pw, qn, qp, qw, cos_same)
+    for ii in range(REACH + 1):  # as in edge_both_sides
+        di = even_step(e[0] // 2, ii)
+        for jj in range(REACH + 1):
+            dj = even_step(e[1] // 2, jj)
+            for kk in range(REACH + 1):
+                dk = even_step(e[2] // 2, kk)
+                if di > REACH or dj > REACH or dk > REACH:
                     continue
-                for m in range(CELL_PLANES):
-                    i = v * CELL_PLANES + m
-                    if pw[i] == 0.0:
-                        continue
-                    nk = wp.normalize(pn[i])
-                    for c in range(NEAR_PLANES):
-                        o = s * NEAR_PLANES + c
-                        if qw[o] == 0.0 or wp.dot(wp.normalize(qn[o]), nk) > cos_same:
-                            qn[o] = qn[o] + pn[i]
-                            qp[o] = qp[o] + pp[i]
-                            qw[o] = qw[o] + pw[i]
-                            break
+                v = plane_cell(bmap, flags, slots, e, di, dj, dk)
+                if v >= 0:
+                    merge_planes(v, s, pn, pp, pw, qn, qp, qw, cos_same)
     kept = int(0)
     apart = bool(False)
     for c in range(NEAR_PLANES):
@@ -323,10 +356,16 @@ def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.in
     for q in range(8):
         x = wp.vec3(e + wp.vec3i(q // 4, (q // 2) % 2, q % 2))
         fs = float(-1.0e30)
+        usq = float(0.0)
         for c in range(NEAR_PLANES):
             o = s * NEAR_PLANES + c
             if qw[o] >= votes:
-                fs = wp.max(fs, wp.dot(wp.normalize(qn[o]), x - qp[o] / qw[o]))
+                pl = wp.dot(wp.normalize(qn[o]), x - qp[o] / qw[o])
+                fs = wp.max(fs, pl)
+                uu = wp.max(pl + rounding, 0.0)
+                usq += uu * uu
+        if usq > 0.0:  # near the crest: the planes' intersection rounded by `rounding`
+            fs = wp.sqrt(usq) - rounding
         t = t0 + ((q // 4) * BS + (q // 2) % 2) * BS + q % 2
         f = phi[t]
         target = wp.max(wp.min(f, fs), f - limit)
