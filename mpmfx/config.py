@@ -166,8 +166,8 @@ class Surface(_Section):
                                                  "(no holes); slower, and sharp box edges round off more.")
     sharp_edges: Bool = Field(False, description="Give convex edges and corners back the sharpness the "
                                                  "particles lost there (the faces' planes meet again; outward "
-                                                 "only; round bodies unchanged). For hard-edged bodies at rest or "
-                                                 "in stills: on a moving body the sharp crest's shading flickers.")
+                                                 "only; round bodies come out as they were). For hard-edged bodies "
+                                                 "at rest and stills: a moving body's edges flicker more.")
     density: Bool = Field(False, description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "
                                              "the material) for granular / volume looks.")
 
