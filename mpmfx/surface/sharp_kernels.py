@@ -6,8 +6,8 @@ vertices within 2 h of an edge averaged 0.18-0.20 h off, the faces 0.10, and the
 always at an edge or a corner, passed 1 h on some samples. Extended marching cubes and dual
 contouring keep such edges by meshing where the faces' tangent planes meet; here the planes are
 fitted on the smoothed field and the field is set to the planes' intersection (the largest of
-their signed distances, a convex wedge or corner) before marching cubes, which then needs no
-change.
+their signed distances, a convex wedge or corner, rounded within 2 voxels of the crest) before
+marching cubes, which then needs no change.
 
 Only where the edge gate is open (edge_kernels.edge_gate: the blurred weights curve like an
 edge), only outward (material is added at a convex crest, never removed), and only where the
