@@ -142,7 +142,6 @@ def merge_planes(v: int, s: int, pn: wp.array(dtype=wp.vec3), pp: wp.array(dtype
                 qp[o] = qp[o] + pp[i]
                 qw[o] = qw[o] + pw[i]
                 break
-    return 0
 
 
 @wp.kernel
