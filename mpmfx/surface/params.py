@@ -135,6 +135,9 @@ class SurfaceParams:
             raise bad("anisotropic", f"got {self.anisotropic!r}; give True or False")
         if not isinstance(self.sharp_edges, bool):
             raise bad("sharp_edges", f"got {self.sharp_edges!r}; give True or False")
+        if self.sharp_edges and self.smooth_iters == 0:
+            raise bad("sharp_edges", "needs smooth_iters > 0 (the edges are found while smoothing); "
+                                     "give smooth_iters or turn sharp_edges off")
         if not isinstance(self.density, bool):
             raise bad("density", f"got {self.density!r}; give True or False")
 

@@ -160,6 +160,11 @@ def test_sharp_edges_is_a_surface_knob(first_run, tmp_path, capsys):
     assert len(after) > 0 and (len(after) != len(before) or not np.array_equal(after, before))
     assert main(["run", str(shot), "--set", "surface.sharp_edges=maybe", "--cache", str(tmp_path / "c")]) == 2
     assert "surface.sharp_edges" in capsys.readouterr().err
+    # without smoothing there is no edge gate to sharpen at: a config error, not a silent no-op
+    assert main(["run", str(shot), "--set", "surface.sharp_edges=true", "--set", "surface.smooth_iters=0",
+                 "--cache", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert "surface.sharp_edges" in err and "surface.smooth_iters" in err and str(shot.name) in err
     assert not (tmp_path / "c").exists()
 
 

@@ -74,9 +74,11 @@ def test_a_thin_sheet_rim_is_not_run_on():
         assert on["thickness_err"] == pytest.approx(off["thickness_err"], abs=1e-6)
 
 
-def test_sharp_edges_must_be_a_bool():
+def test_sharp_edges_must_be_a_bool_and_needs_smoothing():
     with pytest.raises(ValueError, match="SurfaceParams.sharp_edges"):
         SurfaceParams(0.01, sharp_edges="yes")
+    with pytest.raises(ValueError, match="SurfaceParams.sharp_edges: needs smooth_iters > 0"):
+        SurfaceParams(0.01, sharp_edges=True, smooth_iters=0)
 
 
 def test_split_across_threads_the_same_surface(monkeypatch):
