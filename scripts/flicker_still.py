@@ -15,26 +15,11 @@ import argparse
 
 import numpy as np
 
-from mpmfx.bench.surface_flicker import flicker_run, moving_frames, ours, peer
+from mpmfx.bench.surface_flicker import RENDER_SIZE, flicker_run, moving_frames, ours, peer, render
 from mpmfx.bench.surface_peers import peer_missing
 from mpmfx.render import import_pyvista
 
 GAIN = 4
-CAMERA = [(1.05, 0.8, 0.85), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)]
-
-
-def render(pv, vertices: np.ndarray, faces: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """(H, W, 3) uint8 picture of one mesh (m) from CAMERA, glossy, one grazing key light."""
-    plotter = pv.Plotter(off_screen=True, window_size=size, lighting="none")
-    plotter.add_light(pv.Light(position=(0.9, -0.4, 0.45), focal_point=(0, 0, 0), intensity=1.0))
-    plotter.add_light(pv.Light(position=(-0.5, 0.8, 0.3), focal_point=(0, 0, 0), intensity=0.3))
-    cells = np.hstack([np.full((len(faces), 1), 3), faces]).ravel()
-    plotter.add_mesh(pv.PolyData(np.asarray(vertices, np.float64), cells), color="#8fb8d8", smooth_shading=True,
-                     specular=0.9, specular_power=60, diffuse=0.6, ambient=0.1)
-    plotter.camera_position = CAMERA
-    img = plotter.screenshot(return_img=True)
-    plotter.close()
-    return np.asarray(img)[..., :3]
 
 
 def main() -> None:
@@ -50,7 +35,7 @@ def main() -> None:
     methods = [("mpmfx fine", ours("fine", h, args.device))]
     if peer_missing("splashsurf") is None:
         methods.append(("splashsurf", peer("splashsurf", h)))
-    size = (560, 420)
+    size = RENDER_SIZE
     rows = []
     for name, run in methods:
         stats, meshes = flicker_run(run, xs, h, step)

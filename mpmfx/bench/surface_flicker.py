@@ -10,7 +10,11 @@ out, a surfacer that follows the body leaves a mesh that stands still; what move
 - normal turn: angle between the vertex normal and frame k - 1's smooth-shading normal at that
   closest point (degrees): what moves a highlight; on the faces, and apart on the box's edges
   (within EDGE_BAND h of two faces), where a random sample is roughest;
-- area and volume change between consecutive frames (%): a "breathing" or shimmering body.
+- area and volume change between consecutive frames (%): a "breathing" or shimmering body;
+- the picture: each frame rendered from a camera that moves with the body (PyVista, glossy, a
+  grazing key light; `render`), and the change of its pixels between consecutive frames over
+  the pixels the body covers in either: the mean in 8-bit levels, and the share that change by
+  more than VISIBLE_LEVELS. A surfacer without flicker gives two equal pictures.
 
 Every method gets its normals the same way (area-weighted face normals), so peers compare.
 
@@ -143,6 +147,53 @@ EDGE_BAND = 1.5
 """Vertices this close (in h) to two faces of the box count as its edges (the rounded strip)."""
 
 
+RENDER_SIZE = (560, 420)
+"""Pixels of a rendered frame (width, height): the 20k block is about 30 h across, ~9 pixels an h."""
+CAMERA = [(1.05, 0.8, 0.85), (0.0, 0.0, 0.0), (0.0, 0.0, 1.0)]
+"""Camera (position, focus, up; m) on the block at its rest place: three faces, their edges and a corner."""
+VISIBLE_LEVELS = 4
+"""A pixel changing by more than this (of 255, ~1.6 %) between frames counts as a visible change:
+at 24 fps the eye sees flicker of about 1-2 % contrast."""
+
+
+def render(pv, vertices: np.ndarray, faces: np.ndarray, size: tuple[int, int] = RENDER_SIZE) -> np.ndarray:
+    """(H, W, 3) uint8 picture of one mesh (m) from CAMERA on black, glossy with smooth shading
+    (area-weighted vertex normals, as every method gets), a key light grazing the top face so a
+    normal's turn shows as a highlight's change."""
+    plotter = pv.Plotter(off_screen=True, window_size=size, lighting="none")
+    plotter.set_background("black")
+    plotter.add_light(pv.Light(position=(0.9, -0.4, 0.45), focal_point=(0, 0, 0), intensity=1.0))
+    plotter.add_light(pv.Light(position=(-0.5, 0.8, 0.3), focal_point=(0, 0, 0), intensity=0.3))
+    mesh = pv.PolyData(np.asarray(vertices, np.float64), np.hstack([np.full((len(faces), 1), 3), faces]).ravel())
+    mesh.point_data["Normals"] = vertex_normals(vertices, faces)
+    plotter.add_mesh(mesh, color="#8fb8d8", smooth_shading=True, specular=0.9, specular_power=60, diffuse=0.6,
+                     ambient=0.1)
+    plotter.camera_position = CAMERA
+    img = plotter.screenshot(return_img=True)
+    plotter.close()
+    return np.asarray(img)[..., :3]
+
+
+def picture_change(meshes: list[tuple[np.ndarray, np.ndarray]]) -> dict:
+    """Rendered flicker of meshes already moved back to the body's rest place: over each
+    consecutive pair, the pixels showing the body in either picture, their change (the largest
+    over R, G, B; 8-bit levels) averaged, and the share changing by more than VISIBLE_LEVELS;
+    means over the pairs. Empty where PyVista is missing (a GPU node): the table shows "-"."""
+    try:
+        from mpmfx.render import import_pyvista
+        pv = import_pyvista()
+    except ImportError:
+        return {}
+    pictures = [render(pv, v, f).astype(np.int16) for v, f in meshes]
+    means, shares = [], []
+    for a, b in zip(pictures[:-1], pictures[1:]):
+        body = (a.max(axis=2) > 0) | (b.max(axis=2) > 0)
+        change = np.abs(b - a).max(axis=2)[body]
+        means.append(change.mean())
+        shares.append((change > VISIBLE_LEVELS).mean())
+    return {"pixel_change": float(np.mean(means)), "pixels_changed": float(np.mean(shares))}
+
+
 def flicker_run(surface: Callable[[np.ndarray], tuple], frames: list[np.ndarray], h: float,
                 step: np.ndarray) -> tuple[list[dict], list[tuple[np.ndarray, np.ndarray]]]:
     """Surface every frame with `surface` (positions -> (vertices, faces), or (vertices, faces,
@@ -216,16 +267,17 @@ def bench_flicker(count: int = FLICKER_COUNT, device: str | None = None, *, peer
     out = Table(FLICKER_HEADER, format_flicker_row, echo=echo)
     for method, run in methods:
         try:
-            rows, _ = flicker_run(run, xs, h, step)
+            rows, meshes = flicker_run(run, xs, h, step)
         except RUN_ERRORS as exc:
             print(f"flicker: {method} failed, no row: {exc}", flush=True)
             continue
-        out.emit(summarise(method, rows, len(xs[0]), h))
+        out.emit({**summarise(method, rows, len(xs[0]), h), **picture_change(meshes)})
     return list(out)
 
 
 FLICKER_HEADER = (f"{'case':18} {'n':>7} {'method':16} {'s/frame':>7} {'jitter/h':>8} {'p99/h':>6} {'turn deg':>8} "
-                  f"{'p99 deg':>7} {'edge p99':>8} {'dA max':>7} {'dV max':>7} {'pieces':>6}")
+                  f"{'p99 deg':>7} {'edge p99':>8} {'dA max':>7} {'dV max':>7} {'pieces':>6} {'px lvl':>6} "
+                  f"{'px >' + str(VISIBLE_LEVELS):>6}")
 
 
 def format_flicker_row(r: dict) -> str:
@@ -233,7 +285,8 @@ def format_flicker_row(r: dict) -> str:
     return (f"{r['case']:18} {r['particles']:7d} {r['method']:16} {r['seconds']:7.3f} {r['normal_jitter_h']:8.4f} "
             f"{r['normal_jitter_p99_h']:6.3f} {r['normal_turn_deg']:8.2f} {r['normal_turn_p99_deg']:7.2f} "
             f"{r['edge_turn_p99_deg']:8.2f} "
-            f"{r['area_change_max']:7.3%} {r['volume_change_max']:7.3%} {r['components_max']:6d}")
+            f"{r['area_change_max']:7.3%} {r['volume_change_max']:7.3%} {r['components_max']:6d} "
+            + (f"{r['pixel_change']:6.2f} {r['pixels_changed']:6.2%}" if "pixel_change" in r else f"{'-':>6} {'-':>6}"))
 
 
 def main(argv: Sequence[str] | None = None) -> None:

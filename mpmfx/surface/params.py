@@ -80,12 +80,12 @@ class SurfaceParams:
         there (sparse._sharpen: where the edge gate is open, the field takes the intersection of
         the faces' planes, fitted where the surface is flat a few spacings away; outward only,
         at most 1.5 spacings). Round bodies come out as they were (a tube 5 spacings across,
-        blobs of 300 particles: not a vertex moves; random spheres and tori: at most 0.14 % of
-        the vertices, by at most 0.09 h). For hard-edged bodies at rest and for stills: a moving
-        body's edges flicker more (the gliding block: vertices p99 0.040 -> 0.080 h off the
-        previous frame, the edges' shading p99 23 -> 28 degrees). Random box, 100k, "fine":
-        vertex mean 0.115-0.122 -> 0.102-0.108 h, max 0.78-1.23 -> 0.52-0.93 h
-        (docs/surfacing-log.md, twenty-third step).
+        blobs of 300 particles: not a vertex moves; random spheres and tori: at most 0.07 % of
+        the vertices, by at most 0.01 h). A moving body's vertices jitter a little more (the
+        gliding 20k block: p99 0.040 -> 0.046 h off the previous frame), its rendered pictures no
+        more (0.86-0.91 -> 0.84-0.89 levels a frame; a 3000-particle block 1.32-1.45 -> 1.49-1.56).
+        Random box, 100k, 12 samples: vertex mean 0.115-0.122 -> 0.101-0.107 h, max 0.78-1.23 ->
+        0.53-0.83 h (docs/surfacing-log.md, twenty-third and twenty-fourth steps).
     dense_output: also return the level set (and velocity, density) as dense
         arrays over the band's bounding box; False returns only `SurfaceResult.sparse` (the
         dense arrays are then empty) -- what to use at millions of particles.

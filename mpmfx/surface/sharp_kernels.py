@@ -15,23 +15,30 @@ planes found around a cell support each other (every plane's points lie under th
 least two (three at a corner) and not back to back (a sheet's rim). Planes come from pairs of
 points on the zero level, 2.5 and 5.5 spacings out from the cell along the surface, kept only
 where the surface is flat there: both points' normals, and the normals 1.5 spacings to each side
-of each, agree within 12 degrees. A round body is flat nowhere over those spans (a torus whose
-tube is 5 spacings across, blobs of 300 particles: not a vertex moved; random spheres and tori:
-at most 0.14 % of vertices, by at most 0.09 h, where isolated spots pass), where
+of each, agree within 12 degrees, and a plane needs 3 of a cell's 16 directions. A round body is
+flat nowhere over those spans (a torus whose tube is 5 spacings across, blobs of 300 particles:
+not a vertex moved; random spheres and tori of 20k-100k: at most 0.07 % of vertices, by at most
+0.01 h), where
 shorter spans (4 spacings, 1 to the sides) found "faces" around such a tube and moved 73 % of
 its vertices by up to 1.2 h. Lengths are voxels; a cell is 2^3 voxels (sparse_kernels.gate_cell),
 voxel (i, j, k)'s value sits at the point (i, j, k).
 
-On a moving body marching cubes cuts a sharp crest differently as it crosses voxel planes, and
-the gliding block's edges flicker more (p99 shading turn between frames 23 -> 28 degrees with
-the crest rounded within 2 voxels, 52 without), so SurfaceParams.sharp_edges is off by
-default."""
+On a moving body marching cubes cuts a sharp crest differently as it crosses voxel planes (the
+crest is rounded within 2 voxels: unrounded, the gliding block's edges' shading turned 52 degrees
+p99 between frames, rounded 28), and a face's plane, fitted afresh every frame, turns a little:
+each plane's normal is a mean over many directions' normals (DIRECTIONS), and the sharpening is
+blended by the gates interpolated to each voxel (gate_at). Rendered, the gliding 20k block then
+changes as little from frame to frame as without sharp edges (mpmfx.bench.surface_flicker)."""
 
 import warp as wp
 
 from mpmfx.surface.sparse_kernels import BS, BV, gate_cell, get, slot
 
-DIRECTIONS = wp.constant(8)  # directions around a cell's normal that look for a face
+# directions around a cell's normal that look for a face: each face's normal is a mean over the
+# directions that found it, and at 8 it turned enough from frame to frame to move a crest 5-10
+# voxels from its points (the gliding block's vertices p99 0.080 h off the previous frame, 0.038
+# with the exact normals; 16: 0.055, with the side normals too 0.049)
+DIRECTIONS = wp.constant(16)
 CELL_PLANES = wp.constant(3)  # planes a cell keeps (a corner's three faces)
 NEAR_PLANES = wp.constant(4)  # planes a cell's neighbourhood may hold
 # cells on each side whose planes a cell takes (planes are looked for in every other cell): at 2 a
@@ -88,12 +95,15 @@ def unit_normal(bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), q:
 @wp.func
 def flat_beside(bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), q: wp.vec3, n: wp.vec3, d: wp.vec3,
                 width: float, cos_flat: float, out_v: float, in_v: float):
-    """Whether the normals `width` to each side of q (across direction d) agree with n and with
-    each other (a curve across d turns them apart by 2 width / its radius)."""
+    """The sum of the unit normals `width` to each side of q (across direction d) where they agree
+    with n and with each other (a curve across d turns them apart by 2 width / its radius), else
+    zero."""
     side = wp.normalize(wp.cross(d, n))
     a = unit_normal(bmap, phi, q + side * width, out_v, in_v)
     b = unit_normal(bmap, phi, q - side * width, out_v, in_v)
-    return wp.dot(a, n) > cos_flat and wp.dot(b, n) > cos_flat and wp.dot(a, b) > cos_flat
+    if wp.dot(a, n) > cos_flat and wp.dot(b, n) > cos_flat and wp.dot(a, b) > cos_flat:
+        return a + b
+    return wp.vec3(0.0)
 
 
 @wp.func
@@ -111,16 +121,49 @@ def even_step(c: int, n: int):
 
 
 @wp.func
+def cell_at(bmap: wp.array3d(dtype=wp.int32), i: int, j: int, k: int):
+    """Index of the 2^3-voxel cell holding voxel (i, j, k), or -1 outside the stored blocks."""
+    t = slot(bmap, i, j, k)
+    if t < 0:
+        return -1
+    l = t % BV
+    return (t // BV) * 64 + gate_cell(0, l // 64, (l // 8) % 8, l % 8)
+
+
+@wp.func
+def gate_at(bmap: wp.array3d(dtype=wp.int32), gate: wp.array(dtype=float), x: wp.vec3i):
+    """The cells' gates interpolated trilinearly to voxel x (a cell's value sits at its centre):
+    one gate for all of a cell's voxels stepped the sharpened field at the cells' faces, and a
+    moving body's surface rippled along its edges (the gliding block's pixels changed 1.50
+    levels a frame on average, 1.42 interpolated; "fine" 1.32)."""
+    fx = (float(x[0]) - 0.5) * 0.5
+    fy = (float(x[1]) - 0.5) * 0.5
+    fz = (float(x[2]) - 0.5) * 0.5
+    i = int(wp.floor(fx))
+    j = int(wp.floor(fy))
+    k = int(wp.floor(fz))
+    tx = fx - float(i)
+    ty = fy - float(j)
+    tz = fz - float(k)
+    g = float(0.0)
+    for q in range(8):
+        a = q // 4
+        b = (q // 2) % 2
+        c = q % 2
+        w = wp.where(a == 1, tx, 1.0 - tx) * wp.where(b == 1, ty, 1.0 - ty) * wp.where(c == 1, tz, 1.0 - tz)
+        v = cell_at(bmap, 2 * (i + a), 2 * (j + b), 2 * (k + c))
+        if v >= 0:
+            g += w * gate[v]
+    return g
+
+
+@wp.func
 def plane_cell(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32), slots: wp.array(dtype=wp.int32),
                e: wp.vec3i, di: int, dj: int, dk: int):
     """Slot of the cell (di, dj, dk) cells from the one at even voxel e where that cell is
     flagged, else -1."""
-    t = slot(bmap, e[0] + 2 * di, e[1] + 2 * dj, e[2] + 2 * dk)
-    if t < 0:
-        return -1
-    l = t % BV
-    v = (t // BV) * 64 + gate_cell(0, l // 64, (l // 8) % 8, l % 8)
-    if flags[v] == 0:
+    v = cell_at(bmap, e[0] + 2 * di, e[1] + 2 * dj, e[2] + 2 * dk)
+    if v < 0 or flags[v] == 0:
         return -1
     return slots[v]
 
@@ -227,11 +270,13 @@ def cell_planes(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int3
             continue
         if wp.abs(wp.dot(na, qb - qa)) >= plane_tol or wp.abs(wp.dot(nb, qa - qb)) >= plane_tol:
             continue
-        if not flat_beside(bmap, phi, qa, na, along, width, cos_flat, out_v, in_v):
+        sa = flat_beside(bmap, phi, qa, na, along, width, cos_flat, out_v, in_v)
+        if wp.length_sq(sa) == 0.0:
             continue
-        if not flat_beside(bmap, phi, qb, nb, along, width, cos_flat, out_v, in_v):
+        sb = flat_beside(bmap, phi, qb, nb, along, width, cos_flat, out_v, in_v)
+        if wp.length_sq(sb) == 0.0:
             continue
-        nk = wp.normalize(na + nb)
+        nk = wp.normalize(na + nb + sa + sb)  # six normals over 3 x 3 h: less of each one's noise
         ck = (qa + qb) * 0.5
         for m in range(CELL_PLANES):  # the first plane it matches, else the first free one
             i = s * CELL_PLANES + m
@@ -303,8 +348,8 @@ def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.in
     (the largest of theirs, rounded within `rounding` of the crest: marching cubes cuts a crest
     sharper than a voxel or two differently wherever it falls between voxel planes, and a moving
     body's edges then flicker) where that is lower (outward), by at most `limit`, blended by
-    the cell's gate. Writes only the cell's own voxels and reads no other value of phi: it runs
-    in place."""
+    the gates interpolated to each voxel (gate_at). Writes only the cell's own voxels and reads
+    no other value of phi: it runs in place."""
     s = wp.tid() + base
     u = cells[s]
     for m in range(NEAR_PLANES):
@@ -350,7 +395,6 @@ def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.in
         return  # a corner (edge_gate's sample < 0) needs its three faces: two would run its edge on past it
     if kept == 2 and not edge_both_sides(bmap, flags, slots, e, pn, pw, qn, qw, s, votes, cos_same):
         return  # the end of an edge, where no cell saw the third face: two planes would run it on
-    g = gate[u]
     t0 = slot(bmap, e[0], e[1], e[2])
     for q in range(8):
         x = wp.vec3(e + wp.vec3i(q // 4, (q // 2) % 2, q % 2))
@@ -366,6 +410,7 @@ def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.in
         if usq > 0.0:  # near the crest: the planes' intersection rounded by `rounding`
             fs = wp.sqrt(usq) - rounding
         t = t0 + ((q // 4) * BS + (q // 2) % 2) * BS + q % 2
+        g = gate_at(bmap, gate, e + wp.vec3i(q // 4, (q // 2) % 2, q % 2))
         f = phi[t]
         target = wp.max(wp.min(f, fs), f - limit)
         phi[t] = f + g * (target - f)

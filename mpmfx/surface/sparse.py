@@ -57,7 +57,7 @@ SHARP = {  # sparse._sharpen (sharp_kernels); lengths in particle spacings h unl
     "cos_flat": math.cos(math.radians(12.0)),  # normals that agree
     "plane_tol": 0.5,  # each point this near the other's tangent plane
     "cos_same": math.cos(math.radians(15.0)),  # planes closer than this are one
-    "votes": 2.0,  # directions that must find a plane
+    "votes": 3.0,  # directions that must find a plane (of sharp_kernels.DIRECTIONS, 16; at 2, a spot of a 20k random torus passed)
     "support": 0.3,  # voxels: a plane's points this far over another's at most (convex)
     "cos_apart": math.cos(math.radians(65.0)),  # at least two planes this far apart (an edge, not a face)
     "cos_open": math.cos(math.radians(120.0)),  # and none further (faces back to back: a sheet's rim)
