@@ -164,11 +164,11 @@ class Surface(_Section):
                                                     "particle spacing; 0 = off; slower, random sheets get thicker).")
     anisotropic: Bool = Field(False, description="Yu & Turk anisotropic kernels: thin sheets of water stay sheets "
                                                  "(no holes); slower, and sharp box edges round off more.")
-    sharp_edges: Bool = Field(False, description="Give convex edges and corners back the sharpness the "
-                                                 "particles lost there (the faces' planes meet again; outward "
-                                                 "only; round bodies come out as they were). For hard-edged bodies "
-                                                 "at rest and stills: a moving body's edges flicker more. Needs "
-                                                 "smooth_iters > 0.")
+    sharp_edges: Bool = Field(True, description="Give convex edges and corners back the sharpness the "
+                                                "particles lost there (the faces' planes meet again; outward "
+                                                "only; round bodies come out as they were); false leaves them "
+                                                "rounded as the particles' kernels make them. Works while "
+                                                "smoothing: smooth_iters = 0 turns it off.")
     density: Bool = Field(False, description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "
                                              "the material) for granular / volume looks.")
 
@@ -392,7 +392,7 @@ def _check_semantics(shot: Shot, source: str) -> None:
         if shot.solver.dt_max * shot.shot.fps * 0.999 > 1.0 / shot.solver.time_scale:
             problems.append(f"{source}: solver.dt_max ({shot.solver.dt_max} s) is longer than one frame "
                             f"(1/{shot.shot.fps} s): lower solver.dt_max")
-    if shot.surface.sharp_edges and shot.surface.smooth_iters == 0:
+    if shot.surface.sharp_edges and shot.surface.smooth_iters == 0 and "sharp_edges" in shot.surface.model_fields_set:
         problems.append(f"{source}: surface.sharp_edges: needs surface.smooth_iters > 0 (the edges are found while "
                         f"smoothing): raise surface.smooth_iters or set surface.sharp_edges = false")
     names = [o.name for o in shot.objects] + [c.name for c in shot.colliders]

@@ -1,5 +1,6 @@
-"""The README's figure of surface.sharp_edges: the bench's random box cut by two planes, "fine"
-(the surface stage's setting) against "sharp" ("fine" with sharp edges). Left: the plane z = 0,
+"""The README's figure of surface.sharp_edges: the bench's random box cut by two planes, "round"
+(the surface stage's setting with surface.sharp_edges = false) against "fine" (the setting, with
+sharp edges). Left: the plane z = 0,
 at the middle of the edge x = +0.3, y = +0.2 m. Right: the plane z = +0.25 - h, a spacing
 under the top face, at the corner above that edge. Dots: the particles within h / 2 of the
 plane; the vertex error of each mesh (mean and max over the whole box) in the legend.
@@ -45,7 +46,7 @@ def main() -> None:
     args = ap.parse_args()
     sdf = shape_sdf("box")[0]
     x, h = sample_shape("box", args.count, "random", seed=args.seed)
-    meshes = {label: surface(x, h, label) for label in ("fine", "sharp")}
+    meshes = {label: surface(x, h, label) for label in ("round", "fine")}
     fig, axes = plt.subplots(1, 2, figsize=(11, 5.4))
     for ax, (z, where) in zip(axes, ((0.0, "the middle of an edge (z = 0)"),
                                      (BOX_HALF[2] - h, "a corner, one spacing under the top face"))):
@@ -54,10 +55,10 @@ def main() -> None:
         ax.scatter(x[near, 0], x[near, 1], s=14, c="0.75", zorder=1)
         ax.plot([lo[0], BOX_HALF[0], BOX_HALF[0]], [BOX_HALF[1], BOX_HALF[1], lo[1]], c="k", lw=1, zorder=2,
                 label="the box")
-        for label, style, colour in (("fine", "--", "tab:red"), ("sharp", "-", "tab:blue")):
+        for label, style, colour in (("round", "--", "tab:red"), ("fine", "-", "tab:blue")):
             mesh = meshes[label]
             err = np.abs(sdf(mesh.vertices.astype(np.float64))) / h
-            what = '"fine" (shots\' default)' if label == "fine" else '"sharp" (surface.sharp_edges)'
+            what = '"fine" (shots\' default)' if label == "fine" else '"round" (surface.sharp_edges = false)'
             ax.add_collection(LineCollection(section(mesh, z), colors=colour, linestyles=style, lw=2, zorder=3,
                                              label=f"{what}: vertex mean {err.mean():.3f} h, max {err.max():.2f} h"))
         ax.set_xlim(lo[0], hi[0])

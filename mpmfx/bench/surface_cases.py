@@ -343,10 +343,10 @@ OURS = {
     # voxel = r (0.6 h) and four smoothing steps: the speed setting
     "fast": {"voxel_h": PARTICLE_RADIUS_PER_SPACING, "smooth_iters": 4},
     # what shots run with (the surface stage's defaults: mpmfx/stages/surface.py, config.Surface):
-    # voxel h / 2, eight smoothing steps, blobs of fewer than 8 particles removed
-    "fine": {"voxel_h": 0.5, "smooth_iters": 8, "min_feature_particles": 8},
-    # "fine" with surface.sharp_edges: hard edges and corners kept (for bodies at rest and stills)
-    "sharp": {"voxel_h": 0.5, "smooth_iters": 8, "min_feature_particles": 8, "sharp_edges": True},
+    # voxel h / 2, eight smoothing steps, blobs of fewer than 8 particles removed, sharp edges
+    "fine": {"voxel_h": 0.5, "smooth_iters": 8, "min_feature_particles": 8, "sharp_edges": True},
+    # "fine" with surface.sharp_edges = false: edges and corners as the kernels round them
+    "round": {"voxel_h": 0.5, "smooth_iters": 8, "min_feature_particles": 8, "sharp_edges": False},
 }
 """Our settings in the benchmark: label -> `measure` keywords (voxel_h x particle spacing h)."""
 

@@ -42,7 +42,8 @@ def surface_params(shot: Shot):
     return SurfaceParams(particle_radius=PARTICLE_RADIUS_PER_SPACING * h, radius_scale=s.radius_scale,
                          voxel_size=s.voxel_size or 0.5 * h, dense_output=False, smooth_iters=s.smooth_iters, dilate=s.dilate,
                          min_feature_particles=s.min_feature_particles, density=s.density,
-                         anisotropic=s.anisotropic, close_voids=s.close_voids, sharp_edges=s.sharp_edges)
+                         anisotropic=s.anisotropic, close_voids=s.close_voids,
+                         sharp_edges=s.sharp_edges and s.smooth_iters > 0)  # found while smoothing (config's check)
 
 
 def todo(ctx: Context) -> list[int]:

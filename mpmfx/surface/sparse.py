@@ -52,6 +52,7 @@ EDGE_NOISE = 2.0  # x the samples' noise (standard deviation): how far the smoot
 EDGE_PIT = 0.25  # 1/voxel: a pit along an edge this sharply curved (or more) stops the flow rounding the edge there (sparse_kernels.edge_flow_step); 0.1 filled more but flickered more (docs/surfacing-log.md, nineteenth step)
 SHARP = {  # sparse._sharpen (sharp_kernels); lengths in particle spacings h unless said
     "band": 3.0,  # voxels: cells whose centre lies this near the zero level
+    "thin": 2.5,  # and where the body is thicker than this (a sheet is its faces back to back)
     "near": 2.5, "far": 5.5,  # a direction's two points: near out from the cell, then on along the surface to far
     "width": 1.5,  # the points to each side whose normals must agree too
     "cos_flat": math.cos(math.radians(12.0)),  # normals that agree
@@ -801,7 +802,7 @@ def _sharpen(wp, bcoord, bmap, phi, tiles, gate, sample, h: float) -> None:
         return
     c = SHARP
     flags = wp.empty(ncell, dtype=wp.int32)
-    _split(wp, K.flag_cells, ncell, [phi, gate, c["band"], flags])
+    _split(wp, K.flag_cells, ncell, [bcoord, bmap, phi, *tiles, gate, c["band"], c["thin"] * h, flags])
     slots = _scan(wp, flags, inclusive=False)
     count = int(slots[ncell - 1 : ncell].numpy()[0] + flags[ncell - 1 : ncell].numpy()[0])
     if count == 0:

@@ -19,6 +19,7 @@ def test_fine_is_the_surface_stage_setting_at_the_shipped_radius():
     assert stage.particle_radius == PARTICLE_RADIUS_PER_SPACING * h
     assert np.isclose(stage.resolved_voxel_size, fine["voxel_h"] * h)
     assert (stage.smooth_iters, stage.min_feature_particles) == (fine["smooth_iters"], fine["min_feature_particles"])
+    assert stage.sharp_edges is fine["sharp_edges"] is True
     assert (stage.kernel_radius, stage.radius_scale, stage.dilate) == (3.7, 1.0, 0.0)
 
 

@@ -147,12 +147,15 @@ def test_close_voids_is_a_surface_knob(first_run, tmp_path, capsys):
 
 
 def test_sharp_edges_is_a_surface_knob(first_run, tmp_path, capsys):
-    """surface.sharp_edges reaches the surfacer: the shot's block keeps its edges in the first
-    frame (only surface re-runs); a value that is not a boolean is a config error naming the field."""
+    """surface.sharp_edges (on by default) reaches the surfacer: turned off, the shot's block
+    rounds its edges in the first frame (only surface re-runs); a value that is not a boolean is a
+    config error naming the field."""
     from mpmfx.cli import main
     from mpmfx.io.frames import SurfaceFrame
+    from mpmfx.config import load_shot_config
+    from mpmfx.stages.surface import surface_params
     shot, cache, first = first_run
-    run = mpmfx.load_shot(shot, overrides=["surface.sharp_edges=true"], cache_root=cache, quiet=True)
+    run = mpmfx.load_shot(shot, overrides=["surface.sharp_edges=false"], cache_root=cache, quiet=True)
     results = run.run(until="surface")
     assert _states(results) == {"voxelise": "cached", "simulate": "cached", "surface": "ran"}
     before = SurfaceFrame.read(first[2].entry / "frames" / "0001.npz").groups["Elastic"].vertices
@@ -160,7 +163,9 @@ def test_sharp_edges_is_a_surface_knob(first_run, tmp_path, capsys):
     assert len(after) > 0 and (len(after) != len(before) or not np.array_equal(after, before))
     assert main(["run", str(shot), "--set", "surface.sharp_edges=maybe", "--cache", str(tmp_path / "c")]) == 2
     assert "surface.sharp_edges" in capsys.readouterr().err
-    # without smoothing there is no edge gate to sharpen at: a config error, not a silent no-op
+    # without smoothing there is no edge gate to sharpen at: asked for, a config error, not a
+    # silent no-op; left at its default, it goes off with the smoothing
+    assert not surface_params(load_shot_config(shot, ["surface.smooth_iters=0"])).sharp_edges
     assert main(["run", str(shot), "--set", "surface.sharp_edges=true", "--set", "surface.smooth_iters=0",
                  "--cache", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err

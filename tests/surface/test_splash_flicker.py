@@ -82,8 +82,9 @@ def test_a_slowly_moving_block_does_not_flicker():
     assert s["components_max"] <= 2
 
 
-def test_a_slowly_moving_block_does_not_flicker_at_the_shot_setting():
-    # as above at "fine" (the surface stage's setting). The voxels next to the zero crossing
+def test_a_slowly_moving_block_does_not_flicker_at_the_shot_setting_with_round_edges():
+    # as above at "round" (the surface stage's setting with surface.sharp_edges = false; the
+    # setting itself: tests/surface/test_sharp_edges.py). The voxels next to the zero crossing
     # start the redistancing at their distance to the plane through the crossings, with the
     # other axes' zero levels extrapolated so that the start does not jump when a crossing
     # appears on another axis between frames. Measured p99 of the vertices' distance to the
@@ -92,8 +93,8 @@ def test_a_slowly_moving_block_does_not_flicker_at_the_shot_setting():
     # 4.3 / 5.4 degrees at 5 / 8 steps of the curvature flow (the stage's 8), 4.7 / 7.2 with 5 /
     # 8 passes of the blur it replaced; p99 distance 0.049 / 0.055 h
     xs, h, step = flicker.moving_frames(3000, frames=4)
-    rows, _ = flicker.flicker_run(flicker.ours("fine", h, "cpu"), xs, h, step)
-    s = flicker.summarise("mpmfx fine", rows, len(xs[0]), h)
+    rows, _ = flicker.flicker_run(flicker.ours("round", h, "cpu"), xs, h, step)
+    s = flicker.summarise("mpmfx round", rows, len(xs[0]), h)
     assert s["normal_jitter_h"] < 0.01, s
     assert s["normal_jitter_p99_h"] < 0.062, s
     assert s["normal_turn_p99_deg"] < 5.8, s
