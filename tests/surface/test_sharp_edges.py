@@ -104,7 +104,7 @@ def test_a_moving_sharp_box_flickers_within_bounds():
     # 0.010-0.013 h off the previous frame's surface (p99 0.055-0.100 h) against 0.008-0.009 h
     # (p99 0.053-0.058 h); the faces' shading p99 4.9-5.2 degrees against 4.3-5.9; the rendered
     # pictures' pixels change 1.33-1.67 levels a frame against 1.30-1.41 (on the 20k block of
-    # the bench 0.84-0.89 against 0.86-0.91: a small body has more of its surface at an edge)
+    # the bench 0.85-0.89 against 0.86-0.91: a small body has more of its surface at an edge)
     from mpmfx.bench import surface_flicker as flicker
 
     xs, h, step = flicker.moving_frames(3000, frames=4)
