@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from mpmfx.bench.surface_flicker import vertex_normals
+from mpmfx.io.frames import SurfaceFrame
 from mpmfx.render import import_pyvista
 
 CAMERA = [(0.55, 0.45, 0.75), (0.05, 0.08, 0.05), (0.0, 1.0, 0.0)]
@@ -32,14 +33,14 @@ def frames_dir(shot_cache: Path) -> Path:
 
 def picture(pv, path: Path, size: tuple[int, int]) -> np.ndarray:
     """(H, W, 3) uint8 picture of every group's mesh in a surface frame (.npz) from CAMERA."""
-    z = np.load(path)
+    frame = SurfaceFrame.read(path)
     plotter = pv.Plotter(off_screen=True, window_size=size, lighting="none")
     plotter.set_background("black")
     plotter.add_light(pv.Light(position=(0.9, 1.2, 0.8), focal_point=(0, 0, 0), intensity=1.0))
     plotter.add_light(pv.Light(position=(-0.6, 0.5, -0.5), focal_point=(0, 0, 0), intensity=0.35))
-    for key in z.files:
-        if key.endswith(".vertices") and len(z[key]):
-            v, f = z[key].astype(np.float64), z[key[: -len("vertices")] + "faces"]
+    for group in frame.groups.values():
+        if len(group.vertices):
+            v, f = group.vertices.astype(np.float64), group.faces
             mesh = pv.PolyData(v, np.hstack([np.full((len(f), 1), 3), f]).ravel())
             mesh.point_data["Normals"] = vertex_normals(v, f)
             plotter.add_mesh(mesh, color="#e8eef4", smooth_shading=True, specular=0.8, specular_power=50,
@@ -63,7 +64,7 @@ def main() -> None:
     size = (640, 400)
     rows = []
     for frame in args.frames:
-        a, b = (picture(pv, frames_dir(c) / f"{frame:04d}.npz", size) for c in (args.sharp, args.round))
+        a, b = (picture(pv, frames_dir(c) / f"{frame:04d}.{SurfaceFrame.EXT}", size) for c in (args.sharp, args.round))
         diff = np.clip(np.abs(a.astype(int) - b.astype(int)).max(axis=2) * GAIN, 0, 255).astype(np.uint8)
         strip = Image.fromarray(np.concatenate([a, b, np.repeat(diff[..., None], 3, axis=2)], axis=1))
         draw = ImageDraw.Draw(strip)
