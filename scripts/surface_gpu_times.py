@@ -5,7 +5,8 @@ end, M particles/s, as the surface stage asks: no dense level set),
 and the mean / max vertex error and the area-weighted surface error (surface_cases.surface_error). `scripts/surface_gpu.py` (the full bench: pieces, jitter,
 peers, the sheet) takes longer than one device call at 10M.
 
-    python3 scripts/surface_gpu_times.py [count] [--sheet N]     # default 10M; $OUT/surface_times.csv
+    python3 scripts/surface_gpu_times.py [count] [--sheet N] [--calls 3] [--labels fast fine round]
+default 10M, every setting of OURS, the median of 3 calls after a warm-up; $OUT/surface_times.csv
 """
 import os
 import sys
@@ -20,6 +21,8 @@ from mpmfx.surface import SurfaceParams, surface_particles
 
 args = sys.argv[1:]
 sheet = int(args[args.index("--sheet") + 1]) if "--sheet" in args else 0
+calls = int(args[args.index("--calls") + 1]) if "--calls" in args else 3
+labels = args[args.index("--labels") + 1:] if "--labels" in args else list(OURS)  # last on the line
 count = int(args[0]) if args and not args[0].startswith("--") else 10_000_000
 out = os.environ.get("OUT", "renders/bench")
 wp.config.quiet = True
@@ -32,14 +35,14 @@ for shape in ("sphere", "torus", "box"):
         x, h = sample_shape(shape, count, sampling)
         sdf, _, _ = shape_sdf(shape)
         xd = wp.array(x, dtype=wp.vec3, device=dev)
-        for label, kw in OURS.items():
-            kw = dict(kw)
+        for label in labels:
+            kw = dict(OURS[label])
             # as the surface stage (sparse leaves, no dense level set: that costs 0.5-1.9 s at 10M)
             params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=kw.pop("voxel_h") * h,
                                    dense_output=False, **kw)
             surface_particles(xd, None, params)  # warm-up (compiles once)
             device_s, total_s = [], []
-            for _ in range(3):
+            for _ in range(calls):
                 wp.synchronize_device(dev)
                 t0 = time.perf_counter()
                 res = surface_particles(xd, None, params)
@@ -51,7 +54,8 @@ for shape in ("sphere", "torus", "box"):
                          "device_ms": 1e3 * d, "with_host_ms": 1e3 * t, "Mps_device": len(x) / d / 1e6,
                          "Mps_end_to_end": len(x) / t / 1e6, "err_mean_h": float(err.mean()),
                          "err_surface_h": surface_error(res.mesh.vertices, res.mesh.faces, sdf) / h,
-                         "err_max_h": float(err.max()), "vertices": len(res.mesh.vertices), "device": dev.name})
+                         "err_max_h": float(err.max()), "vertices": len(res.mesh.vertices), "calls": calls,
+                         "Mps_end_to_end_min": len(x) / max(total_s) / 1e6, "device": dev.name})
             print_table(rows[-1:], list(rows[-1]))
 print_table(rows, list(rows[0]))
 print("table:", write_rows(rows, out, "surface_times"), flush=True)
