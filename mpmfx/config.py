@@ -164,11 +164,13 @@ class Surface(_Section):
                                                     "particle spacing; 0 = off; slower, random sheets get thicker).")
     anisotropic: Bool = Field(False, description="Yu & Turk anisotropic kernels: thin sheets of water stay sheets "
                                                  "(no holes); slower, and sharp box edges round off more.")
-    sharp_edges: Bool = Field(True, description="Give convex edges and corners back the sharpness the "
-                                                "particles lost there (the faces' planes meet again; outward "
-                                                "only; round bodies come out as they were); false leaves them "
-                                                "rounded as the particles' kernels make them. Works while "
-                                                "smoothing: smooth_iters = 0 turns it off.")
+    sharp_edges: Literal["auto"] | Bool = Field(
+        "auto", description="Give convex edges and corners back the sharpness the particles lost there (the "
+                            "faces' planes meet again; outward only; round bodies come out as they were); false "
+                            "leaves them rounded as the particles' kernels make them. auto: on for every surface "
+                            "group without a fluid (water, tracers) in it: a liquid holds no edge, and the narrow "
+                            "faces of water against a tank's walls sharpen in pieces. Works while smoothing: "
+                            "smooth_iters = 0 turns it off.")
     density: Bool = Field(False, description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "
                                              "the material) for granular / volume looks.")
 
@@ -258,6 +260,25 @@ class Shot(_Section):
     def particle_spacing(self) -> float:
         """Mean particle spacing h (m): dx / ppc^(1/3)."""
         return self.domain.size / self.domain.grid_n / self.voxelise.ppc ** (1 / 3)
+
+    def fluid_objects(self) -> list[bool]:
+        """Per object: is its material a fluid (a water or tracer preset)? A fluid holds no shape:
+        no thickness rule (voxelise), no sharp edges by default (sharp_edges_for)."""
+        from mpmfx.mpm.materials import PRESETS, Mode
+
+        by_name = {k.lower(): m for k, m in PRESETS.items()}
+        return [o.material.lower() in by_name and by_name[o.material.lower()].mode in (Mode.WATER, Mode.TRACER)
+                for o in self.objects]
+
+    def sharp_edges_for(self, group: str) -> bool:
+        """surface.sharp_edges for surface group `group` (one of surface_groups()): "auto" is on
+        where none of the group's objects is a fluid; off without smoothing."""
+        s = self.surface
+        if s.smooth_iters == 0:
+            return False
+        if s.sharp_edges != "auto":
+            return s.sharp_edges
+        return not any(f for f, g in zip(self.fluid_objects(), self.surface_groups()) if g == group)
 
     def surface_groups(self) -> list[str]:
         """Per object, the surface group it belongs to: its material preset name, its own
@@ -392,7 +413,7 @@ def _check_semantics(shot: Shot, source: str) -> None:
         if shot.solver.dt_max * shot.shot.fps * 0.999 > 1.0 / shot.solver.time_scale:
             problems.append(f"{source}: solver.dt_max ({shot.solver.dt_max} s) is longer than one frame "
                             f"(1/{shot.shot.fps} s): lower solver.dt_max")
-    if shot.surface.sharp_edges and shot.surface.smooth_iters == 0 and "sharp_edges" in shot.surface.model_fields_set:
+    if shot.surface.sharp_edges is True and shot.surface.smooth_iters == 0:
         problems.append(f"{source}: surface.sharp_edges: needs surface.smooth_iters > 0 (the edges are found while "
                         f"smoothing): raise surface.smooth_iters or set surface.sharp_edges = false")
     names = [o.name for o in shot.objects] + [c.name for c in shot.colliders]

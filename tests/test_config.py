@@ -133,3 +133,24 @@ def test_a_bad_material_override_names_the_shot_file_and_the_object(tiny_shot):
     shot = load_shot_config(tiny_shot, ["objects.0.material=Granular", "objects.0.overrides.friction_angle=50"])
     with pytest.raises(ShotError, match=rf"{tiny_shot.name}: objects\[0\] .*friction_angle = 50.*must be < 45"):
         materials(shot)
+
+
+def test_sharp_edges_auto_leaves_fluids_round(tmp_path):
+    """surface.sharp_edges = "auto" (the default): sharp edges for each surface group with no
+    fluid in it. Water holds no edge, and its narrow faces against a tank's walls sharpened in
+    pieces (ledges; README, "Sharp edges and corners"); true and false apply to every group."""
+    from mpmfx.stages.surface import surface_params
+
+    pool = '\n[[objects]]\nname = "pool"\nmesh = "cube.obj"\nmaterial = "Water"\ntranslate = [0.5, 0.15, 0.5]\n'
+    path = write_tiny_shot(tmp_path, extra=pool)
+    shot = load_shot_config(path)
+    assert shot.surface.sharp_edges == "auto" and shot.surface_groups() == ["Elastic", "Water"]
+    assert (shot.sharp_edges_for("Elastic"), shot.sharp_edges_for("Water")) == (True, False)
+    assert (surface_params(shot, "Elastic").sharp_edges, surface_params(shot, "Water").sharp_edges) == (True, False)
+    assert not load_shot_config(path, ["surface.group=all"]).sharp_edges_for("all")  # one surface, water in it
+    assert load_shot_config(path, ["surface.group=object"]).sharp_edges_for("cube")
+    assert load_shot_config(path, ["surface.sharp_edges=true"]).sharp_edges_for("Water")
+    assert not load_shot_config(path, ["surface.sharp_edges=false"]).sharp_edges_for("Elastic")
+    assert not load_shot_config(path, ["surface.smooth_iters=0"]).sharp_edges_for("Elastic")  # found while smoothing
+    with pytest.raises(ShotError, match="surface.sharp_edges"):
+        load_shot_config(path, ["surface.sharp_edges=sometimes"])

@@ -59,8 +59,9 @@ def load_splash(path: str | Path = SPLASH_ASSET) -> tuple[np.ndarray, float]:
 
 
 def splash_params(h: float, *, anisotropic: bool, shot: str | Path = SPLASH_SHOT):
-    """The surface stage's SurfaceParams for `shot` (radius_scale 1.2 for water_dam), with
-    `anisotropic` set as asked; h must be the shot's spacing (checked: the asset's shot)."""
+    """The surface stage's SurfaceParams for `shot`'s first surface group (water_dam's water:
+    radius_scale 1.2, no sharp edges), with `anisotropic` set as asked; h must be the shot's
+    spacing (checked: the asset's shot)."""
     from mpmfx.config import load_shot_config
     from mpmfx.stages.surface import surface_params
 
@@ -68,7 +69,7 @@ def splash_params(h: float, *, anisotropic: bool, shot: str | Path = SPLASH_SHOT
     if not np.isclose(cfg.particle_spacing, h):
         raise ValueError(f"{shot}: spacing {cfg.particle_spacing:g} m, the splash asset's {h:g} m; "
                          "make the asset again (write_splash_asset) from this shot")
-    return dataclasses.replace(surface_params(cfg), anisotropic=anisotropic)
+    return dataclasses.replace(surface_params(cfg, cfg.surface_groups()[0]), anisotropic=anisotropic)
 
 
 def piece_volumes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

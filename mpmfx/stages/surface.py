@@ -24,8 +24,10 @@ GPU_WRITE_THREADS = 4  # frames deflated and written at once while the GPU surfa
 
 
 def params(shot: Shot) -> dict:
-    # The resolved surfacer parameters, not the config section: a changed default re-runs surface.
-    resolved = {k: getattr(v, "value", v) for k, v in vars(surface_params(shot)).items()}
+    # The resolved surfacer parameters of each group, not the config section: a changed default
+    # re-runs surface.
+    resolved = {g: {k: getattr(v, "value", v) for k, v in vars(surface_params(shot, g)).items()}
+                for g in sorted(set(shot.surface_groups()))}
     return {"surface": resolved, "groups": shot.surface_groups()}
 
 
@@ -33,7 +35,8 @@ def inputs(shot: Shot) -> dict[str, str]:
     return {}
 
 
-def surface_params(shot: Shot):
+def surface_params(shot: Shot, group: str):
+    """The surfacer's parameters for surface group `group` (one of shot.surface_groups())."""
     from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams
     s = shot.surface
     h = shot.particle_spacing
@@ -43,7 +46,7 @@ def surface_params(shot: Shot):
                          voxel_size=s.voxel_size or 0.5 * h, dense_output=False, smooth_iters=s.smooth_iters, dilate=s.dilate,
                          min_feature_particles=s.min_feature_particles, density=s.density,
                          anisotropic=s.anisotropic, close_voids=s.close_voids,
-                         sharp_edges=s.sharp_edges and s.smooth_iters > 0)  # found while smoothing (config's check)
+                         sharp_edges=shot.sharp_edges_for(group))
 
 
 def todo(ctx: Context) -> list[int]:
@@ -105,7 +108,6 @@ def _surfaces(job: FrameJob, p: ParticleFrame, f: int) -> tuple[SurfaceFrame, di
 
     quiet_warp(job.device)
     shot = job.shot
-    sp = surface_params(shot)
     names = shot.surface_groups()
     groups = sorted(set(names))
     stats = {"vertices": 0, "faces": 0}
@@ -114,7 +116,7 @@ def _surfaces(job: FrameJob, p: ParticleFrame, f: int) -> tuple[SurfaceFrame, di
     for gi, g in enumerate(groups):
         sel = group_of == gi
         try:
-            res = surface_particles(p.x[sel], p.v[sel], sp, device=job.device)
+            res = surface_particles(p.x[sel], p.v[sel], surface_params(shot, g), device=job.device)
         except GridTooLarge as exc:  # the surfacer names its own parameter; the shot has a key for voxel_size
             raise StageError(f"{shot.source or shot.shot.name}: surface.voxel_size, frame {f}, group {g!r}: "
                              f"{exc.detail} (--set surface.voxel_size=...)") from None

@@ -22,18 +22,10 @@ CODE = ("mpmfx.stages.voxelise", "mpmfx.geometry.mesh", "mpmfx.geometry.inside",
 def params(shot: Shot) -> dict:
     objects = [o.model_dump(mode="json", include={"name", "prim_path", "translate", "rotate", "scale",
                                                   "velocity", "angular_velocity"}) for o in shot.objects]
-    for o, fluid in zip(objects, _fluid(shot)):
+    for o, fluid in zip(objects, shot.fluid_objects()):
         o["fluid"] = fluid
     return {"domain": shot.domain.model_dump(mode="json"), "objects": objects,
             "voxelise": shot.voxelise.model_dump(mode="json")}
-
-
-def _fluid(shot: Shot) -> list[bool]:
-    """Per object: is its material a fluid (water, tracer)? Fluids hold no shape: no thickness rule."""
-    from mpmfx.mpm.materials import PRESETS, Mode
-    by_name = {k.lower(): m for k, m in PRESETS.items()}
-    return [o.material.lower() in by_name and by_name[o.material.lower()].mode in (Mode.WATER, Mode.TRACER)
-            for o in shot.objects]
 
 
 def inputs(shot: Shot) -> dict[str, str]:
@@ -47,7 +39,7 @@ def run(ctx: Context) -> dict:
 
     shot, dom = ctx.shot, ctx.shot.domain
     xs, vs, vols, bodies, reports = [], [], [], [], {}
-    fluid = _fluid(shot)
+    fluid = shot.fluid_objects()
     for body, obj in enumerate(ctx.progress(shot.objects, total=len(shot.objects), desc="voxelise", unit="object")):
         path = shot.resolve(obj.mesh)
         try:

@@ -14,7 +14,7 @@ def test_fine_is_the_surface_stage_setting_at_the_shipped_radius():
 
     shot = load_shot_config(Path(__file__).parents[2] / "pipeline" / "shots" / "snow_smash.toml")  # no [surface] section: the defaults
     h = shot.particle_spacing
-    stage = surface_params(shot)
+    stage = surface_params(shot, shot.surface_groups()[0])
     fine = OURS["fine"]
     assert stage.particle_radius == PARTICLE_RADIUS_PER_SPACING * h
     assert np.isclose(stage.resolved_voxel_size, fine["voxel_h"] * h)

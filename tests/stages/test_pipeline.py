@@ -165,7 +165,7 @@ def test_sharp_edges_is_a_surface_knob(first_run, tmp_path, capsys):
     assert "surface.sharp_edges" in capsys.readouterr().err
     # without smoothing there is no edge gate to sharpen at: asked for, a config error, not a
     # silent no-op; left at its default, it goes off with the smoothing
-    assert not surface_params(load_shot_config(shot, ["surface.smooth_iters=0"])).sharp_edges
+    assert not surface_params(load_shot_config(shot, ["surface.smooth_iters=0"]), "Elastic").sharp_edges
     assert main(["run", str(shot), "--set", "surface.sharp_edges=true", "--set", "surface.smooth_iters=0",
                  "--cache", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err
