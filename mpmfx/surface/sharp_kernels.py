@@ -20,8 +20,10 @@ flat nowhere over those spans (a torus whose tube is 5 spacings across, blobs of
 not a vertex moved; random spheres and tori of 20k-100k: at most 0.07 % of vertices, by at most
 0.01 h), where
 shorter spans (4 spacings, 1 to the sides) found "faces" around such a tube and moved 73 % of
-its vertices by up to 1.2 h. Lengths are voxels; a cell is 2^3 voxels (sparse_kernels.gate_cell),
-voxel (i, j, k)'s value sits at the point (i, j, k).
+its vertices by up to 1.2 h. Each cell decides (decide_cells), then sharpens as far as the
+decisions around it agree (sharpen_cells, sharpen_weight): a narrow face's votes come and go
+along its edge, and all-or-nothing cells left ledges there. Lengths are voxels; a cell is 2^3
+voxels (sparse_kernels.gate_cell), voxel (i, j, k)'s value sits at the point (i, j, k).
 
 On a moving body marching cubes cuts a sharp crest differently as it crosses voxel planes (the
 crest is rounded within 2 voxels: unrounded, the gliding block's edges' shading turned 52 degrees
@@ -46,6 +48,12 @@ NEAR_PLANES = wp.constant(4)  # planes a cell's neighbourhood may hold
 # where the few planes within reach failed (100k random box "fine", 12 seeds: corners 0.24 h;
 # the moving block's vertices p99 0.19 h off the previous frame); at 6, 0.16 h and 0.08 h
 REACH = wp.constant(6)
+# a cell's decision (decide_cells): its planes meet at an edge or corner to sharpen; they do not
+# (too few, not apart, not convex, back to back); or the edge ends here (a corner without its
+# third face, an edge past its last cell)
+SHARPEN = wp.constant(1)
+NOT_EDGE = wp.constant(0)
+EDGE_END = wp.constant(-1)
 
 
 @wp.func
@@ -342,27 +350,25 @@ def edge_both_sides(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.i
 
 
 @wp.kernel
-def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
-                  gate: wp.array(dtype=float), sample: wp.array(dtype=float), flags: wp.array(dtype=wp.int32),
-                  slots: wp.array(dtype=wp.int32), cells: wp.array(dtype=wp.int32), pn: wp.array(dtype=wp.vec3),
-                  pp: wp.array(dtype=wp.vec3), pw: wp.array(dtype=float), cos_same: float, votes: float,
-                  support: float, cos_apart: float, cos_open: float, limit: float, rounding: float,
-                  qn: wp.array(dtype=wp.vec3), qp: wp.array(dtype=wp.vec3), qw: wp.array(dtype=float), base: int):
+def decide_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32),
+                 sample: wp.array(dtype=float), flags: wp.array(dtype=wp.int32),
+                 slots: wp.array(dtype=wp.int32), cells: wp.array(dtype=wp.int32), pn: wp.array(dtype=wp.vec3),
+                 pp: wp.array(dtype=wp.vec3), pw: wp.array(dtype=float), cos_same: float, votes: float,
+                 support: float, cos_apart: float, cos_open: float,
+                 qn: wp.array(dtype=wp.vec3), qp: wp.array(dtype=wp.vec3), qw: wp.array(dtype=float),
+                 state: wp.array(dtype=wp.int32), base: int):
     """Flagged cell cells[s]: the planes found by the cells within REACH cells merged into at
-    most NEAR_PLANES (qn, qp, qw: this thread's scratch), those found
-    `votes` times or more kept. Where at least two are kept (three where edge_gate saw a
-    corner), apart by more than cos_apart somewhere and nowhere by more than cos_open (faces
-    nearly back to back are a sheet's rim: their intersection would run the sheet on past it),
-    every kept plane's mean point lies under every other kept plane (within `support`: a convex
-    edge or corner), and, for two, cells that saw them lie on both sides along their edge
-    (edge_both_sides), each of the cell's voxels takes their intersection's signed distance
-    (the largest of theirs, rounded within `rounding` of the crest: marching cubes cuts a crest
-    sharper than a voxel or two differently wherever it falls between voxel planes, and a moving
-    body's edges then flicker) where that is lower (outward), by at most `limit`, blended by
-    the gates interpolated to each voxel (gate_at). Writes only the cell's own voxels and reads
-    no other value of phi: it runs in place."""
+    most NEAR_PLANES (qn, qp, qw: the cell's, kept for sharpen_cells), those found `votes` times
+    or more kept, and state[s] the cell's decision. SHARPEN where at least two are kept (three
+    where edge_gate saw a corner), apart by more than cos_apart somewhere and nowhere by more
+    than cos_open (faces nearly back to back are a sheet's rim: their intersection would run
+    the sheet on past it), every kept plane's mean point lies under every other kept plane
+    (within `support`: a convex edge or corner), and, for two, cells that saw them lie on both
+    sides along their edge (edge_both_sides); EDGE_END where only those last two tests fail (a
+    corner without its third face, an edge past its end); else NOT_EDGE."""
     s = wp.tid() + base
     u = cells[s]
+    state[s] = NOT_EDGE
     for m in range(NEAR_PLANES):
         qn[s * NEAR_PLANES + m] = wp.vec3(0.0)
         qp[s * NEAR_PLANES + m] = wp.vec3(0.0)
@@ -402,10 +408,57 @@ def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.in
                 return  # faces nearly back to back: a sheet's rim or a blade, not an edge to extend
             if turn < cos_apart:
                 apart = True
-    if kept < 2 or not apart or (kept < 3 and sample[u] < 0.0):
-        return  # a corner (edge_gate's sample < 0) needs its three faces: two would run its edge on past it
+    if kept < 2 or not apart:
+        return
+    if kept < 3 and sample[u] < 0.0:
+        state[s] = EDGE_END  # a corner (edge_gate's sample < 0) needs its three faces: two would run its edge on past it
+        return
     if kept == 2 and not edge_both_sides(bmap, flags, slots, e, pn, pw, qn, qw, s, votes, cos_same):
-        return  # the end of an edge, where no cell saw the third face: two planes would run it on
+        state[s] = EDGE_END  # the end of an edge, where no cell saw the third face: two planes would run it on
+        return
+    state[s] = SHARPEN
+
+
+@wp.func
+def sharpen_weight(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32), slots: wp.array(dtype=wp.int32),
+                   state: wp.array(dtype=wp.int32), e: wp.vec3i, spread: int):
+    """How fully the cell at even voxel e sharpens: 2 x the share of SHARPEN among the decided
+    cells within `spread` cells on each axis (EDGE_END ones left out), less 1, in 0 .. 1 (1 at
+    spread 0)."""
+    n = int(0)
+    yes = int(0)
+    for di in range(-spread, spread + 1):
+        for dj in range(-spread, spread + 1):
+            for dk in range(-spread, spread + 1):
+                v = cell_at(bmap, e[0] + 2 * di, e[1] + 2 * dj, e[2] + 2 * dk)
+                if v >= 0 and flags[v] != 0:
+                    st = state[slots[v]]
+                    if st != EDGE_END:
+                        n += 1
+                        yes += wp.where(st == SHARPEN, 1, 0)
+    return wp.clamp(2.0 * float(yes) / float(n) - 1.0, 0.0, 1.0)
+
+
+@wp.kernel
+def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
+                  gate: wp.array(dtype=float), flags: wp.array(dtype=wp.int32), slots: wp.array(dtype=wp.int32),
+                  cells: wp.array(dtype=wp.int32), state: wp.array(dtype=wp.int32), votes: float, limit: float,
+                  rounding: float, spread: int, qn: wp.array(dtype=wp.vec3), qp: wp.array(dtype=wp.vec3), qw: wp.array(dtype=float),
+                  base: int):
+    """Each cell that decide_cells passed (SHARPEN; its kept planes in qn, qp, qw): each of its
+    voxels takes the planes' intersection's signed distance (the largest of theirs, rounded
+    within `rounding` of the crest: marching cubes cuts a crest sharper than a voxel or two
+    differently wherever it falls between voxel planes, and a moving body's edges then flicker)
+    where that is lower (outward), by at most `limit`, blended by the gates interpolated to
+    each voxel (gate_at) and by sharpen_weight over `spread` cells. Writes only the cell's own voxels and reads no
+    other value of phi: it runs in place."""
+    s = wp.tid() + base
+    if state[s] != SHARPEN:
+        return
+    e = cell_corner(bcoord, cells[s])
+    weight = sharpen_weight(bmap, flags, slots, state, e, spread)
+    if weight == 0.0:
+        return
     t0 = slot(bmap, e[0], e[1], e[2])
     for q in range(8):
         x = wp.vec3(e + wp.vec3i(q // 4, (q // 2) % 2, q % 2))
@@ -424,4 +477,4 @@ def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.in
         g = gate_at(bmap, gate, e + wp.vec3i(q // 4, (q // 2) % 2, q % 2))
         f = phi[t]
         target = wp.max(wp.min(f, fs), f - limit)
-        phi[t] = f + g * (target - f)
+        phi[t] = f + weight * g * (target - f)

@@ -64,6 +64,10 @@ SHARP = {  # sparse._sharpen (sharp_kernels); lengths in particle spacings h unl
     "cos_open": math.cos(math.radians(120.0)),  # and none further (faces back to back: a sheet's rim)
     "limit": 1.5,  # the most the field moves outward
     "rounding": 2.0,  # voxels: the crest's radius (0 flickered twice as much on a moving box, 3 gave back a third of the gain)
+    # cells on each side whose decisions weigh a cell's sharpening (sharp_kernels.sharpen_weight): at
+    # 0 each cell sharpened all or nothing, and where a narrow face's votes hovered about `votes`
+    # along an edge it stopped and started in ledges up to 1.3 h high (water_dam's splash frame)
+    "spread": 2,
 }
 EDGE_BAND = 3.0  # voxels from the raw zero level where a 2^3 cell's corner looks for an edge (its voxels within ~2)
 FLOW_DT = 0.25  # voxel^2, one smoothing step (sparse_kernels.curvature_flow): a [1 2 1]/4 pass's spread along the surface
@@ -814,9 +818,12 @@ def _sharpen(wp, bcoord, bmap, phi, tiles, gate, sample, h: float) -> None:
                                       c["width"] * h, c["cos_flat"], c["plane_tol"] * h, c["cos_same"], cells, pn, pp, pw])
     qn, qp = wp.empty(count * K.NEAR_PLANES, dtype=wp.vec3), wp.empty(count * K.NEAR_PLANES, dtype=wp.vec3)
     qw = wp.empty(count * K.NEAR_PLANES, dtype=float)
-    launch_split(wp, K.sharpen_cells, count, [bcoord, bmap, phi, gate, sample, flags, slots, cells, pn, pp, pw,
-                                              c["cos_same"], c["votes"], c["support"], c["cos_apart"], c["cos_open"],
-                                              c["limit"] * h, c["rounding"], qn, qp, qw],
+    state = wp.empty(count, dtype=wp.int32)
+    launch_split(wp, K.decide_cells, count, [bcoord, bmap, sample, flags, slots, cells, pn, pp, pw, c["cos_same"],
+                                             c["votes"], c["support"], c["cos_apart"], c["cos_open"], qn, qp, qw, state],
+                 device=phi.device, min_split=256)  # a few hundred cells already: each thread does much
+    launch_split(wp, K.sharpen_cells, count, [bcoord, bmap, phi, gate, flags, slots, cells, state, c["votes"],
+                                              c["limit"] * h, c["rounding"], c["spread"], qn, qp, qw],
                  device=phi.device, min_split=256)  # a few hundred cells already: each thread does much
 
 

@@ -74,6 +74,37 @@ def test_a_thin_sheet_rim_is_not_run_on():
         assert on["thickness_err"] == pytest.approx(off["thickness_err"], abs=1e-6)
 
 
+def test_the_sharpening_fades_along_an_edge_instead_of_stepping(monkeypatch):
+    # water_dam's splash frame with sharp edges forced on: along the tank floor's edge at
+    # x = -0.46 m the water's face against the wall is a strip a few h high, whose votes come and
+    # go; a cell deciding alone (spread 0) stepped the sharpening by 0.61 h within half an h
+    # along that edge (ledges), weighed by the decisions around it 0.18 h (measured)
+    import dataclasses
+
+    from scipy.spatial import cKDTree
+
+    from mpmfx.bench.surface_splash import load_splash, splash_params
+    from mpmfx.surface import sparse
+
+    x, h = load_splash()
+    params = splash_params(h, anisotropic=False)
+    shipped = sparse.SHARP["spread"]
+    round_mesh = surface_particles(x, None, params, device="cpu").mesh
+
+    def largest_step(spread: int) -> float:
+        monkeypatch.setitem(sparse.SHARP, "spread", spread)
+        v = surface_particles(x, None, dataclasses.replace(params, sharp_edges=True), device="cpu").mesh.vertices
+        moved = cKDTree(round_mesh.vertices).query(v)[0] / h
+        edge = (np.abs(v[:, 1] - v[:, 1].min()) < 2 * h) & (np.abs(v[:, 0] - v[:, 0].min()) < 2 * h)
+        bins = np.floor(v[edge, 2] / (0.5 * h)).astype(int)  # half-h steps along the edge
+        at = np.unique(bins)
+        most = np.array([moved[edge][bins == b].max() for b in at])
+        return float(np.abs(np.diff(most))[np.diff(at) == 1].max())
+
+    assert largest_step(0) > 0.4  # the measure sees the ledges
+    assert largest_step(shipped) < 0.3
+
+
 def test_sharp_edges_must_be_a_bool_and_needs_smoothing():
     with pytest.raises(ValueError, match="SurfaceParams.sharp_edges"):
         SurfaceParams(0.01, sharp_edges="yes")
