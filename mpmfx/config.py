@@ -167,10 +167,9 @@ class Surface(_Section):
     sharp_edges: Literal["auto"] | Bool = Field(
         "auto", description="Give convex edges and corners back the sharpness the particles lost there (the "
                             "faces' planes meet again; outward only; round bodies come out as they were); false "
-                            "leaves them rounded as the particles' kernels make them. auto: on for every surface "
-                            "group without a fluid (water, tracers) in it: a liquid holds no edge, and the narrow "
-                            "faces of water against a tank's walls sharpen in pieces. Works while smoothing: "
-                            "smooth_iters = 0 turns it off.")
+                            "leaves them rounded as the particles' kernels make them; auto: on for every surface "
+                            "group without a fluid (water, tracers) in it, as a liquid holds no edge of its own. "
+                            "Works while smoothing: smooth_iters = 0 turns it off.")
     density: Bool = Field(False, description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "
                                              "the material) for granular / volume looks.")
 
@@ -372,6 +371,16 @@ def _format_error(err: dict, source: str) -> str:
     return f"{source}: '{key}' = {err.get('input')!r}: {err['msg']}{hint}{doc}"
 
 
+def _either(errs: list[dict]) -> str:
+    """One message for a key's errors, one per union member: "Input should be 'auto' or a valid
+    boolean" (the first alone when they do not all say what the input should be)."""
+    msgs = list(dict.fromkeys(e["msg"] for e in errs))
+    head = "Input should be "
+    if len(msgs) > 1 and all(m.startswith(head) for m in msgs):
+        return head + " or ".join(m[len(head):] for m in msgs)
+    return msgs[0]
+
+
 def load_shot_config(path: str | Path, overrides: list[str] = ()) -> Shot:
     """Read, override and validate a shot file. Raises ShotError naming file, key and fix."""
     path = Path(path)
@@ -389,11 +398,11 @@ def load_shot_config(path: str | Path, overrides: list[str] = ()) -> Shot:
         shot = Shot.model_validate({**data, "base_dir": path.resolve().parent, "source": path,
                                     "overrides": tuple(overrides)})
     except ValidationError as exc:
-        by_key: dict[str, str] = {}
-        for e in exc.errors():  # a union (float | bool) reports each member: its first error per key
-            line = _format_error(e, str(path))
-            by_key.setdefault(line.split("' = ")[0], line)
-        raise ShotError("\n".join(by_key.values())) from None
+        by_key: dict[str, list[dict]] = {}
+        for e in exc.errors():  # a union ("auto" | bool) reports each member: one line per key says all
+            by_key.setdefault(_format_error(e, str(path)).split("' = ")[0], []).append(e)
+        raise ShotError("\n".join(_format_error({**errs[0], "msg": _either(errs)}, str(path))
+                                  for errs in by_key.values())) from None
     _check_semantics(shot, str(path))
     return shot
 

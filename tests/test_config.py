@@ -152,5 +152,5 @@ def test_sharp_edges_auto_leaves_fluids_round(tmp_path):
     assert load_shot_config(path, ["surface.sharp_edges=true"]).sharp_edges_for("Water")
     assert not load_shot_config(path, ["surface.sharp_edges=false"]).sharp_edges_for("Elastic")
     assert not load_shot_config(path, ["surface.smooth_iters=0"]).sharp_edges_for("Elastic")  # found while smoothing
-    with pytest.raises(ShotError, match="surface.sharp_edges"):
+    with pytest.raises(ShotError, match="surface.sharp_edges' = 'sometimes': Input should be 'auto' or a valid boolean"):
         load_shot_config(path, ["surface.sharp_edges=sometimes"])
