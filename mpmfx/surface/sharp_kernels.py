@@ -443,15 +443,15 @@ def sharpen_weight(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.in
 def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
                   gate: wp.array(dtype=float), flags: wp.array(dtype=wp.int32), slots: wp.array(dtype=wp.int32),
                   cells: wp.array(dtype=wp.int32), state: wp.array(dtype=wp.int32), votes: float, limit: float,
-                  rounding: float, spread: int, qn: wp.array(dtype=wp.vec3), qp: wp.array(dtype=wp.vec3), qw: wp.array(dtype=float),
-                  base: int):
+                  rounding: float, spread: int, qn: wp.array(dtype=wp.vec3), qp: wp.array(dtype=wp.vec3),
+                  qw: wp.array(dtype=float), base: int):
     """Each cell that decide_cells passed (SHARPEN; its kept planes in qn, qp, qw): each of its
     voxels takes the planes' intersection's signed distance (the largest of theirs, rounded
     within `rounding` of the crest: marching cubes cuts a crest sharper than a voxel or two
     differently wherever it falls between voxel planes, and a moving body's edges then flicker)
     where that is lower (outward), by at most `limit`, blended by the gates interpolated to
-    each voxel (gate_at) and by sharpen_weight over `spread` cells. Writes only the cell's own voxels and reads no
-    other value of phi: it runs in place."""
+    each voxel (gate_at) and by sharpen_weight over `spread` cells. Writes only the cell's own
+    voxels and reads no other value of phi: it runs in place."""
     s = wp.tid() + base
     if state[s] != SHARPEN:
         return
