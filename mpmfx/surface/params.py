@@ -79,15 +79,17 @@ class SurfaceParams:
     sharp_edges: give convex edges and corners back the sharpness a random sample loses
         there (sparse._sharpen: where the edge gate is open, the field takes the intersection of
         the faces' planes, fitted where the surface is flat a few spacings away; outward only,
-        at most 1.5 spacings; not where the body is thinner than 2.5 spacings). Shots turn it on
-        (config.Surface.sharp_edges); off here, as the smallest call. Round bodies and sheets
+        at most 1.5 spacings; not where the body is thinner than 2.5 spacings; each cell as far
+        as the decisions of the cells around it agree). Shots turn it on for every surface group
+        without a fluid in it (config.Surface.sharp_edges = "auto"); off here, as the smallest
+        call. Round bodies and sheets
         come out as they were (a tube 5 spacings across, blobs of 300 particles: not a vertex
         moves; random spheres and tori: at most 0.07 % of the vertices, by at most 0.01 h). A
         moving body's vertices jitter a little more (the gliding 20k block: p99 0.040 -> 0.047 h
         off the previous frame), its rendered pictures no more (0.86-0.91 -> 0.85-0.89 levels a
-        frame; a 3000-particle block 1.32-1.45 -> 1.51-1.57).
+        frame; a 3000-particle block 1.32-1.45 -> 1.47-1.58).
         Random box, 100k, 12 samples: vertex mean 0.115-0.122 -> 0.101-0.107 h, max 0.78-1.23 ->
-        0.53-0.83 h (docs/surfacing-log.md, twenty-third and twenty-fourth steps).
+        0.53-0.83 h (docs/surfacing-log.md, twenty-third to twenty-fifth steps).
     dense_output: also return the level set (and velocity, density) as dense
         arrays over the band's bounding box; False returns only `SurfaceResult.sparse` (the
         dense arrays are then empty) -- what to use at millions of particles.
