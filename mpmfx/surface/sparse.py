@@ -4,7 +4,8 @@
    a block is OUTSIDE (no particle within the kernel reach), INSIDE (it and its neighbours
    are at least half full: the surface is farther than the kernel and the smoothing reach, see
    _dense_rule), or ACTIVE.
-   OUTSIDE blocks the grid boundary does not reach (large voids) become INSIDE.
+   OUTSIDE blocks the grid boundary does not reach (voids) become ACTIVE: the voxels' topology
+   tells a bubble (filled) from the open space between sparse particles.
 2. field: Zhu-Bridson phi at each voxel of ACTIVE blocks, GATHERED from the particles of the
    blocks within the kernel support (no atomics);
 3. topology: outside voxels not connected to an OUTSIDE block are bubbles (-> inside); inside
@@ -32,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from mpmfx.surface.cpu_memory import keep_freed_memory
-from mpmfx.surface.launch import launch_split, launch_split_scratch
+from mpmfx.surface.launch import launch_sequence, launch_split, launch_split_scratch
 from mpmfx.surface.params import PARTICLE_RADIUS_PER_SPACING, GridTooLarge, SurfaceParams, SurfaceResult
 
 log = logging.getLogger(__name__)
@@ -44,6 +45,7 @@ MAX_BLOCKS = 1 << 26  # block-grid cells: 2^26 blocks = 2^35 voxels of bounding 
 MAX_ACTIVE_BLOCKS = ((1 << 31) - 1) // (3 * 512)  # the marching cubes' arrays hold 3 edges a voxel, indexed by int32 (Warp's array limit)
 MAX_SWEEP_ROUNDS = 1024
 NORMAL_STEP = 2  # voxels between the taps of the weight blur (the weights are smooth at 1 voxel)
+BLUR_MIN_SPLIT = 1024  # blocks below which the weight blur's passes run on one CPU thread (a pass's barrier costs ~20-50 us)
 MAX_BLOCK_SWEEP_ROUNDS = 256  # block-grid flood fill (a full line per launch: settles in a few rounds)
 SEED_DEPTH = 0.5  # x particle radius: how deep a particle's voxel must be to seed a genuine inside component
 SMOOTH_LIMIT = 0.5  # x particle radius: how far smoothing may move the level set inward (see _smooth)
@@ -108,12 +110,26 @@ class SparseGrid:
         # voxels from the zero level whose distance is read: by the smoothing's steps, and by the
         # final renormalise's differences across the band (_eikonal_sweeps converges them)
         self.read_vox = float(max(smooth_reach(params), params.band_voxels + 1))
-        # a voxel whose final value is not +background lies within r + dilation + band + smoothing of
-        # a particle, +2 voxels for the gradient stencils: r + dilation + wide (wide + 2, as it was,
-        # counted the stencils twice: 9 % more active blocks at 100k torus lattice "fine"; the
-        # meshes move by at most 1e-4 h without them, where the blurred weights lose a little tail)
-        self.reach_vox = self.r_vox + max(params.dilate, 0.0) / self.voxel + self.wide
-        self.reach_blocks = int(math.ceil(max(self.reach_vox, self.gather_vox) / BS))
+        # the active blocks: those with a voxel within reach_vox of a particle. They must hold
+        # what is read around the surface: `read` voxels around the zero level, which the
+        # smoothing moves outward by a voxel or so (s = read + 1 from the raw field's inside,
+        # phi <= dilation, r' = r + dilation voxels). An inside point x of the Zhu-Bridson field
+        # has xbar, the weighted mean of the particles within the gather's reach R, within r'
+        # of x, so along any direction u some particle p has (p - x).u >= -r', and x + s u lies
+        # within sqrt(R^2 + s^2 + 2 s r') of p: the reach. It covers a surface bridged between
+        # sparse particles (spray: the raw inside up to R from them) as well as a body's. The
+        # projection on the wide normal bounds only the normal part of x - xbar; measured, no
+        # voxel within `read` of the raw inside lies outside the active blocks (spray, the
+        # splash frame with and without anisotropy, random boxes; test_sparse), 0-70 within
+        # read + 1. It was r' + band + smoothing + 2 (9 voxels at "fine"), a fifth to a quarter
+        # more blocks than that (100k lattice torus "fine": 3541 -> 2917 blocks, 10.2 -> 7.5
+        # voxels; where the weights' blur loses a little more of its tail, vertices move by p99
+        # 5e-4 h on the 30k bench cases, one of the random box's 0.31 h where a corner sharpens
+        # otherwise, p99 2.5e-3 h on the splash frame; errors the same to four digits at 100k)
+        dilation = max(params.dilate, 0.0) / self.voxel
+        s = self.read_vox + 1.0
+        self.reach_vox = math.sqrt(self.gather_vox**2 + s * s + 2.0 * s * (self.r_vox + dilation))
+        self.reach_blocks = int(math.ceil(self.reach_vox / BS))
         self.dense_reach, self.dense_min, self.inside_depth = _dense_rule(self, params)
         lo = np.floor(np.asarray(lo, np.float64) / self.voxel)
         hi = np.floor(np.asarray(hi, np.float64) / self.voxel)
@@ -535,13 +551,14 @@ def _classify(wp, S, gs, counts, cells, starts, grid: SparseGrid):
     labels = wp.empty(grid.nblocks, dtype=wp.int32)
     wp.launch(S.outside_block_labels, grid.nblocks, inputs=[state, labels])
     _sweep_block_labels(wp, S, labels)
+    wp.launch(S.open_voids, grid.nblocks, inputs=[labels, state])
     flags = wp.empty(math.prod(grid.nblocks), dtype=wp.int32)
     wp.launch(S.active_flags, grid.nblocks, inputs=[state, flags])
     offsets = _scan(wp, flags, inclusive=False)
     nact = int(offsets[-1:].numpy()[0] + flags[-1:].numpy()[0])
     bmap = wp.empty(grid.nblocks, dtype=wp.int32)
     bcoord = wp.empty(max(nact, 1), dtype=wp.vec3i)
-    wp.launch(S.compact_blocks, grid.nblocks, inputs=[state, labels, offsets, bmap, bcoord])
+    wp.launch(S.compact_blocks, grid.nblocks, inputs=[state, offsets, bmap, bcoord])
     return bmap, bcoord[:nact]
 
 
@@ -637,13 +654,18 @@ def _blur_weights(wp, S, bcoord, bmap, w, passes: int):
 
     # the first pass reads w itself (no copy of it: 8 MB at 100k "fine"), then two buffers take turns
     a, b = w, wp.empty_like(w)
+    steps = []
     for _ in range(passes):
         for axis in range(3):
             if _lines(w) and NORMAL_STEP == 2:  # the line kernel is written out for step 2
-                _blocks(wp, L.blur_weight_lines, [bcoord, bmap, L.rows(a), axis, L.rows(b)], light=True)
-            else:
-                _split(wp, S.blur_weight_axis, bcoord.shape[0] * BS * BS, [bcoord, bmap, a, axis, NORMAL_STEP, b])  # a line each
+                steps.append((L.blur_weight_lines, [bcoord, bmap, L.rows(a), axis, L.rows(b)]))
+            else:  # a line each
+                steps.append((S.blur_weight_axis, [bcoord, bmap, a, axis, NORMAL_STEP, b]))
             a, b = b, (wp.empty_like(w) if a is w else a)
+    dim = bcoord.shape[0] * (1 if _lines(w) else BS * BS)
+    # 21 light passes at the shots' setting (0.4-0.5 ms each at 100k "fine"): split, each would pay
+    # a hand-off to the pool; as a sequence, one (the lattice torus "fine" 2.3-3.4 ms less a call)
+    launch_sequence(wp, steps, dim, device=w.device, min_split=BLUR_MIN_SPLIT)
     return a
 
 

@@ -43,6 +43,7 @@ def test_cpu_line_kernels_and_threads_give_the_voxel_kernels_surface(monkeypatch
     monkeypatch.setenv("MPMFX_SURFACE_THREADS", "3")  # more chunks than cores: any split must agree
     monkeypatch.setattr("mpmfx.surface.launch.MIN_SPLIT", 64)
     monkeypatch.setattr("mpmfx.surface.launch.LIGHT_MIN_SPLIT", 8)
+    monkeypatch.setattr(sparse, "BLUR_MIN_SPLIT", 8)  # the weight blur's passes behind a barrier (launch_sequence)
     lines = surface_particles(x, v, params, device="cpu")
     monkeypatch.setattr(sparse, "LINE_KERNELS_ON_CPU", False)
     monkeypatch.setenv("MPMFX_SURFACE_THREADS", "1")
