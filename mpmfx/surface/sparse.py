@@ -1,7 +1,8 @@
 """Sparse (block) surfacer: the work follows the surface, not the bounding-box volume.
 
 1. blocks: particles are binned into blocks of 8^3 voxels (count, radix sort by block);
-   a block is OUTSIDE (no particle within the kernel reach), INSIDE (it and its neighbours
+   a block is OUTSIDE (no particle within SparseGrid.reach_vox: the kernel's reach and what
+   is read around the surface), INSIDE (it and its neighbours
    are at least half full: the surface is farther than the kernel and the smoothing reach, see
    _dense_rule), or ACTIVE.
    OUTSIDE blocks the grid boundary does not reach (voids) become ACTIVE: the voxels' topology
