@@ -360,16 +360,24 @@ def sweep_block_labels(labels: wp.array3d(dtype=wp.int32), axis: int, reverse: i
 
 
 @wp.kernel
-def open_voids(labels: wp.array3d(dtype=wp.int32), state: wp.array3d(dtype=wp.int32)):
-    """OUTSIDE blocks the grid boundary does not reach (labels != 0 after the block flood fill)
-    become ACTIVE: whether the void is a bubble (an air pocket the surface closes: topology
-    fills it) or the space between sparse particles (spray: open through gaps narrower than a
-    block) is the voxels' to tell. As INSIDE tiles, the second became a phantom body: 120
-    drops on a sphere 7.6 h apart surfaced as 121 pieces, a ball 10-12 h from every particle
-    among them (test_sparse)."""
+def count_voids(labels: wp.array3d(dtype=wp.int32), state: wp.array3d(dtype=wp.int32), counts: wp.array(dtype=wp.int32)):
+    """counts[0] += the ACTIVE blocks, counts[1] += the OUTSIDE blocks the grid boundary does
+    not reach (labels != 0 after the block flood fill: voids; sparse._settle_voids)."""
+    i, j, k = wp.tid()
+    s = state[i, j, k]
+    if s == TILE_ACTIVE:
+        wp.atomic_add(counts, 0, 1)
+    elif s == TILE_OUTSIDE and labels[i, j, k] != 0:
+        wp.atomic_add(counts, 1, 1)
+
+
+@wp.kernel
+def settle_voids(labels: wp.array3d(dtype=wp.int32), code: int, state: wp.array3d(dtype=wp.int32)):
+    """The OUTSIDE blocks the grid boundary does not reach (voids) take state `code` (ACTIVE or
+    INSIDE: sparse._settle_voids)."""
     i, j, k = wp.tid()
     if state[i, j, k] == TILE_OUTSIDE and labels[i, j, k] != 0:
-        state[i, j, k] = TILE_ACTIVE
+        state[i, j, k] = code
 
 
 @wp.kernel
