@@ -553,18 +553,23 @@ def _classify(wp, S, gs, counts, cells, starts, grid: SparseGrid):
     labels = wp.empty(grid.nblocks, dtype=wp.int32)
     wp.launch(S.outside_block_labels, grid.nblocks, inputs=[state, labels])
     _sweep_block_labels(wp, S, labels)
-    _settle_voids(wp, S, labels, state, grid)
     flags = wp.empty(math.prod(grid.nblocks), dtype=wp.int32)
-    wp.launch(S.active_flags, grid.nblocks, inputs=[state, flags])
-    offsets = _scan(wp, flags, inclusive=False)
-    nact = int(offsets[-1:].numpy()[0] + flags[-1:].numpy()[0])
+
+    def count_active():
+        wp.launch(S.active_flags, grid.nblocks, inputs=[state, flags])
+        offsets = _scan(wp, flags, inclusive=False)
+        return offsets, int(offsets[-1:].numpy()[0] + flags[-1:].numpy()[0])
+
+    offsets, nact = count_active()
+    if _settle_voids(wp, S, labels, state, nact, grid):
+        offsets, nact = count_active()
     bmap = wp.empty(grid.nblocks, dtype=wp.int32)
     bcoord = wp.empty(max(nact, 1), dtype=wp.vec3i)
     wp.launch(S.compact_blocks, grid.nblocks, inputs=[state, offsets, bmap, bcoord])
     return bmap, bcoord[:nact]
 
 
-def _settle_voids(wp, S, labels, state, grid: SparseGrid) -> None:
+def _settle_voids(wp, S, labels, state, nact: int, grid: SparseGrid) -> bool:
     """The OUTSIDE blocks the grid boundary does not reach (`labels` != 0: voids) become ACTIVE,
     so that the voxels' topology tells a bubble (an air pocket the surface closes: filled) from
     the open space between sparse particles (spray: open through gaps narrower than a block). As
@@ -574,16 +579,19 @@ def _settle_voids(wp, S, labels, state, grid: SparseGrid) -> None:
     INSIDE, as they were: a hollow shell's sealed cavity is filled either way, and as ACTIVE
     blocks it cost in proportion to its volume (a lattice shell 0.28-0.30 m of a 0.3 m ball:
     voids 78 % of the active blocks, the call 1.8x as long); a spray that closes around a void
-    that big at the block level still makes the phantom."""
-    counts = wp.zeros(2, dtype=wp.int32)
-    wp.launch(S.count_voids, grid.nblocks, inputs=[labels, state, counts])
-    active, voids = (int(c) for c in counts.numpy())
-    if voids:
-        code = S.TILE_ACTIVE if voids <= VOID_SHARE * active else S.TILE_INSIDE
-        if code == S.TILE_INSIDE:
-            log.info("surface: %d enclosed outside blocks (more than %g of the %d active ones) filled as inside",
-                     voids, VOID_SHARE, active)
-        wp.launch(S.settle_voids, grid.nblocks, inputs=[labels, int(code), state])
+    that big at the block level still makes the phantom. nact: the ACTIVE blocks; True where
+    voids became ACTIVE."""
+    count = wp.zeros(1, dtype=wp.int32)
+    wp.launch(S.count_voids, grid.nblocks, inputs=[labels, state, count])
+    voids = int(count.numpy()[0])
+    if voids == 0:
+        return False
+    code = S.TILE_ACTIVE if voids <= VOID_SHARE * nact else S.TILE_INSIDE
+    if code == S.TILE_INSIDE:
+        log.info("surface: %d enclosed outside blocks (more than %g of the %d active ones) filled as inside",
+                 voids, VOID_SHARE, nact)
+    wp.launch(S.settle_voids, grid.nblocks, inputs=[labels, int(code), state])
+    return code == S.TILE_ACTIVE
 
 
 def _sweep_block_labels(wp, S, labels) -> int:

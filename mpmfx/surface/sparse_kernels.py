@@ -360,15 +360,12 @@ def sweep_block_labels(labels: wp.array3d(dtype=wp.int32), axis: int, reverse: i
 
 
 @wp.kernel
-def count_voids(labels: wp.array3d(dtype=wp.int32), state: wp.array3d(dtype=wp.int32), counts: wp.array(dtype=wp.int32)):
-    """counts[0] += the ACTIVE blocks, counts[1] += the OUTSIDE blocks the grid boundary does
-    not reach (labels != 0 after the block flood fill: voids; sparse._settle_voids)."""
+def count_voids(labels: wp.array3d(dtype=wp.int32), state: wp.array3d(dtype=wp.int32), count: wp.array(dtype=wp.int32)):
+    """count[0] += the OUTSIDE blocks the grid boundary does not reach (labels != 0 after the
+    block flood fill: voids; sparse._settle_voids). Most grids have none: no atomic contends."""
     i, j, k = wp.tid()
-    s = state[i, j, k]
-    if s == TILE_ACTIVE:
-        wp.atomic_add(counts, 0, 1)
-    elif s == TILE_OUTSIDE and labels[i, j, k] != 0:
-        wp.atomic_add(counts, 1, 1)
+    if state[i, j, k] == TILE_OUTSIDE and labels[i, j, k] != 0:
+        wp.atomic_add(count, 0, 1)
 
 
 @wp.kernel
