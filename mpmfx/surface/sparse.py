@@ -5,8 +5,9 @@
    is read around the surface), INSIDE (it and its neighbours
    are at least half full: the surface is farther than the kernel and the smoothing reach, see
    _dense_rule), or ACTIVE.
-   OUTSIDE blocks the grid boundary does not reach (voids) become ACTIVE, so that the voxels'
-   topology tells a bubble (filled) from the open space between sparse particles (_settle_voids).
+   OUTSIDE blocks the grid boundary does not reach (voids) become ACTIVE next to other blocks and
+   INSIDE within, until the voxels' topology tells a bubble (filled) from the open space between
+   sparse particles (_settle_voids, _open_void_cores).
 2. field: Zhu-Bridson phi at each voxel of ACTIVE blocks, GATHERED from the particles of the
    blocks within the kernel support (no atomics);
 3. topology: outside voxels not connected to an OUTSIDE block are bubbles (-> inside); inside
@@ -46,7 +47,6 @@ MAX_BLOCKS = 1 << 26  # block-grid cells: 2^26 blocks = 2^35 voxels of bounding 
 MAX_ACTIVE_BLOCKS = ((1 << 31) - 1) // (3 * 512)  # the marching cubes' arrays hold 3 edges a voxel, indexed by int32 (Warp's array limit)
 MAX_SWEEP_ROUNDS = 1024
 NORMAL_STEP = 2  # voxels between the taps of the weight blur (the weights are smooth at 1 voxel)
-VOID_SHARE = 0.25  # x the active blocks: the most enclosed outside blocks _settle_voids makes active (more stay INSIDE)
 BLUR_MIN_SPLIT = 1024  # blocks below which the weight blur's passes run on one CPU thread (a pass's barrier costs ~20-50 us)
 MAX_BLOCK_SWEEP_ROUNDS = 256  # block-grid flood fill (a full line per launch: settles in a few rounds)
 SEED_DEPTH = 0.5  # x particle radius: how deep a particle's voxel must be to seed a genuine inside component
@@ -278,7 +278,7 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     wp.launch(S.to_grid, n, inputs=[x, wp.vec3(*grid.origin.astype(np.float32)), 1.0 / grid.voxel, g])
     counts, cells, starts, order = _bin_particles(wp, S, g, grid)
     gs = _sorted_positions(wp, S, g, order)
-    bmap, bcoord = _classify(wp, S, gs, counts, cells, starts, grid)
+    bmap, bcoord, voids = _classify(wp, S, gs, counts, cells, starts, grid)
     nact = bcoord.shape[0]
     if nact > MAX_ACTIVE_BLOCKS:  # (a 10M-particle sheet one spacing thick at voxel h / 2: 2.6M blocks)
         raise GridTooLarge(
@@ -293,6 +293,8 @@ def surface_on_device(wp, x, v, params: SurfaceParams) -> DeviceSurface:
     mark = _mark_particle_voxels(wp, T, bcoord, bmap, cells, starts, gs)
     tiles = (grid.far_vox, -grid.r_vox)  # (outside, inside) tile values of the raw field
     steps = _fix_topology(wp, T, bcoord, bmap, phi, mark, tiles, seed_depth=SEED_DEPTH * grid.r_vox)
+    if voids is not None:
+        _open_void_cores(wp, S, bmap, phi, voids)
     timings["topology"] = _lap(wp, t0)
     if params.dilate != 0.0 and nvox:
         wp.launch(S.add_scalar, nvox, inputs=[phi, -params.dilate / grid.voxel])
@@ -533,7 +535,8 @@ def _edges(wp, bcoord, bmap, wide, offset, phi, grid: SparseGrid) -> tuple:
 
 
 def _classify(wp, S, gs, counts, cells, starts, grid: SparseGrid):
-    """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates);
+    """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates,
+    each block's void label or None: _settle_voids);
     cells, starts: the gather cells' particles (_bin_particles), gs: their grid positions in the
     cells' order (_sorted_positions)."""
     near = wp.zeros(grid.nblocks, dtype=wp.int32)
@@ -553,45 +556,45 @@ def _classify(wp, S, gs, counts, cells, starts, grid: SparseGrid):
     labels = wp.empty(grid.nblocks, dtype=wp.int32)
     wp.launch(S.outside_block_labels, grid.nblocks, inputs=[state, labels])
     _sweep_block_labels(wp, S, labels)
+    voids = _settle_voids(wp, S, labels, state, grid)
     flags = wp.empty(math.prod(grid.nblocks), dtype=wp.int32)
-
-    def count_active():
-        wp.launch(S.active_flags, grid.nblocks, inputs=[state, flags])
-        offsets = _scan(wp, flags, inclusive=False)
-        return offsets, int(offsets[-1:].numpy()[0] + flags[-1:].numpy()[0])
-
-    offsets, nact = count_active()
-    if _settle_voids(wp, S, labels, state, nact, grid):
-        offsets, nact = count_active()
+    wp.launch(S.active_flags, grid.nblocks, inputs=[state, flags])
+    offsets = _scan(wp, flags, inclusive=False)
+    nact = int(offsets[-1:].numpy()[0] + flags[-1:].numpy()[0])
     bmap = wp.empty(grid.nblocks, dtype=wp.int32)
     bcoord = wp.empty(max(nact, 1), dtype=wp.vec3i)
     wp.launch(S.compact_blocks, grid.nblocks, inputs=[state, offsets, bmap, bcoord])
-    return bmap, bcoord[:nact]
+    return bmap, bcoord[:nact], voids
 
 
-def _settle_voids(wp, S, labels, state, nact: int, grid: SparseGrid) -> bool:
-    """The OUTSIDE blocks the grid boundary does not reach (`labels` != 0: voids) become ACTIVE,
-    so that the voxels' topology tells a bubble (an air pocket the surface closes: filled) from
-    the open space between sparse particles (spray: open through gaps narrower than a block). As
-    INSIDE tiles, the second became a phantom body: 120 drops on a sphere 7.6 h apart surfaced
-    as 121 pieces, a ball 10-12 h from every particle among them (test_sparse; its voids are
-    15-22 % of its active blocks). Voids of more than VOID_SHARE of the active blocks stay
-    INSIDE, as they were: a hollow shell's sealed cavity is filled either way, and as ACTIVE
-    blocks it cost in proportion to its volume (a lattice shell 0.28-0.30 m of a 0.3 m ball:
-    voids 78 % of the active blocks, the call 1.8x as long); a spray that closes around a void
-    that big at the block level still makes the phantom. nact: the ACTIVE blocks; True where
-    voids became ACTIVE."""
+def _settle_voids(wp, S, labels, state, grid: SparseGrid):
+    """Voids, the OUTSIDE blocks the grid boundary does not reach (`labels` != 0), may be sealed
+    air (a bubble in a body, a hollow shell's cavity: filled) or the open space between sparse
+    particles (spray, open through gaps narrower than a block). The voxels tell them apart, so
+    each void's blocks next to any other block (its shell) become ACTIVE, and the rest (its
+    core) an INSIDE tile, until _open_void_cores reads the shell after the bubble fill. As
+    INSIDE tiles whole, an open void became a phantom body: 120 drops on a sphere 7.6 h apart
+    surfaced as 121 pieces, a ball 10-12 h from every particle among them (test_sparse). Made
+    ACTIVE whole, a void costs in proportion to its volume (a lattice shell 0.28-0.30 m of a
+    0.3 m ball: 1.8x the call), its shell only to its area. Returns each block's void label
+    (LABEL_NONE outside voids), or None without voids; `state` is updated in place."""
+    voids = wp.empty(grid.nblocks, dtype=wp.int32)
     count = wp.zeros(1, dtype=wp.int32)
-    wp.launch(S.count_voids, grid.nblocks, inputs=[labels, state, count])
-    voids = int(count.numpy()[0])
-    if voids == 0:
-        return False
-    code = S.TILE_ACTIVE if voids <= VOID_SHARE * nact else S.TILE_INSIDE
-    if code == S.TILE_INSIDE:
-        log.info("surface: %d enclosed outside blocks (more than %g of the %d active ones) filled as inside",
-                 voids, VOID_SHARE, nact)
-    wp.launch(S.settle_voids, grid.nblocks, inputs=[labels, int(code), state])
-    return code == S.TILE_ACTIVE
+    wp.launch(S.void_labels, grid.nblocks, inputs=[labels, state, voids, count])
+    if int(count.numpy()[0]) == 0:
+        return None
+    _sweep_block_labels(wp, S, voids)  # one label a void: its least block index
+    wp.launch(S.void_shells, grid.nblocks, inputs=[voids, state])
+    return voids
+
+
+def _open_void_cores(wp, S, bmap, phi, voids) -> None:
+    """After the bubble fill (_fix_topology): the core of each void whose shell holds an outside
+    voxel (open: its air joins the outside) becomes OUTSIDE; a sealed void's core stays INSIDE,
+    as its shell was filled."""
+    open_ = wp.zeros(math.prod(bmap.shape), dtype=wp.int32)
+    wp.launch(S.void_openness, bmap.shape, inputs=[voids, bmap, phi, open_])
+    wp.launch(S.open_void_cores, bmap.shape, inputs=[voids, open_, bmap])
 
 
 def _sweep_block_labels(wp, S, labels) -> int:

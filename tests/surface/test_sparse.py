@@ -79,22 +79,17 @@ def test_a_shell_of_drops_leaves_its_middle_open():
         assert far.max() < 2.5 * h, f"{label}: a vertex {far.max() / h:.1f} h from every drop"
 
 
-def test_a_hollow_shells_cavity_is_filled_without_surfacing_its_volume(monkeypatch):
-    # a lattice shell 0.27-0.30 m: its cavity's blocks, which no particle reaches, are 39 % of
-    # the active blocks; made active (sparse._settle_voids), the topology would fill them too,
-    # at the cost of their volume, so they stay INSIDE tiles
-    import mpmfx.surface.sparse as sparse
-
+def test_a_hollow_shells_cavity_is_filled_without_surfacing_its_volume():
+    # a lattice shell 0.27-0.30 m: its cavity's blocks, which no particle reaches, are sealed
+    # air, filled as a bubble (sparse._settle_voids). Only the cavity's shell of blocks is
+    # surfaced, not its volume: the solid ball's active blocks and a layer more (1.19x; the
+    # whole cavity active, 1.41x; at 0.28-0.30 m of a 200k ball, 1.8x the call)
     x, h = sample_shape("sphere", 60000, "lattice")
-    x = x[np.linalg.norm(x, axis=1) > 0.27]
-    shares, default = {}, sparse.VOID_SHARE
-    for share in (default, 1.0):
-        monkeypatch.setattr(sparse, "VOID_SHARE", share)
-        res = surface(x, h)
-        mesh_volume, pieces = mesh_stats(res.mesh.vertices, res.mesh.faces)
-        assert pieces == 1 and abs(mesh_volume / (4 / 3 * np.pi * 0.3**3) - 1) < 0.02, (share, pieces, mesh_volume)
-        shares[share] = res.stats["active_blocks"]
-    assert shares[1.0] > 1.3 * shares[default], shares
+    solid = surface(x, h).stats["active_blocks"]
+    res = surface(x[np.linalg.norm(x, axis=1) > 0.27], h)
+    mesh_volume, pieces = mesh_stats(res.mesh.vertices, res.mesh.faces)
+    assert pieces == 1 and abs(mesh_volume / (4 / 3 * np.pi * 0.3**3) - 1) < 0.02, (pieces, mesh_volume)
+    assert res.stats["active_blocks"] < 1.3 * solid, (res.stats["active_blocks"], solid)
 
 
 def test_the_active_blocks_hold_what_is_read_around_the_raw_surface(monkeypatch):
