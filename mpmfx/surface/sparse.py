@@ -536,7 +536,7 @@ def _edges(wp, bcoord, bmap, wide, offset, phi, grid: SparseGrid) -> tuple:
 
 def _classify(wp, S, gs, counts, cells, starts, grid: SparseGrid):
     """(bmap: block -> active index or tile code, bcoord: (m,) vec3i active block coordinates,
-    each block's void label or None: _settle_voids);
+    the block flood fill's labels where there are voids, else None: _settle_voids);
     cells, starts: the gather cells' particles (_bin_particles), gs: their grid positions in the
     cells' order (_sorted_positions)."""
     near = wp.zeros(grid.nblocks, dtype=wp.int32)
@@ -568,31 +568,29 @@ def _classify(wp, S, gs, counts, cells, starts, grid: SparseGrid):
 
 
 def _settle_voids(wp, S, labels, state, grid: SparseGrid):
-    """Voids, the OUTSIDE blocks the grid boundary does not reach (`labels` != 0), may be sealed
-    air (a bubble in a body, a hollow shell's cavity: filled) or the open space between sparse
-    particles (spray, open through gaps narrower than a block). The voxels tell them apart, so
-    each void's blocks next to any other block (its shell) become ACTIVE, and the rest (its
-    core) an INSIDE tile, until _open_void_cores reads the shell after the bubble fill. As
-    INSIDE tiles whole, an open void became a phantom body: 120 drops on a sphere 7.6 h apart
-    surfaced as 121 pieces, a ball 10-12 h from every particle among them (test_sparse). Made
-    ACTIVE whole, a void costs in proportion to its volume (a lattice shell 0.28-0.30 m of a
-    0.3 m ball: 1.8x the call), its shell only to its area. Returns each block's void label
-    (LABEL_NONE outside voids), or None without voids; `state` is updated in place."""
-    voids = wp.empty(grid.nblocks, dtype=wp.int32)
+    """Voids, the OUTSIDE blocks the grid boundary does not reach (`labels` above 0, one label a
+    void), may be sealed air (a bubble in a body, a hollow shell's cavity: filled) or the open
+    space between sparse particles (spray, open through gaps narrower than a block). The voxels
+    tell them apart, so each void's blocks next to any other block (its shell) become ACTIVE,
+    and the rest (its core) an INSIDE tile, until _open_void_cores reads the shell after the
+    bubble fill. As INSIDE tiles whole, an open void became a phantom body: 120 drops on a
+    sphere 7.6 h apart surfaced as 121 pieces, a ball 10-12 h from every particle among them
+    (test_sparse). Made ACTIVE whole, a void costs in proportion to its volume (a lattice shell
+    0.28-0.30 m of a 0.3 m ball: 1.8x the call), its shell only to its area. Returns `labels`
+    where there are voids, else None; `state` is updated in place."""
     count = wp.zeros(1, dtype=wp.int32)
-    wp.launch(S.void_labels, grid.nblocks, inputs=[labels, state, voids, count])
+    wp.launch(S.count_voids, grid.nblocks, inputs=[labels, count])
     if int(count.numpy()[0]) == 0:
         return None
-    _sweep_block_labels(wp, S, voids)  # one label a void: its least block index
-    wp.launch(S.void_shells, grid.nblocks, inputs=[voids, state])
-    return voids
+    wp.launch(S.void_shells, grid.nblocks, inputs=[labels, state])
+    return labels
 
 
 def _open_void_cores(wp, S, bmap, phi, voids) -> None:
-    """After the bubble fill (_fix_topology): the core of each void whose shell holds an outside
-    voxel (open: its air joins the outside) becomes OUTSIDE; a sealed void's core stays INSIDE,
-    as its shell was filled."""
-    open_ = wp.zeros(math.prod(bmap.shape), dtype=wp.int32)
+    """After the bubble fill (_fix_topology): the core of each void (`voids`: _settle_voids'
+    labels) whose shell holds an outside voxel (open: its air joins the outside) becomes
+    OUTSIDE; a sealed void's core stays INSIDE, as its shell was filled."""
+    open_ = wp.zeros(math.prod(bmap.shape) + 1, dtype=wp.int32)  # by label: a block's linear index + 1
     wp.launch(S.void_openness, bmap.shape, inputs=[voids, bmap, phi, open_])
     wp.launch(S.open_void_cores, bmap.shape, inputs=[voids, open_, bmap])
 

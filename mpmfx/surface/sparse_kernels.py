@@ -315,13 +315,15 @@ def classify_blocks(
 
 @wp.kernel
 def outside_block_labels(state: wp.array3d(dtype=wp.int32), labels: wp.array3d(dtype=wp.int32)):
-    """Flood-fill seeds over constant-outside blocks: label 0 on the grid's faces."""
+    """Flood-fill seeds over constant-outside blocks: label 0 on the grid's faces, the block's
+    linear index + 1 elsewhere. After the sweeps (sweep_block_labels) the blocks the boundary
+    reaches hold 0, and each void (the others) the least seed of its blocks: one label a void."""
     i, j, k = wp.tid()
     if state[i, j, k] == TILE_OUTSIDE:
         if i == 0 or j == 0 or k == 0 or i == state.shape[0] - 1 or j == state.shape[1] - 1 or k == state.shape[2] - 1:
             labels[i, j, k] = 0
         else:
-            labels[i, j, k] = LABEL_BIG
+            labels[i, j, k] = (i * state.shape[1] + j) * state.shape[2] + k + 1
     else:
         labels[i, j, k] = LABEL_NONE
 
@@ -360,48 +362,40 @@ def sweep_block_labels(labels: wp.array3d(dtype=wp.int32), axis: int, reverse: i
 
 
 @wp.kernel
-def void_labels(labels: wp.array3d(dtype=wp.int32), state: wp.array3d(dtype=wp.int32), voids: wp.array3d(dtype=wp.int32),
-                count: wp.array(dtype=wp.int32)):
-    """voids = the block's linear index on the OUTSIDE blocks the grid boundary does not reach
-    (labels != 0 after the block flood fill), LABEL_NONE elsewhere: seeds of one label per
-    void (sweep_block_labels); count[0] += those blocks (most grids have none: no atomic
-    contends)."""
+def count_voids(labels: wp.array3d(dtype=wp.int32), count: wp.array(dtype=wp.int32)):
+    """count[0] += the OUTSIDE blocks the grid boundary does not reach (labels above 0 after the
+    block flood fill: voids). Most grids have none: no atomic contends."""
     i, j, k = wp.tid()
-    if state[i, j, k] == TILE_OUTSIDE and labels[i, j, k] != 0:
-        voids[i, j, k] = (i * state.shape[1] + j) * state.shape[2] + k
+    if labels[i, j, k] > 0:
         wp.atomic_add(count, 0, 1)
-    else:
-        voids[i, j, k] = LABEL_NONE
 
 
 @wp.kernel
-def void_shells(voids: wp.array3d(dtype=wp.int32), state: wp.array3d(dtype=wp.int32)):
-    """A void's blocks next to (26-neighbourhood) any other block, or the grid's edge, become
+def void_shells(labels: wp.array3d(dtype=wp.int32), state: wp.array3d(dtype=wp.int32)):
+    """A void's blocks (labels above 0) next to (26-neighbourhood) a block of no void become
     ACTIVE (its shell); the others INSIDE for now (its core: sparse._open_void_cores)."""
     i, j, k = wp.tid()
-    if voids[i, j, k] == LABEL_NONE:
+    if labels[i, j, k] <= 0:
         return
     shell = int(0)
     for n in range(27):
         a = i + n // 9 - 1
         b = j + (n // 3) % 3 - 1
         c = k + n % 3 - 1
-        if a < 0 or b < 0 or c < 0 or a >= voids.shape[0] or b >= voids.shape[1] or c >= voids.shape[2]:
-            shell = 1
-        elif voids[a, b, c] == LABEL_NONE:
+        if labels[a, b, c] <= 0:  # a void never touches the grid's faces: its neighbours are in the grid
             shell = 1
     state[i, j, k] = wp.where(shell != 0, TILE_ACTIVE, TILE_INSIDE)
 
 
 @wp.kernel
-def void_openness(voids: wp.array3d(dtype=wp.int32), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
+def void_openness(labels: wp.array3d(dtype=wp.int32), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
                   open_: wp.array(dtype=wp.int32)):
     """open_[a void's label] = 1 where a voxel of its shell is outside after the topology's
     bubble fill: the void joins the outside through gaps in its surface. A sealed void's shell
     is all inside then (filled as a bubble)."""
     i, j, k = wp.tid()
-    lab = voids[i, j, k]
-    if lab == LABEL_NONE:
+    lab = labels[i, j, k]
+    if lab <= 0:
         return
     b = bmap[i, j, k]
     if b < 0:
@@ -413,11 +407,11 @@ def void_openness(voids: wp.array3d(dtype=wp.int32), bmap: wp.array3d(dtype=wp.i
 
 
 @wp.kernel
-def open_void_cores(voids: wp.array3d(dtype=wp.int32), open_: wp.array(dtype=wp.int32), bmap: wp.array3d(dtype=wp.int32)):
+def open_void_cores(labels: wp.array3d(dtype=wp.int32), open_: wp.array(dtype=wp.int32), bmap: wp.array3d(dtype=wp.int32)):
     """A void's core (INSIDE tiles) becomes OUTSIDE where the void is open (void_openness)."""
     i, j, k = wp.tid()
-    lab = voids[i, j, k]
-    if lab != LABEL_NONE and bmap[i, j, k] == TILE_INSIDE and open_[lab] != 0:
+    lab = labels[i, j, k]
+    if lab > 0 and bmap[i, j, k] == TILE_INSIDE and open_[lab] != 0:
         bmap[i, j, k] = TILE_OUTSIDE
 
 
