@@ -2,7 +2,8 @@
 
 All lengths are world units (metres). Formats: OBJ, PLY, STL, GLB/glTF through trimesh
 (scenes are flattened with their node transforms) and USD/USDA/USDC through ``pxr``
-(every ``UsdGeom.Mesh`` under a prim, world transform and ``metersPerUnit`` applied).
+(every ``UsdGeom.Mesh`` under a prim, world transform and ``metersPerUnit`` applied, and a
+Z-up stage, as Blender writes, turned Y-up: our world is Y-up).
 trimesh, scipy and pxr are imported inside the functions that use them.
 """
 
@@ -22,6 +23,9 @@ USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 # A mesh whose smallest bounding-box side is below this fraction of its largest is flat:
 # it has no interior to fill with particles.
 _FLAT_RATIO = 1e-6
+
+# row vectors times this: a Z-up stage's (x, y, z) becomes (x, z, -y) in our Y-up world
+Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
 
 class MeshError(ValueError):
@@ -91,6 +95,9 @@ def _load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray
         raise MeshError(f"{path}: prim '{prim_path}' not found; pass an existing prim path "
                         "(e.g. /root/model) or none to load the whole stage")
     meters = UsdGeom.GetStageMetersPerUnit(stage)
+    # Y-up world: a Z-up stage (Blender's USD export) turns -90 degrees about x, (x, y, z) -> (x, z, -y),
+    # a rotation, so the winding stands (left as it was, a 1 m post from Blender lay along z)
+    up = Z_UP_TO_Y_UP if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z else np.eye(3)
     time = Usd.TimeCode.EarliestTime()
     cache = UsdGeom.XformCache(time)
     all_v, all_f, offset = [], [], 0
@@ -111,7 +118,7 @@ def _load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray
             tris = tris[:, ::-1]
         if np.linalg.det(m[:3, :3]) < 0:  # a mirroring transform flips the winding
             tris = tris[:, ::-1]
-        all_v.append(v * meters)
+        all_v.append(v @ up * meters)
         all_f.append(tris + offset)
         offset += len(v)
     if not all_f or sum(len(f) for f in all_f) == 0:

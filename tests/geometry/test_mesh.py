@@ -19,11 +19,12 @@ def test_trimesh_formats_round_trip(tmp_path, suffix):
     np.testing.assert_allclose(mesh.extents, (0.2, 0.4, 0.6), rtol=1e-6)
 
 
-def _write_usda(path: Path, mesh, *, meters_per_unit=1.0, translate=(0, 0, 0), quads=False):
+def _write_usda(path: Path, mesh, *, meters_per_unit=1.0, translate=(0, 0, 0), quads=False, up_axis="Y"):
     from pxr import Gf, Usd, UsdGeom
 
     stage = Usd.Stage.CreateNew(str(path))
     UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if up_axis == "Z" else UsdGeom.Tokens.y)
     xf = UsdGeom.Xform.Define(stage, "/world")
     xf.AddTranslateOp().Set(Gf.Vec3d(*translate))
     geom = UsdGeom.Mesh.Define(stage, "/world/box")
@@ -46,6 +47,17 @@ def test_usda_applies_transform_and_meters_per_unit(tmp_path):
     mesh = load_mesh(path)
     np.testing.assert_allclose(mesh.extents, (0.002, 0.004, 0.006), rtol=1e-5)
     np.testing.assert_allclose(mesh.bounds.mean(0), (1.0, 0, 0), atol=1e-6)
+
+
+def test_a_z_up_stage_stands_up_in_our_y_up_world(tmp_path):
+    # Blender's USD export is Z-up: a box 0.6 m tall along its z, 1 m above the ground, must
+    # stand 0.6 m tall along our y, 1 m up, wound outward still
+    path = tmp_path / "blender.usda"
+    _write_usda(path, BOX, translate=(0.5, 0, 1.0), up_axis="Z")
+    mesh = load_mesh(path)
+    np.testing.assert_allclose(mesh.extents, (0.2, 0.6, 0.4), rtol=1e-5)
+    np.testing.assert_allclose(mesh.bounds.mean(0), (0.5, 1.0, 0.0), atol=1e-6)
+    assert mesh.is_watertight and mesh.volume == pytest.approx(0.2 * 0.4 * 0.6, rel=1e-5)
 
 
 def test_usda_quads_are_triangulated_into_a_closed_cube(tmp_path):
