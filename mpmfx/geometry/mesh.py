@@ -2,7 +2,7 @@
 
 All lengths are world units (metres). Formats: OBJ, PLY, STL, GLB/glTF through trimesh
 (scenes are flattened with their node transforms) and USD/USDA/USDC through ``pxr``
-(every ``UsdGeom.Mesh`` under a prim, world transform and ``metersPerUnit`` applied, and a
+(every ``UsdGeom.Mesh`` a renderer draws under a prim: `_usd_meshes`; world transform and ``metersPerUnit`` applied, and a
 Z-up stage, as Blender writes, turned Y-up: our world is Y-up).
 trimesh, scipy and pxr are imported inside the functions that use them.
 """
@@ -99,19 +99,13 @@ def _load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray
     # a rotation, so the winding stands (left as it was, a 1 m post from Blender lay along z)
     up = Z_UP_TO_Y_UP if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z else np.eye(3)
     time = Usd.TimeCode.EarliestTime()
-    cache = UsdGeom.XformCache(time)
     all_v, all_f, offset = [], [], 0
-    for prim in Usd.PrimRange(root):
-        if not prim.IsA(UsdGeom.Mesh):
-            continue
-        geom = UsdGeom.Mesh(prim)
+    for geom, m in _usd_meshes(root, time):
         points = geom.GetPointsAttr().Get(time)
         counts = geom.GetFaceVertexCountsAttr().Get(time)
         indices = geom.GetFaceVertexIndicesAttr().Get(time)
         if points is None or counts is None or indices is None or len(points) == 0:
             continue
-        # USD matrices act on row vectors: p_world = p @ M.
-        m = np.array(cache.GetLocalToWorldTransform(prim), dtype=float).reshape(4, 4)
         v = np.asarray(points, float) @ m[:3, :3] + m[3, :3]
         tris = _fan_triangulate(np.asarray(counts, np.int64), np.asarray(indices, np.int64))
         if geom.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
@@ -126,6 +120,56 @@ def _load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray
         raise MeshError(f"{path}: no UsdGeom.Mesh with faces {where}; point prim_path at "
                         "the mesh or export the asset with its geometry")
     return np.concatenate(all_v), np.concatenate(all_f)
+
+
+def _usd_meshes(root, time, *, place=None):
+    """(UsdGeom.Mesh, (4, 4) float64 local-to-world matrix for row vectors) of every mesh a
+    renderer would draw under ``root``: through instanceable references (instance proxies),
+    each instance of a PointInstancer's prototypes at its own transform, and without what is
+    hidden or drawn only in viewports (visibility invisible, purpose guide or proxy: a
+    production asset's proxy is a coarse double of its render geometry). place: (4, 4) matrix
+    taking world space to where it is instanced (a prototype's meshes), or None."""
+    from pxr import Usd, UsdGeom
+
+    cache = UsdGeom.XformCache(time)
+    it = iter(Usd.PrimRange(root, Usd.TraverseInstanceProxies()))
+    for prim in it:
+        img = UsdGeom.Imageable(prim)
+        if img and (img.ComputeVisibility(time) == UsdGeom.Tokens.invisible
+                    or img.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy)):
+            it.PruneChildren()
+            continue
+        world = np.array(cache.GetLocalToWorldTransform(prim), dtype=float).reshape(4, 4)
+        if place is not None:
+            world = world @ place
+        if prim.IsA(UsdGeom.PointInstancer):
+            it.PruneChildren()  # the prototypes are drawn only where instanced
+            yield from _instanced_meshes(UsdGeom.PointInstancer(prim), world, time)
+        elif prim.IsA(UsdGeom.Mesh):
+            yield UsdGeom.Mesh(prim), world
+
+
+def _instanced_meshes(instancer, world: np.ndarray, time):
+    """_usd_meshes of each instance of a PointInstancer whose local-to-world matrix is `world`:
+    a prototype's mesh at (mesh relative to the prototype) x (the instance's transform, which
+    holds the prototype's own) x world."""
+    from pxr import UsdGeom
+
+    protos = instancer.GetPrototypesRel().GetTargets()
+    index = instancer.GetProtoIndicesAttr().Get(time)
+    if not protos or index is None:
+        return
+    stage = instancer.GetPrim().GetStage()
+    cache = UsdGeom.XformCache(time)
+    inst = [np.array(m, dtype=float).reshape(4, 4) for m in instancer.ComputeInstanceTransformsAtTime(time, time)]
+    for k, path in enumerate(protos):
+        proto = stage.GetPrimAtPath(path)
+        if not proto:
+            continue
+        # world space -> the prototype's own space (its transform comes back in the instance's)
+        to_proto = np.linalg.inv(np.array(cache.GetLocalToWorldTransform(proto), dtype=float).reshape(4, 4))
+        for i in np.flatnonzero(np.asarray(index) == k):
+            yield from _usd_meshes(proto, time, place=to_proto @ inst[i] @ world)
 
 
 def _usd_readable(path: Path) -> bool:

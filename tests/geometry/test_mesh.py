@@ -123,3 +123,49 @@ def test_check_in_domain_messages_say_what_to_change():
         check_in_domain(BOX, origin=(0, 0, 0), size=0.3, name="box")
     with pytest.raises(MeshError, match=r"outside the domain.*translate it by \(0.1, 0.2, 0.3\)"):
         check_in_domain(BOX, origin=(0, 0, 0), size=1.0, name="box")
+
+
+def _box_prim(stage, path, *, translate=(0, 0, 0)):
+    from pxr import Gf, UsdGeom
+
+    geom = UsdGeom.Mesh.Define(stage, path)
+    geom.CreatePointsAttr([Gf.Vec3f(*p) for p in BOX.vertices])
+    geom.CreateFaceVertexCountsAttr([3] * len(BOX.faces))
+    geom.CreateFaceVertexIndicesAttr([int(i) for i in BOX.faces.ravel()])
+    if any(translate):
+        geom.AddTranslateOp().Set(Gf.Vec3d(*translate))
+    return geom
+
+
+def test_usd_loads_what_a_renderer_draws(tmp_path):
+    # a production-style stage: instanceable references, a PointInstancer, a proxy double of
+    # the render geometry, a guide and a hidden part; only the drawn boxes come in, each where
+    # it is drawn
+    from pxr import Gf, Sdf, Usd, UsdGeom
+
+    path = tmp_path / "set.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    UsdGeom.Xform.Define(stage, "/world")
+    _box_prim(stage, "/protos/crate/geo")
+    stage.GetPrimAtPath("/protos").SetSpecifier(Sdf.SpecifierClass)  # not drawn itself
+    for i, x in enumerate((2.0, 4.0)):  # two instanceable references to the crate
+        ref = UsdGeom.Xform.Define(stage, f"/world/crate{i}")
+        ref.AddTranslateOp().Set(Gf.Vec3d(x, 0, 0))
+        ref.GetPrim().GetReferences().AddInternalReference("/protos/crate")
+        ref.GetPrim().SetInstanceable(True)
+    inst = UsdGeom.PointInstancer.Define(stage, "/world/scatter")
+    inst.AddTranslateOp().Set(Gf.Vec3d(0, 0, 10.0))
+    proto = _box_prim(stage, "/world/scatter/protos/box", translate=(0, 1.0, 0))  # its own transform counts once
+    inst.CreatePrototypesRel().SetTargets([proto.GetPath()])
+    inst.CreateProtoIndicesAttr([0, 0, 0])
+    inst.CreatePositionsAttr([Gf.Vec3f(-3, 0, 0), Gf.Vec3f(-5, 0, 0), Gf.Vec3f(-7, 0, 0)])
+    _box_prim(stage, "/world/proxy", translate=(9, 9, 9)).CreatePurposeAttr(UsdGeom.Tokens.proxy)
+    _box_prim(stage, "/world/guide", translate=(9, 9, 9)).CreatePurposeAttr(UsdGeom.Tokens.guide)
+    _box_prim(stage, "/world/hidden", translate=(9, 9, 9)).MakeInvisible()
+    stage.GetRootLayer().Save()
+    mesh = load_mesh(path)
+    parts = mesh.split(only_watertight=True)
+    centres = sorted(tuple(np.round(p.bounds.mean(0), 6)) for p in parts)
+    assert centres == [(-7, 1, 10), (-5, 1, 10), (-3, 1, 10), (2, 0, 0), (4, 0, 0)]
+    assert all(p.volume == pytest.approx(0.2 * 0.4 * 0.6, rel=1e-5) for p in parts)
