@@ -2,8 +2,8 @@
 
 All lengths are world units (metres). Formats: OBJ, PLY, STL, GLB/glTF through trimesh
 (scenes are flattened with their node transforms) and USD/USDA/USDC through ``pxr``
-(every ``UsdGeom.Mesh`` a renderer draws under a prim: `_usd_meshes`; world transform and ``metersPerUnit`` applied, and a
-Z-up stage, as Blender writes, turned Y-up: our world is Y-up).
+(every ``UsdGeom.Mesh`` a renderer draws under a prim, `_usd_meshes`; world transform and
+``metersPerUnit`` applied, and a Z-up stage, as Blender writes, turned Y-up: our world is Y-up).
 trimesh, scipy and pxr are imported inside the functions that use them.
 """
 
