@@ -9,6 +9,7 @@ trimesh, scipy and pxr are imported inside the functions that use them.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -106,8 +107,10 @@ def _load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray
         indices = geom.GetFaceVertexIndicesAttr().Get(time)
         if points is None or counts is None or indices is None or len(points) == 0:
             continue
-        v = np.asarray(points, float) @ m[:3, :3] + m[3, :3]
-        tris = _fan_triangulate(np.asarray(counts, np.int64), np.asarray(indices, np.int64))
+        v, counts, indices = _drawn_faces(geom, np.asarray(points, float), np.asarray(counts, np.int64),
+                                          np.asarray(indices, np.int64), time)
+        v = v @ m[:3, :3] + m[3, :3]
+        tris = _fan_triangulate(counts, indices)
         if geom.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
             tris = tris[:, ::-1]
         if np.linalg.det(m[:3, :3]) < 0:  # a mirroring transform flips the winding
@@ -120,6 +123,38 @@ def _load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray
         raise MeshError(f"{path}: no UsdGeom.Mesh with faces {where}; point prim_path at "
                         "the mesh or export the asset with its geometry")
     return np.concatenate(all_v), np.concatenate(all_f)
+
+
+def _drawn_faces(geom, v: np.ndarray, counts: np.ndarray, indices: np.ndarray, time):
+    """(vertices, counts, indices) of the surface a renderer draws for a UsdGeom.Mesh: its
+    faces but those in holeIndices, and for a subdivision surface (subdivisionScheme
+    catmullClark, USD's default where none is authored, or loop) the limit surface, closely
+    (mpmfx.geometry.subdivide: a coarse cage can lie far outside what is drawn)."""
+    from pxr import UsdGeom
+
+    from mpmfx.geometry.subdivide import catmull_clark
+
+    ok = counts >= 3
+    if not ok.all():  # points and lines are not faces
+        indices = indices[np.repeat(ok, counts)]
+        counts = counts[ok]
+    keep = np.ones(len(counts), bool)
+    holes = geom.GetHoleIndicesAttr().Get(time)
+    if holes is not None and len(holes):
+        old_index = np.flatnonzero(ok)  # hole indices count the faces as authored
+        keep[np.isin(old_index, np.asarray(holes))] = False
+    scheme = geom.GetSubdivisionSchemeAttr()
+    if scheme.Get() in (UsdGeom.Tokens.catmullClark, UsdGeom.Tokens.loop) and len(counts):
+        if not scheme.HasAuthoredValue():  # likely a polygon mesh whose exporter left USD's default
+            warnings.warn(f"{geom.GetPath()}: no subdivisionScheme, so USD's default catmullClark holds and "
+                          "its limit surface is used, as renderers draw it; for a polygon mesh author "
+                          'subdivisionScheme = "none"', UserWarning, stacklevel=2)
+        v, counts, indices, parent = catmull_clark(v, counts, indices)
+        keep = keep[parent]
+    if not keep.all():
+        indices = indices[np.repeat(keep, counts)]
+        counts = counts[keep]
+    return v, counts, indices
 
 
 def _usd_meshes(root, time, *, place=None):

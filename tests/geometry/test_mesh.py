@@ -19,7 +19,8 @@ def test_trimesh_formats_round_trip(tmp_path, suffix):
     np.testing.assert_allclose(mesh.extents, (0.2, 0.4, 0.6), rtol=1e-6)
 
 
-def _write_usda(path: Path, mesh, *, meters_per_unit=1.0, translate=(0, 0, 0), quads=False, up_axis="Y"):
+def _write_usda(path: Path, mesh, *, meters_per_unit=1.0, translate=(0, 0, 0), quads=False, up_axis="Y",
+                scheme="none"):
     from pxr import Gf, Usd, UsdGeom
 
     stage = Usd.Stage.CreateNew(str(path))
@@ -28,6 +29,8 @@ def _write_usda(path: Path, mesh, *, meters_per_unit=1.0, translate=(0, 0, 0), q
     xf = UsdGeom.Xform.Define(stage, "/world")
     xf.AddTranslateOp().Set(Gf.Vec3d(*translate))
     geom = UsdGeom.Mesh.Define(stage, "/world/box")
+    if scheme:  # "none": a polygon mesh, as DCCs export one; None: unauthored (USD's default, catmullClark)
+        geom.CreateSubdivisionSchemeAttr(scheme)
     if quads:  # a unit cube as 6 quads: exercises n-gon triangulation
         v = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
         f = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
@@ -129,6 +132,7 @@ def _box_prim(stage, path, *, translate=(0, 0, 0)):
     from pxr import Gf, UsdGeom
 
     geom = UsdGeom.Mesh.Define(stage, path)
+    geom.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     geom.CreatePointsAttr([Gf.Vec3f(*p) for p in BOX.vertices])
     geom.CreateFaceVertexCountsAttr([3] * len(BOX.faces))
     geom.CreateFaceVertexIndicesAttr([int(i) for i in BOX.faces.ravel()])
@@ -169,3 +173,32 @@ def test_usd_loads_what_a_renderer_draws(tmp_path):
     centres = sorted(tuple(np.round(p.bounds.mean(0), 6)) for p in parts)
     assert centres == [(-7, 1, 10), (-5, 1, 10), (-3, 1, 10), (2, 0, 0), (4, 0, 0)]
     assert all(p.volume == pytest.approx(0.2 * 0.4 * 0.6, rel=1e-5) for p in parts)
+
+
+@pytest.mark.parametrize("scheme", [None, "catmullClark"])
+def test_a_subdivision_cage_loads_as_its_limit_surface(tmp_path, scheme):
+    # a unit cube's cage, subdivided as a renderer draws it: a rounded blob a third of its
+    # volume, 0.08 inside each face (the limit surface), not the cube
+    path = tmp_path / "subd.usda"
+    _write_usda(path, None, quads=True, scheme=scheme)
+    if scheme is None:
+        with pytest.warns(UserWarning, match=r"/world/box: no subdivisionScheme.*subdivisionScheme = \"none\""):
+            mesh = load_mesh(path)
+    else:
+        mesh = load_mesh(path)
+    assert mesh.is_watertight
+    assert mesh.volume == pytest.approx(0.328, abs=0.01)
+    np.testing.assert_allclose(mesh.bounds, [[0.075] * 3, [0.925] * 3], atol=0.006)
+
+
+def test_hole_faces_are_not_loaded(tmp_path):
+    from pxr import Usd, UsdGeom
+
+    path = tmp_path / "holes.usda"
+    _write_usda(path, None, quads=True)
+    stage = Usd.Stage.Open(str(path))
+    UsdGeom.Mesh(stage.GetPrimAtPath("/world/box")).CreateHoleIndicesAttr([1])  # the x = 1 face
+    stage.GetRootLayer().Save()
+    mesh = load_mesh(path)
+    assert len(mesh.faces) == 10 and not mesh.is_watertight
+    assert not np.any(np.all(np.isclose(mesh.triangles[:, :, 0], 1.0), axis=1))
