@@ -7,7 +7,9 @@ Rules as USD's default (OpenSubdiv, interpolateBoundary "edgeAndCorner"): a boun
 stays a curve through its own end points (edge point: the midpoint; boundary vertex: 1/8,
 6/8, 1/8 of its boundary neighbours and itself), and a boundary vertex of a single face is a
 corner and stays. Creases, corners and holes authored on the mesh are not read. An edge used by
-more than two faces is treated as a boundary.
+more than two faces is treated as a boundary. Checked against Blender 4.5's OpenSubdiv (Subdivision
+Surface modifier, "Keep Corners"): the same vertices to 2e-7 at levels 1-3, on a cube and on an
+open L-shaped grid with a concave boundary corner.
 """
 
 from __future__ import annotations
