@@ -1,7 +1,8 @@
 """Mesh loading, placement and domain checks.
 
 All lengths are world units (metres). Formats: OBJ, PLY, STL, GLB/glTF through trimesh
-(scenes are flattened with their node transforms) and USD/USDA/USDC through ``pxr``
+(scenes are flattened with their node transforms), Blender and FBX files through Blender in
+its own process (mpmfx.geometry.blender_export) and USD/USDA/USDC through ``pxr``
 (every ``UsdGeom.Mesh`` a renderer draws under a prim, `_usd_meshes`; world transform and
 ``metersPerUnit`` applied, and a Z-up stage, as Blender writes, turned Y-up: our world is Y-up).
 trimesh, scipy and pxr are imported inside the functions that use them.
@@ -20,6 +21,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 TRIMESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
+BLENDER_SUFFIXES = (".blend", ".fbx")
 
 # A mesh whose smallest bounding-box side is below this fraction of its largest is flat:
 # it has no interior to fill with particles.
@@ -53,9 +55,11 @@ def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Tri
         vertices, faces = _load_usd(path, prim_path)
     elif suffix in TRIMESH_SUFFIXES:
         vertices, faces = _load_trimesh(path)
+    elif suffix in BLENDER_SUFFIXES:
+        vertices, faces = _load_blender(path)
     else:
         raise MeshError(f"{path}: unsupported format '{suffix}'; export the asset as one of "
-                        f"{', '.join(TRIMESH_SUFFIXES + USD_SUFFIXES)}")
+                        f"{', '.join(TRIMESH_SUFFIXES + BLENDER_SUFFIXES + USD_SUFFIXES)}")
     bad = np.flatnonzero(~np.isfinite(vertices).all(axis=1))
     if len(bad):  # checked before trimesh, which would drop them (and their faces) silently
         raise MeshError(f"{path}: {len(bad)} vertices are NaN or inf (the first is vertex {bad[0]}); "
@@ -80,6 +84,34 @@ def _load_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
                         "scene); export the surface as a polygon mesh")
     merged = trimesh.util.concatenate(parts)
     return np.asarray(merged.vertices, float), np.asarray(merged.faces, np.int64)
+
+
+def _load_blender(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """A .blend or .fbx file's rendered surfaces, from Blender in its own process."""
+    import importlib.util
+    import os
+    import subprocess
+    import sys
+    import tempfile
+
+    from mpmfx.geometry.blender_export import ERROR
+
+    if importlib.util.find_spec("bpy") is None:
+        raise MeshError(f"{path}: reading {path.suffix} files needs Blender as a Python module (bpy 4.5): "
+                        "run `bash setup.sh`, or export the asset as USD, glTF or OBJ")
+    root = str(Path(__file__).resolve().parents[2])  # the child imports this package as the parent does
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}
+    with tempfile.TemporaryDirectory(prefix="mpmfx-blender-") as tmp:
+        out = Path(tmp) / "mesh.npz"
+        res = subprocess.run([sys.executable, "-m", "mpmfx.geometry.blender_export", str(path.resolve()), str(out)],
+                             capture_output=True, text=True, env=env)
+        if res.returncode != 0 or not out.is_file():
+            lines = (res.stdout + res.stderr).strip().splitlines()
+            why = next((s.removeprefix(ERROR) for s in lines if s.startswith(ERROR)), " / ".join(lines[-3:]))
+            raise MeshError(f"{path}: Blender could not read it ({why}); open it in Blender to check it, "
+                            "or export the asset as USD, glTF or OBJ")
+        with np.load(out) as data:
+            return data["vertices"], data["faces"]
 
 
 def _load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray]:

@@ -20,12 +20,13 @@ import numpy as np
 
 from mpmfx.cache import file_hash, write_json
 from mpmfx.config import ColliderShape, Shot, ShotError
+from mpmfx.geometry import MESH_LOADING
 from mpmfx.io.frames import ParticleFrame, SeedParticles, read_arrays, write_arrays
 from mpmfx.stages.base import Context, StageError, quiet_warp
 from mpmfx.stages.writer import FrameWriter
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "simulate", 1, True, ParticleFrame.EXT
-CODE = ("mpmfx.stages.simulate", "mpmfx.mpm", "mpmfx.geometry.colliders", "mpmfx.geometry.mesh",
+CODE = ("mpmfx.stages.simulate", "mpmfx.mpm", "mpmfx.geometry.colliders", *MESH_LOADING,
         "mpmfx.geometry.voxelise", "mpmfx.geometry.inside", "mpmfx.io.frames")
 KEEP_CHECKPOINTS = 2
 

@@ -11,11 +11,12 @@ import numpy as np
 
 from mpmfx.cache import file_hash, write_json
 from mpmfx.config import Shot, ShotError, Thickness
+from mpmfx.geometry import MESH_LOADING
 from mpmfx.io.frames import SeedParticles, write_arrays
 from mpmfx.stages.base import Context, StageError
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "voxelise", 1, False, "npz"
-CODE = ("mpmfx.stages.voxelise", "mpmfx.geometry.mesh", "mpmfx.geometry.inside", "mpmfx.geometry.voxelise",
+CODE = ("mpmfx.stages.voxelise", *MESH_LOADING, "mpmfx.geometry.inside", "mpmfx.geometry.voxelise",
         "mpmfx.geometry.thickness", "mpmfx.render.thickness", "mpmfx.mpm.materials", "mpmfx.io.frames")
 
 
