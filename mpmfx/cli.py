@@ -68,7 +68,7 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("-y", "--yes", action="store_true", help="delete simulations without asking")
 
     k = sub.add_parser("check", help="five-cell thickness check of an asset (exit 0 pass/warn, 1 fail, 2 bad input)")
-    k.add_argument("asset", help="mesh file (obj, ply, stl, glb, gltf, usd)")
+    k.add_argument("asset", help="mesh file (obj, ply, stl, glb, gltf, usd, usda, usdc, usdz, blend, fbx)")
     k.add_argument("--grid-n", type=int, default=64, help="grid cells per axis of the domain")
     k.add_argument("--domain", default=None, metavar="OX,OY,OZ,SIZE",
                    help="domain min corner and edge (m); default: the mesh's bounding cube + 10 %%")

@@ -53,7 +53,8 @@ class Domain(_Section):
 
 class SceneObject(_Section):
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="Object name (a USD prim name).")
-    mesh: Path = Field(description="Mesh file (obj, ply, stl, glb, gltf, usd, usda, usdc), relative to the shot file.")
+    mesh: Path = Field(description="Mesh file (obj, ply, stl, glb, gltf, usd, usda, usdc, usdz, blend, fbx), "
+                                   "relative to the shot file.")
     prim_path: str | None = Field(None, description="USD files only: the prim whose meshes are taken.")
     material: str = Field("Elastic", description="Preset name from the guide's section 8 (Soft, Mushy, Goopy, Wet, "
                           "Slush, Elastic, Granular, CohesiveGranular, Water, Tracer).")
