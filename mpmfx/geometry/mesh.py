@@ -181,12 +181,40 @@ def _drawn_faces(geom, v: np.ndarray, counts: np.ndarray, indices: np.ndarray, t
             warnings.warn(f"{geom.GetPath()}: no subdivisionScheme, so USD's default catmullClark holds and "
                           "its limit surface is used, as renderers draw it; for a polygon mesh author "
                           'subdivisionScheme = "none"', UserWarning, stacklevel=2)
-        v, counts, indices, parent = catmull_clark(v, counts, indices)
+        v, counts, indices, parent = catmull_clark(v, counts, indices, creases=_usd_creases(geom, time))
         keep = keep[parent]
     if not keep.all():
         indices = indices[np.repeat(keep, counts)]
         counts = counts[keep]
     return v, counts, indices
+
+
+def _usd_creases(geom, time):
+    """The mesh's authored creases (chains of vertices, a sharpness per chain or per edge) and
+    sharp corners, as mpmfx.geometry.subdivide.Creases."""
+    from mpmfx.geometry.subdivide import Creases
+
+    def get(attr, dtype):
+        value = attr.Get(time)
+        return np.zeros(0, dtype) if value is None else np.asarray(value, dtype)
+
+    chain = get(geom.GetCreaseIndicesAttr(), np.int64)
+    lengths = get(geom.GetCreaseLengthsAttr(), np.int64)
+    sharp = get(geom.GetCreaseSharpnessesAttr(), float)
+    starts = np.cumsum(lengths) - lengths
+    a = np.concatenate([chain[s: s + n - 1] for s, n in zip(starts, lengths)] or [np.zeros(0, np.int64)])
+    b = np.concatenate([chain[s + 1: s + n] for s, n in zip(starts, lengths)] or [np.zeros(0, np.int64)])
+    if len(sharp) == len(lengths):  # one sharpness a crease, else one an edge
+        sharp = np.repeat(sharp, np.maximum(lengths - 1, 0))
+    if len(sharp) != len(a):
+        raise MeshError(f"{geom.GetPath()}: creaseSharpnesses holds {len(sharp)} values for {len(lengths)} creases of "
+                        f"{len(a)} edges; give one a crease or one an edge")
+    corners = get(geom.GetCornerIndicesAttr(), np.int64)
+    corner_sharp = get(geom.GetCornerSharpnessesAttr(), float)
+    if len(corner_sharp) != len(corners):
+        raise MeshError(f"{geom.GetPath()}: {len(corners)} cornerIndices but {len(corner_sharp)} cornerSharpnesses; "
+                        "give one sharpness a corner")
+    return Creases(pairs=np.stack([a, b], 1), sharpness=sharp, corners=corners, corner_sharpness=corner_sharp)
 
 
 def _usd_meshes(root, time, *, place=None):

@@ -6,13 +6,16 @@ of under half its volume).
 Rules as USD's default (OpenSubdiv, interpolateBoundary "edgeAndCorner"): a boundary edge
 stays a curve through its own end points (edge point: the midpoint; boundary vertex: 1/8,
 6/8, 1/8 of its boundary neighbours and itself), and a boundary vertex of a single face is a
-corner and stays. Creases, corners and holes authored on the mesh are not read. An edge used by
-more than two faces is treated as a boundary. Checked against Blender 4.5's OpenSubdiv (Subdivision
-Surface modifier, "Keep Corners"): the same vertices to 2e-7 at levels 1-3, on a cube and on an
-open L-shaped grid with a concave boundary corner.
+corner and stays. Creases and sharp corners (`Creases`) follow OpenSubdiv's uniform rule. An
+edge used by more than two faces is treated as a boundary. tests/geometry/test_subdivide.py
+checks it against Blender 4.5's OpenSubdiv (Subdivision Surface modifier, "Keep Corners"): the
+same vertices to 2e-7 at levels 1-3, on a cube smooth, creased for good, creased 1.5 and 0.5
+and with a sharp corner, and on an open L-shaped grid with a concave boundary corner.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -24,26 +27,46 @@ LEVELS = 3
 three levels are within half a percent of the cage's edge."""
 
 
-def catmull_clark(vertices: np.ndarray, counts: np.ndarray, indices: np.ndarray, *, levels: int = LEVELS,
-                  max_faces: int = MAX_FACES) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+@dataclass(frozen=True)
+class Creases:
+    """Sharpness of a cage's edges and vertices (USD's creaseIndices / cornerIndices, OpenSubdiv's
+    uniform crease method): an edge of sharpness s is sharp for floor(s) levels, then blends
+    back to smooth (a fraction of it at the level where s < 1), and its halves take s - 1.
+    pairs: (k, 2) vertex indices of sharp edges; sharpness: (k,); corners: (c,) vertex indices;
+    corner_sharpness: (c,). SHARP_INFINITE or more never wears off."""
+
+    pairs: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.int64))
+    sharpness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    corners: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    corner_sharpness: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+SHARP_INFINITE = 10.0
+"""Sharpness from which an edge or corner is sharp at every level (OpenSubdiv's Crease::SHARPNESS_INFINITE)."""
+
+
+def catmull_clark(vertices: np.ndarray, counts: np.ndarray, indices: np.ndarray, *, creases: Creases | None = None,
+                  levels: int = LEVELS, max_faces: int = MAX_FACES) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(vertices (n', 3) float64, counts (p',) int64, indices, parent (p',) int64: the input
     face each output face came from) after up to `levels` levels of Catmull-Clark subdivision:
     fewer where a level would pass `max_faces` faces (a dense cage is already close to its
     limit surface). vertices: (n, 3); counts: (p,) vertices per face, each at least 3;
-    indices: (sum counts,) int, wound as the faces are (kept)."""
+    indices: (sum counts,) int, wound as the faces are (kept); creases: sharp edges and
+    corners (None: smooth but for the boundary)."""
     v = np.asarray(vertices, float)
     counts = np.asarray(counts, np.int64)
     indices = np.asarray(indices, np.int64)
+    creases = creases or Creases()
     parent = np.arange(len(counts))
     for _ in range(levels):
         if counts.sum() > max_faces:  # the next level's quads
             break
         parent = np.repeat(parent, counts)  # an n-gon's n quads, in its corners' order
-        v, counts, indices = _level(v, counts, indices)
+        v, counts, indices, creases = _level(v, counts, indices, creases)
     return v, counts, indices, parent
 
 
-def _level(v: np.ndarray, counts: np.ndarray, indices: np.ndarray):
+def _level(v: np.ndarray, counts: np.ndarray, indices: np.ndarray, creases: Creases):
     """One level: every n-gon becomes n quads (vertex point, edge point, face point, edge point)."""
     nv, nf = len(v), len(counts)
     face = np.repeat(np.arange(nf), counts)  # face of each corner
@@ -62,23 +85,52 @@ def _level(v: np.ndarray, counts: np.ndarray, indices: np.ndarray):
     nfaces = np.bincount(edge_of, minlength=len(edges))  # faces at each edge
     fsum = np.zeros((len(edges), 3))
     np.add.at(fsum, edge_of, fpt[face])
-    inner = nfaces == 2
+    sharp = _edge_sharpness(edges, nv, nfaces, creases)
     mid = 0.5 * (v[ea] + v[eb])
-    ept = np.where(inner[:, None], 0.5 * mid + 0.25 * fsum, mid)  # inside: (a + b + f1 + f2) / 4
-    vpt = _vertex_points(v, indices, face, fpt, ea, eb, inner)
+    t = np.minimum(sharp, 1.0)[:, None]  # 1: the sharp rule (the midpoint), 0: smooth, between: a blend
+    smooth = np.where(nfaces[:, None] == 2, 0.5 * mid + 0.25 * fsum, mid)  # inside: (a + b + f1 + f2) / 4
+    ept = (1.0 - t) * smooth + t * mid
+    vpt = _vertex_points(v, indices, face, fpt, ea, eb, nfaces, sharp, creases)
     # corner c of face f: quad (its vertex, edge to next, face point, edge from the previous
     # corner: that corner's edge to next)
     prev_of = edge_of[start + (pos - 1) % size]
     out_v = np.concatenate([vpt, ept, fpt])
     quads = np.stack([indices, nv + edge_of, nv + len(edges) + face, nv + prev_of], axis=1)
-    return out_v, np.full(len(quads), 4, np.int64), quads.ravel()
+    # the halves of a creased edge (its vertex points to its edge point) carry its sharpness less one
+    keep = (nfaces == 2) & (sharp > 1.0)
+    half = np.flatnonzero(keep)
+    child = Creases(pairs=np.concatenate([np.stack([ea[half], nv + half], 1), np.stack([eb[half], nv + half], 1)]),
+                    sharpness=np.tile(_wear(sharp[half]), 2),
+                    corners=creases.corners[creases.corner_sharpness > 1.0],
+                    corner_sharpness=_wear(creases.corner_sharpness[creases.corner_sharpness > 1.0]))
+    return out_v, np.full(len(quads), 4, np.int64), quads.ravel(), child
 
 
-def _vertex_points(v, indices, face, fpt, ea, eb, inner):
-    """New positions of the old vertices: (Q + 2 R + (n - 3) P) / n inside (Q: mean of the
-    faces' points around, R: of the edges' midpoints, n: edges at the vertex); on a boundary
-    (P 6/8 and its two boundary neighbours 1/8 each); a corner (a boundary vertex of one face,
-    or where the boundary is not a simple curve) stays."""
+def _wear(s: np.ndarray) -> np.ndarray:
+    """Sharpness at the next level: s - 1, but infinite stays."""
+    return np.where(s >= SHARP_INFINITE, s, s - 1.0)
+
+
+def _edge_sharpness(edges: np.ndarray, nv: int, nfaces: np.ndarray, creases: Creases) -> np.ndarray:
+    """(e,) sharpness of each edge: a boundary (or an edge of more than two faces) infinite,
+    a creased edge its sharpness, 0 else."""
+    sharp = np.where(nfaces == 2, 0.0, np.inf)
+    if len(creases.pairs):
+        a, b = creases.pairs[:, 0], creases.pairs[:, 1]
+        key = np.minimum(a, b) * nv + np.maximum(a, b)
+        at = np.minimum(np.searchsorted(edges, key), len(edges) - 1)
+        ok = edges[at] == key  # a crease along no edge of the mesh is ignored
+        np.maximum.at(sharp, at[ok], creases.sharpness[ok])
+    return sharp
+
+
+def _vertex_points(v, indices, face, fpt, ea, eb, nfaces, sharp, creases: Creases):
+    """New positions of the old vertices: smooth, (Q + 2 R + (n - 3) P) / n (Q: mean of the
+    faces' points around, R: of the edges' midpoints, n: edges at the vertex); on a crease or
+    boundary, two sharp edges meeting (P 6/8 and the two edges' other ends 1/8 each); a corner
+    where three or more sharp edges meet, at a boundary vertex of one face, where a boundary is
+    not a simple curve, and at a sharp corner: it stays. A vertex whose sharp edges (or corner)
+    wear off this level blends the smooth position in by their mean sharpness below 1."""
     nv = len(v)
     nedge = np.bincount(np.concatenate([ea, eb]), minlength=nv).astype(float)
     nface = np.bincount(indices, minlength=nv).astype(float)
@@ -90,13 +142,23 @@ def _vertex_points(v, indices, face, fpt, ea, eb, inner):
     np.add.at(r, eb, mid)
     n = np.maximum(nedge, 1.0)[:, None]
     out = (q / np.maximum(nface, 1.0)[:, None] + 2.0 * r / n + (n - 3.0) * v) / n
-    bnd = ~inner
-    nb = np.bincount(np.concatenate([ea[bnd], eb[bnd]]), minlength=nv)
+    on = sharp > 0.0
+    count = np.bincount(np.concatenate([ea[on], eb[on]]), minlength=nv)
+    total = np.bincount(np.concatenate([ea[on], eb[on]]), weights=np.tile(np.minimum(sharp[on], 1.0), 2), minlength=nv)
+    t = (total / np.maximum(count, 1))[:, None]  # the sharp edges' mean sharpness, at most 1
     side = np.zeros((nv, 3))
-    np.add.at(side, ea[bnd], v[eb[bnd]])
-    np.add.at(side, eb[bnd], v[ea[bnd]])
-    curve = nb == 2
-    out[curve] = 0.75 * v[curve] + 0.125 * side[curve]
-    fixed = ((nb > 0) & ~curve) | (curve & (nface == 1)) | (nface == 0)
+    np.add.at(side, ea[on], v[eb[on]])
+    np.add.at(side, eb[on], v[ea[on]])
+    crease = count == 2
+    out[crease] = ((1.0 - t) * out + t * (0.75 * v + 0.125 * side))[crease]
+    corner = count >= 3
+    out[corner] = ((1.0 - t) * out + t * v)[corner]
+    bnd = nfaces != 2
+    nb = np.bincount(np.concatenate([ea[bnd], eb[bnd]]), minlength=nv)
+    fixed = ((nb > 0) & (nb != 2)) | ((nb == 2) & (nface == 1)) | (nface == 0)
     out[fixed] = v[fixed]
+    if len(creases.corners):
+        tc = np.zeros(nv)
+        np.maximum.at(tc, creases.corners, np.minimum(creases.corner_sharpness, 1.0))
+        out = (1.0 - tc[:, None]) * out + tc[:, None] * v
     return out

@@ -191,6 +191,45 @@ def test_a_subdivision_cage_loads_as_its_limit_surface(tmp_path, scheme):
     np.testing.assert_allclose(mesh.bounds, [[0.075] * 3, [0.925] * 3], atol=0.006)
 
 
+def test_creases_keep_a_subdivision_cages_edges(tmp_path):
+    # the top face's four edges creased for good, a corner of the bottom sharp: the top stays a
+    # flat face at z = 1 out to near the cage's edges (its outline a crease curve, round at the
+    # corners: two creased edges meet there), and that corner where it was (the same vertices
+    # as Blender's OpenSubdiv, mpmfx.geometry.subdivide); creased for one level only (sharpness
+    # 0.5) the top rounds as without creases (0.925 high)
+    from pxr import Usd, UsdGeom
+
+    def load(sharpness):
+        path = tmp_path / f"crease{sharpness}.usda"
+        _write_usda(path, None, quads=True, scheme="catmullClark")
+        stage = Usd.Stage.Open(str(path))
+        geom = UsdGeom.Mesh(stage.GetPrimAtPath("/world/box"))
+        geom.CreateCreaseIndicesAttr([1, 3, 7, 5, 1])  # one chain round the top (z = 1) face
+        geom.CreateCreaseLengthsAttr([5])
+        geom.CreateCreaseSharpnessesAttr([sharpness])
+        geom.CreateCornerIndicesAttr([0])
+        geom.CreateCornerSharpnessesAttr([10.0])
+        stage.GetRootLayer().Save()
+        return load_mesh(path)
+
+    sharp = load(10.0)
+    top = sharp.vertices[np.isclose(sharp.vertices[:, 2], 1.0)]
+    assert len(top) > 20 and np.all(top[:, :2].min(0) < 0.05) and np.all(top[:, :2].max(0) > 0.95)
+    assert np.isclose(np.linalg.norm(sharp.vertices, axis=1), 0.0).any()  # the sharp corner stays
+    assert sharp.vertices[:, 2].max() == pytest.approx(1.0)
+    assert load(0.5).vertices[:, 2].max() < 0.97
+    with pytest.raises(MeshError, match="creaseSharpnesses holds 2 values for 1 creases of 4 edges"):
+        path = tmp_path / "bad.usda"
+        _write_usda(path, None, quads=True, scheme="catmullClark")
+        stage = Usd.Stage.Open(str(path))
+        geom = UsdGeom.Mesh(stage.GetPrimAtPath("/world/box"))
+        geom.CreateCreaseIndicesAttr([1, 3, 7, 5, 1])
+        geom.CreateCreaseLengthsAttr([5])
+        geom.CreateCreaseSharpnessesAttr([1.0, 2.0])
+        stage.GetRootLayer().Save()
+        load_mesh(path)
+
+
 def test_hole_faces_are_not_loaded(tmp_path):
     from pxr import Usd, UsdGeom
 
