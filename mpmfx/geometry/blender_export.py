@@ -18,9 +18,10 @@ import sys
 
 import numpy as np
 
+from mpmfx.geometry.mesh import Z_UP_TO_Y_UP
+
 ERROR = "mpmfx-blender-error: "  # the line the parent reads the reason from
 SURFACES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}  # object types Blender turns into a mesh
-Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])  # row vectors: (x, y, z) -> (x, z, -y)
 
 
 def open_file(path: str) -> None:
