@@ -207,9 +207,6 @@ def open_winding_number(mesh, lattice: Lattice, index: np.ndarray) -> np.ndarray
     points = lattice.points(index) + _RAY_SHIFT * lattice.h
     if len(caps) >= len(mesh.faces):  # faces wound every which way: the caps would cost more than they save
         return winding_number(np.asarray(mesh.triangles, float), points)
-    if len(caps) == 0:
-        closed = ray_winding(mesh, lattice, axis=2, signed=True)
-        return closed[tuple(np.asarray(index).T)].astype(float)
     tris = np.concatenate([np.asarray(mesh.triangles, float), caps])
     normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
     closed = _ray_crossings(tris, normals, lattice, axis=2, signed=True)
