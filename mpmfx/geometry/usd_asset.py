@@ -150,9 +150,9 @@ def _usd_meshes(root, time, *, place=None):
 
 
 def _instanced_meshes(instancer, world: np.ndarray, time):
-    """_usd_meshes of each instance of a PointInstancer whose local-to-world matrix is `world`:
-    a prototype's mesh at (mesh relative to the prototype) x (the instance's transform, which
-    holds the prototype's own) x world."""
+    """_usd_meshes of each drawn instance (not in invisibleIds nor inactiveIds) of a
+    PointInstancer whose local-to-world matrix is `world`: a prototype's mesh at (mesh relative
+    to the prototype) x (the instance's transform, which holds the prototype's own) x world."""
     from pxr import UsdGeom
 
     protos = instancer.GetPrototypesRel().GetTargets()
@@ -161,14 +161,20 @@ def _instanced_meshes(instancer, world: np.ndarray, time):
         return
     stage = instancer.GetPrim().GetStage()
     cache = UsdGeom.XformCache(time)
-    inst = [np.array(m, dtype=float).reshape(4, 4) for m in instancer.ComputeInstanceTransformsAtTime(time, time)]
+    # every instance's transform, in protoIndices' order (applying the mask would drop the hidden
+    # ones from the list and shift the rest against protoIndices), then the mask by hand
+    inst = [np.array(m, dtype=float).reshape(4, 4) for m in instancer.ComputeInstanceTransformsAtTime(
+        time, time, UsdGeom.PointInstancer.IncludeProtoXform, UsdGeom.PointInstancer.IgnoreMask)]
+    shown = np.asarray(instancer.ComputeMaskAtTime(time), bool)  # empty: every instance is drawn
+    index = np.asarray(index)
+    drawn = shown if len(shown) == len(index) else np.ones(len(index), bool)
     for k, path in enumerate(protos):
         proto = stage.GetPrimAtPath(path)
         if not proto:
             continue
         # world space -> the prototype's own space (its transform comes back in the instance's)
         to_proto = np.linalg.inv(np.array(cache.GetLocalToWorldTransform(proto), dtype=float).reshape(4, 4))
-        for i in np.flatnonzero(np.asarray(index) == k):
+        for i in np.flatnonzero((index == k) & drawn):
             yield from _usd_meshes(proto, time, place=to_proto @ inst[i] @ world)
 
 

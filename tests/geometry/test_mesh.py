@@ -162,8 +162,9 @@ def test_usd_loads_what_a_renderer_draws(tmp_path):
     inst.AddTranslateOp().Set(Gf.Vec3d(0, 0, 10.0))
     proto = _box_prim(stage, "/world/scatter/protos/box", translate=(0, 1.0, 0))  # its own transform counts once
     inst.CreatePrototypesRel().SetTargets([proto.GetPath()])
-    inst.CreateProtoIndicesAttr([0, 0, 0])
-    inst.CreatePositionsAttr([Gf.Vec3f(-3, 0, 0), Gf.Vec3f(-5, 0, 0), Gf.Vec3f(-7, 0, 0)])
+    inst.CreateProtoIndicesAttr([0, 0, 0, 0])
+    inst.CreatePositionsAttr([Gf.Vec3f(-3, 0, 0), Gf.Vec3f(-5, 0, 0), Gf.Vec3f(9, 9, 9), Gf.Vec3f(-7, 0, 0)])
+    inst.CreateInvisibleIdsAttr([2])  # the third instance hidden: the fourth still where it is
     _box_prim(stage, "/world/proxy", translate=(9, 9, 9)).CreatePurposeAttr(UsdGeom.Tokens.proxy)
     _box_prim(stage, "/world/guide", translate=(9, 9, 9)).CreatePurposeAttr(UsdGeom.Tokens.guide)
     _box_prim(stage, "/world/hidden", translate=(9, 9, 9)).MakeInvisible()
