@@ -55,7 +55,8 @@ class SceneObject(_Section):
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="Object name (a USD prim name).")
     mesh: Path = Field(description="Mesh file (obj, ply, stl, glb, gltf, usd, usda, usdc, usdz, blend, fbx), "
                                    "relative to the shot file.")
-    prim_path: str | None = Field(None, description="USD files only: the prim whose meshes are taken.")
+    prim_path: str | None = Field(None, description="The part of the file taken: a USD prim whose meshes are taken, "
+                                  "or a .blend / .fbx object or collection name; default: the whole file.")
     material: str = Field("Elastic", description="Preset name from the guide's section 8 (Soft, Mushy, Goopy, Wet, "
                           "Slush, Elastic, Granular, CohesiveGranular, Water, Tracer).")
     overrides: dict[str, Real | Bool | str] = Field(

@@ -2,7 +2,10 @@
 mpmfx.geometry.mesh: Blender opens the file in its own process (it bundles its own USD
 libraries, so bpy never shares a process with pxr) and writes the triangles to an .npz.
 
-    python -m mpmfx.geometry.blender_export IN.blend|IN.fbx OUT.npz
+    python -m mpmfx.geometry.blender_export IN.blend|IN.fbx OUT.npz [PART]
+
+PART: the name of an object or collection to take alone (the object, what it instances, the
+collection's objects however deeply nested); all of the scene without it.
 
 What comes out: every object that renders as a surface (meshes, curves, text, surfaces,
 metaballs), with its modifiers at their render settings (a subdivision at its render levels),
@@ -50,15 +53,43 @@ def as_rendered() -> None:
                 mod.levels = mod.render_levels
 
 
-def triangles() -> tuple[np.ndarray, np.ndarray]:
-    """(vertices (n, 3) float64 in Blender's world units and axes, faces (f, 3) int64)."""
+def _in_part(inst, part: str | None) -> bool:
+    """Whether a depsgraph instance belongs to `part`: the object of that name, one it
+    instances (its instancer's name), or one in the collection of that name (or a collection
+    inside it). None: everything."""
+    if part is None:
+        return True
+    owners = [inst.object.original] + ([inst.parent.original] if inst.is_instance and inst.parent else [])
+    for ob in owners:
+        if ob.name == part or any(c.name == part or part in _ancestors(c) for c in ob.users_collection):
+            return True
+    return False
+
+
+def _ancestors(coll) -> set[str]:
+    """Names of the collections that hold `coll`, however deep."""
+    import bpy
+
+    names, todo = set(), [coll]
+    while todo:
+        c = todo.pop()
+        for parent in bpy.data.collections:
+            if c.name in parent.children and parent.name not in names:
+                names.add(parent.name)
+                todo.append(parent)
+    return names
+
+
+def triangles(part: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(vertices (n, 3) float64 in Blender's world units and axes, faces (f, 3) int64) of
+    everything, or of `part` (_in_part)."""
     import bpy
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
     verts, faces, offset = [], [], 0
     for inst in depsgraph.object_instances:
         ob = inst.object
-        if ob.type not in SURFACES:
+        if ob.type not in SURFACES or not _in_part(inst, part):
             continue
         mesh = ob.to_mesh()
         try:
@@ -86,14 +117,18 @@ def triangles() -> tuple[np.ndarray, np.ndarray]:
 def main(argv: list[str]) -> int:
     import bpy
 
-    src, out = argv
+    src, out, part = argv[0], argv[1], (argv[2] if len(argv) > 2 else None)
     try:
         open_file(src)
     except RuntimeError as exc:  # Blender's operators raise RuntimeError("Error: ...") for a bad file
         print(f"{ERROR}{' '.join(str(exc).split())}", flush=True)
         return 1
+    if part is not None and part not in bpy.data.objects and part not in bpy.data.collections:
+        names = sorted(o.name for o in bpy.context.scene.objects if o.type in SURFACES)[:12]
+        print(f"{ERROR}no object or collection named '{part}'; its surfaces: {', '.join(names) or 'none'}", flush=True)
+        return 1
     as_rendered()
-    v, f = triangles()
+    v, f = triangles(part)
     v = v * bpy.context.scene.unit_settings.scale_length @ Z_UP_TO_Y_UP
     with open(out, "wb") as fh:  # a file object: np.savez would add .npz to a name without it
         np.savez(fh, vertices=v, faces=f)

@@ -36,8 +36,9 @@ class MeshError(ValueError):
 def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Trimesh":
     """Load a triangle mesh in world units (metres).
 
-    path: OBJ, PLY, STL, GLB/glTF or USD/USDA/USDC file.
-    prim_path: USD only; load the meshes under this prim (default: the whole stage).
+    path: OBJ, PLY, STL, GLB/glTF, .blend, .fbx or USD/USDA/USDC/USDZ file.
+    prim_path: USD: load the meshes under this prim; .blend / .fbx: the object or collection of
+        this name (a leading / ignored); default: the whole file.
     Returns one ``trimesh.Trimesh`` (all parts concatenated, transforms applied,
     n-gons triangulated). Raises ``MeshError`` for a missing, unreadable, empty or
     degenerate (flat, zero-volume) mesh.
@@ -53,10 +54,13 @@ def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Tri
         from mpmfx.geometry.usd_asset import load_usd
 
         vertices, faces = load_usd(path, prim_path)
+    elif suffix in BLENDER_SUFFIXES:
+        vertices, faces = _load_blender(path, prim_path)
+    elif prim_path is not None and suffix in TRIMESH_SUFFIXES:
+        raise MeshError(f"{path}: prim_path '{prim_path}' names a part of a USD, .blend or .fbx file; a "
+                        f"{suffix} file is taken whole: drop prim_path or export the part on its own")
     elif suffix in TRIMESH_SUFFIXES:
         vertices, faces = _load_trimesh(path)
-    elif suffix in BLENDER_SUFFIXES:
-        vertices, faces = _load_blender(path)
     else:
         raise MeshError(f"{path}: unsupported format '{suffix}'; export the asset as one of "
                         f"{', '.join(TRIMESH_SUFFIXES + BLENDER_SUFFIXES + USD_SUFFIXES)}")
@@ -86,8 +90,9 @@ def _load_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(merged.vertices, float), np.asarray(merged.faces, np.int64)
 
 
-def _load_blender(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    """A .blend or .fbx file's rendered surfaces, from Blender in its own process."""
+def _load_blender(path: Path, part: str | None) -> tuple[np.ndarray, np.ndarray]:
+    """A .blend or .fbx file's rendered surfaces, or those of the object or collection named
+    `part`, from Blender in its own process."""
     import importlib.util
     import os
     import subprocess
@@ -103,8 +108,8 @@ def _load_blender(path: Path) -> tuple[np.ndarray, np.ndarray]:
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}
     with tempfile.TemporaryDirectory(prefix="mpmfx-blender-") as tmp:
         out = Path(tmp) / "mesh.npz"
-        res = subprocess.run([sys.executable, "-m", "mpmfx.geometry.blender_export", str(path.resolve()), str(out)],
-                             capture_output=True, text=True, env=env)
+        cmd = [sys.executable, "-m", "mpmfx.geometry.blender_export", str(path.resolve()), str(out)]
+        res = subprocess.run(cmd + ([part.lstrip("/")] if part else []), capture_output=True, text=True, env=env)
         if res.returncode != 0 or not out.is_file():
             lines = (res.stdout + res.stderr).strip().splitlines()
             why = next((s.removeprefix(ERROR) for s in lines if s.startswith(ERROR)), " / ".join(lines[-3:]))

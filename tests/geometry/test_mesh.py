@@ -293,6 +293,16 @@ def test_a_blend_file_loads_as_cycles_renders_it(blender_files):
     assert 0.25 < parts[0][1] < 0.4
 
 
+def test_prim_path_takes_one_object_of_a_blend_file(blender_files, tmp_path):
+    # "Cube" with its array's copy, not the other cube; an unknown name lists the file's surfaces
+    assert [c for c, _ in _parts(load_mesh(blender_files[0], prim_path="Cube"))] == [(2.0, 0.5, -2.0), (2.0, 0.5, 0.0)]
+    with pytest.raises(MeshError, match=r"no object or collection named 'Nope'; its surfaces: Cube, Cube\.001, Sphere"):
+        load_mesh(blender_files[0], prim_path="Nope")
+    BOX.export(tmp_path / "box.obj")
+    with pytest.raises(MeshError, match=r"box\.obj: prim_path '/box' names a part of a USD, \.blend or \.fbx file"):
+        load_mesh(tmp_path / "box.obj", prim_path="/box")
+
+
 def test_an_fbx_file_loads_standing_up_in_metres(blender_files):
     parts = _parts(load_mesh(blender_files[1]))
     assert (2.0, 0.5, 0.0) in [c for c, _ in parts] and all(v > 0 for _, v in parts)
