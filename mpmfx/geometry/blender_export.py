@@ -1,4 +1,4 @@
-"""The meshes of a Blender (.blend) or FBX file as Cycles would render them, for
+"""The meshes of a Blender (.blend), FBX or compressed glTF file as Cycles would render them, for
 mpmfx.geometry.mesh: Blender opens the file in its own process (it bundles its own USD
 libraries, so bpy never shares a process with pxr) and writes the triangles to an .npz.
 
@@ -32,8 +32,11 @@ def open_file(path: str) -> None:
 
     if path.lower().endswith(".blend"):
         bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
+        return
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    if path.lower().endswith((".glb", ".gltf")):  # a compressed glTF (Draco, meshopt): Blender decodes it
+        bpy.ops.import_scene.gltf(filepath=path)
     else:
-        bpy.ops.wm.read_factory_settings(use_empty=True)
         bpy.ops.import_scene.fbx(filepath=path)
 
 

@@ -17,7 +17,7 @@ import numpy as np
 if TYPE_CHECKING:  # pragma: no cover
     import trimesh
 
-TRIMESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
+TRIMESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")  # a compressed glTF goes to Blender
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
 BLENDER_SUFFIXES = (".blend", ".fbx")
 
@@ -54,7 +54,7 @@ def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Tri
         from mpmfx.geometry.usd_asset import load_usd
 
         vertices, faces = load_usd(path, prim_path)
-    elif suffix in BLENDER_SUFFIXES:
+    elif suffix in BLENDER_SUFFIXES or _compressed_gltf(path):  # Blender decodes Draco and meshopt
         vertices, faces = _load_blender(path, prim_path)
     elif prim_path is not None and suffix in TRIMESH_SUFFIXES:
         raise MeshError(f"{path}: prim_path '{prim_path}' names a part of a USD, .blend or .fbx file; a "
@@ -71,6 +71,32 @@ def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Tri
     mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=True)
     _validate(mesh, path)
     return mesh
+
+
+GLTF_COMPRESSION = ("KHR_draco_mesh_compression", "EXT_meshopt_compression", "KHR_meshopt_compression")
+"""glTF extensions that compress meshes: trimesh reads such a file as empty geometry, Blender decodes it."""
+
+
+def _compressed_gltf(path: Path) -> bool:
+    """Whether a .glb / .gltf file's meshes are compressed (GLTF_COMPRESSION in its extensions)."""
+    import json
+    import struct
+
+    suffix = path.suffix.lower()
+    if suffix not in (".glb", ".gltf"):
+        return False
+    try:
+        with open(path, "rb") as fh:
+            if suffix == ".gltf":
+                doc = json.load(fh)
+            else:  # 12-byte header, then the JSON chunk: length, type, data
+                fh.seek(12)
+                length, kind = struct.unpack("<I4s", fh.read(8))
+                doc = json.loads(fh.read(length)) if kind == b"JSON" else {}
+    except (OSError, ValueError, struct.error):
+        return False  # unreadable: trimesh says so, naming the file
+    used = set(doc.get("extensionsUsed", [])) | set(doc.get("extensionsRequired", []))
+    return bool(used & set(GLTF_COMPRESSION))
 
 
 def _load_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
