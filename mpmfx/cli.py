@@ -72,6 +72,8 @@ def _parser() -> argparse.ArgumentParser:
     k.add_argument("--grid-n", type=int, default=64, help="grid cells per axis of the domain")
     k.add_argument("--domain", default=None, metavar="OX,OY,OZ,SIZE",
                    help="domain min corner and edge (m); default: the mesh's bounding cube + 10 %%")
+    k.add_argument("--prim-path", default=None, metavar="PART",
+                   help="check one part: a USD prim, or a .blend / .fbx object or collection name")
     k.add_argument("--json", action="store_true", help="JSON for pipelines")
 
     b = sub.add_parser("bench", help="speed and accuracy benchmarks (run them on the GPU)")
@@ -135,7 +137,8 @@ def _dispatch(args) -> int:
                 print(f"error: --domain {args.domain!r}: expected OX,OY,OZ,SIZE in metres", file=sys.stderr)
                 return 2
             origin, size = tuple(o), s
-        return run_check(args.asset, grid_n=args.grid_n, origin=origin, size=size, as_json=args.json)
+        return run_check(args.asset, grid_n=args.grid_n, origin=origin, size=size, as_json=args.json,
+                         prim_path=args.prim_path)
     if args.cmd == "bench":
         from mpmfx.bench import main as bench_main
         from mpmfx.stages.base import quiet_warp

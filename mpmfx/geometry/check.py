@@ -39,8 +39,9 @@ def _topology_line(t: dict) -> str:
 
 
 def run_check(asset: str, *, grid_n: int, origin=None, size=None, as_json: bool = False,
-              out_dir: str | Path | None = None) -> int:
-    """Check ``asset``'s thickness at ``grid_n`` cells per domain edge.
+              out_dir: str | Path | None = None, prim_path: str | None = None) -> int:
+    """Check ``asset``'s thickness at ``grid_n`` cells per domain edge (only its part
+    ``prim_path``, as mpmfx.geometry.mesh.load_mesh takes it, where given).
 
     origin (3,) m and size (m) give the domain (default: the mesh bbox cube, padded 10 %).
     Prints the table (or JSON with ``as_json``) to stdout, writes ``report.json`` and
@@ -50,7 +51,7 @@ def run_check(asset: str, *, grid_n: int, origin=None, size=None, as_json: bool 
     try:
         if grid_n < 1:
             raise MeshError(f"--grid-n {grid_n}: must be a positive number of cells")
-        mesh = load_mesh(asset)
+        mesh = load_mesh(asset, prim_path=prim_path)
         if (origin is None) != (size is None):
             raise MeshError("--domain needs all of ox,oy,oz,size (or leave it out to use "
                             "the asset's padded bounding cube)")

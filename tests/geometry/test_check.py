@@ -67,3 +67,30 @@ def test_check_says_open_and_non_manifold_in_the_table_and_the_json(tmp_path, ca
     run_check(str(tmp_path / "closed.obj"), grid_n=8, out_dir=tmp_path / "c", as_json=True)
     data = json.loads(capsys.readouterr().out)
     assert data["mesh"] == {"watertight": True, "open_edges": 0, "non_manifold_edges": 0}
+
+
+def test_check_prim_path_checks_one_part_of_a_usd_file(tmp_path, capsys, monkeypatch):
+    # a set with a thick block and a thin plate: each part alone gets its own verdict
+    from pxr import Gf, Usd, UsdGeom
+
+    from mpmfx.cli import main
+
+    monkeypatch.chdir(tmp_path)  # the report and heatmap go to ./renders/check/
+
+    path = tmp_path / "set.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    for name, part, x in (("block", trimesh.creation.box(extents=(0.5, 0.5, 0.5)), 0.0), ("plate", slab(0.02), 1.0)):
+        geom = UsdGeom.Mesh.Define(stage, f"/set/{name}")
+        geom.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        geom.CreatePointsAttr([Gf.Vec3f(*(p + (x, 0, 0))) for p in part.vertices])
+        geom.CreateFaceVertexCountsAttr([3] * len(part.faces))
+        geom.CreateFaceVertexIndicesAttr([int(i) for i in part.faces.ravel()])
+    stage.GetRootLayer().Save()
+    verdicts = {}
+    for prim in ("/set/block", "/set/plate"):
+        code = main(["check", str(path), "--prim-path", prim, "--grid-n", "32", "--json"])
+        verdicts[prim] = (code, json.loads(capsys.readouterr().out)["verdict"])
+    assert verdicts == {"/set/block": (0, "pass"), "/set/plate": (1, "fail")}
+    assert main(["check", str(path), "--prim-path", "/nope"]) == 2
+    assert "'/nope' not found" in capsys.readouterr().err
