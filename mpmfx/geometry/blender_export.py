@@ -2,7 +2,7 @@
 mpmfx.geometry.mesh: Blender opens the file in its own process (it bundles its own USD
 libraries, so bpy never shares a process with pxr) and writes the triangles to an .npz.
 
-    python -m mpmfx.geometry.blender_export IN.blend|IN.fbx OUT.npz [PART]
+    python -m mpmfx.geometry.blender_export IN.blend|IN.fbx|IN.glb OUT.npz [PART]
 
 PART: the name of an object or collection to take alone (the object, what it instances, the
 collection's objects however deeply nested); all of the scene without it.
@@ -56,43 +56,31 @@ def as_rendered() -> None:
                 mod.levels = mod.render_levels
 
 
-def _in_part(inst, part: str | None) -> bool:
-    """Whether a depsgraph instance belongs to `part`: the object of that name, one it
-    instances (its instancer's name), or one in the collection of that name (or a collection
-    inside it). None: everything."""
-    if part is None:
-        return True
-    owners = [inst.object.original] + ([inst.parent.original] if inst.is_instance and inst.parent else [])
-    for ob in owners:
-        if ob.name == part or any(c.name == part or part in _ancestors(c) for c in ob.users_collection):
-            return True
-    return False
-
-
-def _ancestors(coll) -> set[str]:
-    """Names of the collections that hold `coll`, however deep."""
+def part_objects(part: str | None) -> set[str] | None:
+    """Names of the objects `part` takes: the object of that name and every object of the
+    collection of that name, however deeply nested (None: everything)."""
     import bpy
 
-    names, todo = set(), [coll]
-    while todo:
-        c = todo.pop()
-        for parent in bpy.data.collections:
-            if c.name in parent.children and parent.name not in names:
-                names.add(parent.name)
-                todo.append(parent)
+    if part is None:
+        return None
+    names = {part} if part in bpy.data.objects else set()
+    if part in bpy.data.collections:
+        names |= {ob.name for ob in bpy.data.collections[part].all_objects}
     return names
 
 
-def triangles(part: str | None = None) -> tuple[np.ndarray, np.ndarray]:
+def triangles(chosen: set[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (n, 3) float64 in Blender's world units and axes, faces (f, 3) int64) of
-    everything, or of `part` (_in_part)."""
+    everything, or of the objects named in `chosen` and what they instance."""
     import bpy
 
     depsgraph = bpy.context.evaluated_depsgraph_get()
     verts, faces, offset = [], [], 0
     for inst in depsgraph.object_instances:
         ob = inst.object
-        if ob.type not in SURFACES or not _in_part(inst, part):
+        owner = inst.parent if inst.is_instance and inst.parent else ob  # an instance belongs to its instancer
+        if ob.type not in SURFACES or (chosen is not None and ob.original.name not in chosen
+                                       and owner.original.name not in chosen):
             continue
         mesh = ob.to_mesh()
         try:
@@ -131,7 +119,7 @@ def main(argv: list[str]) -> int:
         print(f"{ERROR}no object or collection named '{part}'; its surfaces: {', '.join(names) or 'none'}", flush=True)
         return 1
     as_rendered()
-    v, f = triangles(part)
+    v, f = triangles(part_objects(part))
     v = v * bpy.context.scene.unit_settings.scale_length @ Z_UP_TO_Y_UP
     with open(out, "wb") as fh:  # a file object: np.savez would add .npz to a name without it
         np.savez(fh, vertices=v, faces=f)

@@ -257,6 +257,10 @@ bpy.context.object.hide_render = True
 bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0, 0, 5))
 sub = bpy.context.object.modifiers.new("subd", "SUBSURF")
 sub.levels, sub.render_levels = 0, 2
+crates = bpy.data.collections.new("Crates")  # the second cube alone in a collection
+bpy.context.scene.collection.children.link(crates)
+crates.objects.link(bpy.context.object)
+bpy.context.scene.collection.objects.unlink(bpy.context.object)
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[1])
 bpy.ops.export_scene.fbx(filepath=sys.argv[2], use_mesh_modifiers=False)
 bpy.ops.export_scene.gltf(filepath=sys.argv[3], export_draco_mesh_compression_enable=True)
@@ -295,8 +299,10 @@ def test_a_blend_file_loads_as_cycles_renders_it(blender_files):
 
 
 def test_prim_path_takes_one_object_of_a_blend_file(blender_files, tmp_path):
-    # "Cube" with its array's copy, not the other cube; an unknown name lists the file's surfaces
+    # "Cube" with its array's copy, not the other cube; the collection "Crates" its one cube; an
+    # unknown name lists the file's surfaces
     assert [c for c, _ in _parts(load_mesh(blender_files[0], prim_path="Cube"))] == [(2.0, 0.5, -2.0), (2.0, 0.5, 0.0)]
+    assert [c for c, _ in _parts(load_mesh(blender_files[0], prim_path="Crates"))] == [(0.0, 5.0, 0.0)]
     with pytest.raises(MeshError, match=r"no object or collection named 'Nope'; its surfaces: Cube, Cube\.001, Sphere"):
         load_mesh(blender_files[0], prim_path="Nope")
     BOX.export(tmp_path / "box.obj")
