@@ -30,7 +30,8 @@ def bench_voxelise(n_tris: int = 100_000, grid_n: int = 256, *, ppc: int = 8, ho
     t1 = time.perf_counter()
     report = check_thickness(mesh, grid_n=grid_n, origin=(0, 0, 0), size=1.0)
     t2 = time.perf_counter()
-    return {"mesh": "open" if holes else "closed", "n_tris": int(len(mesh.faces)), "grid_n": grid_n, "particles": int(len(vox.points)),
+    return {"mesh": "open" if holes else "closed", "n_tris": int(len(mesh.faces)), "grid_n": grid_n,
+            "particles": int(len(vox.points)),
             "voxelise_s": round(t1 - t0, 2), "check_s": round(t2 - t1, 2),
             "verdict": report.verdict.name}
 

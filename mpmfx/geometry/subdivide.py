@@ -46,7 +46,8 @@ SHARP_INFINITE = 10.0
 
 
 def catmull_clark(vertices: np.ndarray, counts: np.ndarray, indices: np.ndarray, *, creases: Creases | None = None,
-                  levels: int = LEVELS, max_faces: int = MAX_FACES) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+                  levels: int = LEVELS, max_faces: int = MAX_FACES
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(vertices (n', 3) float64, counts (p',) int64, indices, parent (p',) int64: the input
     face each output face came from) after up to `levels` levels of Catmull-Clark subdivision:
     fewer where a level would pass `max_faces` faces (a dense cage is already close to its

@@ -45,7 +45,7 @@ def load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray]
         if points is None or counts is None or indices is None or len(points) == 0:
             continue
         v, counts, indices = _drawn_faces(geom, np.asarray(points, float), np.asarray(counts, np.int64),
-                                          np.asarray(indices, np.int64), time)
+                                          np.asarray(indices, np.int64), time, where=f"{path}: {geom.GetPath()}")
         v = v @ m[:3, :3] + m[3, :3]
         tris = fan_triangulate(counts, indices)
         if geom.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
@@ -62,11 +62,12 @@ def load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray]
     return np.concatenate(all_v), np.concatenate(all_f)
 
 
-def _drawn_faces(geom, v: np.ndarray, counts: np.ndarray, indices: np.ndarray, time):
+def _drawn_faces(geom, v: np.ndarray, counts: np.ndarray, indices: np.ndarray, time, *, where: str):
     """(vertices, counts, indices) of the surface a renderer draws for a UsdGeom.Mesh: its
     faces but those in holeIndices, and for a subdivision surface (subdivisionScheme
     catmullClark, USD's default where none is authored, or loop) the limit surface, closely
-    (mpmfx.geometry.subdivide: a coarse cage can lie far outside what is drawn)."""
+    (mpmfx.geometry.subdivide: a coarse cage can lie far outside what is drawn). where: the
+    file and prim, for messages."""
     from pxr import UsdGeom
 
     from mpmfx.geometry.subdivide import catmull_clark
@@ -83,10 +84,10 @@ def _drawn_faces(geom, v: np.ndarray, counts: np.ndarray, indices: np.ndarray, t
     scheme = geom.GetSubdivisionSchemeAttr()
     if scheme.Get() in (UsdGeom.Tokens.catmullClark, UsdGeom.Tokens.loop) and len(counts):
         if not scheme.HasAuthoredValue():  # likely a polygon mesh whose exporter left USD's default
-            warnings.warn(f"{geom.GetPath()}: no subdivisionScheme, so USD's default catmullClark holds and "
+            warnings.warn(f"{where}: no subdivisionScheme, so USD's default catmullClark holds and "
                           "its limit surface is used, as renderers draw it; for a polygon mesh author "
                           'subdivisionScheme = "none"', UserWarning, stacklevel=2)
-        v, counts, indices, parent = catmull_clark(v, counts, indices, creases=_usd_creases(geom, time))
+        v, counts, indices, parent = catmull_clark(v, counts, indices, creases=_usd_creases(geom, time, where))
         keep = keep[parent]
     if not keep.all():
         indices = indices[np.repeat(keep, counts)]
@@ -94,9 +95,9 @@ def _drawn_faces(geom, v: np.ndarray, counts: np.ndarray, indices: np.ndarray, t
     return v, counts, indices
 
 
-def _usd_creases(geom, time):
+def _usd_creases(geom, time, where: str):
     """The mesh's authored creases (chains of vertices, a sharpness per chain or per edge) and
-    sharp corners, as mpmfx.geometry.subdivide.Creases."""
+    sharp corners, as mpmfx.geometry.subdivide.Creases; where: the file and prim, for messages."""
     from mpmfx.geometry.subdivide import Creases
 
     def get(attr, dtype):
@@ -112,12 +113,12 @@ def _usd_creases(geom, time):
     if len(sharp) == len(lengths):  # one sharpness a crease, else one an edge
         sharp = np.repeat(sharp, np.maximum(lengths - 1, 0))
     if len(sharp) != len(a):
-        raise MeshError(f"{geom.GetPath()}: creaseSharpnesses holds {len(sharp)} values for {len(lengths)} creases of "
+        raise MeshError(f"{where}: creaseSharpnesses holds {len(sharp)} values for {len(lengths)} creases of "
                         f"{len(a)} edges; give one a crease or one an edge")
     corners = get(geom.GetCornerIndicesAttr(), np.int64)
     corner_sharp = get(geom.GetCornerSharpnessesAttr(), float)
     if len(corner_sharp) != len(corners):
-        raise MeshError(f"{geom.GetPath()}: {len(corners)} cornerIndices but {len(corner_sharp)} cornerSharpnesses; "
+        raise MeshError(f"{where}: {len(corners)} cornerIndices but {len(corner_sharp)} cornerSharpnesses; "
                         "give one sharpness a corner")
     return Creases(pairs=np.stack([a, b], 1), sharpness=sharp, corners=corners, corner_sharpness=corner_sharp)
 
