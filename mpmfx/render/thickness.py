@@ -30,7 +30,9 @@ def render_thickness_heatmap(mesh, vertex_thickness_cells: np.ndarray, path: str
     plotter.add_mesh(poly, scalars="thickness (cells)", cmap="RdYlGn",
                      clim=[0.0, 2.0 * warn_cells], smooth_shading=True)
     plotter.add_text(f"thickness in cells (warn < {warn_cells:g})", font_size=10)
-    plotter.camera_position = "iso"
+    # our world is Y-up (a DCC's view): from the front right, above ("iso" keeps Z up and laid
+    # Y-up assets on their side)
+    plotter.view_vector((0.7, 0.6, 1.0), viewup=(0.0, 1.0, 0.0))
     plotter.screenshot(str(path))
     plotter.close()
     return path
