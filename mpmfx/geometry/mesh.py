@@ -119,23 +119,21 @@ def _load_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
 def _load_blender(path: Path, part: str | None) -> tuple[np.ndarray, np.ndarray]:
     """A .blend or .fbx file's rendered surfaces, or those of the object or collection named
     `part`, from Blender in its own process."""
-    import importlib.util
-    import os
     import subprocess
     import sys
     import tempfile
 
     from mpmfx.geometry.blender_export import ERROR
+    from mpmfx.render.cycles import bpy_available, child_env
 
-    if importlib.util.find_spec("bpy") is None:
+    if not bpy_available():
         raise MeshError(f"{path}: reading {path.suffix} files needs Blender as a Python module (bpy 4.5): "
                         "run `bash setup.sh`, or export the asset as USD, glTF or OBJ")
-    root = str(Path(__file__).resolve().parents[2])  # the child imports this package as the parent does
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [root, os.environ.get("PYTHONPATH")]))}
     with tempfile.TemporaryDirectory(prefix="mpmfx-blender-") as tmp:
         out = Path(tmp) / "mesh.npz"
         cmd = [sys.executable, "-m", "mpmfx.geometry.blender_export", str(path.resolve()), str(out)]
-        res = subprocess.run(cmd + ([part.lstrip("/")] if part else []), capture_output=True, text=True, env=env)
+        res = subprocess.run(cmd + ([part.lstrip("/")] if part else []), capture_output=True, text=True,
+                             env=child_env())
         if res.returncode != 0 or not out.is_file():
             lines = (res.stdout + res.stderr).strip().splitlines()
             why = next((s.removeprefix(ERROR) for s in lines if s.startswith(ERROR)), " / ".join(lines[-3:]))

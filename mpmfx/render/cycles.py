@@ -30,6 +30,14 @@ def bpy_available() -> bool:
     return importlib.util.find_spec("bpy") is not None
 
 
+def child_env() -> dict:
+    """The environment of a Blender child process (`python -m mpmfx....`): it runs this very
+    mpmfx (a worktree or an editable install alike)."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(Path(mpmfx.__file__).parents[1]), env.get("PYTHONPATH", "")])
+    return env
+
+
 def blender_version() -> str | None:
     """The installed bpy's version, read from its metadata (importing bpy costs a second)."""
     from importlib.metadata import PackageNotFoundError, version
@@ -67,12 +75,9 @@ def run_job(job_path: Path, *, log: Path) -> Iterator[tuple[int, float, float]]:
     The child's full output goes to `log`; a failure raises CyclesError with its last lines."""
     if not bpy_available():
         raise CyclesError(INSTALL_HINT)
-    env = dict(os.environ)
-    # The child runs this very mpmfx (a worktree or an editable install alike).
-    env["PYTHONPATH"] = os.pathsep.join([str(Path(mpmfx.__file__).parents[1]), env.get("PYTHONPATH", "")])
     cmd = [sys.executable, "-m", "mpmfx.render.cycles_job", str(job_path)]
     with open(log, "w") as out:
-        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+        proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=child_env())
         try:
             for line in proc.stdout:
                 out.write(line)
