@@ -86,6 +86,9 @@ def _parser() -> argparse.ArgumentParser:
                    "newton-aniso; bare --peers runs none (default: all installed; --quick: splashsurf)")
     b.add_argument("--counts", type=int, nargs="+", default=None, metavar="N",
                    help="surface only: particle counts (default 100000 with --quick, else 1000000 10000000)")
+    d = sub.add_parser("docs", help="write docs/shots.md, the shot field reference, from the schema")
+    d.add_argument("--check", action="store_true", help="write nothing; exit 1 when docs/shots.md is stale")
+    d.add_argument("--write", action="store_true", help="write it (the default)")
     return p
 
 
@@ -148,6 +151,9 @@ def _dispatch(args) -> int:
 
     if args.cmd == "cache":
         return _prune(args)
+    if args.cmd == "docs":
+        from mpmfx.shotdoc import main as docs_main
+        return docs_main(check=args.check)
     if args.cmd == "wedge":
         from mpmfx.wedge import main as wedge_main
         return wedge_main(args)
