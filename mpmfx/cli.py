@@ -50,7 +50,7 @@ def _parser() -> argparse.ArgumentParser:
     from mpmfx.wedge import add_parallel_args, add_wedge_parser
     add_parallel_args(r)
     add_parallel_args(e)
-    add_wedge_parser(shot_cmd("wedge", "side-by-side variants of a shot that differ in one field (guide 9.4)"))
+    add_wedge_parser(shot_cmd("wedge", "side-by-side variants of a shot that differ in one field"))
     s = shot_cmd("status", "each stage: cached, partial, stale or missing, and why")
     s.add_argument("--qa", action="store_true", help="per-frame observables of the simulation")
     c = shot_cmd("clean", "delete this variant's cached results (listed with sizes first)")

@@ -1,4 +1,4 @@
-"""Snow confined compression (validation.md §3): the solver's own return map, per particle.
+"""Snow confined compression (Stomakhin et al. 2013; docs/physics.md, "Validation"): the solver's own return map, per particle.
 
 One thread per table row drives F = diag(1, 1, 1 - eps) quasi-statically in small increments
 through `snow_return_map` (the Stomakhin clamp the solver's G2P calls) and evaluates the

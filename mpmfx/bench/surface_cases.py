@@ -1,6 +1,6 @@
 """Accuracy and speed benchmark of the surfacer on particles sampled inside analytic shapes.
 
-Error = distance of output vertices to the analytic surface (validation.md section 6), in
+Error = distance of output vertices to the analytic surface, in
 world units and in units of the particle spacing h, and the mesh's area-weighted distance
 (`surface_error`: the vertex mean moves with where a flat face sits between voxel planes); volume error of the closed mesh against
 the analytic volume; number of connected mesh pieces (1 = no interior bubbles, no specks);
@@ -60,7 +60,7 @@ def sample_shape(
     """About `count` particles inside `shape`; returns ((n, 3) float32 positions m, spacing h m).
 
     lattice: cell centres of a cubic lattice of spacing h, each moved by up to +-jitter * h
-    per axis (uniform; validation.md's "jittered lattice" rows match jitter ~0.1); random:
+    per axis (uniform); random:
     uniform in the volume (what MPM particles after a simulation resemble more), same count.
     """
     sdf, volume, half = shape_sdf(shape)
@@ -114,7 +114,7 @@ def surface_error(vertices: np.ndarray, faces: np.ndarray, sdf: Callable[[np.nda
     triangles by area. The vertex mean samples the surface where marching cubes puts vertices,
     on grid edges, so it depends on where a flat face sits between voxel planes: the 1M random
     box at "fast" reads 0.104-0.123 h as the box moves by fractions of a voxel, while this
-    reads 0.112 h at every offset (docs/surfacing-log.md, seventeenth step)."""
+    reads the same at every offset."""
     if len(faces) == 0:
         return float("nan")
     t = np.asarray(vertices, np.float64)[faces]
