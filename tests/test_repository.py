@@ -50,8 +50,9 @@ HISTORY = {
     "a working period": re.compile(r"\bsessions?\b", re.I),
     "a lease": re.compile(r"\bleas(e|es|ed|ing)\b", re.I),
     "an issue number": re.compile(r"\bissues? #?\d+", re.I),
+    # "the eighteenth" and its like number working periods; "first run" or "second pass" do not
     "an ordinal of a working period": re.compile(
-        rf"\b({_ORDINALS})[- ](session|period|round|run|step|pass)\b|\bthe ({_ORDINALS.split('|tenth|')[1]})\b", re.I),
+        rf"\b({_ORDINALS})[- ](session|working period|lease)s?\b|\b({_ORDINALS.split('|tenth|')[1]})\b", re.I),
     "a dated run": re.compile(r"\b20\d\d-\d\d-\d\d\b"),
 }
 # Technical words that happen to match: pytest's fixture scope.
