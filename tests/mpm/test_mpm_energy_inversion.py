@@ -84,7 +84,7 @@ def test_report_energy_is_exchanged_and_conserved_in_a_free_bar():
 @pytest.mark.parametrize("kind", ["every other particle", "all particles"])
 def test_inverted_elastic_block_recovers(kind):
     """Inversion must be survivable. Mirrored particles (det F = -1) among normal
-    ones used to drag the whole block flat (det F -> 0); now they are mirrored back out,
+    ones would drag the whole block flat (det F -> 0); they are mirrored back out,
     the frame reports it, and the block keeps its volume."""
     p = block((0.4, 0.4, 0.4), (0.6, 0.6, 0.6), grid_n=16)
     solver = Solver([preset("Elastic")], SolverConfig(grid_n=16, gravity=ZERO_G), device="cpu")

@@ -185,8 +185,8 @@ def test_temp_files_of_a_killed_run_are_removed_by_the_next(tmp_path):
 
 
 def test_a_killed_simulation_resumes_from_its_last_complete_frame(tmp_path):
-    """The README's promise, with the default checkpoints: killed after frame 3 (of 8, before the
-    first checkpoint of the old every-5 default), the next run keeps frames 1-3 as they are."""
+    """The README's promise, with the default checkpoints: killed after frame 3 (of 8), the next run
+    keeps frames 1-3 as they are."""
     import signal
     import subprocess
     import sys
