@@ -3,8 +3,8 @@
 - No history: how the project was built (working periods and their ordinals, leases, issue
   numbers, dated runs, run ordinals in file names) belongs in CHANGELOG.md and git, not in code,
   comments, docs or file names.
-- Every cited document exists: paths under docs/, lab/, assets/, pipeline/, scripts/, mpmfx/ and
-  tests/, Markdown file names and relative Markdown links. Documents kept outside the repository
+- Every cited document exists: paths under docs/, lab/, assets/, pipeline/, scripts/, mpmfx/,
+  tests/ and renders/readme/, Markdown file names and relative Markdown links. Documents kept outside the repository
   are never cited.
 - docs/images/ holds exactly the pictures the Markdown documents show.
 """
@@ -85,7 +85,7 @@ def test_no_history_in_file_names():
 
 # -- cited documents ---------------------------------------------------------------------------
 
-CITED_PATH = re.compile(r"(?<![\w./~-])((?:docs|lab|assets|pipeline|scripts|mpmfx|tests)/[\w./-]*\w)")
+CITED_PATH = re.compile(r"(?<![\w./~-])((?:docs|lab|assets|pipeline|scripts|mpmfx|tests|renders/readme)/[\w./-]*\w)")
 CITED_MD = re.compile(r"(?<![\w./~-])([\w-]+\.md)\b")
 MD_LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)|<img[^>]*\bsrc=\"([^\"]+)\"")
 
