@@ -244,10 +244,11 @@ class Shot(_Section):
     surface: Surface = Field(Surface(), description="How particles become surfaces (level sets and meshes).")
     export: Export = Field(Export(), description="What the USD stage and the VDB files hold.")
     render: Render = Field(Render(), description="How frames are drawn.")
-    # Not part of the schema's TOML: where the file lives (relative paths resolve from here).
-    base_dir: Path = Field(Path("."), exclude=True)
-    source: Path | None = Field(None, exclude=True)                # the shot file, for messages
-    overrides: tuple[str, ...] = Field((), exclude=True)           # the --set values it was loaded with
+    # Not part of the schema's TOML (excluded from dumps and from docs/shots.md):
+    base_dir: Path = Field(Path("."), exclude=True, description="Where the shot file lives; relative paths "
+                           "resolve from here.")
+    source: Path | None = Field(None, exclude=True, description="The shot file, for messages.")
+    overrides: tuple[str, ...] = Field((), exclude=True, description="The --set values it was loaded with.")
 
     @property
     def frames(self) -> range:
