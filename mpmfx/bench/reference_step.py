@@ -1,8 +1,8 @@
 """The MLS-MPM substep written plainly in numpy (float64), for tests and benchmarks.
 
 Read it line by line against docs/physics.md ("The method", "Materials", "Boundaries") or
-the tutorial "Material Point Method: Step by Step": the four phases, the stencil and B-spline weights, the fused MLS stress,
-fixed-corotated elasticity, the snow clamp and the sand cone, the Tait fluid, and the
+the tutorial "Material Point Method: Step by Step": the four phases, the stencil and B-spline
+weights, the fused MLS stress, fixed-corotated elasticity, the snow clamp and the sand cone, the Tait fluid, and the
 walls of `mpmfx.mpm.config.SolverConfig` (a band of `boundary_cells` nodes on each face,
 sticky / slip / separate, Coulomb `wall_friction`). It is the reference the production
 Warp solver (`mpmfx.mpm.Solver`) must match on the same particles, grid and dt; it is

@@ -54,8 +54,8 @@ class SolverConfig:
         cfl: CFL number; dt = cfl * dx / (c_max + |v|_max), usually 0.3-0.5 (docs/physics.md,
             "The method").
         gravity: (3,) domain/s^2; the default is standard gravity for a 1 m domain (a shot
-            gives m/s^2 and the stage divides by the domain's size). A balance knob (mound vs pancake), not a speed knob:
-            time_scale is the speed knob.
+            gives m/s^2 and the stage divides by the domain's size). A balance knob (mound vs
+            pancake), not a speed knob: time_scale is the speed knob.
         damping: 1/s velocity decay rate, applied per substep as v *= 1 - damping * dt
             so its effect per second does not depend on dt. Without it an elastic body rings on.
         drag: 1/s rate at which the affine velocity C is blended toward PIC,

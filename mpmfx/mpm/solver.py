@@ -4,7 +4,8 @@
 
     clear grid -> P2G -> grid update -> G2P
 
-`Solver.advance` owns the clock, the wall-clock-to-substep accounting: dt = cfl * dx / (c_max + |v|max) from the current hardened moduli, a substep
+`Solver.advance` owns the clock, the wall-clock-to-substep accounting:
+dt = cfl * dx / (c_max + |v|max) from the current hardened moduli, a substep
 that produces non-finite values or moves a particle more than a cell is rejected and redone
 at half dt, and the substeps land exactly on the requested time.
 """
