@@ -436,7 +436,7 @@ def bench_sheet(count: int, device: str | None = None, *, peers: Sequence[str] =
     one that fails at run time is reported and left out): pieces, holes, open edges, thickness
     error, time."""
     for label in OURS:  # load every setting's kernels first: on a fresh GPU machine a module's first
-        for aniso in (False, True):  # load compiles it (the 1M sheet's first "fine" row took 65 s on an H200)
+        for aniso in (False, True):  # load compiles it (a minute, which would land in the first row)
             measure_sheet(500, "random", label=label, device=device, anisotropic=aniso)
     rows = Table(SHEET_HEADER, format_sheet_row, echo=echo)
     for sampling in ("lattice", "random"):
