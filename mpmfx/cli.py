@@ -67,6 +67,10 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--dry-run", action="store_true", help="list what would be deleted, delete nothing")
     m.add_argument("-y", "--yes", action="store_true", help="delete simulations without asking")
 
+    d = sub.add_parser("docs", help="write docs/shots.md, the shot field reference, from the schema")
+    d.add_argument("--check", action="store_true", help="write nothing; exit 1 when docs/shots.md is stale")
+    d.add_argument("--write", action="store_true", help="write it (the default)")
+
     k = sub.add_parser("check", help="five-cell thickness check of an asset (exit 0 pass/warn, 1 fail, 2 bad input)")
     k.add_argument("asset", help="mesh file (obj, ply, stl, glb, gltf, usd, usda, usdc, usdz, blend, fbx)")
     k.add_argument("--grid-n", type=int, default=64, help="grid cells per axis of the domain")
@@ -86,9 +90,6 @@ def _parser() -> argparse.ArgumentParser:
                    "newton-aniso; bare --peers runs none (default: all installed; --quick: splashsurf)")
     b.add_argument("--counts", type=int, nargs="+", default=None, metavar="N",
                    help="surface only: particle counts (default 100000 with --quick, else 1000000 10000000)")
-    d = sub.add_parser("docs", help="write docs/shots.md, the shot field reference, from the schema")
-    d.add_argument("--check", action="store_true", help="write nothing; exit 1 when docs/shots.md is stale")
-    d.add_argument("--write", action="store_true", help="write it (the default)")
     return p
 
 
