@@ -206,7 +206,7 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
     # each of its 12 Jacobi rotations, the sand return map takes logs and exps, so G2P is
     # faster with it. Deterministic mode still replays bit for bit; F moves by about the fast
     # mode's own run-to-run difference, and the errors of the bench's experiments section
-    # against the published data do not change.
+    # against the published data do not change (lab/p2g_gpu.py compares the two on a GPU).
     wp.set_module_options({"fast_math": G2P_FAST_MATH}, module=module)
 
     @wp.kernel(enable_backward=False, module=module, cuda_max_registers=g2p_launch_shape()[0])

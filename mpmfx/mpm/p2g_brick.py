@@ -224,7 +224,8 @@ def sort_cadence(frag, every: int, n: int, cap: int) -> int:
     substeps (every substep sorted) the next chunk tries twice the cadence. The counts are of
     particles, not of time, so a deterministic run picks the same cadences when replayed.
 
-    The rule's pick is at or next to the fastest fixed cadence on the shipped GPU shots. A
+    The rule's pick is at or next to the fastest fixed cadence on the shipped GPU shots
+    (lab/cadence_fit.py measures the cadences and fits the sort's cost). A
     falling block's runs heal as it falls on (a whole run crosses a face and is one run again),
     which the linear growth does not see, so it sorts more often there than it needs to."""
     fresh_sub, stale_sub = float(frag[FRAG_SUBSTEPS]), float(frag[FRAG_SUBSTEPS + 1])

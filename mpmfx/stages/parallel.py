@@ -43,7 +43,7 @@ AUTO_MIN_TASKS = 10
 # From AUTO_MIN_TASKS frames on, auto runs PROBE_CALLS frames here first and starts workers for
 # the rest only if the probe says they would finish sooner (worth_a_cluster). CLUSTER_COST_S: the
 # wall seconds a LocalCluster costs before it gains any, as the default shot's 24 frames measure
-# it on a 2-core CPU: two workers are slower than serial there for surface and export, and
+# it on a 2-core CPU (lab/bench_frames.py): two workers are slower than serial there for surface and export, and
 # Cycles already uses every core.
 PROBE_CALLS = 2
 CLUSTER_COST_S = 4.0

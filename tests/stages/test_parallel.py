@@ -179,7 +179,7 @@ def test_a_bad_surfacer_thread_count_is_bad_input_not_a_traceback(tiny_shot, tmp
 
 
 def test_auto_starts_workers_only_where_they_would_finish_sooner():
-    # on a 2-core CPU the default shot's light surface frames (0.16 s a frame on 1.7 cores) are
+    # on a 2-core CPU (lab/bench_frames.py) the default shot's light surface frames (0.16 s a frame on 1.7 cores) are
     # slower on two workers than serial; heavy single-core frames (5 s each) are faster there;
     # a Cycles frame already uses both cores
     assert not worth_a_cluster(22, wall=0.16, cpu=0.27, cores=2)
