@@ -95,11 +95,14 @@ def _is_template(text: str, end: int) -> bool:
     return text[end:end + 1] in ("*", "<", "{", "[") or text[end:end + 2] in ("/*", "/<", "/{", "/[")
 
 
+PLACEHOLDER = re.compile(r"(^|/)(?!README\b|CHANGELOG\b|LICENSE\b)[A-Z][A-Z0-9_]*(\.\w+)?$")  # lab/NAME.py
+
+
 def _cited_paths(text: str) -> set[str]:
     out = set()
     for m in CITED_PATH.finditer(text):
         path = m.group(1).rstrip(".")
-        if not _is_template(text, m.end()) and not path.endswith((".", "/")):
+        if not _is_template(text, m.end()) and not path.endswith((".", "/")) and not PLACEHOLDER.search(path):
             out.add(path)
     return out
 
