@@ -153,7 +153,7 @@ def _dispatch(args) -> int:
     if args.cmd == "cache":
         return _prune(args)
     if args.cmd == "docs":
-        from mpmfx.shotdoc import main as docs_main
+        from mpmfx.shotdoc import main as docs_main  # backend: pydantic (keeps --help light)
         return docs_main(check=args.check)
     if args.cmd == "wedge":
         from mpmfx.wedge import main as wedge_main
