@@ -1,15 +1,15 @@
-"""Run the GPU hero shots (pipeline/shots/hero_*.toml) through voxelise, simulate and surface with the
-product's own stage runner (`mpmfx.load_shot(...).run(until="surface", frames=...)`, the path of
-`mpmfx run SHOT --until surface --frames ...`), time every stage, and pack the still frames'
-surfaces for the trip back (scripts/hero_codec.py: lossy-compact meshes, split under 15 MiB).
+"""Run the GPU hero shots as `mpmfx bench shots` does (mpmfx.bench.shots: voxelise, simulate and
+surface through the stage runner, every stage timed) and pack the still frames' surfaces for the
+trip back from a remote GPU machine (hero_codec.py: lossy-compact meshes, split under 15 MiB), to
+be exported and rendered by hero_render.py.
 
-    python3 scripts/hero_gpu.py                      # on the GPU: both hero shots, outputs to $OUT
-    python3 scripts/hero_gpu.py --smoke --device cpu # CPU size (grid 32, few frames): tests the path
-    python3 scripts/hero_gpu.py --no-pack            # the stage times only (no surfaces brought back)
+    python lab/hero_gpu.py --out DIR                   # on the GPU: both hero shots
+    python lab/hero_gpu.py --smoke --device cpu        # CPU size (grid 32, few frames): tests the path
 
 Imports numpy, warp and mpmfx only (and what the stages import: pydantic, tqdm, trimesh). Writes
-$OUT/hero_times.json (per shot: particles, grid, frames, substeps, seconds per stage, mesh sizes,
-the device) and $OUT/<shot>_<frame>.hm[.NNN]; prints one table at the end.
+DIR/hero_times.json (per shot: particles, grid, frames, substeps, seconds per stage, mesh sizes,
+the device) and DIR/<shot>_<frame>.hm[.NNN], within a return budget of RETURN_BYTES in
+RETURN_FILES files; prints one table at the end.
 """
 from __future__ import annotations
 
@@ -21,47 +21,13 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(Path(__file__).resolve().parent)]
+import hero_codec
 
-import hero_codec  # noqa: E402  (scripts/, beside this file)
+from mpmfx.bench.shots import SHOTS, SMOKE_GRID, device_name, public, run_shot, smoke_overrides, warm_up
+from mpmfx.bench.shots import table as shots_table
 
-# shot -> frames to surface and bring back, best first (hero_render.py's README_STILL picks the README's).
-SHOTS = {"hero_dam": [8, 6], "hero_castle": [7, 12]}
-RETURN_BYTES = 58 * 2**20   # of the 64 MiB the device tool brings back; the JSON and log need little
-RETURN_FILES = 7            # of its 8 files: one is hero_times.json
-
-
-def smoke_overrides(grid_n: int, last: int) -> list[str]:
-    """CPU size: a coarse grid (domain origin kept 3 cells below y = 0, the solver's floor) and a
-    short shot; everything else is the shot's own."""
-    dx = 2.0 / grid_n
-    return [f"domain.grid_n={grid_n}", f"domain.origin=[-1.0, {-3 * dx}, -1.0]", f"shot.frame_end={last}"]
-
-
-def run_shot(name: str, frames: list[int], *, overrides: list[str], cache: Path, device: str) -> dict:
-    import mpmfx
-    shot_file = ROOT / "pipeline" / "shots" / f"{name}.toml"
-    run = mpmfx.load_shot(shot_file, overrides=overrides, cache_root=cache, device=device, quiet=True, workers=1)
-    t0 = time.perf_counter()
-    results = run.run(until="surface", frames=frames)
-    wall = time.perf_counter() - t0
-    entries = run.entries()
-    man = {s: entries[s].manifest() or {} for s in ("voxelise", "simulate", "surface")}
-    qa = man["simulate"].get("qa", {})
-    substeps = [int(q.get("substeps", 0)) for f, q in sorted(qa.items(), key=lambda kv: int(kv[0])) if int(f) > run.shot.shot.frame_start]
-    return {
-        "shot": name, "overrides": overrides, "grid_n": run.shot.domain.grid_n, "domain_m": run.shot.domain.size,
-        "frames_simulated": len(man["simulate"].get("frames", [])),
-        "seconds_of_shot": (len(man["simulate"].get("frames", [1])) - 1) / run.shot.shot.fps,
-        "frames_surfaced": frames, "particles": man["voxelise"].get("particles"),
-        "substeps_total": sum(substeps), "substeps_per_frame": [min(substeps or [0]), max(substeps or [0])],
-        "stages": {r.stage: {"seconds": round(r.seconds, 2), "state": r.state, "frames": r.frames} for r in results},
-        "simulate_split": man["simulate"].get("seconds_split"),
-        "run_wall_s": round(wall, 2), "surface_vertices": man["surface"].get("this_run", {}).get("vertices"),
-        "surface_faces": man["surface"].get("this_run", {}).get("faces"),
-        "voxel_m": None, "_surface_entry": str(entries["surface"].root), "_shot": run.shot,
-    }
+RETURN_BYTES = 58 * 2**20   # what the packed frames may take of a 64 MiB return; the JSON and log need little
+RETURN_FILES = 7            # of 8 returned files: one is hero_times.json
 
 
 def pack_frame(row: dict, frame: int, out: Path, *, budget: dict) -> dict:
@@ -93,30 +59,11 @@ def pack_frame(row: dict, frame: int, out: Path, *, budget: dict) -> dict:
     return info
 
 
-def device_name(device: str) -> str:
-    import warp as wp
-    d = wp.get_device(device)
-    return getattr(d, "name", str(d)) if d.is_cuda else f"CPU ({platform.processor() or platform.machine()}, {os.cpu_count()} cores)"
-
-
 def table(rows: list[dict], warm: dict | None, dev: str) -> str:
-    lines = [f"device: {dev}"]
-    if warm:
-        lines.append(f"warm-up (Warp kernel compiles, {warm['shot']} at grid {warm['grid_n']}): "
-                     f"{warm['run_wall_s']} s")
-    head = ("shot", "particles", "grid", "frames", "substeps", "voxelise s", "simulate s", "surface s",
-            "surf frames", "vertices", "packed MiB")
-    lines.append(" | ".join(head))
-    for r in rows:
-        st = r["stages"]
-        packed = sum(p["bytes"] for p in r.get("packed", []) if "skipped" not in p) / 2**20
-        lines.append(" | ".join(str(x) for x in (
-            r["shot"], r["particles"], r["grid_n"], r["frames_simulated"], r["substeps_total"],
-            st.get("voxelise", {}).get("seconds"), st.get("simulate", {}).get("seconds"),
-            st.get("surface", {}).get("seconds"), len(r["frames_surfaced"]), r["surface_vertices"], f"{packed:.1f}")))
-        if r.get("simulate_split"):
-            lines.append(f"  {r['shot']} simulate, s: " + ", ".join(f"{k} {v}" for k, v in r["simulate_split"].items()))
-    return "\n".join(lines)
+    """`mpmfx bench shots`'s table, and the MiB packed per shot."""
+    packed = [f"{r['shot']} packed: "
+              f"{sum(p['bytes'] for p in r.get('packed', []) if 'skipped' not in p) / 2**20:.1f} MiB" for r in rows]
+    return "\n".join([shots_table(rows, warm, dev), *packed])
 
 
 def main(argv=None) -> int:
@@ -127,7 +74,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", default="/tmp/hero_cache")
     ap.add_argument("--out", default=os.environ.get("OUT", "hero_out"))
     ap.add_argument("--budget-s", type=float, default=330.0,
-                    help="start no further shot after this many seconds (the device call's limit is 600 s)")
+                    help="start no further shot after this many seconds (a remote call's time limit)")
     ap.add_argument("--pack", action=argparse.BooleanOptionalAction, default=True,
                     help="bring the stills' surfaces back (off: times only)")
     ap.add_argument("--warmup", action=argparse.BooleanOptionalAction, default=None,
@@ -143,19 +90,13 @@ def main(argv=None) -> int:
     budget = {"bytes": RETURN_BYTES, "files": RETURN_FILES}
     warm = None
     if args.warmup if args.warmup is not None else not args.smoke:
-        # Compiling Warp's kernels (first use on a fresh machine) would otherwise land in the first
-        # shot's stage times: a tiny run of the same stages compiles them, timed on its own.
-        t0 = time.perf_counter()
-        for name in args.shots:  # every shot: each material's and collider's kernels
-            warm = run_shot(name, [3], overrides=smoke_overrides(32, 3), cache=cache / "warmup", device=args.device)
-        warm["run_wall_s"] = round(time.perf_counter() - t0, 2)
-        warm["shot"] = ", ".join(args.shots)
+        warm = warm_up(args.shots, cache / "warmup", args.device)
         print(f"warm-up done in {warm['run_wall_s']} s", flush=True)
     rows = []
 
     def save() -> None:  # after every shot: a run cut short still returns what it finished
         report = {"device": dev, "warp": wp.config.version, "python": platform.python_version(), "smoke": args.smoke,
-                  "warmup": _public(warm) if warm else None, "shots": [_public(r) for r in rows],
+                  "warmup": public(warm) if warm else None, "shots": [public(r) for r in rows],
                   "elapsed_s": round(time.perf_counter() - t_start, 1)}
         (out / "hero_times.json").write_text(json.dumps(report, indent=1))
 
@@ -165,13 +106,13 @@ def main(argv=None) -> int:
             print(f"{name}: skipped, {elapsed:.0f} s used of the {args.budget_s} s budget", flush=True)
             continue
         frames = SHOTS[name]
-        over = smoke_overrides(32, max(frames)) if args.smoke else []
+        over = smoke_overrides(SMOKE_GRID, max(frames)) if args.smoke else []
         print(f"{name}: running voxelise, simulate, surface (frames {frames}) ...", flush=True)
         row = run_shot(name, frames, overrides=over, cache=cache, device=args.device)
         print(f"{name}: {row['stages']}", flush=True)
         rows.append(row)
         if args.pack:
-            _pack_into(row, 0, out, budget)  # its README still at once
+            _pack_into(row, 0, out, budget)  # its first still at once
         save()
     for row in rows if args.pack else ():  # then the second frames, while the return budget lasts
         for rank in range(1, len(row["frames_surfaced"])):
@@ -189,10 +130,6 @@ def _pack_into(row: dict, rank: int, out: Path, budget: dict) -> None:
     row.setdefault("packed", []).append(info)
     print(f"packed {row['shot']} frame {info['frame']}: {info['bytes'] / 2**20:.1f} MiB in {info['encode_s']} s "
           f"{info.get('skipped', '')}", flush=True)
-
-
-def _public(row: dict) -> dict:
-    return {k: v for k, v in row.items() if not k.startswith("_")}
 
 
 if __name__ == "__main__":
