@@ -217,7 +217,7 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
     # particles, G2P ms a substep, two rounds: snow 2.52 -> 2.25, sand 2.74 -> 2.27, water
     # 1.20 -> 1.17. Against IEEE G2P after 6 stirred frames in deterministic mode (which still
     # replays bit for bit), max |dF|: snow 2.1e-5 (the fast mode's own run-to-run: 1.5e-5),
-    # sand 1.0e-4 (scripts/p2g_gpu.py, fastmath); over the bench's experiments section (438
+    # sand 1.0e-4 (lab/p2g_gpu.py, fastmath); over the bench's experiments section (438
     # values) the mean error against the published data is unchanged to 4 digits, the largest
     # single change a runout 2.60 -> 2.64 (1.7 %).
     wp.set_module_options({"fast_math": G2P_FAST_MATH}, module=module)

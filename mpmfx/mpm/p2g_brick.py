@@ -47,7 +47,7 @@ on G2P made it slower (water 1.49 -> 1.77 ms at 64). Since the particles' stress
 SVD here any more) 80 is better than 64; H200, fast mode, the scatter alone, ms a substep at
 19.4M (cap 80 / 72 / 64): snow 2.54 / 2.56 / 2.79, water 2.48 / 2.44 / 2.58, sand 2.53 / 2.55 /
 2.79; at 2.4M (uncapped / 96 / 80 / 64 / 56): snow 0.401 / 0.370 / 0.349 / 0.371 / 0.384, water
-0.506 / 0.376 / 0.351 / 0.353 / 0.365 (scripts/kernel_probe.py, kernel_caps("scatter")). Since a run's
+0.506 / 0.376 / 0.351 / 0.353 / 0.365. Since a run's
 weights stay in registers (row_weight: W had spilled to local memory), 64 is best: snow at 19.4M
 (cap 96 / 80 / 72 / 64 / 56) 2.24 / 2.07 / 1.94 / 1.84 / 1.89 ms, water (80 / 72 / 64) 2.20 / 2.06 /
 1.93 (H200). Also dropped (H200, 19.4M snow): rounds cut after block // 9 runs so a round's run
@@ -73,7 +73,7 @@ neighbouring chunks add to the same window nodes at once. Register caps re-measu
 code, scatter alone at 19.4M snow, cap 48 / 56 / 64 / 72 / 80: 1.86 / 1.72 / 1.65 / 1.77 / 1.91
 ms.) The window was float (fast) and int64 (deterministic) before, and shared memory adds both with
 compare-and-swap loops; as 32-bit words, measured on an H100 (G particle-substeps/s, bench
-blocks; ms a substep, shots; scripts/p2g_runs.py):
+blocks; ms a substep, shots):
 
                                   fast: float -> words       deterministic: int64 -> words
     Water / Snow 2.4M             3.16 -> 3.42 / 2.34 -> 2.60   2.25 -> 3.45 / 1.83 -> 2.54
@@ -263,7 +263,7 @@ def sort_cadence(frag, every: int, n: int, cap: int) -> int:
 
     A piece costs 0.22-0.27 ns of scatter in every scene there (slope of scatter time against
     pieces between cadences); a sort 1.34 ms at 19.4M, 0.23 ms at 2.4M. Refitted since
-    (scripts/cadence_fit.py, renders/readme/cadence_fit_h200.json, same scenes): a piece 0.28 ns,
+    (lab/cadence_fit.py, renders/readme/cadence_fit_h200.json, same scenes): a piece 0.28 ns,
     and a sort also costs its substep's G2P moving every particle to its new slot (0.06-0.08 ms
     at 2.4M-3.4M, 0.46-0.50 at 19.4M): 0.29 ms a sort at 2.4M, 1.8 at 19.4M; scatter + sort
     ms a substep for hero_dam at k = 2 / 4 / 8 / 16: 0.68 / 0.61 / 0.60 / 0.64. The falling block's runs

@@ -53,7 +53,7 @@ class SceneFlags:
 
 # A matrix field (C, F) is stored as three planes of rows, a (3, n) vec3 array: row r of
 # particle p at [r, p]. Why: an array of mat33 (36 bytes a particle) copies at 1.3 TB/s on an
-# H200, three planes of 12-byte rows at 3.9 (scripts/layout_probe.py), and G2P reads F and
+# H200, three planes of 12-byte rows at 3.9, and G2P reads F and
 # writes C and F every substep.
 
 
