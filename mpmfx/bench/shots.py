@@ -17,6 +17,10 @@ import tempfile
 import time
 from pathlib import Path
 
+import warp as wp
+
+from mpmfx.stages.runner import load_shot
+
 SHOT_DIR = Path(__file__).parents[2] / "pipeline" / "shots"
 SHOTS = {"hero_dam": [8, 6], "hero_castle": [7, 12]}
 """Shot -> the frames to surface (its stills, best first)."""
@@ -33,8 +37,7 @@ def smoke_overrides(grid_n: int, last: int) -> list[str]:
 def run_shot(name: str, frames: list[int], *, overrides: list[str], cache: Path, device: str | None) -> dict:
     """Run shot `name` up to the surface stage, surfacing `frames`; its times and sizes. Keys
     starting with "_" (the surface cache entry, the shot) are for the caller, not the report."""
-    import mpmfx
-    run = mpmfx.load_shot(SHOT_DIR / f"{name}.toml", overrides=overrides, cache_root=cache, device=device,
+    run = load_shot(SHOT_DIR / f"{name}.toml", overrides=overrides, cache_root=cache, device=device,
                           quiet=True, workers=1)
     t0 = time.perf_counter()
     results = run.run(until="surface", frames=frames)
@@ -60,7 +63,6 @@ def run_shot(name: str, frames: list[int], *, overrides: list[str], cache: Path,
 
 def device_name(device: str | None) -> str:
     """The device's name; the CPU with its core count."""
-    import warp as wp
     d = wp.get_device(device)
     return getattr(d, "name", str(d)) if d.is_cuda else f"CPU ({platform.processor() or platform.machine()}, {os.cpu_count()} cores)"
 
@@ -104,7 +106,6 @@ def public(row: dict) -> dict:
 
 def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench") -> int:
     """Both hero shots from a fresh cache; --quick: CPU size."""
-    import warp as wp
     dev = device_name(device)
     with tempfile.TemporaryDirectory(prefix="mpmfx-bench-shots-") as tmp:
         cache = Path(tmp)

@@ -19,6 +19,12 @@ import time
 from collections.abc import Sequence
 
 import numpy as np
+import warp as wp
+
+from mpmfx.bench.report import print_table, write_rows
+from mpmfx.bench.surface_cases import OURS, PARTICLE_RADIUS_PER_SPACING, sample_shape, shape_sdf, surface_error
+from mpmfx.bench.surface_peers import SPLASHSURF_SETTINGS, peer_missing, splashsurf_call
+from mpmfx.surface import SurfaceParams, surface_particles
 
 QUICK = (100_000, 9)
 FULL = (10_000_000, 11)
@@ -27,12 +33,6 @@ PEERS = ("splashsurf",)
 
 def time_case(shape: str, sampling: str, count: int, calls: int, device, peers: Sequence[str]) -> list[dict]:
     """The rows of one shape and sampling: each of our settings, then each peer."""
-    import warp as wp
-
-    from mpmfx.bench.surface_cases import OURS, PARTICLE_RADIUS_PER_SPACING, sample_shape, shape_sdf, surface_error
-    from mpmfx.bench.surface_peers import SPLASHSURF_SETTINGS, splashsurf_call
-    from mpmfx.surface import SurfaceParams, surface_particles
-
     dev = wp.get_device(device)
     x, h = sample_shape(shape, count, sampling)
     sdf, _, _ = shape_sdf(shape)
@@ -77,9 +77,6 @@ def time_case(shape: str, sampling: str, count: int, calls: int, device, peers: 
 def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench",
          peers: Sequence[str] | None = None, counts: Sequence[int] | None = None) -> int:
     """Every shape and sampling at each of --counts; 0 on success, 2 on a bad --peers / --counts."""
-    from mpmfx.bench.report import print_table, write_rows
-    from mpmfx.bench.surface_peers import peer_missing
-
     count, calls = QUICK if quick else FULL
     counts = tuple(counts) if counts else (count,)
     if min(counts) < 1000:
