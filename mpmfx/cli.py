@@ -81,15 +81,18 @@ def _parser() -> argparse.ArgumentParser:
     k.add_argument("--json", action="store_true", help="JSON for pipelines")
 
     b = sub.add_parser("bench", help="speed and accuracy benchmarks (run them on the GPU)")
-    b.add_argument("what", choices=("accuracy", "gpu", "surface", "solver", "voxelise"), help="which benchmark")
+    b.add_argument("what", choices=("accuracy", "gpu", "surface", "surface-times", "solver", "voxelise", "shots"),
+                   help="which benchmark")
     b.add_argument("--quick", action="store_true", help="small CPU-sized sweep")
     b.add_argument("--device", choices=("cpu", "cuda"), default=None)
     b.add_argument("--out", default="renders/bench", help="folder for CSV/JSON/PNG")
     b.add_argument("--peers", nargs="*", default=None, metavar="PEER",
-                   help="surface only: other surfacers on the same particles, any of splashsurf newton "
-                   "newton-aniso; bare --peers runs none (default: all installed; --quick: splashsurf)")
+                   help="surface: other surfacers on the same particles, any of splashsurf newton "
+                   "newton-aniso; bare --peers runs none (default: all installed; --quick: splashsurf); "
+                   "surface-times: splashsurf (default: with --quick only)")
     b.add_argument("--counts", type=int, nargs="+", default=None, metavar="N",
-                   help="surface only: particle counts (default 100000 with --quick, else 1000000 10000000)")
+                   help="surface: particle counts (default 100000 with --quick, else 1000000 10000000); "
+                   "surface-times: likewise (default 100000 with --quick, else 10000000)")
     return p
 
 

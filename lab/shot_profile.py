@@ -1,11 +1,11 @@
 """Where a shot's simulate time goes: per frame wall time through `Solver.advance` (the path a
 shot runs), then one frame with every kernel timed (CUDA graphs off), summed by kernel name.
 
-    python3 scripts/shot_profile.py hero_dam hero_castle --frames 3 --out $OUT   # on the GPU
-    python3 scripts/shot_profile.py hero_dam --smoke --device cpu                # CPU size
+    python lab/shot_profile.py hero_dam hero_castle --frames 3 --out DIR   # on the GPU
+    python lab/shot_profile.py hero_dam --smoke --device cpu              # CPU size
 
 Builds the solver exactly as the simulate stage does (stages.simulate.materials / colliders /
-the voxelise stage's seeds). Prints one table per shot and writes $OUT/shot_profile.json.
+the voxelise stage's seeds). Prints one table per shot and writes DIR/shot_profile.json.
 Imports numpy, warp and mpmfx (and what loading a shot imports: pydantic, trimesh).
 """
 from __future__ import annotations
@@ -19,10 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(Path(__file__).resolve().parent)]
-
-from hero_gpu import device_name, smoke_overrides  # noqa: E402
+from mpmfx.bench.shots import SHOT_DIR, device_name, smoke_overrides
 
 
 def build(name: str, overrides: list[str], cache: Path, device: str):
@@ -31,7 +28,7 @@ def build(name: str, overrides: list[str], cache: Path, device: str):
     from mpmfx.io.frames import SeedParticles
     from mpmfx.mpm import Particles, Solver
     from mpmfx.stages import simulate
-    run = mpmfx.load_shot(ROOT / "pipeline" / "shots" / f"{name}.toml", overrides=overrides, cache_root=cache,
+    run = mpmfx.load_shot(SHOT_DIR / f"{name}.toml", overrides=overrides, cache_root=cache,
                           device=device, quiet=True, workers=1)
     run.run(until="voxelise")
     shot = run.shot
@@ -77,7 +74,7 @@ def profile(name: str, frames: int, overrides: list[str], cache: Path, device: s
         wp.synchronize_device(solver.device)
         wall = time.perf_counter() - t0
         t0 = time.perf_counter()
-        _host(solver, state)
+        _host(solver, state, {})  # the frame file's host copy (its constant arrays left out)
         copy = time.perf_counter() - t0
         k = rep.substeps + rep.rejected_substeps
         rows.append({"frame": start + f, "substeps": rep.substeps, "rejected": rep.rejected_substeps, "wall_s": wall,

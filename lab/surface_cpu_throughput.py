@@ -4,7 +4,7 @@ time (as the surface stage's Dask workers run them, one thread each: mpmfx.stage
 The frames are one 100k-particle case (mpmfx bench surface), each moved by a different
 sub-voxel offset so no two frames are the same particles.
 
-    python scripts/surface_cpu_throughput.py [--shape torus] [--sampling lattice] [--frames 16] [--out X.json]
+    python lab/surface_cpu_throughput.py [--shape torus] [--sampling lattice] [--frames 16] [--out X.json]
 
 Each worker process warms up (a first call, Warp's kernels loaded) and says so before the clock
 starts; the time is from the start signal to the last frame done.

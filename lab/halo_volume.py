@@ -1,6 +1,6 @@
 """Halo volume of a domain-decomposed simulation, measured from a shot's cached particle frames.
 
-    python scripts/halo_volume.py pipeline/shots/jelly_splash.toml [--cache cache] [--out docs/halo_jelly_splash.csv]
+    python lab/halo_volume.py pipeline/shots/jelly_splash.toml [--cache cache] [--out docs/halo_jelly_splash.csv]
 
 For K = 2, 4, 8 subdomains (particle-balanced slabs along the axis the material spans most, and
 for 8 also 2x2x2 median splits), per frame: each particle belongs to the subdomain holding it;
@@ -18,14 +18,11 @@ import argparse
 import csv
 import json
 import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from mpmfx.io.frames import ParticleFrame  # noqa: E402
-from mpmfx.stages.runner import load_shot  # noqa: E402
+from mpmfx.io.frames import ParticleFrame
+from mpmfx.stages.runner import load_shot
 
 BLOCK = 4                     # Claymore's grid block edge (nodes)
 PARTICLE_BYTES = 128          # x, v, C, F, Jp, J, material, body, volume, ids: ~32 floats

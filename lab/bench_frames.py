@@ -1,6 +1,6 @@
 """Wall time of one per-frame stage on 1, 2, ... Dask workers (LocalCluster), upstream cached.
 
-    python scripts/bench_frames.py pipeline/shots/jelly_splash.toml --cache cache --frames 1:16 \
+    python lab/bench_frames.py pipeline/shots/jelly_splash.toml --cache cache --frames 1:16 \
         --workers 1 2 4 8 16 --device cpu [--stage surface]
 
 Each row re-runs the stage from scratch (`force`) through the product's path (`ShotRun.run`,
@@ -16,9 +16,6 @@ import os
 import resource
 import sys
 import time
-from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 
 def main() -> int:

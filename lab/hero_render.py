@@ -1,13 +1,13 @@
-"""Render the README stills of the GPU hero shots from the surfaces `scripts/hero_gpu.py` brought back.
+"""Render the README stills of the GPU hero shots from the surfaces hero_gpu.py brought back.
 
-    .venv/bin/python scripts/hero_render.py RETURNED_DIR [--cache DIR] [--shots ...] [--frames ...]
+    python lab/hero_render.py RETURNED_DIR [--cache DIR] [--shots ...] [--frames ...]
 
-RETURNED_DIR holds hero_times.json and <shot>_<frame>.hm[.NNN] (scripts/hero_codec.py). For each
-shot: the decoded meshes become that frame's surface stage frame in a local cache (the shot's own
-cache key; the level set leaves do not travel, so the export writes no VDBs), then the product's
-export and render stages run on those frames exactly as `mpmfx run` runs them (USD stage, Blender's
-USD import, Cycles with the shot's [render] settings), and the README still (the first still, or
-README_STILL) is copied to renders/readme/<shot>.png. Prints the CPU times of export and render.
+RETURNED_DIR holds hero_times.json and <shot>_<frame>.hm[.NNN] (hero_codec.py). For each shot:
+the decoded meshes become that frame's surface stage frame in a local cache (the shot's own cache
+key; the level set leaves do not travel, so the export writes no VDBs), then the product's export
+and render stages run on those frames exactly as `mpmfx run` runs them (USD stage, Blender's USD
+import, Cycles with the shot's [render] settings), and the README still (the first still, or
+README_STILL) is copied to docs/images/<shot>.png. Prints the CPU times of export and render.
 """
 from __future__ import annotations
 
@@ -18,12 +18,10 @@ import sys
 import time
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(Path(__file__).resolve().parent)]
+import hero_codec
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-import hero_codec  # noqa: E402
+from mpmfx.bench.shots import SHOT_DIR
 
 # The README still of a shot, where it is not the first still brought back: by hero_dam's frame 8
 # its sheets have reached the domain's side walls (straight cut edges, water climbing air).
@@ -46,7 +44,7 @@ def import_frames(run, returned: Path, frames: list[int], info: dict) -> list[in
         done.append(f)
         print(f"{run.shot.shot.name} frame {f}: " + ", ".join(f"{g} {len(v[0]):,} vertices" for g, v in groups.items()))
     entry.write_manifest(frames=entry.done_frames(SurfaceFrame.EXT), timings={"gpu_surface_s": info["stages"]["surface"]["seconds"]},
-                         extra={"imported": f"decoded from {returned} (scripts/hero_codec.py, lossy: vertices to 1/32 voxel, "
+                         extra={"imported": f"decoded from {returned} (lab/hero_codec.py, lossy: vertices to 1/32 voxel, "
                                             f"velocities int8); surfaced on {info.get('device', '?')}",
                                 "this_run": {"vertices": info.get("surface_vertices"), "faces": info.get("surface_faces")}})
     return done
@@ -70,11 +68,11 @@ def run_stage(run, name: str, frames: list[int]) -> float:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("returned", type=Path)
-    ap.add_argument("--cache", default=str(ROOT / "cache"))
+    ap.add_argument("--cache", default="cache")
     ap.add_argument("--shots", nargs="*", default=None)
     ap.add_argument("--frames", nargs="*", type=int, default=None, help="frames to render (default: the README still)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="extra overrides (render.* only)")
-    ap.add_argument("--readme", default=str(ROOT / "renders" / "readme"))
+    ap.add_argument("--readme", default="docs/images", help="folder the README stills are copied to")
     args = ap.parse_args(argv)
     import mpmfx
     from mpmfx.config import Export
@@ -90,7 +88,7 @@ def main(argv=None) -> int:
         if not frames:
             print(f"{name}: none of frames {want} came back (have {packed}): skipped")
             continue
-        run = mpmfx.load_shot(ROOT / "pipeline" / "shots" / f"{name}.toml",
+        run = mpmfx.load_shot(SHOT_DIR / f"{name}.toml",
                               overrides=info["overrides"] + args.overrides, cache_root=args.cache, workers=1)
         # no level set leaves came back: the USD gets the meshes, not the .vdb files
         run.shot = run.shot.model_copy(update={"export": Export(vdb=False, points=False)})

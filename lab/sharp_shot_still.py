@@ -3,7 +3,7 @@ the README's picture of surface.sharp_edges on a real simulation (snow_smash's s
 
     mpmfx run pipeline/shots/snow_smash.toml --until surface --cache /tmp/on
     mpmfx run pipeline/shots/snow_smash.toml --until surface --cache /tmp/off --set surface.sharp_edges=false
-    python scripts/sharp_shot_still.py /tmp/on/snow_smash /tmp/off/snow_smash --frames 1 13
+    python lab/sharp_shot_still.py /tmp/on/snow_smash /tmp/off/snow_smash --frames 1 13
 
 Each argument is a shot's cache folder; its newest surface entry is read. Every group of a
 frame is drawn in one grey, smooth-shaded with area-weighted vertex normals, one key light.
@@ -58,7 +58,7 @@ def main() -> None:
     ap.add_argument("sharp", type=Path, help="the shot's cache folder surfaced with sharp edges (the default)")
     ap.add_argument("round", type=Path, help="the same with surface.sharp_edges = false")
     ap.add_argument("--frames", type=int, nargs="+", default=[1, 13])
-    ap.add_argument("--out", default="renders/readme/surface_sharp_snow_smash.png")
+    ap.add_argument("--out", default="docs/images/surface_sharp_snow_smash.png")
     args = ap.parse_args()
     pv = import_pyvista()
     size = (640, 400)

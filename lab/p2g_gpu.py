@@ -1,13 +1,13 @@
 """The brick P2G on a GPU: (1) it against the reference, deterministic and fast, over a
 few hundred substeps; (1b) G2P compiled with CUDA fast math (the default, g2p.G2P_FAST_MATH)
 against IEEE G2P; (2) their kernels one by one beside the reference P2G; (3) the paths through
-advance() back to back. One table each; rows also under $OUT (or renders/bench).
+advance() back to back. One table each; rows also under --out ($OUT or renders/bench).
 
-    python3 scripts/p2g_gpu.py [grid ...] [--skip agreement|fastmath|kernels|paths ...]   (grids: 128 256)
+    python lab/p2g_gpu.py [grid ...] [--skip agreement|fastmath|kernels|paths ...]   (grids: 128 256)
 """
+import argparse
 import json
 import os
-import sys
 import time
 
 import numpy as np
@@ -125,11 +125,13 @@ def kernels(name, grid_n, det, p2g, sort1=False):
 
 
 def main():
-    args = sys.argv[1:]
-    skip = set(args[args.index("--skip") + 1:]) if "--skip" in args else set()
-    args = args[:args.index("--skip")] if "--skip" in args else args
-    grids = [int(g) for g in args] or [128, 256]
-    os.makedirs(OUT, exist_ok=True)
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("grids", type=int, nargs="*", default=[128, 256], help="grid sizes of kernels and paths")
+    ap.add_argument("--skip", nargs="+", default=[], choices=("agreement", "fastmath", "kernels", "paths"))
+    ap.add_argument("--out", default=OUT, help="folder for p2g_gpu.json (default $OUT or renders/bench)")
+    a = ap.parse_args()
+    skip, grids = set(a.skip), a.grids
+    os.makedirs(a.out, exist_ok=True)
     wp.init()
     print(wp.get_device("cuda").name)
     t0 = time.time()
@@ -153,7 +155,7 @@ def main():
     if rows:
         print_table(rows, COLS)
     print(f"total {time.time() - t0:.0f} s", flush=True)
-    with open(os.path.join(OUT, "p2g_gpu.json"), "w") as f:
+    with open(os.path.join(a.out, "p2g_gpu.json"), "w") as f:
         json.dump({"agreement": ag, "fast_math": fm, "kernels": ks, "paths": rows}, f, indent=1, default=str)
 
 

@@ -1,10 +1,9 @@
-"""The surfacer's error on random samples over many seeds (README, "Where issue 17's targets
-stand"): for each shape, count and setting, the range over seeds of the vertex mean, the surface
-error (area-weighted) and the max, in particle spacings h, and how many seeds put a vertex past
-1 h. With --edges, also where the random box's edges sit: the signed inset of the vertices near
+"""The surfacer's error on random samples over many seeds: for each shape, count and setting,
+the range over seeds of the vertex mean, the surface error (area-weighted) and the max, in
+particle spacings h, and how many seeds put a vertex past 1 h. With --edges, also where the random box's edges sit: the signed inset of the vertices near
 exactly two faces, and at the edge's bisector (mean / p99 / max), smoothed and raw (no flow).
 
-    python scripts/surface_seeds.py [--counts 100000 1000000] [--seeds 12 6] [--device cpu] [--out X.csv] [--edges]
+    python lab/surface_seeds.py [--counts 100000 1000000] [--seeds 12 6] [--device cpu] [--out X.csv] [--edges]
 """
 import argparse
 import csv

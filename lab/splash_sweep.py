@@ -6,7 +6,7 @@ and prints, per frame and radius_scale (the shot's 1.2 and the default 1.0), pie
 at least 8 h^3, holes, open edges, volume over n h^3 and seconds, as the splash bench measures
 them (mpmfx.bench.surface_splash).
 
-    python scripts/splash_sweep.py FRAMES_DIR [--frames 9 10 12 13 15 16 18] [--device cpu]
+    python lab/splash_sweep.py FRAMES_DIR [--frames 9 10 12 13 15 16 18] [--device cpu]
 """
 from __future__ import annotations
 

@@ -11,20 +11,17 @@ e: what the sorting substep's G2P costs over a plain one, as it moves every part
 slot: the fit of G2P ms a substep = g + e / cadence, per scene) and a fallback particle's cost in
 pieces (f / b). On the GPU:
 
-    python3 scripts/cadence_fit.py --out $OUT        # bench blocks and both hero shots
+    python lab/cadence_fit.py --out DIR        # bench blocks and both hero shots
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
-
-sys.path[:0] = [str(Path(__file__).resolve().parents[1]), str(Path(__file__).resolve().parent)]
 
 CADENCES = (32, 16, 8, 4, 2, 1)
 
@@ -80,7 +77,7 @@ def blocks(rows, device):
 
 
 def shots(rows, device, names, cache, smoke=False):
-    from hero_gpu import smoke_overrides
+    from mpmfx.bench.shots import smoke_overrides
     from shot_profile import build
     for name in names:
         extra = smoke_overrides(24, 10) if smoke else []
@@ -117,7 +114,7 @@ def fit(rows):
 
 
 def main():
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default=os.environ.get("OUT", "profile_out"))
     ap.add_argument("--shots", nargs="*", default=["hero_dam", "hero_castle"])
     ap.add_argument("--device", default="cuda:0")
