@@ -8,7 +8,7 @@ edge the limit keeps. Right: random samples, where the limit lets the flow smoot
 before, but pits along it are filled (tenth session). Dots: the particles within h / 2 of the
 plane (a lattice's two layers at +-h / 2 coincide).
 
-    python scripts/edge_still.py [--count 20000] [--out renders/readme/surface_edge.png]
+    python scripts/edge_still.py [--count 20000] [--out renders/surface_edge.png]
 """
 from __future__ import annotations
 
@@ -51,7 +51,7 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--count", type=int, default=20_000)
-    ap.add_argument("--out", default="renders/readme/surface_edge.png")
+    ap.add_argument("--out", default="renders/surface_edge.png")
     args = ap.parse_args()
     sdf = shape_sdf("box")[0]
     fig, axes = plt.subplots(1, 2, figsize=(11, 5.4))

@@ -7,7 +7,7 @@ top face, so a normal change shows as a highlight change). A surfacer without fl
 two equal pictures and a black difference. Rows: ours at the shot setting ("fine"), then
 splashsurf where installed. The difference is |frame 1 - frame 0| over RGB, times GAIN.
 
-    python scripts/flicker_still.py [--count 20000] [--out renders/readme/surface_flicker.png]
+    python scripts/flicker_still.py [--count 20000] [--out docs/images/surface_flicker.png]
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ def main() -> None:
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--count", type=int, default=20_000)
-    ap.add_argument("--out", default="renders/readme/surface_flicker.png")
+    ap.add_argument("--out", default="docs/images/surface_flicker.png")
     ap.add_argument("--device", default="cpu")
     args = ap.parse_args()
     pv = import_pyvista()

@@ -7,7 +7,7 @@ shot: the decoded meshes become that frame's surface stage frame in a local cach
 cache key; the level set leaves do not travel, so the export writes no VDBs), then the product's
 export and render stages run on those frames exactly as `mpmfx run` runs them (USD stage, Blender's
 USD import, Cycles with the shot's [render] settings), and the README still (the first still, or
-README_STILL) is copied to renders/readme/<shot>.png. Prints the CPU times of export and render.
+README_STILL) is copied to docs/images/<shot>.png. Prints the CPU times of export and render.
 """
 from __future__ import annotations
 
@@ -74,7 +74,7 @@ def main(argv=None) -> int:
     ap.add_argument("--shots", nargs="*", default=None)
     ap.add_argument("--frames", nargs="*", type=int, default=None, help="frames to render (default: the README still)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="extra overrides (render.* only)")
-    ap.add_argument("--readme", default=str(ROOT / "renders" / "readme"))
+    ap.add_argument("--readme", default=str(ROOT / "docs" / "images"))
     args = ap.parse_args(argv)
     import mpmfx
     from mpmfx.config import Export

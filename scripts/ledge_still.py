@@ -7,7 +7,7 @@ decisions around it), seen from outside the tank under the floor's edge along th
 x = -0.46 m, where the water is shallow; the last panel colours each vertex of the shipped
 sharpened mesh by how far it lies from the round one (in particle spacings h).
 
-    python scripts/ledge_still.py [--out renders/readme/surface_water_ledges.png] [--device cpu]
+    python scripts/ledge_still.py [--out docs/images/surface_water_ledges.png] [--device cpu]
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ CAMERA = [(-1.2, -0.25, -0.5), (-0.45, 0.0, -0.1), (0.0, 1.0, 0.0)]
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="renders/readme/surface_water_ledges.png")
+    ap.add_argument("--out", default="docs/images/surface_water_ledges.png")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--camera", default=None, help="position,focus as 6 numbers (m): another view")
     args = ap.parse_args()

@@ -58,7 +58,7 @@ def main() -> None:
     ap.add_argument("sharp", type=Path, help="the shot's cache folder surfaced with sharp edges (the default)")
     ap.add_argument("round", type=Path, help="the same with surface.sharp_edges = false")
     ap.add_argument("--frames", type=int, nargs="+", default=[1, 13])
-    ap.add_argument("--out", default="renders/readme/surface_sharp_snow_smash.png")
+    ap.add_argument("--out", default="docs/images/surface_sharp_snow_smash.png")
     args = ap.parse_args()
     pv = import_pyvista()
     size = (640, 400)

@@ -5,7 +5,7 @@ at the middle of the edge x = +0.3, y = +0.2 m. Right: the plane z = +0.25 - h, 
 under the top face, at the corner above that edge. Dots: the particles within h / 2 of the
 plane; the vertex error of each mesh (mean and max over the whole box) in the legend.
 
-    python scripts/sharp_still.py [--count 100000] [--seed 2] [--out renders/readme/surface_sharp.png]
+    python scripts/sharp_still.py [--count 100000] [--seed 2] [--out docs/images/surface_sharp.png]
 """
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--count", type=int, default=100_000)
     ap.add_argument("--seed", type=int, default=2)
-    ap.add_argument("--out", default="renders/readme/surface_sharp.png")
+    ap.add_argument("--out", default="docs/images/surface_sharp.png")
     args = ap.parse_args()
     sdf = shape_sdf("box")[0]
     x, h = sample_shape("box", args.count, "random", seed=args.seed)

@@ -4,7 +4,7 @@ A disc one particle spacing thick, uniformly random particles (a splash sheet), 
 surface stage's setting ("fine") without and with `SurfaceParams.anisotropic`, drawn side by
 side with PyVista, holes counted in the titles.
 
-    python scripts/sheet_still.py [--count 10000] [--out renders/readme/surface_sheet.png] [--device cpu]
+    python scripts/sheet_still.py [--count 10000] [--out docs/images/surface_sheet.png] [--device cpu]
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_pa
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--count", type=int, default=10_000)
-    ap.add_argument("--out", default="renders/readme/surface_sheet.png")
+    ap.add_argument("--out", default="docs/images/surface_sheet.png")
     ap.add_argument("--device", default="cpu")
     args = ap.parse_args()
     pv = import_pyvista()

@@ -5,7 +5,7 @@ shipped), surfaced at the shot's setting without and with `SurfaceParams.anisotr
 side by side with PyVista, seen from inside the tank towards the far wall; pieces and holes in
 the titles.
 
-    python scripts/splash_still.py [--out renders/readme/surface_splash.png] [--device cpu]
+    python scripts/splash_still.py [--out docs/images/surface_splash.png] [--device cpu]
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ CAMERA = [(-1.1, 1.0, -1.3), (0.1, 0.1, 0.0), (0.0, 1.0, 0.0)]
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="renders/readme/surface_splash.png")
+    ap.add_argument("--out", default="docs/images/surface_splash.png")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--asset", default=None, help="another splash asset (.npz, write_splash_asset)")
     args = ap.parse_args()

@@ -263,7 +263,7 @@ def sort_cadence(frag, every: int, n: int, cap: int) -> int:
 
     A piece costs 0.22-0.27 ns of scatter in every scene there (slope of scatter time against
     pieces between cadences); a sort 1.34 ms at 19.4M, 0.23 ms at 2.4M. Refitted since
-    (scripts/cadence_fit.py, renders/readme/cadence_fit_h200.json, same scenes): a piece 0.28 ns,
+    (scripts/cadence_fit.py, same scenes): a piece 0.28 ns,
     and a sort also costs its substep's G2P moving every particle to its new slot (0.06-0.08 ms
     at 2.4M-3.4M, 0.46-0.50 at 19.4M): 0.29 ms a sort at 2.4M, 1.8 at 19.4M; scatter + sort
     ms a substep for hero_dam at k = 2 / 4 / 8 / 16: 0.68 / 0.61 / 0.60 / 0.64. The falling block's runs
