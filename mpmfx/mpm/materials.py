@@ -48,7 +48,7 @@ class Material:
             §8 knob table) under the default fit; see friction_fit.
         friction_fit: how friction_angle sets the Drucker-Prager cone (sand). Default
             "repose" (below): the guide's promise "friction angle = angle of repose",
-            measured against column-collapse experiments (README, `mpmfx bench accuracy`).
+            measured against column-collapse experiments (docs/benchmarks.md, `mpmfx bench accuracy`).
             "compression" (Klar et al. 2016, the guide's alpha formula): the outer cone, exact in triaxial
             compression; in plane-strain flow (a slab, a dam, a chute: anything that flows
             in a plane) it is as strong as Mohr-Coulomb at a much larger angle (asin of
