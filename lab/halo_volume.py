@@ -1,6 +1,6 @@
 """Halo volume of a domain-decomposed simulation, measured from a shot's cached particle frames.
 
-    python lab/halo_volume.py pipeline/shots/jelly_splash.toml [--cache cache] [--out docs/halo_jelly_splash.csv]
+    python lab/halo_volume.py pipeline/shots/jelly_splash.toml [--cache cache] [--out halo.csv]
 
 For K = 2, 4, 8 subdomains (particle-balanced slabs along the axis the material spans most, and
 for 8 also 2x2x2 median splits), per frame: each particle belongs to the subdomain holding it;
