@@ -1,32 +1,30 @@
-"""`mpmfx` command line. Parses, then calls the stage runner; imports nothing heavy at start-up.
+"""`mpmfx` command line. Parses, then calls the stage runner; imports nothing heavy at start-up
+(warp, pxr, the schema's pydantic: the imports marked "keeps --help light" load them on use).
 
 Exit codes: 0 success, 1 a stage failed (or a check failed), 2 bad input (config, file, arguments).
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import errno
 import os
 import sys
 from pathlib import Path
 
+from mpmfx import __version__
+from mpmfx.bench import main as bench_main
+from mpmfx.cache import BusyError, Cache, PathError, default_root
+from mpmfx.cli_args import add_parallel_args, add_wedge_parser, frame_range
+from mpmfx.maintain import clean_targets, delete, human, prune_targets, tree_size
+from mpmfx.publish import published_entries
 from mpmfx.stages import STAGES
-
-
-def _frames(text: str) -> list[int]:
-    try:
-        a, _, b = text.partition(":")
-        lo, hi = int(a), int(b or a)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"--frames {text!r}: expected A:B (inclusive), e.g. --frames 10:20")
-    if hi < lo:
-        raise argparse.ArgumentTypeError(f"--frames {text!r}: B must not be below A")
-    return list(range(lo, hi + 1))
+from mpmfx.stages.qa import print_qa
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="mpmfx", description="Meshes to simulated, surfaced and rendered MPM "
                                 "snow, sand, mud, water and jelly.")
-    from mpmfx import __version__
     p.add_argument("--version", action="version", version=f"mpmfx {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
 
@@ -41,13 +39,12 @@ def _parser() -> argparse.ArgumentParser:
     r = shot_cmd("run", "run the pipeline (cached stages are skipped)")
     r.add_argument("--until", choices=STAGES, default="render", help="last stage to run")
     r.add_argument("--force", choices=STAGES, action="append", default=[], help="re-run this stage from scratch")
-    r.add_argument("--frames", type=_frames, default=None, metavar="A:B", help="only these frames (inclusive)")
+    r.add_argument("--frames", type=frame_range, default=None, metavar="A:B", help="only these frames (inclusive)")
     r.add_argument("--device", choices=("cpu", "cuda"), default=None, help="Warp device (default: cuda if present)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     r.add_argument("--strict", action="store_true", help="exit 1 when the QA flags a frame (CI, farms)")
     e = shot_cmd("export", "run export alone from the cached upstream stages")
-    e.add_argument("--frames", type=_frames, default=None, metavar="A:B")
-    from mpmfx.wedge import add_parallel_args, add_wedge_parser
+    e.add_argument("--frames", type=frame_range, default=None, metavar="A:B")
     add_parallel_args(r)
     add_parallel_args(e)
     add_wedge_parser(shot_cmd("wedge", "side-by-side variants of a shot that differ in one field"))
@@ -104,9 +101,8 @@ def main(argv: list[str] | None = None) -> int:
         print("interrupted: complete frames are cached; run again to resume", file=sys.stderr)
         return 130
     except Exception as exc:  # noqa: BLE001 - every error becomes a message and an exit code
-        from mpmfx.cache import BusyError, PathError
-        from mpmfx.config import ShotError
-        from mpmfx.stages.base import StageError
+        from mpmfx.config import ShotError  # backend: pydantic (keeps --help light)
+        from mpmfx.stages.base import StageError  # backend: warp (keeps --help light)
         if isinstance(exc, (ShotError, PathError)):
             print(f"error: {exc}", file=sys.stderr)
             return 2
@@ -121,7 +117,6 @@ def main(argv: list[str] | None = None) -> int:
 
 def _os_message(exc: OSError) -> str:
     """A file system error as the path and what to do (no traceback)."""
-    import errno
     keep = "complete frames are kept: run again to resume"
     if exc.errno == errno.ENOSPC:
         return (f"no space left on the device writing {exc.filename}: free space, or point --cache "
@@ -134,7 +129,7 @@ def _os_message(exc: OSError) -> str:
 
 def _dispatch(args) -> int:
     if args.cmd == "check":
-        from mpmfx.geometry.check import run_check
+        from mpmfx.check import run_check  # backend: trimesh (keeps --help light)
         origin = size = None
         if args.domain:
             try:
@@ -147,8 +142,7 @@ def _dispatch(args) -> int:
         return run_check(args.asset, grid_n=args.grid_n, origin=origin, size=size, as_json=args.json,
                          prim_path=args.prim_path)
     if args.cmd == "bench":
-        from mpmfx.bench import main as bench_main
-        from mpmfx.stages.base import quiet_warp
+        from mpmfx.stages.base import quiet_warp  # backend: warp (keeps --help light)
         quiet_warp()  # stdout carries the benchmark's tables only, never Warp's banner
         return bench_main(args.what, quick=args.quick, device=args.device, out=args.out, peers=args.peers,
                           counts=args.counts)
@@ -159,10 +153,10 @@ def _dispatch(args) -> int:
         from mpmfx.shotdoc import main as docs_main  # backend: pydantic (keeps --help light)
         return docs_main(check=args.check)
     if args.cmd == "wedge":
-        from mpmfx.wedge import main as wedge_main
+        from mpmfx.wedge import main as wedge_main  # backend: warp (keeps --help light)
         return wedge_main(args)
 
-    from mpmfx.stages.runner import load_shot
+    from mpmfx.stages.runner import load_shot  # backend: warp (keeps --help light)
     run = load_shot(args.shot, overrides=args.overrides, cache_root=args.cache,
                     device=getattr(args, "device", None), quiet=getattr(args, "quiet", False),
                     workers=getattr(args, "workers", None), scheduler=getattr(args, "scheduler", None))
@@ -185,7 +179,6 @@ def _dispatch(args) -> int:
         _print_outputs(run, results)
         return 0
     if args.cmd == "status":
-        from mpmfx.maintain import human, tree_size
         rows = [[s.stage, s.state, s.why, human(tree_size(s.entry)) if s.entry.exists() else "",
                  os.path.relpath(s.entry)] for s in run.status()]
         _print_table(["stage", "state", "why", "disk", "entry"], rows)
@@ -194,11 +187,9 @@ def _dispatch(args) -> int:
             print(f"\nall variants of this shot: {human(tree_size(shot_dir))} in {os.path.relpath(shot_dir)} "
                   f"(`mpmfx clean SHOT --all-variants` or `mpmfx cache prune` to free it)")
         if args.qa:
-            from mpmfx.stages.qa import print_qa
             return print_qa(run)
         return 0
     if args.cmd == "clean":
-        from mpmfx.maintain import clean_targets, delete
         with run.cache.lock():
             targets = clean_targets(run, stage=args.stage, all_variants=args.all_variants)
             return delete(targets, root=run.cache.root, dry_run=args.dry_run, yes=args.yes)
@@ -207,11 +198,6 @@ def _dispatch(args) -> int:
 
 def _prune(args) -> int:
     """`mpmfx cache prune`: every shot of the cache root, each under its lock."""
-    import contextlib
-
-    from mpmfx.cache import Cache, default_root
-    from mpmfx.maintain import delete, prune_targets
-    from mpmfx.publish import published_entries
     root = Path(args.cache) if args.cache else default_root()
     if args.keep < 1:
         print("error: --keep must be at least 1 (clean SHOT --all-variants deletes everything)", file=sys.stderr)

@@ -21,6 +21,8 @@ from typing import Annotated, Any, Literal
 from pydantic import AllowInfNan, BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator
 
 from mpmfx.mpm.config import STANDARD_GRAVITY, SolverConfig, SolverConfigError, WallType
+from mpmfx.mpm.materials import PRESETS, Mode
+from mpmfx.render.looks import LOOKS
 
 # Every number of the schema is one of these: finite (NaN or inf in a TOML file or a --set is a
 # typo, never a setting) and strict (a quoted "0.3" is an error, not silently a number).
@@ -224,7 +226,6 @@ class Render(_Section):
     @field_validator("looks")
     @classmethod
     def _known_looks(cls, v):
-        from mpmfx.render.looks import LOOKS
         bad = {k: look for k, look in v.items() if look not in LOOKS}
         if bad:
             raise ValueError(f"unknown look(s) {bad}: use one of {', '.join(LOOKS)}")
@@ -274,8 +275,6 @@ class Shot(_Section):
     def fluid_objects(self) -> list[bool]:
         """Per object: is its material a fluid (a water or tracer preset)? A fluid holds no shape:
         no thickness rule (voxelise), no sharp edges by default (sharp_edges_for)."""
-        from mpmfx.mpm.materials import PRESETS, Mode
-
         by_name = {k.lower(): m for k, m in PRESETS.items()}
         return [o.material.lower() in by_name and by_name[o.material.lower()].mode in (Mode.WATER, Mode.TRACER)
                 for o in self.objects]

@@ -5,11 +5,13 @@ inside the cache root; a simulation (minutes of work) is deleted only after a ye
 """
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import sys
 from pathlib import Path
 
+from mpmfx.cache import child
 from mpmfx.stages import STAGES
 
 ASK_BEFORE = ("simulate",)  # stages whose entries cost minutes: deleted only after a yes
@@ -41,7 +43,6 @@ def clean_targets(run, *, stage: str | None, all_variants: bool) -> list[Path]:
 
 def delete(targets: list[Path], *, root: Path, dry_run: bool, yes: bool, verb: str = "delete") -> int:
     """List `targets` with sizes, ask before a simulation unless `yes`, delete. Exit code."""
-    from mpmfx.cache import child
     if not targets:
         print("nothing to delete")
         return 0
@@ -70,7 +71,6 @@ def prune_targets(root: Path, *, keep: int, in_use: set[Path]) -> list[Path]:
     """Per shot and stage, every entry but the `keep` newest (by manifest time, else folder time)
     and those `in_use` (resolved paths; with the entries they were made from, so re-running a
     published variant costs nothing)."""
-    import json
     protected = set()
     todo = list(in_use)
     while todo:  # a used entry's upstream entries are used too

@@ -28,47 +28,25 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+from PIL import Image, ImageDraw, ImageFont
+
+from mpmfx.cache import Cache, atomic_path, default_root
+from mpmfx.cli_args import frame_range
+from mpmfx.config import ShotError, apply_override, load_shot_config
+from mpmfx.render.frames import write_movie
+from mpmfx.stages import STAGES
+from mpmfx.stages.base import Context
+from mpmfx.stages.parallel import Frames, task_key
+from mpmfx.stages.runner import ShotRun, stage_module
+
 SHEET_WIDTH = 1920      # px: a frame's sheet is scaled to at most this width
 CONTACT_FRAMES = 4      # columns of contact.png
 
 
 def _bad(message: str) -> Exception:
-    """Bad input (exit 2). The CLI builds this module's parser at start-up, so the schema
-    (pydantic) is imported only when an error is raised."""
-    from mpmfx.config import ShotError
+    """Bad input (exit 2)."""
     return ShotError(message)
-
-
-def _workers(text: str) -> int:
-    import argparse
-    if not text.isdigit() or int(text) < 1:
-        raise argparse.ArgumentTypeError(f"--workers {text!r}: a whole number of processes, 1 or more (1 = serial)")
-    return int(text)
-
-
-def add_parallel_args(p) -> None:
-    p.add_argument("--workers", type=_workers, default=None, metavar="N",
-                   help="Dask LocalCluster worker processes for independent frames; 1 = serial "
-                        "(default: all cores when there are 10 or more frames to make, else serial; $MPMFX_WORKERS)")
-    p.add_argument("--scheduler", default=None, metavar="ADDR",
-                   help="a running Dask scheduler, e.g. tcp://farm-head:8786 (default $MPMFX_SCHEDULER)")
-
-
-def add_wedge_parser(w) -> None:
-    w.add_argument("--vary", required=True, metavar="KEY=V1,V2,..|KEY=LO:HI:N",
-                   help="the one field to vary (any key --set takes; list items also by name, e.g. "
-                        "objects.bear.overrides.youngs_modulus) and its values")
-    w.add_argument("--log", action="store_true", help="LO:HI:N steps evenly in log space")
-    w.add_argument("--keep", default=None, metavar="PATH",
-                   help="the previous champion's render for the first tile: a folder of NNNN.png or one image")
-    w.add_argument("--pick", default=None, metavar="VALUE",
-                   help="run nothing: write a copy of the shot file with KEY = VALUE (see --out)")
-    w.add_argument("--out", default=None, metavar="PATH",
-                   help="--pick: the copy's path (default beside the shot: NAME-FIELD-VALUE.toml)")
-    w.add_argument("--frames", default=None, metavar="A:B", help="only these frames (inclusive)")
-    w.add_argument("--device", choices=("cpu", "cuda"), default=None, help="Warp device")
-    w.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
-    add_parallel_args(w)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -146,7 +124,6 @@ def label(field: str, value: Any) -> str:
 
 def variant_shots(path: str | Path, field: str, values: list[Any], overrides: list[str] = ()) -> list:
     """One validated shot per value: the shot, `overrides`, deterministic mode, field = value."""
-    from mpmfx.config import load_shot_config
     fixed = [*overrides, "solver.deterministic=true"]
     return [load_shot_config(path, [*fixed, f"{field}={_toml_text(v)}"]) for v in values]
 
@@ -155,11 +132,6 @@ def run_wedge(shots: list, *, cache_root: str | Path | None = None, executor=Non
               device: str | None = None, quiet: bool = False) -> list[dict[str, Any]]:
     """Run every variant to `render`, stage by stage over all variants; each distinct entry once.
     Returns, per variant, each stage's entry root. `executor`: `mpmfx.stages.parallel.Frames`."""
-    from mpmfx.cache import Cache, default_root
-    from mpmfx.stages import STAGES
-    from mpmfx.stages.parallel import Frames, task_key
-    from mpmfx.stages.runner import ShotRun, stage_module
-
     if not shots:
         return []
     ex = executor or Frames(workers=1)
@@ -190,7 +162,6 @@ def run_wedge(shots: list, *, cache_root: str | Path | None = None, executor=Non
 
 def _run_stage(shot, cache_root: Path, name: str, frames, device, quiet: bool):
     """One variant's whole-shot stage (voxelise, simulate), its upstream already cached: a task."""
-    from mpmfx.stages.runner import ShotRun
     return ShotRun(shot, cache_root=cache_root, device=device, quiet=quiet, workers=1,
                    publish=False, locked=True).run(until=name, frames=frames)[-1]
 
@@ -198,7 +169,6 @@ def _run_stage(shot, cache_root: Path, name: str, frames, device, quiet: bool):
 def _frame_stage(mod, runs: list, entries: list[dict], frames: list[int] | None) -> None:
     """Every frame of every variant of a per-frame stage as one batch of tasks; then each
     variant's finish (in the client) and its manifest."""
-    from mpmfx.stages.base import Context
     ctxs = [(r, c) for r, e in zip(runs, entries) if isinstance(c := r.begin(mod.NAME, e, frames), Context)]
     if not ctxs:
         return
@@ -232,10 +202,6 @@ def write_sheets(out: Path, tiles: list[tuple[str, dict[int, Path]]], frames: li
                  movie: bool = True) -> dict[str, Path]:
     """Per frame, the tiles side by side (a grid of up to 3 columns) with their labels; then a
     movie of the sheets and `contact.png` (a row per tile, CONTACT_FRAMES frames each)."""
-    import numpy as np
-
-    from mpmfx.cache import atomic_path
-    from mpmfx.render.frames import write_movie
     out.mkdir(parents=True, exist_ok=True)
     cols = min(len(tiles), 3 if len(tiles) != 4 else 2)
     sheets = []
@@ -260,8 +226,6 @@ def write_sheets(out: Path, tiles: list[tuple[str, dict[int, Path]]], frames: li
 
 def _labelled(path: Path | None, text: str, *, scale: int = 1):
     """The image at `path` (or a grey 'missing' tile), downscaled by `scale`, `text` in its corner."""
-    import numpy as np
-    from PIL import Image, ImageDraw, ImageFont
     img = Image.open(path).convert("RGB") if path and Path(path).is_file() else Image.new("RGB", (960, 540), "#404040")
     if scale > 1:
         img = img.resize((img.width // scale, img.height // scale), Image.LANCZOS)
@@ -277,8 +241,6 @@ def _labelled(path: Path | None, text: str, *, scale: int = 1):
 
 
 def _grid(images: list, cols: int, *, max_width: int):
-    import numpy as np
-    from PIL import Image
     h, w = images[0].shape[:2]
     images = [np.asarray(Image.fromarray(a).resize((w, h))) if a.shape[:2] != (h, w) else a for a in images]
     blank = np.zeros_like(images[0])
@@ -293,7 +255,6 @@ def _grid(images: list, cols: int, *, max_width: int):
 
 
 def _save(image, path: Path) -> None:
-    from PIL import Image
     Image.fromarray(image).save(path, format="PNG")
 
 
@@ -317,7 +278,6 @@ def _keep_tile(keep: str, frames: list[int]) -> dict[int, Path]:
 def pick(path: str | Path, field: str, value: Any, *, out: str | Path | None = None) -> Path:
     """Write a copy of the shot file with `field` = `value` (comments are not kept); relative
     mesh paths are rewritten for the copy's folder. The copy is validated; returns its path."""
-    from mpmfx.config import apply_override, load_shot_config
     path = Path(path)
     data = tomllib.loads(path.read_text())
     apply_override(data, field.split("."), value, source=str(path))
@@ -379,8 +339,6 @@ def _is_table(v: Any) -> bool:
 
 
 def main(args) -> int:
-    from mpmfx.stages.parallel import Frames
-
     key, values = parse_vary(args.vary, log=args.log) if args.pick is None else (args.vary.partition("=")[0], [])
     path = Path(args.shot)
     if not path.is_file():
@@ -416,9 +374,8 @@ def main(args) -> int:
 def _frames(text: str | None, shot) -> list[int]:
     if not text:
         return list(shot.frames)
-    from mpmfx.cli import _frames as parse
     try:
-        frames = parse(text)
+        frames = frame_range(text)
     except Exception as exc:  # argparse.ArgumentTypeError
         raise _bad(str(exc)) from None
     bad = sorted(set(frames) - set(shot.frames))
@@ -429,7 +386,6 @@ def _frames(text: str | None, shot) -> list[int]:
 
 def _report(key: str, values: list, roots: list[dict[str, Path]]) -> None:
     """Which entries the variants share: one row per stage, the number of distinct entries."""
-    from mpmfx.stages import STAGES
     print(f"{key}: {', '.join(map(str, values))}", file=sys.stderr)
     for name in STAGES:
         n = len({r[name] for r in roots})

@@ -12,12 +12,16 @@ skipped with a message without it.
 """
 from __future__ import annotations
 
+import json
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from mpmfx.bench import cases
+from mpmfx.bench import cases, lab
+from mpmfx.bench.plot import speed_error_plot
+from mpmfx.bench.report import print_table, write_rows
 from mpmfx.bench.snow_table import snow_compression
 
 
@@ -127,10 +131,6 @@ LAB_COLUMNS = ["case", "reference", "a", "grid_n", "cells_across", "value", "law
 
 def experiments(*, quick: bool, device, out) -> list[dict]:
     """The experiments section: prints its table, trend and summary; writes its files."""
-    from mpmfx.bench import lab
-    from mpmfx.bench.report import print_table, write_rows
-    import json
-    from pathlib import Path
     rows, series = lab.run_lab(lab.QUICK if quick else lab.FULL, device)
     print("\nexperiments (laboratory data; error = simulation / experiment - 1)")
     print_table(rows, LAB_COLUMNS)
@@ -152,7 +152,6 @@ def experiments(*, quick: bool, device, out) -> list[dict]:
 
 
 def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench") -> int:
-    from mpmfx.bench.report import print_table, write_rows
     sweep = QUICK if quick else FULL
     rows, orders = run_sweep(sweep, device)
     print_table(rows, COLUMNS)
@@ -161,7 +160,6 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
     write_rows(rows, out, "accuracy")
     write_rows(orders, out, "accuracy_orders")
     try:
-        from mpmfx.bench.plot import speed_error_plot
         path = speed_error_plot(rows, out)
         print(f"plot: {path}")
     except ImportError as err:

@@ -17,6 +17,9 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import warp as wp
+
+from mpmfx.mpm import Particles, Solver, SolverConfig, preset
 
 from ..mpm.state import m33_assign
 
@@ -98,13 +101,11 @@ def device_name(solver) -> str:
 
 
 def _elastic(E: float, nu: float, rho: float = 1.0):
-    from mpmfx.mpm import preset
     return preset("Elastic", youngs_modulus=float(E), poisson_ratio=float(nu), density=float(rho))
 
 
 def _setup(mat, x, v, spacing, *, grid_n, gravity=(0.0, 0.0, 0.0), device=None, damping=0.0, **cfg):
     """Solver + state for one material; warms the kernels up so timing excludes compiling."""
-    from mpmfx.mpm import Particles, Solver, SolverConfig
     config = SolverConfig(grid_n=grid_n, gravity=gravity, damping=damping, **cfg)
     solver = Solver([mat], config, device=device)
     n = len(x)
@@ -125,7 +126,6 @@ def _dt(solver, state, cfl: float, vmax: float) -> float:
 def _march(solver, state, dt: float, steps: int, observe=None, every: int = 1) -> float:
     """`steps` substeps of dt; observe(k) after substep k when k % every == 0. Returns
     (wall seconds, device synchronised and including the observations' copies; simulated seconds)."""
-    import warp as wp
     wp.synchronize_device(solver.device)
     t0 = time.perf_counter()
     for k in range(1, steps + 1):

@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from mpmfx.bench.cases import lattice
+from mpmfx.bench.reference_step import ReferenceSolver
+from mpmfx.mpm import Particles, Solver, SolverConfig, preset
 
 G = 9.81  # domain/s^2: standard gravity in a 1 m domain
 LAYER = 0.25  # a column counts as covered from a quarter of a one-cell layer
@@ -54,9 +56,7 @@ def channel_walls(floor: str = "sticky"):
 
 def _engine(engine, materials, config, device):
     if engine == "reference":
-        from mpmfx.bench.reference_step import ReferenceSolver
         return ReferenceSolver(materials, config), "cpu (numpy reference)"
-    from mpmfx.mpm import Solver
     solver = Solver(materials, config, device=device)
     return solver, (solver.device.name if solver.device.is_cuda else "cpu")
 
@@ -65,7 +65,6 @@ def simulate(engine, materials, config, x, spacing, *, dt, t_end, observe_times=
              device=None) -> Run:
     """Run `x` (n, 3) at rest, one material (index 0), fixed dt until t_end (s).
     observe(positions) is called at each of observe_times (s, rounded to whole steps)."""
-    from mpmfx.mpm import Particles
     n = len(x)
     parts = Particles(x=np.asarray(x, np.float32), v=np.zeros((n, 3), np.float32),
                       volume=np.full(n, spacing**3, np.float32), material=np.zeros(n, np.int32),
@@ -140,7 +139,6 @@ def dam_break(*, grid_n=32, width=0.2, t_star=(1.0, 1.5, 2.0, 2.5, 3.0), engine=
     from the back wall) at T = t sqrt(2 g / width) = each of t_star. floor/wall_friction:
     the frictionless case is all walls `separate` with mu = 0; the rough case gives the
     walls Coulomb friction (or a sticky floor)."""
-    from mpmfx.mpm import SolverConfig, preset
     mat = preset("Water")
     cfg = SolverConfig(grid_n=grid_n, gravity=(0.0, -G, 0.0), walls=channel_walls(floor),
                        wall_friction=wall_friction, cfl=cfl)
@@ -210,7 +208,6 @@ def column_collapse(*, a=1.0, grid_n=32, engine="warp", friction_angle=38.0, fit
     release. L0 is chosen so the published runout fits the domain with margin. config: extra
     SolverConfig fields (e.g. boundary_cells) for diagnostics.
     extra: L0, H0, runout (L_inf - L0) / L0, height H_inf / L0, and the law's values."""
-    from mpmfx.mpm import SolverConfig, preset
     over = {"friction_angle": friction_angle}
     if fit is not None:
         over["friction_fit"] = fit

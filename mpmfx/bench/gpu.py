@@ -22,8 +22,16 @@ import os
 import subprocess
 import sys
 import time
+import traceback
 
 import numpy as np
+import warp as wp
+
+from mpmfx.bench.gpu_plot import throughput_plot
+from mpmfx.bench.report import print_table, write_rows
+from mpmfx.mpm import Collider, ColliderKind, Particles, Solver, SolverConfig, preset
+from mpmfx.mpm.p2g import P2GParams
+from mpmfx.mpm.stepper import SubstepDev
 
 MATERIALS = ("Water", "Mushy", "Granular", "Elastic")
 MIXED = MATERIALS  # the mixed scene's four columns
@@ -48,7 +56,6 @@ def block(grid_n: int, *, seed: int = 0) -> tuple[np.ndarray, float]:
 
 def sphere_collider(grid_n: int):
     """An SDF sphere (radius 0.12, 24^3 voxels) sweeping through the block along +x in 0.5 s."""
-    from mpmfx.mpm import Collider, ColliderKind
     r, res = 0.12, 24
     voxel = 2.6 * r / (res - 1)
     g = (np.arange(res) * voxel - 1.3 * r).astype(np.float32)
@@ -61,7 +68,6 @@ def sphere_collider(grid_n: int):
 
 def scene(name: str, grid_n: int):
     """(materials, Particles, colliders) of a scene: one material name, or "Mixed"."""
-    from mpmfx.mpm import Particles, preset
     x, vol = block(grid_n)
     n = len(x)
     if name == "Mixed":  # the four materials in four columns of the block, a moving collider
@@ -77,7 +83,6 @@ def scene(name: str, grid_n: int):
 
 def copy_bandwidth(device, mbytes: int = 1024) -> float:
     """Device-to-device copy, GB/s counting read + write (0 on the CPU: not measured)."""
-    import warp as wp
     if not wp.get_device(device).is_cuda:
         return 0.0
     a = wp.zeros(mbytes * 2**18, dtype=float, device=device)
@@ -115,7 +120,6 @@ def traffic(solver, state) -> tuple[int, int, int]:
 
 def _phase_split(solver, state, t: float, span: float) -> tuple[dict, float]:
     """Device ms per substep of each phase over one more advance() (CUDA only), and t after it."""
-    import warp as wp
     if not solver.device.is_cuda:
         report = solver.advance(state, t, t + span)
         return {}, t + span
@@ -143,10 +147,6 @@ def sort_ms(solver, state, reps: int = 10, *, whole: bool = False) -> float:
     its CUB calls (radix sort and scan), which are not Warp launches, so Warp's kernel timing
     (_phase_split) does not see them (its Warp kernels, keys and segments, are in P2G's); whole:
     the whole sort (what p2g_brick.sort_cadence weighs)."""
-    import warp as wp
-
-    from mpmfx.mpm.p2g import P2GParams
-    from mpmfx.mpm.stepper import SubstepDev
     brick = solver._device_advance._brick
     if brick is None or not solver.device.is_cuda or solver._device_advance.p2g != "brick":
         return 0.0
@@ -179,9 +179,6 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     brick P2G, the default on a GPU), "device-sortK" (the brick P2G re-sorted every K
     substeps, not at the cadence p2g_brick.sort_cadence picks; 32: once a chunk) or "host" (the reference loop and kernels: statistics read every
     substep)."""
-    import warp as wp
-
-    from mpmfx.mpm import Solver, SolverConfig
     mats, parts, colliders = scene(name, grid_n)
     cfg = SolverConfig(grid_n=grid_n, deterministic=deterministic)
     solver = Solver(mats, cfg, colliders=colliders, device=device, stepper="host" if path == "host" else "device")
@@ -234,21 +231,18 @@ def safe_case(*args, **kw) -> dict:
     try:
         return run_case(*args, **kw)
     except Exception as err:  # noqa: BLE001 (reported in the row and the table)
-        import traceback
         traceback.print_exc()
         return {"impl": "mpmfx", "path": kw.get("path", "device"), "scene": args[0], "grid_n": args[1],
                 "det": int(args[2]), "error": repr(err)[:200], "finite": False}
 
 
 def _device_name(device) -> str:
-    import warp as wp
     d = wp.get_device(device)
     return d.name if d.is_cuda else "cpu"
 
 
 def taichi_rows(cases: list[tuple], *, arch: str = "cuda") -> list[dict]:
     """Run the Taichi peer in a child process (its own memory pool); rows it printed."""
-    from mpmfx.mpm import preset
     m = preset("Mushy")
     spec = {"cases": cases, "arch": arch, "snow": {"mu0": m.mu0, "lambda0": m.lambda0, "hardening": m.hardening,
                                                    "theta_c": m.theta_c, "theta_s": m.theta_s}}
@@ -267,9 +261,6 @@ def taichi_rows(cases: list[tuple], *, arch: str = "cuda") -> list[dict]:
 def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench",
          sizes: tuple[int, ...] | None = None) -> int:
     """sizes: grid sizes to run (default 64, 128, 256; the mixed scene runs at 128 if listed)."""
-    import warp as wp
-
-    from mpmfx.bench.report import print_table, write_rows
     if quick:
         device = device or "cpu"
     sizes = (16,) if quick else tuple(sizes or (64, 128, 256))
@@ -310,7 +301,6 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
             rows.append(t)
     write_rows(rows, out, "gpu")
     try:
-        from mpmfx.bench.gpu_plot import throughput_plot
         print("plot:", throughput_plot(rows, out))
     except ImportError as err:
         print(f"plot skipped ({err}); draw it from {out}/gpu.csv with `python -m mpmfx.bench.gpu_plot {out}`")

@@ -12,9 +12,9 @@ from pathlib import Path
 
 
 def throughput_plot(rows: list[dict], out: str | Path, *, name: str = "gpu") -> Path:
-    import matplotlib
+    import matplotlib  # optional: matplotlib
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional: matplotlib
 
     fig, ax = plt.subplots(figsize=(9, 6), dpi=110)
     lines: dict[tuple, list] = {}

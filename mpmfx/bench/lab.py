@@ -22,6 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from mpmfx.bench import experiments as ex
+from mpmfx.bench.plot import COLORS
+from mpmfx.bench.snow_table import snow_compression
+from mpmfx.render import import_pyvista
 
 DATA = Path(__file__).parent / "data"
 
@@ -133,7 +136,6 @@ def sand_rows(sweep: LabSweep, device) -> tuple[list[dict], list]:
 
 
 def snow_rows(device) -> list[dict]:
-    from mpmfx.bench.snow_table import snow_compression
     row = snow_compression(device=device)
     return [{"case": "snow confined compression", "reference": "Stomakhin et al. 2013 (derived table)",
              "grid_n": 0, "error": row["error"], "metric": row.get("metric", "max rel stress error"),
@@ -170,8 +172,6 @@ def run_lab(sweep: LabSweep, device=None) -> tuple[list[dict], dict]:
 
 def lab_plot(series: dict, out, *, name: str = "experiments") -> list[Path]:
     """Two PNGs: surge front Z(T) against the experiments, and runout against a with the laws."""
-    from mpmfx.render import import_pyvista
-    from mpmfx.bench.plot import COLORS
     pv = import_pyvista()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mpmfx.render import import_pyvista
+
 COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink",
           "tab:gray", "tab:olive", "tab:cyan"]
 
@@ -37,7 +39,6 @@ def speed_error_plot(rows: list[dict], out: str | Path, *, name: str = "accuracy
     """One line per case: x = wall seconds of stepping per simulated second, y = error (both log10). Rows with a
     non-positive error or time (exact to round-off) cannot sit on a log axis and are left
     out. Writes `<out>/<name>.png` (1000 x 700) and returns its path."""
-    from mpmfx.render import import_pyvista
     pv = import_pyvista()
     chart = pv.Chart2D(x_label="wall seconds per simulated second (log)", y_label="error against reference (log)")
     chart.title = "mpmfx bench accuracy: speed against error"
@@ -72,7 +73,6 @@ def surface_plot(rows: list[dict], out: str | Path, *, name: str = "surface") ->
     vertex mean for rows written before it was measured), both log10. One colour per method, one marker per particle
     count (legend "method @ count"); each series holds every shape and sampling. Rows with a
     non-positive or non-finite value are left out. Writes `<out>/<name>.png` (1000 x 700)."""
-    from mpmfx.render import import_pyvista
     pv = import_pyvista()
     chart = pv.Chart2D(x_label="particles per second (log)", y_label="mean surface error / h (log)")
     chart.title = "mpmfx bench surface: speed against error"

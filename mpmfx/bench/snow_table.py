@@ -14,6 +14,7 @@ import time
 import numpy as np
 import warp as wp
 
+from mpmfx.mpm import preset
 from mpmfx.mpm.constitutive import MaterialParams, hardening_factor, pack_material, snow_return_map, solid_tau, unpack_f
 
 # (eps, Jp, hardening h, sigma_axial, sigma_lateral), Stomakhin et al. 2013 defaults, derived
@@ -61,7 +62,6 @@ def snow_compression(*, increments: int = 1, drift_increments: int = 200, device
     s_axial, s_lateral) rows, and `error_after_<drift_increments>` = the same error when
     the path is cut into that many return-map calls (what a simulation does: it shows any
     drift of the SVD round trip U diag(S) V^T that the return map applies every substep)."""
-    from mpmfx.mpm import preset
     mat = preset("Soft", youngs_modulus=1.4e5, poisson_ratio=0.2, density=400.0, hardening=10.0,
                  theta_c=2.5e-2, theta_s=7.5e-3)
     dev = wp.get_device(device)

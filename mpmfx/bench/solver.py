@@ -9,6 +9,10 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import warp as wp
+
+from mpmfx.bench.report import print_table, write_rows
+from mpmfx.mpm import Particles, Solver, SolverConfig, preset
 
 MATERIALS = ("Elastic", "Mushy", "Granular", "Water")
 
@@ -27,9 +31,6 @@ def block_particles(n_target: int, grid_n: int, ppc: int = 8, seed: int = 0):
 
 
 def run_case(material: str, n_target: int, grid_n: int, substeps: int, device):
-    import warp as wp
-
-    from mpmfx.mpm import Particles, Solver, SolverConfig, preset
     x, vol = block_particles(n_target, grid_n)
     n = len(x)
     parts = Particles(x=x, v=np.zeros_like(x), volume=np.full(n, vol, np.float32),
@@ -52,13 +53,11 @@ def run_case(material: str, n_target: int, grid_n: int, substeps: int, device):
 
 
 def _device_name(device) -> str:
-    import warp as wp
     d = wp.get_device(device)
     return d.name if d.is_cuda else "cpu"
 
 
 def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench") -> int:
-    from mpmfx.bench.report import print_table, write_rows
     n, grid_n, steps = (20_000, 64, 20) if quick else (1_000_000, 256, 200)
     rows = [run_case(m, n, grid_n, steps, device) for m in MATERIALS]
     print_table(rows)

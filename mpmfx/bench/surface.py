@@ -14,8 +14,14 @@ over 10 frames (mpmfx.bench.surface_flicker): surface_flicker.csv/json.
 from __future__ import annotations
 
 import sys
-
 from collections.abc import Sequence
+
+from mpmfx.bench.plot import surface_plot
+from mpmfx.bench.report import write_rows
+from mpmfx.bench.surface_cases import HEADER, SHEET_COUNTS, bench_sheet, bench_surface
+from mpmfx.bench.surface_flicker import FLICKER_COUNT, bench_flicker
+from mpmfx.bench.surface_peers import PEERS, peer_missing
+from mpmfx.bench.surface_splash import SPLASH_PARTICLES, bench_splash
 
 QUICK_COUNTS = (100_000,)
 FULL_COUNTS = (1_000_000, 10_000_000)
@@ -25,8 +31,6 @@ def choose_peers(peers: Sequence[str] | None, *, quick: bool) -> list[str]:
     """The peers to run: `peers` as asked (ValueError naming the fix for an unknown or missing
     one), or by default splashsurf for --quick and every peer for the full run, each only where
     its package is installed (the others are named on stdout)."""
-    from mpmfx.bench.surface_peers import PEERS, peer_missing
-
     if peers is not None:
         unknown = [p for p in peers if p not in PEERS]
         if unknown:
@@ -48,9 +52,6 @@ def choose_peers(peers: Sequence[str] | None, *, quick: bool) -> list[str]:
 def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench",
          peers: Sequence[str] | None = None, counts: Sequence[int] | None = None) -> int:
     """Run the sweep; 0 on success, 2 on bad --peers / --counts."""
-    from mpmfx.bench.report import write_rows
-    from mpmfx.bench.surface_cases import HEADER, SHEET_COUNTS, bench_sheet, bench_surface
-
     try:
         chosen = choose_peers(peers, quick=quick)
     except ValueError as err:
@@ -66,7 +67,6 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
     path = write_rows(rows, out, "surface")
     print(f"tables: {path} (+ .json)")
     try:
-        from mpmfx.bench.plot import surface_plot
         print(f"plot: {surface_plot(rows, out)}")
     except ImportError as err:
         print(f"plot skipped: {err} (pip install pyvista to draw surface.png; the CSV/JSON are written)")
@@ -77,8 +77,6 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
     sheet_peers = chosen if peers is not None else choose_peers(None, quick=False)
     sheet = bench_sheet(min(SHEET_COUNTS["quick" if quick else "full"], max(counts)), device, peers=sheet_peers)
     print(f"thin sheet: {write_rows(sheet, out, 'surface_sheet')} (+ .json)")
-    from mpmfx.bench.surface_flicker import FLICKER_COUNT, bench_flicker
-    from mpmfx.bench.surface_splash import SPLASH_PARTICLES, bench_splash
     if max(counts) >= SPLASH_PARTICLES:
         print(f"splash frame: {write_rows(bench_splash(device, peers=sheet_peers), out, 'surface_splash')} (+ .json)")
     else:

@@ -22,7 +22,12 @@ import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
+import warp as wp
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
+from mpmfx.bench.surface_peers import run_peer
 from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_particles
 
 SPHERE_RADIUS = 0.3
@@ -91,8 +96,6 @@ def mesh_stats(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, int]:
     """(enclosed volume m^3 by the divergence theorem, number of connected pieces)."""
     if len(faces) == 0:
         return 0.0, 0
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
 
     t = vertices[faces].astype(np.float64)
     volume = float(np.einsum("ij,ij->i", t[:, 0], np.cross(t[:, 1], t[:, 2])).sum() / 6.0)
@@ -185,8 +188,6 @@ def measure_sheet(count: int, sampling: str, *, label: str = "fine", device: str
                   radius_factor: float = PARTICLE_RADIUS_PER_SPACING, **overrides) -> dict:
     """Our surfacer (setting OURS[label], plus SurfaceParams `overrides`, e.g. anisotropic=True)
     on the thin-sheet case: time (s, whole call), pieces, holes, open edges, thickness error."""
-    import warp as wp
-
     x, h = sample_sheet(count, sampling)
     setting = {**OURS[label], **overrides}
     voxel_h = setting.pop("voxel_h")
@@ -208,8 +209,6 @@ def measure_sheet_peer(name: str, count: int, sampling: str, *, device: str | No
     splashsurf 0.14 has no anisotropic kernel (its Laplacian mesh smoothing moves vertices but
     keeps the topology: holes unchanged, measured), so its row is its isotropic colour field;
     "newton-aniso" is Newton's Yu & Turk mode. Time: median of `repeats` after a warm-up."""
-    from mpmfx.bench.surface_peers import run_peer
-
     x, h = sample_sheet(count, sampling)
     res = run_peer(name, x, h, sampling, device=device, repeats=repeats)
     return {"shape": "sheet", "sampling": sampling, "particles": len(x), "h": h, "method": res.name,
@@ -228,12 +227,9 @@ def rest_jitter(x: np.ndarray, h: float, params: SurfaceParams, first, *, device
     same particles surfaced again). x: (n, 3) m; first: the SurfaceResult of x. The second frame
     moves each particle by N(0, REST_NOISE h) per axis. Where both frames have the same triangles
     (the usual case) vertices are compared one to one, else each to the other frame's nearest."""
-    import warp as wp
-
     def moved(a, b) -> float:
         if a.faces.shape == b.faces.shape and np.array_equal(a.faces, b.faces):
             return float(np.linalg.norm(a.vertices - b.vertices, axis=1).mean() / h)
-        from scipy.spatial import cKDTree
         if len(a.vertices) == 0 or len(b.vertices) == 0:
             return float("nan")
         d1 = cKDTree(a.vertices).query(b.vertices)[0]
@@ -259,9 +255,6 @@ def moving_jitter(x: np.ndarray, h: float, params: SurfaceParams, first, *, devi
     second frame's vertices, moved back, to the first frame's surface (point to the tangent
     plane of the nearest first-frame vertex, so a different triangulation of the same surface
     reads 0). A surfacer that follows the body exactly gives about the rest jitter."""
-    import warp as wp
-    from scipy.spatial import cKDTree
-
     a = first.mesh
     if len(a.vertices) == 0:
         return float("nan")
@@ -294,8 +287,6 @@ def measure(
     as a device array. "seconds" is the device work (SurfaceResult.stats["device"]),
     "seconds_host" the whole call including the copy of the result to the host.
     """
-    import warp as wp
-
     x, h = sample if sample is not None else sample_shape(shape, count, sampling)
     if voxel_h is not None:
         overrides["voxel_size"] = voxel_h * h
@@ -331,8 +322,6 @@ def measure(
 def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray, float], *,
                  device: str | None = None, repeats: int = 3) -> dict:
     """Peer `name` (mpmfx.bench.surface_peers.PEERS) on `sample` = (x (n, 3) m, h m); one row like ours."""
-    from mpmfx.bench.surface_peers import run_peer
-
     x, h = sample
     res = run_peer(name, x, h, sampling, device=device, repeats=repeats)
     row = _row(shape, sampling, x, h, res.name, "-", res.seconds, res.vertices, res.faces)

@@ -27,9 +27,12 @@ import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
+from scipy.spatial import cKDTree
 
-from mpmfx.bench.surface_cases import (BOX_HALF, MOVE_STEP, OURS, REST_NOISE, RUN_ERRORS, Table, mesh_stats,
-                                       sample_shape)
+from mpmfx.bench.report import write_rows
+from mpmfx.bench.surface_cases import BOX_HALF, MOVE_STEP, OURS, REST_NOISE, RUN_ERRORS, Table, mesh_stats, sample_shape
+from mpmfx.bench.surface_peers import run_peer
+from mpmfx.render import import_pyvista
 from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_particles
 
 FLICKER_COUNT = 20_000
@@ -78,8 +81,6 @@ def closest_on_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,
     """For each of `points` (q, 3), the closest point of the triangles around its nearest vertex
     of the mesh (vertices (m, 3), faces (k, 3)) and the vertex `normals` (m, 3) interpolated there
     (barycentric, renormalised: what smooth shading shows). Returns ((q, 3) points, (q, 3) normals)."""
-    from scipy.spatial import cKDTree
-
     _, near = cKDTree(vertices).query(points)
     # triangles incident to each vertex, padded with the vertex's first one (a repeat changes no minimum)
     order = np.argsort(faces.ravel(), kind="stable")
@@ -180,7 +181,6 @@ def picture_change(meshes: list[tuple[np.ndarray, np.ndarray]]) -> dict:
     over R, G, B; 8-bit levels) averaged, and the share changing by more than VISIBLE_LEVELS;
     means over the pairs. Empty where PyVista is missing (a GPU node): the table shows "-"."""
     try:
-        from mpmfx.render import import_pyvista
         pv = import_pyvista()
     except ImportError:
         return {}
@@ -233,8 +233,6 @@ def ours(label: str, h: float, device: str | None = None) -> Callable[[np.ndarra
 def peer(name: str, h: float, device: str | None = None) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, float]]:
     """Peer `name` at its bench settings for random samples as a positions -> (vertices, faces,
     seconds) function; seconds = its timed call (run_peer warms up first, untimed)."""
-    from mpmfx.bench.surface_peers import run_peer
-
     def run(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         res = run_peer(name, x, h, "random", device=device, repeats=1)
         return res.vertices, res.faces, res.seconds
@@ -299,7 +297,6 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = ap.parse_args(argv)
     rows = bench_flicker(args.count, args.device, peers=args.peers, frames=args.frames)
     if args.out:
-        from mpmfx.bench.report import write_rows
         print(f"table: {write_rows(rows, args.out, 'surface_flicker')} (+ .json)")
 
 

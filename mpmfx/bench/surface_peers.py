@@ -12,8 +12,8 @@ volume, Newton's splat volume (2 r)^3 = h^3), and their settings below were tune
 (mpmfx.surface.PARTICLE_RADIUS_PER_SPACING, 0.6 h) is an offset of our level set, another
 quantity; giving the peers 0.6 h would only inflate their densities.
 
-numpy only at import; pysplashsurf, newton and warp are imported inside the runners and a
-missing one raises ImportError that says what to pip install.
+pysplashsurf and newton (optional) are imported inside the runners, and a missing one raises
+ImportError that says what to pip install.
 """
 
 from __future__ import annotations
@@ -25,6 +25,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+import warp as wp
+
+from mpmfx.threads import usable_cores
 
 PEER_RADIUS_PER_SPACING = 0.5
 """The peers' particle radius in units of the spacing h (see the module docstring)."""
@@ -80,7 +83,7 @@ def _median_time(call: Callable[[], object], repeats: int) -> tuple[float, objec
 
 def _import_splashsurf():
     try:
-        import pysplashsurf
+        import pysplashsurf  # optional: pysplashsurf
     except ImportError as exc:
         raise ImportError(f"the splashsurf peer needs pysplashsurf: {SPLASHSURF_PIP}") from exc
     return pysplashsurf
@@ -107,7 +110,6 @@ def _splashsurf_threads(threads: int | None) -> str:
     if threads is not None and fixed is None:
         os.environ["RAYON_NUM_THREADS"] = str(threads)
         fixed = threads
-    from mpmfx.surface.launch import usable_cores
     _rayon_threads = fixed or usable_cores()
     return f"cpu x{_rayon_threads}"
 
@@ -156,8 +158,7 @@ def splashsurf_call(x: np.ndarray, h: float, *, kernel: float, cube: float, thre
 
 def _import_newton():
     try:
-        import warp as wp
-        from newton.geometry import ParticleSurface
+        from newton.geometry import ParticleSurface  # optional: newton
     except ImportError as exc:
         raise ImportError(f"the Newton peer needs newton and warp-lang: {NEWTON_PIP}") from exc
     return wp, ParticleSurface

@@ -22,6 +22,16 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+import warp as wp
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from mpmfx.bench.report import write_rows
+from mpmfx.bench.surface_cases import Table, mesh_stats, sheet_stats
+from mpmfx.bench.surface_peers import run_peer
+from mpmfx.config import load_shot_config
+from mpmfx.stages.surface import surface_params
+from mpmfx.surface import SurfaceParams, surface_particles
 
 SPLASH_ASSET = Path(__file__).parent / "data" / "water_dam_splash.npz"
 SPLASH_SHOT = Path(__file__).parents[2] / "pipeline" / "shots" / "water_dam.toml"
@@ -36,8 +46,6 @@ def write_splash_asset(frame_npz: str | Path, out: str | Path = SPLASH_ASSET, *,
                        shot: str | Path = SPLASH_SHOT, frame: int = SPLASH_FRAME) -> Path:
     """Store the positions `x` of a simulate-stage frame (.npz) of `shot` as the bench's asset:
     uint16 per axis over the shot's domain cube, with origin, size, spacing h (m) and frame."""
-    from mpmfx.config import load_shot_config
-
     cfg = load_shot_config(shot)
     origin, size = np.asarray(cfg.domain.origin, np.float64), float(cfg.domain.size)
     x = np.load(frame_npz)["x"].astype(np.float64)
@@ -62,9 +70,6 @@ def splash_params(h: float, *, anisotropic: bool, shot: str | Path = SPLASH_SHOT
     """The surface stage's SurfaceParams for `shot`'s first surface group (water_dam's water:
     radius_scale 1.2, no sharp edges), with `anisotropic` set as asked; h must be the shot's
     spacing (checked: the asset's shot)."""
-    from mpmfx.config import load_shot_config
-    from mpmfx.stages.surface import surface_params
-
     cfg = load_shot_config(shot)
     if not np.isclose(cfg.particle_spacing, h):
         raise ValueError(f"{shot}: spacing {cfg.particle_spacing:g} m, the splash asset's {h:g} m; "
@@ -75,9 +80,6 @@ def splash_params(h: float, *, anisotropic: bool, shot: str | Path = SPLASH_SHOT
 def piece_volumes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Enclosed volume (m^3) of each connected piece of a closed triangle mesh, by the divergence
     theorem per piece; (pieces,) float64, in no particular order."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     if len(faces) == 0:
         return np.zeros(0)
     n = len(vertices)
@@ -97,8 +99,6 @@ MIN_PIECE_VOLUME = 8.0
 
 def _row(method: str, x: np.ndarray, h: float, seconds: float, vertices: np.ndarray, faces: np.ndarray,
          device: str, settings: str) -> dict:
-    from mpmfx.bench.surface_cases import mesh_stats, sheet_stats
-
     stats = sheet_stats(vertices, faces, h)
     stats.pop("thickness_err")  # a disc's measure; this frame has no analytic thickness
     volume, _ = mesh_stats(vertices, faces)
@@ -110,10 +110,6 @@ def _row(method: str, x: np.ndarray, h: float, seconds: float, vertices: np.ndar
 
 def measure_splash(x: np.ndarray, h: float, *, anisotropic: bool, device: str | None = None) -> dict:
     """Our surfacer at the shot's setting on (x (n, 3) m, h m); time = one whole call (compiled)."""
-    import warp as wp
-
-    from mpmfx.surface import surface_particles
-
     params = splash_params(h, anisotropic=anisotropic)
     t0 = time.perf_counter()
     mesh = surface_particles(x, None, params, device=device).mesh
@@ -126,8 +122,6 @@ def measure_splash(x: np.ndarray, h: float, *, anisotropic: bool, device: str | 
 
 def measure_splash_peer(name: str, x: np.ndarray, h: float, *, device: str | None = None, repeats: int = 1) -> dict:
     """Peer `name` on (x, h) at its bench settings for random samples; time: median after a warm-up."""
-    from mpmfx.bench.surface_peers import run_peer
-
     res = run_peer(name, x, h, "random", device=device, repeats=repeats)
     return _row(res.name, x, h, res.seconds, res.vertices, res.faces, res.device, res.settings)
 
@@ -136,9 +130,6 @@ def bench_splash(device: str | None = None, *, peers: Sequence[str] = (), echo: 
                  asset: str | Path = SPLASH_ASSET) -> list[dict]:
     """The splash frame with ours isotropic and anisotropic and each peer (a failing peer is
     reported and left out); prints SPLASH_HEADER rows when `echo`."""
-    from mpmfx.bench.surface_cases import Table
-    from mpmfx.surface import SurfaceParams, surface_particles
-
     x, h = load_splash(asset)
     surface_particles(x[:500], None, SurfaceParams(h, anisotropic=True), device=device)  # compile
     rows = Table(SPLASH_HEADER, format_splash_row, echo=echo)
@@ -167,7 +158,6 @@ def main(argv: Sequence[str] | None = None) -> None:
     args = ap.parse_args(argv)
     rows = bench_splash(args.device, peers=args.peers)
     if args.out:
-        from mpmfx.bench.report import write_rows
         print(f"table: {write_rows(rows, args.out, 'surface_splash')} (+ .json)")
 
 

@@ -18,6 +18,8 @@ import json
 import sys
 import time
 
+import numpy as np
+
 
 def run_case(ti, grid_n: int, material: str, dt: float, substeps: int, snow: dict) -> dict:
     dx, inv_dx = 1.0 / grid_n, float(grid_n)
@@ -129,14 +131,13 @@ def run_case(ti, grid_n: int, material: str, dt: float, substeps: int, snow: dic
     ti.sync()
     wall = time.perf_counter() - t0
     xs = x.to_numpy()
-    import numpy as np
     return {"impl": "taichi", "material": material, "grid_n": grid_n, "particles": n, "dt": dt,
             "substeps": substeps, "wall_s": wall, "G_per_s": n * substeps / wall / 1e9,
             "ms_substep": 1e3 * wall / substeps, "finite": bool(np.isfinite(xs).all())}
 
 
 def main(spec: dict) -> int:
-    import taichi as ti
+    import taichi as ti  # optional: taichi
     for grid_n, material, dt, substeps in spec["cases"]:
         ti.init(arch=getattr(ti, spec.get("arch", "cuda")), default_fp=ti.f32, offline_cache=True,
                 device_memory_GB=spec.get("memory_GB", 12), log_level=ti.WARN)

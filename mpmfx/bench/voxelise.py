@@ -3,7 +3,16 @@ game assets often are): ``mpmfx bench voxelise``."""
 
 from __future__ import annotations
 
+import json
 import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+import trimesh
+
+from mpmfx.geometry.thickness import check_thickness
+from mpmfx.geometry.voxelise import voxelise
 
 
 def bench_voxelise(n_tris: int = 100_000, grid_n: int = 256, *, ppc: int = 8, holes: bool = False) -> dict:
@@ -14,11 +23,7 @@ def bench_voxelise(n_tris: int = 100_000, grid_n: int = 256, *, ppc: int = 8, ho
     winding number where the rays disagree (mpmfx.geometry.inside).
     Returns {"mesh", "n_tris", "grid_n", "particles", "voxelise_s", "check_s", "verdict"}.
     """
-    import numpy as np
-    import trimesh
 
-    from mpmfx.geometry.thickness import check_thickness
-    from mpmfx.geometry.voxelise import voxelise
 
     count = max(8, int(round(np.sqrt(n_tris / 4.0))))  # uv_sphere: ~4 count^2 faces
     mesh = trimesh.creation.uv_sphere(radius=0.3, count=[count, count])
@@ -39,9 +44,6 @@ def bench_voxelise(n_tris: int = 100_000, grid_n: int = 256, *, ppc: int = 8, ho
 def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench") -> int:
     """`mpmfx bench voxelise`: a closed and an open sphere (CPU work: `device` is not used);
     --quick: 10k triangles, grid 64."""
-    import json
-    import warnings
-    from pathlib import Path
     size = (10_000, 64) if quick else (100_000, 256)
     rows = []
     for holes in (False, True):

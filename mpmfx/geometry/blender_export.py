@@ -19,17 +19,16 @@ from __future__ import annotations
 
 import sys
 
+import bpy
 import numpy as np
 
-from mpmfx.geometry.mesh import Z_UP_TO_Y_UP
+from mpmfx.blender import ERROR
+from mpmfx.geometry.common import Z_UP_TO_Y_UP
 
-ERROR = "mpmfx-blender-error: "  # the line the parent reads the reason from
 SURFACES = {"MESH", "CURVE", "SURFACE", "META", "FONT"}  # object types Blender turns into a mesh
 
 
 def open_file(path: str) -> None:
-    import bpy
-
     if path.lower().endswith(".blend"):
         bpy.ops.wm.open_mainfile(filepath=path, load_ui=False)
         return
@@ -42,8 +41,6 @@ def open_file(path: str) -> None:
 
 def as_rendered() -> None:
     """Make the viewport's evaluation the render's: visibility and modifier settings."""
-    import bpy
-
     for coll in bpy.data.collections:
         coll.hide_viewport = coll.hide_render
     for ob in bpy.context.scene.objects:
@@ -59,8 +56,6 @@ def as_rendered() -> None:
 def part_objects(part: str | None) -> set[str] | None:
     """Names of the objects `part` takes: the object of that name and every object of the
     collection of that name, however deeply nested (None: everything)."""
-    import bpy
-
     if part is None:
         return None
     names = {part} if part in bpy.data.objects else set()
@@ -72,8 +67,6 @@ def part_objects(part: str | None) -> set[str] | None:
 def triangles(chosen: set[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (n, 3) float64 in Blender's world units and axes, faces (f, 3) int64) of
     everything, or of the objects named in `chosen` and what they instance."""
-    import bpy
-
     depsgraph = bpy.context.evaluated_depsgraph_get()
     verts, faces, offset = [], [], 0
     for inst in depsgraph.object_instances:
@@ -106,8 +99,6 @@ def triangles(chosen: set[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
 
 
 def main(argv: list[str]) -> int:
-    import bpy
-
     src, out, part = argv[0], argv[1], (argv[2] if len(argv) > 2 else None)
     try:
         open_file(src)

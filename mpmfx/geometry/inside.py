@@ -15,6 +15,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from trimesh.triangles import closest_point
 
 # Every lattice point is tested as if moved by this tiny, irrational fraction of h, so a
 # ray never passes exactly through a mesh edge or vertex, and a point on an axis-aligned
@@ -166,9 +170,6 @@ def boundary_caps(mesh) -> np.ndarray:
     is taken as a chain: an edge counts with the net number of times the faces use it
     a -> b rather than b -> a, so holes, non-manifold edges and faces wound against their
     neighbours all get capped. (0, 3, 3) for a closed, consistently wound mesh."""
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     faces = np.asarray(mesh.faces, np.int64)
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     lo, hi = e.min(axis=1), e.max(axis=1)
@@ -240,9 +241,6 @@ def signed_distance(mesh, lattice: Lattice, inside: np.ndarray) -> np.ndarray:
     further away, the distance to the nearest exact point plus that point's distance,
     an upper bound that is within about one spacing of the truth.
     """
-    from scipy import ndimage
-    from trimesh.triangles import closest_point
-
     h, shape = lattice.h, lattice.shape
     tris = np.asarray(mesh.triangles, float)
     dist = np.full(int(np.prod(shape)), np.inf)

@@ -4,18 +4,24 @@ All lengths are world units (metres). Formats: OBJ, PLY, STL, GLB/glTF through t
 (scenes are flattened with their node transforms), Blender and FBX files through Blender in
 its own process (mpmfx.geometry.blender_export) and USD/USDA/USDC/USDZ through ``pxr``
 (mpmfx.geometry.usd_asset: what a renderer draws, Y-up, in metres).
-trimesh, scipy and pxr are imported inside the functions that use them.
+pxr is imported inside mpmfx.geometry.usd_asset's functions; bpy only in Blender's own process.
 """
 
 from __future__ import annotations
 
+import json
+import struct
+import subprocess
+import tempfile
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
+import trimesh
+from scipy.spatial.transform import Rotation
 
-if TYPE_CHECKING:  # pragma: no cover
-    import trimesh
+from mpmfx.blender import ERROR, bpy_available, child_command, child_env
+from mpmfx.geometry.common import MeshError
+from mpmfx.geometry.usd_asset import load_usd
 
 TRIMESH_SUFFIXES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")  # a compressed glTF goes to Blender
 USD_SUFFIXES = (".usd", ".usda", ".usdc", ".usdz")
@@ -24,13 +30,6 @@ BLENDER_SUFFIXES = (".blend", ".fbx")
 # A mesh whose smallest bounding-box side is below this fraction of its largest is flat:
 # it has no interior to fill with particles.
 _FLAT_RATIO = 1e-6
-
-# row vectors times this: a Z-up stage's (x, y, z) becomes (x, z, -y) in our Y-up world
-Z_UP_TO_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
-
-
-class MeshError(ValueError):
-    """A mesh cannot be used as given; the message names the file and the fix."""
 
 
 def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Trimesh":
@@ -43,16 +42,12 @@ def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Tri
     n-gons triangulated). Raises ``MeshError`` for a missing, unreadable, empty or
     degenerate (flat, zero-volume) mesh.
     """
-    import trimesh
-
     path = Path(path)
     if not path.is_file():
         raise MeshError(f"{path}: no such file; check the asset path (relative paths are "
                         f"relative to {Path.cwd()})")
     suffix = path.suffix.lower()
     if suffix in USD_SUFFIXES:
-        from mpmfx.geometry.usd_asset import load_usd
-
         vertices, faces = load_usd(path, prim_path)
     elif suffix in BLENDER_SUFFIXES or _compressed_gltf(path):  # Blender decodes Draco and meshopt
         vertices, faces = _load_blender(path, prim_path)
@@ -79,9 +74,6 @@ GLTF_COMPRESSION = ("KHR_draco_mesh_compression", "EXT_meshopt_compression", "KH
 
 def _compressed_gltf(path: Path) -> bool:
     """Whether a .glb / .gltf file's meshes are compressed (GLTF_COMPRESSION in its extensions)."""
-    import json
-    import struct
-
     suffix = path.suffix.lower()
     if suffix not in (".glb", ".gltf"):
         return False
@@ -100,8 +92,6 @@ def _compressed_gltf(path: Path) -> bool:
 
 
 def _load_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
-    import trimesh
-
     try:
         scene = trimesh.load_scene(str(path), process=False)  # keep NaN vertices: load_mesh refuses them
         parts = [g for g in scene.dump(concatenate=False)
@@ -119,19 +109,12 @@ def _load_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
 def _load_blender(path: Path, part: str | None) -> tuple[np.ndarray, np.ndarray]:
     """A .blend or .fbx file's rendered surfaces, or those of the object or collection named
     `part`, from Blender in its own process."""
-    import subprocess
-    import sys
-    import tempfile
-
-    from mpmfx.geometry.blender_export import ERROR
-    from mpmfx.render.cycles import bpy_available, child_env
-
     if not bpy_available():
         raise MeshError(f"{path}: reading {path.suffix} files needs Blender as a Python module (bpy 4.5): "
                         "run `bash setup.sh`, or export the asset as USD, glTF or OBJ")
     with tempfile.TemporaryDirectory(prefix="mpmfx-blender-") as tmp:
         out = Path(tmp) / "mesh.npz"
-        cmd = [sys.executable, "-m", "mpmfx.geometry.blender_export", str(path.resolve()), str(out)]
+        cmd = child_command("mpmfx.geometry.blender_export", str(path.resolve()), str(out))
         res = subprocess.run(cmd + ([part.lstrip("/")] if part else []), capture_output=True, text=True,
                              env=child_env())
         if res.returncode != 0 or not out.is_file():
@@ -143,23 +126,7 @@ def _load_blender(path: Path, part: str | None) -> tuple[np.ndarray, np.ndarray]
             return data["vertices"], data["faces"]
 
 
-def fan_triangulate(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
-    """Fan-triangulate polygons. counts: (p,) vertices per face; indices: (sum counts,).
-
-    Returns (t, 3) int64 vertex indices; faces with fewer than 3 vertices are dropped.
-    """
-    starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
-    n_tris = np.clip(counts - 2, 0, None)
-    face_start = np.repeat(starts, n_tris)
-    # k-th triangle of a face uses vertices (0, k+1, k+2) of that face.
-    k = np.arange(n_tris.sum()) - np.repeat(np.cumsum(n_tris) - n_tris, n_tris)
-    return np.stack([indices[face_start], indices[face_start + k + 1],
-                     indices[face_start + k + 2]], axis=1)
-
-
 def _validate(mesh: "trimesh.Trimesh", path: Path | str) -> None:
-    import trimesh
-
     if len(mesh.faces) == 0:
         raise MeshError(f"{path}: no non-degenerate triangles; export the surface as a "
                         "polygon mesh")
@@ -184,8 +151,6 @@ def transform_mesh(mesh: "trimesh.Trimesh", *, translate=(0.0, 0.0, 0.0),
     translate: (3,) metres. rotate_deg: (3,) XYZ Euler angles in degrees (about the fixed
     world x, then y, then z axes). scale: scalar or (3,) factor, applied about the origin.
     """
-    from scipy.spatial.transform import Rotation
-
     s = np.broadcast_to(np.asarray(scale, float), (3,))
     if not np.all(np.isfinite(s)) or np.any(s <= 0):
         raise MeshError(f"scale={scale!r}: scale factors must be positive; use rotate_deg "

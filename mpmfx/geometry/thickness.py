@@ -15,6 +15,11 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+import trimesh
+from scipy import ndimage
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from mpmfx.geometry.inside import Lattice, inside_mask, signed_distance
 
@@ -130,8 +135,6 @@ def local_thickness(inside: np.ndarray, *, voxel: float, fine_up_to: float | Non
     actual ball that covers it, so values are within about one voxel of the truth.
     inside: (a, b, c) bool; voxels outside the array count as outside.
     """
-    from scipy import ndimage
-
     depth = ndimage.distance_transform_edt(np.pad(inside, 1))[1:-1, 1:-1, 1:-1]
     depth = np.where(inside, depth - 0.5, 0.0)
     thick = _thickness_from_depth(depth, fine_up_to / voxel if fine_up_to else None)
@@ -146,8 +149,6 @@ def _thickness_from_depth(depth: np.ndarray, fine_up_to: float | None) -> np.nda
     is >= r gets 2 * ridge(c) (the ball's diameter; ridge: the depth's sub-voxel peak near
     c). The +0.5 keeps raster staircases at sloped faces from reading as thin.
     """
-    from scipy import ndimage
-
     padded = np.pad(depth, 1)
     ridge = _ridge_depth(padded)
     thick = 2.0 * np.where(padded > 0, ridge, 0.0)  # every voxel lies in its own ball
@@ -177,8 +178,6 @@ def _cover_coarse(depth, ridge, thick, r: float) -> None:
     The block's deepest voxel may sit up to sqrt(3)/2 voxel from the block centre, so
     the cover reaches that much further: small next to r >= 8.
     """
-    from scipy import ndimage
-
     shape = depth.shape
     pad = [(0, n % 2) for n in shape]
     blocks = [np.pad(a, pad) for a in (depth, ridge)]
@@ -247,8 +246,6 @@ def check_thickness(mesh, *, grid_n: int, origin, size: float, warn_cells: float
     thickness along its core (else t_min), h: the raster voxel (it reads faces up to h / 2
     out), so that grid passes.
     """
-    from scipy import ndimage
-
     if grid_n < 1 or size <= 0 or not 0 < fail_cells <= warn_cells:
         raise ValueError(f"grid_n={grid_n}, size={size}, fail_cells={fail_cells}, "
                          f"warn_cells={warn_cells}: need grid_n >= 1, size > 0 and "
@@ -323,8 +320,6 @@ def check_thickness(mesh, *, grid_n: int, origin, size: float, warn_cells: float
 
 def _regions(labels, cored, thick, core, lat: Lattice, dx: float, min_core: int
              ) -> list[ThinRegion]:
-    from scipy import ndimage
-
     out = []
     slices = ndimage.find_objects(labels)
     for lab in cored:
@@ -363,8 +358,6 @@ def _split_features(core, thick, *, dx: float, h: float, min_core: int, levels: 
     thickness are a feature of their own (a taper's tip or a neck is shorter than that),
     measured the same way; the rest keeps the median of what is left.
     """
-    from scipy import ndimage
-
     t = float(np.median(thick[core]))
     out, rest = [], core.copy()
     lower = core & (thick < t - dx)
@@ -394,9 +387,6 @@ def _vertex_thickness(mesh, inside, shown, lat: Lattice):
     (unresolved features). Vertices buried in the solid (kit-bashed parts overlapping, a
     box's corner inside another) are far from the skin but not lost: inside voxels surround
     them."""
-    from scipy import ndimage
-    from scipy.spatial import cKDTree
-
     verts = np.asarray(mesh.vertices, float)
     skin = inside & ~ndimage.binary_erosion(inside)
     idx = np.argwhere(skin)
@@ -422,8 +412,6 @@ def _lost_regions(mesh, lost: np.ndarray, *, min_extent: float) -> list[ThinRegi
     """
     if not lost.any():
         return []
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
 
     e = np.asarray(mesh.edges_unique)
     e = e[lost[e[:, 0]] & lost[e[:, 1]]]
@@ -447,6 +435,5 @@ def refine_for_heatmap(mesh, *, grid_n: int, size: float, max_faces: int = 2_000
     dx = size / grid_n
     if len(mesh.faces) >= max_faces or mesh.edges_unique_length.max() <= dx:
         return mesh
-    import trimesh
     v, f = trimesh.remesh.subdivide_to_size(mesh.vertices, mesh.faces, max_edge=dx, max_iter=12)
     return mesh if len(f) > max_faces else trimesh.Trimesh(v, f, process=False)

@@ -3,7 +3,7 @@
 PointInstancer in place; hidden prims, proxy and guide purposes and hole faces left out), a
 subdivision surface as its limit surface with its creases (mpmfx.geometry.subdivide), world
 transforms and ``metersPerUnit`` applied, and a Z-up stage (Blender's export) turned Y-up.
-pxr is imported inside the functions.
+pxr is imported inside the functions (a backend boundary: importing this module stays light).
 """
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mpmfx.geometry.mesh import Z_UP_TO_Y_UP, MeshError, fan_triangulate
+from mpmfx.geometry.common import Z_UP_TO_Y_UP, MeshError, fan_triangulate
+from mpmfx.geometry.subdivide import Creases, catmull_clark
 
 
 def load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray]:
@@ -21,7 +22,7 @@ def load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray]
     draws of the stage at `path` under `prim_path` (None: the whole stage); MeshError where
     there is nothing to load."""
     try:
-        from pxr import Usd, UsdGeom
+        from pxr import Usd, UsdGeom  # backend: pxr
     except ImportError as exc:  # pragma: no cover - usd-core is a dependency
         raise MeshError(f"{path}: reading USD needs pxr; pip install usd-core") from exc
     stage = Usd.Stage.Open(str(path)) if _usd_readable(path) else None
@@ -68,9 +69,8 @@ def _drawn_faces(geom, v: np.ndarray, counts: np.ndarray, indices: np.ndarray, t
     catmullClark, USD's default where none is authored, or loop) the limit surface, closely
     (mpmfx.geometry.subdivide: a coarse cage can lie far outside what is drawn). where: the
     file and prim, for messages."""
-    from pxr import UsdGeom
+    from pxr import UsdGeom  # backend: pxr
 
-    from mpmfx.geometry.subdivide import catmull_clark
 
     ok = counts >= 3
     if not ok.all():  # points and lines are not faces
@@ -98,8 +98,6 @@ def _drawn_faces(geom, v: np.ndarray, counts: np.ndarray, indices: np.ndarray, t
 def _usd_creases(geom, time, where: str):
     """The mesh's authored creases (chains of vertices, a sharpness per chain or per edge) and
     sharp corners, as mpmfx.geometry.subdivide.Creases; where: the file and prim, for messages."""
-    from mpmfx.geometry.subdivide import Creases
-
     def get(attr, dtype):
         value = attr.Get(time)
         return np.zeros(0, dtype) if value is None else np.asarray(value, dtype)
@@ -130,7 +128,7 @@ def _usd_meshes(root, time, *, place=None):
     hidden or drawn only in viewports (visibility invisible, purpose guide or proxy: a
     production asset's proxy is a coarse double of its render geometry). place: (4, 4) matrix
     taking world space to where it is instanced (a prototype's meshes), or None."""
-    from pxr import Usd, UsdGeom
+    from pxr import Usd, UsdGeom  # backend: pxr
 
     cache = UsdGeom.XformCache(time)
     it = iter(Usd.PrimRange(root, Usd.TraverseInstanceProxies()))
@@ -154,7 +152,7 @@ def _instanced_meshes(instancer, world: np.ndarray, time):
     """_usd_meshes of each drawn instance (not in invisibleIds nor inactiveIds) of a
     PointInstancer whose local-to-world matrix is `world`: a prototype's mesh at (mesh relative
     to the prototype) x (the instance's transform, which holds the prototype's own) x world."""
-    from pxr import UsdGeom
+    from pxr import UsdGeom  # backend: pxr
 
     protos = instancer.GetPrototypesRel().GetTargets()
     index = instancer.GetProtoIndicesAttr().Get(time)
@@ -181,7 +179,7 @@ def _instanced_meshes(instancer, world: np.ndarray, time):
 
 def _usd_readable(path: Path) -> bool:
     # Usd.Stage.Open raises (rather than returning None) on garbage; normalise to a bool.
-    from pxr import Sdf
+    from pxr import Sdf  # backend: pxr
 
     try:
         return Sdf.Layer.FindOrOpen(str(path)) is not None

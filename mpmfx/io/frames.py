@@ -130,13 +130,6 @@ class GroupSurface:
     vel_blocks: np.ndarray | None = None
     density_blocks: np.ndarray | None = None
 
-    def level_set(self):
-        """The leaves as `mpmfx.surface.SparseLevelSet` (to_dense / velocity_dense / density_dense)."""
-        from mpmfx.surface.params import SparseLevelSet
-        return SparseLevelSet(block_ijk=self.block_ijk, values=self.blocks, velocity=self.vel_blocks,
-                              inside_ijk=self.inside_ijk, voxel_size=float(self.voxel_size),
-                              background=float(self.background), density=self.density_blocks)
-
 
 @dataclass
 class SurfaceFrame:

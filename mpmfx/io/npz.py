@@ -21,6 +21,8 @@ from typing import BinaryIO
 
 import numpy as np
 
+from mpmfx.threads import THREADS_ENV, cpu_threads, usable_cores
+
 CHUNK = 4 << 20  # bytes of .npy data deflated as one piece
 LEVEL = 1  # zlib level, as the frame files were always written (fast; the level set still shrinks ~2.5x)
 MAX_THREADS = 8
@@ -34,8 +36,6 @@ def threads() -> int:
     2-core machine the cores are the surfacer's and the solver's). A Dask worker's share of the
     cores is the MPMFX_SURFACE_THREADS its cluster sets (mpmfx.stages.parallel), so many workers
     writing at once do not each start threads for every core."""
-    from mpmfx.surface.launch import THREADS_ENV, cpu_threads, usable_cores  # (no Warp import)
-
     cores = min(usable_cores(), cpu_threads()) if THREADS_ENV in os.environ else usable_cores()
     return max(1, min(MAX_THREADS, cores // 2))
 

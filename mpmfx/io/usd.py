@@ -53,8 +53,8 @@ def import_pxr() -> Any:
     """Return the pxr package with the modules used here loaded, or raise ImportError saying
     how to install it."""
     try:
-        import pxr
-        from pxr import Gf, Sdf, Usd, UsdGeom, UsdUtils, UsdVol, Vt  # noqa: F401
+        import pxr  # backend: pxr
+        from pxr import Gf, Sdf, Usd, UsdGeom, UsdUtils, UsdVol, Vt  # backend: pxr  # noqa: F401
     except ImportError as exc:
         raise ImportError(INSTALL_HINT) from exc
     return pxr
@@ -111,7 +111,7 @@ class ColliderSample:
 def _atomic_target(path: Path) -> Iterator[Path]:
     """`mpmfx.cache.atomic_path` (the layer is read back before the rename), then reload a
     layer this process already holds for `path`."""
-    from pxr import Sdf
+    from pxr import Sdf  # backend: pxr
     with atomic_path(path, verify=lambda tmp: Sdf.Layer.OpenAsAnonymous(str(tmp)) is not None) as tmp:
         yield tmp
     _reload_if_open(path)
@@ -119,7 +119,7 @@ def _atomic_target(path: Path) -> Iterator[Path]:
 
 def _reload_if_open(path: Path) -> None:
     """A layer this process already opened from `path` would keep serving the old content."""
-    from pxr import Sdf
+    from pxr import Sdf  # backend: pxr
     layer = Sdf.Layer.Find(str(path))
     if layer is not None:
         layer.Reload(True)
@@ -143,7 +143,7 @@ def _array(value: Any, where: str, *, shape: tuple[int | None, ...], dtype: type
 
 
 def _check_name(name: str, what: str) -> None:
-    from pxr import Sdf, Tf
+    from pxr import Sdf, Tf  # backend: pxr
     if not isinstance(name, str) or not Sdf.Path.IsValidIdentifier(name):
         raise ValueError(f"{what} name {name!r} is not a valid USD prim name: use letters, digits "
                          f"and underscores, not starting with a digit (e.g. "
@@ -153,7 +153,7 @@ def _check_name(name: str, what: str) -> None:
 
 
 def _extent(points: np.ndarray, pad: float = 0.0) -> Any:
-    from pxr import Vt
+    from pxr import Vt  # backend: pxr
     if len(points) == 0:
         return Vt.Vec3fArray.FromNumpy(np.zeros((2, 3), np.float32))
     box = np.stack([points.min(axis=0) - pad, points.max(axis=0) + pad]).astype(np.float32)
@@ -162,7 +162,7 @@ def _extent(points: np.ndarray, pad: float = 0.0) -> Any:
 
 def _vt_array(arr: np.ndarray, where: str) -> tuple[Any, Any]:
     """(Sdf value type, Vt array) for a primvar array of shape (n,) or (n, 3)."""
-    from pxr import Sdf, Vt
+    from pxr import Sdf, Vt  # backend: pxr
     kinds = {
         (1, "i4"): (Sdf.ValueTypeNames.IntArray, Vt.IntArray, np.int32),
         (1, "i8"): (Sdf.ValueTypeNames.Int64Array, Vt.Int64Array, np.int64),
@@ -180,7 +180,7 @@ def _vt_array(arr: np.ndarray, where: str) -> tuple[Any, Any]:
 
 
 def _write_points(stage: Any, path: str, sample: PointsSample, time: float, where: str) -> None:
-    from pxr import UsdGeom, Vt
+    from pxr import UsdGeom, Vt  # backend: pxr
     pts = _array(sample.positions, f"{where}.positions", shape=(None, 3), dtype=np.float32)
     n = len(pts)
     prim = UsdGeom.Points.Define(stage, path)
@@ -216,7 +216,7 @@ def _write_points(stage: Any, path: str, sample: PointsSample, time: float, wher
 
 
 def _write_mesh(stage: Any, path: str, sample: MeshSample, time: float, where: str) -> None:
-    from pxr import UsdGeom, Vt
+    from pxr import UsdGeom, Vt  # backend: pxr
     pts = _array(sample.points, f"{where}.points", shape=(None, 3), dtype=np.float32)
     tris = _array(sample.face_vertex_indices, f"{where}.face_vertex_indices", shape=(None, 3), dtype=np.int32)
     if tris.size and (tris.min() < 0 or tris.max() >= len(pts)):
@@ -238,7 +238,7 @@ def _write_mesh(stage: Any, path: str, sample: MeshSample, time: float, where: s
 
 def _write_volume(stage: Any, path: str, fields: dict[str, str], time: float, *,
                   root_dir: Path, layer_dir: Path, where: str) -> None:
-    from pxr import Sdf, UsdVol
+    from pxr import Sdf, UsdVol  # backend: pxr
     volume = UsdVol.Volume.Define(stage, path)
     for name, file_path in fields.items():
         _check_name(name, f"{where} field")
@@ -265,7 +265,7 @@ def _write_volume(stage: Any, path: str, fields: dict[str, str], time: float, *,
 
 
 def _write_collider(stage: Any, sample: ColliderSample, time: float) -> None:
-    from pxr import Gf, UsdGeom, Vt
+    from pxr import Gf, UsdGeom, Vt  # backend: pxr
     _check_name(sample.name, "collider")
     where = f"collider {sample.name!r}"
     pts = _array(sample.points, f"{where}.points", shape=(None, 3), dtype=np.float32)
@@ -300,7 +300,7 @@ def _camera_matrix(position: np.ndarray, look_at: np.ndarray, up: np.ndarray) ->
 
 
 def _write_camera(stage: Any, camera: dict, meters_per_unit: float) -> None:
-    from pxr import Gf, UsdGeom
+    from pxr import Gf, UsdGeom  # backend: pxr
     unknown = sorted(set(camera) - set(_CAMERA_KEYS))
     if unknown or "position" not in camera or "look_at" not in camera:
         raise ValueError(f"camera: needs 'position' and 'look_at' (metres); unknown keys {unknown}; "
@@ -363,7 +363,7 @@ class UsdShotWriter:
         return self.root_path.with_name(f"{self.root_path.stem}.manifest.usda")
 
     def _new_stage(self) -> Any:
-        from pxr import Usd, UsdGeom
+        from pxr import Usd, UsdGeom  # backend: pxr
         stage = Usd.Stage.CreateInMemory()
         stage.SetTimeCodesPerSecond(self.fps)
         stage.SetFramesPerSecond(self.fps)
@@ -382,7 +382,7 @@ class UsdShotWriter:
         the root stage's folder (or absolute)}. Values are time samples at time code `frame`.
         """
         import_pxr()
-        from pxr import UsdGeom
+        from pxr import UsdGeom  # backend: pxr
         stage = self._new_stage()
         time = float(frame)
         groups = {**dict.fromkeys(points or {}), **dict.fromkeys(meshes or {}),
@@ -414,7 +414,7 @@ class UsdShotWriter:
         focus_distance (metres), f_stop}; position and look_at are required.
         """
         import_pxr()
-        from pxr import Sdf, UsdUtils
+        from pxr import Sdf, UsdUtils  # backend: pxr
         frames = sorted({int(f) for f in frames})
         if not frames:
             raise ValueError(f"{self.root_path}: no frames to stitch; write frames first")
@@ -445,7 +445,7 @@ class UsdShotWriter:
 
     def _root_layer(self, frames: list[int], camera: dict | None) -> Any:
         """The root layer: stage metadata, clip metadata on /World, camera; topology sublayered."""
-        from pxr import Gf, Sdf, Usd, UsdGeom
+        from pxr import Gf, Sdf, Usd, UsdGeom  # backend: pxr
         layer = Sdf.Layer.CreateAnonymous(".usda")
         stage = Usd.Stage.Open(layer)
         stage.SetTimeCodesPerSecond(self.fps)
@@ -482,9 +482,9 @@ def validate_stage(path: str | Path, *, include_warnings: bool = False) -> list[
     --useNewValidationFramework` does (all but the usdz-package ones); return the messages of
     errors (and warnings if asked). Empty means clean."""
     import_pxr()
-    from pxr import Usd
+    from pxr import Usd  # backend: pxr
     try:
-        from pxr import UsdValidation
+        from pxr import UsdValidation  # backend: pxr
     except ImportError as exc:
         raise ImportError(f"{INSTALL_HINT} (usd-core >= 25.5 has pxr.UsdValidation)") from exc
     stage = Usd.Stage.Open(str(path))

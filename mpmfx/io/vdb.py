@@ -68,7 +68,7 @@ class VdbGrid:
 def import_pyopenvdb() -> Any:
     """Return the pyopenvdb module, or raise ImportError saying how to install it."""
     try:
-        import pyopenvdb
+        import pyopenvdb  # optional: pyopenvdb
     except ImportError as exc:
         raise ImportError(INSTALL_HINT) from exc
     return pyopenvdb

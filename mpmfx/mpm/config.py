@@ -6,6 +6,8 @@ import enum
 import math
 from dataclasses import dataclass
 
+from mpmfx.mpm.slots import WallCode
+
 __all__ = ["WallType", "OutOfDomain", "SolverConfig", "SolverConfigError", "STANDARD_GRAVITY"]
 
 STANDARD_GRAVITY = 9.81  # m/s^2; in domain units it is this over the domain's edge in metres
@@ -29,7 +31,6 @@ class WallType(enum.Enum):
     @property
     def code(self) -> int:
         """The grid update's integer code for this wall (slots.WallCode, same name)."""
-        from .slots import WallCode
         return int(WallCode[self.name])
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 
+import bmesh
 import bpy
 from mathutils import Matrix, Vector
 
@@ -113,7 +114,6 @@ def add_basin(lo, hi, *, height: float, thickness: float, look: str = "ground") 
     """Four walls of `height` m (stone, or the look named) standing on the floor just outside the
     box [lo, hi] (stage metres), where the solver's side walls hold a pool: the water meets a
     wall, not thin air."""
-    import bmesh
     bm = bmesh.new()
     x0, y0, z0 = lo
     x1, _, z1 = hi

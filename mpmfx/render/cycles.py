@@ -5,17 +5,13 @@ in its own process (both bundle USD libraries), and reports each finished frame 
 """
 from __future__ import annotations
 
-import importlib.util
 import json
-import os
 import subprocess
-import sys
 from collections.abc import Iterator
+from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-import mpmfx
-from mpmfx.render.cycles_job import FRAME_LINE
-
+from mpmfx.blender import FRAME_LINE, bpy_available, child_command, child_env
 
 INSTALL_HINT = ("render.engine = \"cycles\" needs Blender as a Python module (bpy 4.5, Python 3.11; "
                 "pinned in pyproject.toml): run `bash setup.sh`, or `pip install -e '.[render]'`, or render "
@@ -26,21 +22,8 @@ class CyclesError(RuntimeError):
     """The Blender child failed; the message carries the end of its output."""
 
 
-def bpy_available() -> bool:
-    return importlib.util.find_spec("bpy") is not None
-
-
-def child_env() -> dict:
-    """The environment of a Blender child process (`python -m mpmfx....`): it runs this very
-    mpmfx (a worktree or an editable install alike)."""
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(Path(mpmfx.__file__).parents[1]), env.get("PYTHONPATH", "")])
-    return env
-
-
 def blender_version() -> str | None:
     """The installed bpy's version, read from its metadata (importing bpy costs a second)."""
-    from importlib.metadata import PackageNotFoundError, version
     try:
         return version("bpy")
     except PackageNotFoundError:
@@ -75,7 +58,7 @@ def run_job(job_path: Path, *, log: Path) -> Iterator[tuple[int, float, float]]:
     The child's full output goes to `log`; a failure raises CyclesError with its last lines."""
     if not bpy_available():
         raise CyclesError(INSTALL_HINT)
-    cmd = [sys.executable, "-m", "mpmfx.render.cycles_job", str(job_path)]
+    cmd = child_command("mpmfx.render.cycles_job", str(job_path))
     with open(log, "w") as out:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=child_env())
         try:

@@ -2,9 +2,10 @@
 
     python -m mpmfx.render.cycles_job JOB.json
 
-Blender (`bpy`) and usd-core each bundle their own USD libraries, so this module is the only
-one that imports bpy, and it never imports pxr: the render stage writes a small JSON job
-(`mpmfx.render.cycles.write_job` documents its keys) and runs this as a child process.
+Blender (`bpy`) and usd-core each bundle their own USD libraries, so this module (with
+`mpmfx.render.blender_scene`) imports bpy, never pxr, and no module of the parent imports it
+(`mpmfx.blender`): the render stage writes a small JSON job (`mpmfx.render.cycles.write_job`
+documents its keys) and runs this as a child process.
 
 The stage is opened with Blender's own USD importer (`bpy.ops.wm.usd_import`), so every
 render also proves that the USD works in a DCC. Per frame, stdout gets one line
@@ -20,14 +21,18 @@ import sys
 import time
 from pathlib import Path
 
-FRAME_LINE = "MPMFX_FRAME"
+import bpy
+from mathutils import Vector
+
+from mpmfx.blender import FRAME_LINE
+from mpmfx.render import blender_scene as bs
+from mpmfx.render.blender_scene import Y_UP_TO_Z_UP, assign, make_material
 
 
 def import_stage(usd: str) -> dict[str, list]:
     """Import the USD stage and sort what came in: {"meshes", "points", "volumes", "colliders",
     "cameras"} -> [(prim name, object)]. The prim name is the object / surface group name
     (the parent prim's name: /World/<name>/mesh) or the collider's own name."""
-    import bpy
     res = bpy.ops.wm.usd_import(filepath=usd, set_frame_range=True, merge_parent_xform=False,
                                 import_lights=False, import_materials=False, relative_path=False,
                                 create_world_material=False)
@@ -57,10 +62,6 @@ def _prim_name(obj) -> str:
 
 def scene_bounds(objects, frames: list[int]):
     """(lo, hi) stage metres (Y up) of `objects` over `frames` (at most 12 of them sampled)."""
-    import bpy
-    from mathutils import Vector
-
-    from mpmfx.render.blender_scene import Y_UP_TO_Z_UP
     scene = bpy.context.scene
     back = Y_UP_TO_Z_UP.inverted()
     lo, hi = [math.inf] * 3, [-math.inf] * 3
@@ -82,7 +83,6 @@ def scene_bounds(objects, frames: list[int]):
 def set_looks(job: dict, imported: dict) -> None:
     """Materials per look; surface mode shows the meshes, particles mode the points; volumes
     (the .vdb level sets) stay in the file for the artist but out of the picture."""
-    from mpmfx.render.blender_scene import assign, make_material
     made: dict[str, object] = {}
 
     def material(look):
@@ -104,7 +104,6 @@ def set_looks(job: dict, imported: dict) -> None:
 
 def set_render(job: dict) -> None:
     """Cycles on the CPU: samples, OpenImageDenoise, motion blur from the exported velocities."""
-    import bpy
     scene = bpy.context.scene
     r, c = scene.render, scene.cycles
     r.engine = "CYCLES"
@@ -136,9 +135,6 @@ def set_render(job: dict) -> None:
 
 def build_scene(job: dict) -> None:
     """Import the stage, then add looks, ground, sky, camera and the render settings."""
-    import bpy
-
-    from mpmfx.render import blender_scene as bs
     bpy.ops.wm.read_factory_settings(use_empty=True)
     imported = import_stage(job["usd"])
     set_looks(job, imported)
@@ -171,7 +167,6 @@ def build_scene(job: dict) -> None:
 
 def render_frames(job: dict) -> None:
     """Render each frame to its PNG (written to a temp name, then renamed: complete or absent)."""
-    import bpy
     scene = bpy.context.scene
     for frame, path in zip(job["frames"], job["outputs"]):
         t0, c0 = time.perf_counter(), time.process_time()
@@ -189,7 +184,6 @@ def main(argv: list[str]) -> int:
         print("usage: python -m mpmfx.render.cycles_job JOB.json", file=sys.stderr)
         return 2
     job = json.loads(Path(argv[0]).read_text())
-    import bpy
     build_scene(job)
     scene = bpy.context.scene
     scene.frame_set(job["frames"][0])

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import imageio.v2 as imageio
 import numpy as np
 
 from mpmfx.render import import_pyvista
@@ -83,7 +84,6 @@ class FrameRenderer:
 
 def write_movie(frames: list[Path], path: Path, *, fps: float) -> Path:
     """H.264 mp4 of the PNGs (imageio-ffmpeg ships its own ffmpeg binary), written atomically."""
-    import imageio.v2 as imageio
     tmp = path.with_name(f".{path.stem}.tmp.mp4")
     # H.264 needs even sizes only; 8 would resize 540-high frames
     with imageio.get_writer(tmp, fps=fps, codec="libx264", quality=8, macro_block_size=2) as w:
@@ -96,7 +96,6 @@ def write_movie(frames: list[Path], path: Path, *, fps: float) -> Path:
 def contact_sheet(frames: list[Path], path: Path, *, count: int = 4, scale: int = 1) -> Path:
     """`count` evenly spaced frames in a grid of two columns, each downsampled by `scale`: one
     picture of a shot, read left to right, top to bottom."""
-    import imageio.v2 as imageio
     picks = [frames[round(i * (len(frames) - 1) / max(count - 1, 1))] for i in range(min(count, len(frames)))]
     images = [np.asarray(imageio.imread(p))[::scale, ::scale, :3] for p in picks]
     if len(images) % 2:

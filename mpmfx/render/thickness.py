@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
+from mpmfx.render import import_pyvista
+
 
 def render_thickness_heatmap(mesh, vertex_thickness_cells: np.ndarray, path: str | Path, *,
                              warn_cells: float = 5.0, window_size=(800, 600)) -> Path:
@@ -14,7 +16,6 @@ def render_thickness_heatmap(mesh, vertex_thickness_cells: np.ndarray, path: str
     mesh: trimesh.Trimesh in metres. vertex_thickness_cells: (v,) thickness per vertex in
     sim cells. Colour runs red (0 cells) through yellow to green (2 x warn_cells and above).
     """
-    from mpmfx.render import import_pyvista
     pv = import_pyvista()
     values = np.asarray(vertex_thickness_cells, float)
     if values.shape != (len(mesh.vertices),):

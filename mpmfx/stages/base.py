@@ -5,6 +5,9 @@ import sys
 from dataclasses import dataclass, field
 from typing import Protocol
 
+import warp as wp
+from tqdm import tqdm
+
 from mpmfx.cache import Entry
 from mpmfx.config import Shot
 from mpmfx.stages.parallel import FrameJob, Frames
@@ -43,7 +46,6 @@ class Context:
         """A progress bar over frames on stderr (silent when quiet or not a terminal in tests)."""
         if self.quiet:
             return iterable
-        from tqdm import tqdm
         return tqdm(iterable, total=total, desc=f"{desc or self.entry.stage:>9}", unit=unit,
                     file=sys.stderr, leave=False, dynamic_ncols=True)
 
@@ -68,7 +70,6 @@ class Stage(Protocol):
 def quiet_warp(device: str | None = None) -> None:
     """Silence Warp's start-up banner and per-module compile lines (the stage has its own progress
     bar), and check that the asked-for device exists before any kernel is built."""
-    import warp as wp
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # Warp 1.19 prints module loads at INFO
     if device and device.startswith("cuda") and not wp.is_cuda_available():

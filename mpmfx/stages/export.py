@@ -9,13 +9,20 @@ from __future__ import annotations
 import numpy as np
 
 from mpmfx.config import Shot
-from mpmfx.io.frames import ParticleFrame, SurfaceFrame
+from mpmfx.geometry.colliders import collider_mesh, keyframes
+from mpmfx.io.frames import GroupSurface, ParticleFrame, SurfaceFrame
+from mpmfx.io.usd import ColliderSample, MeshSample, PointsSample, UsdShotWriter
+from mpmfx.io.vdb import VdbGrid, write_vdb
+from mpmfx.mpm.colliders import pose_matrix
+from mpmfx.render.camera import default_camera
 from mpmfx.stages.base import Context
+from mpmfx.stages.colliders import collider_geometry
 from mpmfx.stages.parallel import FrameJob
+from mpmfx.surface.params import SparseLevelSet
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "export", 1, True, "usdc"
 CODE = ("mpmfx.stages.export", "mpmfx.io", "mpmfx.surface.params", "mpmfx.render.camera",
-        "mpmfx.geometry.colliders", "mpmfx.geometry.mesh", "mpmfx.mpm.colliders")
+        "mpmfx.stages.colliders", "mpmfx.geometry.colliders", "mpmfx.geometry.mesh", "mpmfx.mpm.colliders")
 
 
 def params(shot: Shot) -> dict:
@@ -55,13 +62,11 @@ def finish(ctx: Context, results: list) -> dict:
 
 
 def _writer(shot: Shot, entry):
-    from mpmfx.io.usd import UsdShotWriter
     return UsdShotWriter(entry.root / "shot.usda", fps=shot.shot.fps, start_frame=shot.shot.frame_start,
                          end_frame=shot.shot.frame_end, up_axis="Y", meters_per_unit=1.0)
 
 
 def _points(shot: Shot, p: ParticleFrame) -> dict:
-    from mpmfx.io.usd import PointsSample
     out = {}
     for body, obj in enumerate(shot.objects):
         sel = p.body == body
@@ -75,30 +80,26 @@ def _points(shot: Shot, p: ParticleFrame) -> dict:
 
 
 def _meshes(groups: dict) -> dict:
-    from mpmfx.io.usd import MeshSample
     return {g: MeshSample(points=d.vertices, face_vertex_indices=d.faces, normals=d.normals,
                           velocities=d.velocities) for g, d in groups.items()}
 
 
 def _colliders(shot: Shot, frame: int) -> list:
     """Each collider's mesh (local frame, m) and its pose at this frame, for USD."""
-    from mpmfx.geometry.colliders import collider_mesh, keyframes
-    from mpmfx.io.usd import ColliderSample
-    from mpmfx.mpm.colliders import pose_matrix
     t = (frame - shot.shot.frame_start) / shot.shot.fps
     out = []
     for col in shot.colliders:
-        m = collider_mesh(col, resolve=shot.resolve, plane_size=2 * shot.domain.size)
+        geom = collider_geometry(col)
+        m = collider_mesh(geom, resolve=shot.resolve, plane_size=2 * shot.domain.size)
         out.append(ColliderSample(name=col.name, points=np.asarray(m.vertices, np.float32),
-                                  faces=np.asarray(m.faces, np.int32), xform=pose_matrix(*keyframes(col), t)))
+                                  faces=np.asarray(m.faces, np.int32), xform=pose_matrix(*keyframes(geom), t)))
     return out
 
 
 def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
-    from mpmfx.io.vdb import VdbGrid, write_vdb
     volumes = {}
     for g, d in groups.items():
-        sparse = d.level_set()
+        sparse = level_set(d)
         ls = sparse.to_dense()
         if ls.values.size == 0:
             continue
@@ -118,7 +119,13 @@ def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
     return volumes
 
 
+def level_set(d: GroupSurface) -> SparseLevelSet:
+    """A stored group's leaves as `mpmfx.surface.SparseLevelSet` (to_dense / velocity_dense /
+    density_dense)."""
+    return SparseLevelSet(block_ijk=d.block_ijk, values=d.blocks, velocity=d.vel_blocks, inside_ijk=d.inside_ijk,
+                          voxel_size=float(d.voxel_size), background=float(d.background), density=d.density_blocks)
+
+
 def _camera(shot: Shot) -> dict:
-    from mpmfx.render.camera import default_camera
     pos, look = default_camera(shot)
     return {"position": pos, "look_at": look, "focal_length": 35.0}

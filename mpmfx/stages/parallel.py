@@ -30,7 +30,11 @@ import time
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable
 
+from tqdm import tqdm
+
 from mpmfx.cache import Entry
+from mpmfx.config import ShotError
+from mpmfx.threads import THREADS_ENV, cpu_threads, usable_cores
 
 if TYPE_CHECKING:
     from mpmfx.config import Shot
@@ -91,7 +95,6 @@ class Frames:
     """
 
     def __init__(self, *, workers: int | None = None, scheduler: str | None = None):
-        from mpmfx.config import ShotError  # bad input: exit 2 with the setting's name
         self.scheduler = scheduler or os.environ.get(SCHEDULER_ENV) or None
         if workers is None and os.environ.get(WORKERS_ENV):
             try:
@@ -101,7 +104,7 @@ class Frames:
                                 f"processes (1 = serial), or unset it") from None
         if workers is not None and workers < 1:
             raise ShotError(f"--workers / ${WORKERS_ENV} = {workers}: give at least 1 (1 = serial)")
-        from mpmfx.surface.launch import cpu_threads  # (no Warp import) its setting, checked before any stage runs
+        # the surfacer's thread setting, checked before any stage runs
         try:
             cpu_threads()
         except ValueError as exc:
@@ -132,12 +135,11 @@ class Frames:
     def client(self):
         """The Dask client: connected to the scheduler, or to a LocalCluster started now."""
         if self._client is None:
-            from distributed import Client, LocalCluster
+            from distributed import Client, LocalCluster  # backend: distributed
             if self.scheduler:
                 try:
                     self._client = Client(self.scheduler, timeout="20s")
                 except (OSError, TimeoutError) as exc:
-                    from mpmfx.config import ShotError
                     raise ShotError(f"--scheduler / ${SCHEDULER_ENV} = {self.scheduler!r}: no Dask scheduler "
                                     f"answers there ({exc}); start one (dask scheduler) or check the address, "
                                     f"or run without it") from None
@@ -230,18 +232,16 @@ class Frames:
 
 def _worker_env(workers: int) -> dict[str, str]:
     """The LocalCluster workers' share of the cores for the surfacer's CPU threads
-    (mpmfx.surface.launch): without it each of n workers splits its kernels across every core,
+    (mpmfx.threads): without it each of n workers splits its kernels across every core,
     and two workers on two cores surfaced the default shot 10 % slower (44.0-46.1 s against
     40.4-41.2 s with one thread each). A value the user set is inherited as it is."""
-    from mpmfx.surface.launch import THREADS_ENV, usable_cores  # (no Warp import)
-
     if THREADS_ENV in os.environ:
         return {}
     return {THREADS_ENV: str(max(1, usable_cores() // max(1, workers)))}
 
 
 def _gather(client, futures: list, bar) -> list[Any]:
-    from distributed import as_completed
+    from distributed import as_completed  # backend: distributed
     try:
         for fut in as_completed(futures):
             fut.result()  # raises the task's exception here, in the client
@@ -264,5 +264,4 @@ def _bar(total: int, desc: str, quiet: bool):
     """A progress bar over tasks as they complete (in any order), on stderr."""
     if quiet:
         return _NoBar()
-    from tqdm import tqdm
     return tqdm(total=total, desc=f"{desc:>9}", unit="frame", file=sys.stderr, leave=False, dynamic_ncols=True)

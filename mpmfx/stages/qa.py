@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+import sys
 
 MASS_TOL = 1e-4          # relative change of total mass that counts as "mass changed"
 ENERGY_JUMP = 1.5        # kinetic + elastic energy growing by more than this factor in one frame ...
@@ -53,7 +54,6 @@ def shot_flags(shot, qa: dict) -> dict[int, list[str]]:
 
 def warn_flags(bad: dict[int, list[str]], shot_path: str = "SHOT") -> None:
     """Say flagged frames on stderr at run time (they are easy to miss in `status --qa`)."""
-    import sys
     if not bad:
         return
     print(f"[simulate] warning: QA flags {len(bad)} frame(s); the result may not be physical "

@@ -15,23 +15,28 @@ from pathlib import Path
 
 from mpmfx.cache import atomic_path
 from mpmfx.config import RenderEngine, Shot
+from mpmfx.geometry.colliders import collider_mesh, keyframes
 from mpmfx.io.frames import ParticleFrame, SurfaceFrame
+from mpmfx.mpm.colliders import pose_matrix
+from mpmfx.render.camera import VIEW_DIRECTION, default_camera, solver_box, solver_floor
+from mpmfx.render.cycles import CyclesError, blender_version, run_job, write_job
+from mpmfx.render.frames import FrameRenderer, colour_for, contact_sheet, write_movie
+from mpmfx.render.looks import PROP_LOOKS, look_for
 from mpmfx.stages.base import Context, StageError
+from mpmfx.stages.colliders import collider_geometry
 from mpmfx.stages.parallel import FrameJob
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "render", 2, True, "png"
-CODE = ("mpmfx.stages.render", "mpmfx.render", "mpmfx.io.frames", "mpmfx.geometry.colliders",
-        "mpmfx.geometry.mesh", "mpmfx.mpm.colliders")
+CODE = ("mpmfx.stages.render", "mpmfx.render", "mpmfx.io.frames", "mpmfx.stages.colliders",
+        "mpmfx.geometry.colliders", "mpmfx.geometry.mesh", "mpmfx.mpm.colliders")
 
 
 def params(shot: Shot) -> dict:
-    from mpmfx.render.camera import default_camera, solver_floor
     out = {"render": shot.render.model_dump(mode="json"), "camera": default_camera(shot),
            "domain": shot.domain.model_dump(mode="json"), "materials": [o.material for o in shot.objects],
            "colliders": [c.model_dump(mode="json") for c in shot.colliders], "floor": solver_floor(shot),
            "title": title(shot)}
     if shot.render.engine is RenderEngine.CYCLES:
-        from mpmfx.render.cycles import blender_version
         out["blender"] = blender_version()  # another Blender may shade differently
     return out
 
@@ -74,8 +79,6 @@ def frame(job: FrameJob, f: int) -> dict:
 def finish(ctx: Context, results: list[dict]) -> dict:
     """In the client, after every frame's task: held frames, the movie, the contact sheet; the
     runner publishes them (and the .blend) to renders/<shot>/."""
-    from mpmfx.render.frames import contact_sheet, write_movie
-
     shot, entry = ctx.shot, ctx.entry
     step, start = shot.render.frame_step, shot.shot.frame_start
     for f in ctx.frames:
@@ -98,9 +101,6 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
     """Cycles through Blender's own process; saves the lit scene as `<shot>.blend` and returns
     the seconds per frame (wall, and CPU of all render threads: wall / CPU shows how much of the
     machine it had)."""
-    from mpmfx.render.camera import VIEW_DIRECTION, default_camera, solver_box, solver_floor
-    from mpmfx.render.cycles import CyclesError, run_job, write_job
-    from mpmfx.render.looks import PROP_LOOKS, look_for
     shot, entry, r = job.shot, job.entry, job.shot.render
     if not frames:
         return {}
@@ -138,8 +138,6 @@ _RENDERER: dict[str, object] = {}
 
 def _preview(job: FrameJob, f: int) -> None:
     """PyVista viewport capture (the fast look) of frame f's surfaces or particles."""
-    from mpmfx.render.camera import default_camera, solver_floor
-    from mpmfx.render.frames import FrameRenderer, colour_for
     shot, r = job.shot, job.shot.render
     setup = dict(size=(r.width, r.height), camera=default_camera(shot), floor=solver_floor(shot),
                  domain=(shot.domain.origin, shot.domain.size), title=title(shot))
@@ -184,13 +182,12 @@ def _hold(src: Path, dst: Path) -> None:
 
 def _collider_meshes(shot: Shot, frame: int) -> dict:
     """Each collider posed at this frame's time, in a neutral grey, so the audience sees what hits."""
-    from mpmfx.geometry.colliders import collider_mesh, keyframes
-    from mpmfx.mpm.colliders import pose_matrix
     t = (frame - shot.shot.frame_start) / shot.shot.fps
     out = {}
     for col in shot.colliders:
-        m = collider_mesh(col, resolve=shot.resolve, plane_size=2 * shot.domain.size)
-        xf = pose_matrix(*keyframes(col), t)
+        geom = collider_geometry(col)
+        m = collider_mesh(geom, resolve=shot.resolve, plane_size=2 * shot.domain.size)
+        xf = pose_matrix(*keyframes(geom), t)
         out[f"collider_{col.name}"] = (m.vertices @ xf[:3, :3].T + xf[:3, 3], m.faces, "#9aa0a8")
     return out
 

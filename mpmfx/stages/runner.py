@@ -6,6 +6,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import socket
 import time
 from dataclasses import dataclass
@@ -13,9 +14,11 @@ from pathlib import Path
 
 from mpmfx.cache import Cache, Entry, code_hash, default_root, remove_temps
 from mpmfx.config import Shot, ShotError, load_shot_config
+from mpmfx.publish import publish_renders, publish_stage
 from mpmfx.stages import STAGES, export, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage, StageError
 from mpmfx.stages.parallel import Frames
+from mpmfx.stages.qa import shot_flags, warn_flags
 
 MODULES: dict[str, Stage] = {m.NAME: m for m in (voxelise, simulate, surface, export, render)}
 assert tuple(MODULES) == STAGES, "mpmfx.stages.STAGES and the runner's modules disagree"
@@ -122,7 +125,6 @@ class ShotRun:
             self.published = self._publish(results) if self.publish else {}
         for r in results:
             if r.stage == "simulate":  # cached or not: bad physics is said every time
-                from mpmfx.stages.qa import shot_flags, warn_flags
                 bad = shot_flags(self.shot, (self.entries()["simulate"].manifest() or {}).get("qa", {}))
                 warn_flags(bad, str(self.shot.source or "SHOT"))
                 r.flagged = len(bad)
@@ -141,7 +143,6 @@ class ShotRun:
 
     def _publish(self, results: list[StageResult]) -> dict[str, Path]:
         """Every run that reaches export / render publishes them at stable paths (`mpmfx.publish`)."""
-        from mpmfx.publish import publish_renders, publish_stage
         entries, out = self.entries(), {}
         done = {r.stage for r in results}
         if "export" in done:
@@ -229,7 +230,6 @@ def _ranges(frames: list[int]) -> str:
 
 def _why_stale(entry: Entry, other: Path) -> str:
     """Name the key inputs that differ from the newest other entry of the same stage."""
-    import json
     try:
         old = json.loads((other / "manifest.json").read_text())["key_inputs"]
     except (OSError, KeyError, ValueError):

@@ -21,13 +21,17 @@ import numpy as np
 from mpmfx.cache import file_hash, write_json
 from mpmfx.config import ColliderShape, Shot, ShotError
 from mpmfx.geometry import MESH_LOADING
+from mpmfx.geometry.colliders import collider_mesh, keyframes, mesh_sdf
 from mpmfx.io.frames import ParticleFrame, SeedParticles, read_arrays, write_arrays
+from mpmfx.mpm import Collider, ColliderKind, Particles, SimulationError, Solver
+from mpmfx.mpm.materials import preset
 from mpmfx.stages.base import Context, StageError, quiet_warp
+from mpmfx.stages.colliders import collider_geometry
 from mpmfx.stages.writer import FrameWriter
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "simulate", 1, True, ParticleFrame.EXT
-CODE = ("mpmfx.stages.simulate", "mpmfx.mpm", "mpmfx.geometry.colliders", *MESH_LOADING,
-        "mpmfx.geometry.voxelise", "mpmfx.geometry.inside", "mpmfx.io.frames")
+CODE = ("mpmfx.stages.simulate", "mpmfx.mpm", "mpmfx.stages.colliders", "mpmfx.geometry.colliders",
+        *MESH_LOADING, "mpmfx.geometry.voxelise", "mpmfx.geometry.inside", "mpmfx.io.frames")
 KEEP_CHECKPOINTS = 2
 
 
@@ -51,7 +55,6 @@ def inputs(shot: Shot) -> dict[str, str]:
 
 def materials(shot: Shot) -> tuple[list, list[int]]:
     """Distinct materials of the shot and, per object, its index into them."""
-    from mpmfx.mpm.materials import preset
     mats, index = [], []
     for i, obj in enumerate(shot.objects):
         try:
@@ -67,12 +70,11 @@ def materials(shot: Shot) -> tuple[list, list[int]]:
 def colliders(shot: Shot) -> list:
     """The shot's colliders as `mpmfx.mpm.Collider`s in domain units (positions / domain.size,
     about domain.origin); keyframe times stay on the shot clock, as the solver expects."""
-    from mpmfx.geometry.colliders import collider_mesh, keyframes, mesh_sdf
-    from mpmfx.mpm import Collider, ColliderKind
     origin, L = np.asarray(shot.domain.origin, float), shot.domain.size
     out = []
     for col in shot.colliders:
-        t, tr, rot = keyframes(col)
+        geom = collider_geometry(col)
+        t, tr, rot = keyframes(geom)
         common = dict(friction=col.friction, times=t, translations=((tr - origin) / L).astype(np.float32),
                       rotations=rot.astype(np.float32))
         if col.shape is ColliderShape.PLANE:
@@ -82,7 +84,7 @@ def colliders(shot: Shot) -> list:
         elif col.shape is ColliderShape.SPHERE:
             out.append(Collider(kind=ColliderKind.SPHERE, radius=col.radius / L, **common))
         else:
-            mesh = collider_mesh(col, resolve=shot.resolve, plane_size=2 * L)
+            mesh = collider_mesh(geom, resolve=shot.resolve, plane_size=2 * L)
             sdf, sdf_origin, voxel = mesh_sdf(mesh, dx=L / shot.domain.grid_n)
             out.append(Collider(kind=ColliderKind.SDF, sdf=(sdf / L).astype(np.float32),
                                 sdf_origin=tuple(sdf_origin / L), sdf_voxel=voxel / L, **common))
@@ -90,8 +92,6 @@ def colliders(shot: Shot) -> list:
 
 
 def run(ctx: Context) -> dict:
-    from mpmfx.mpm import Particles, SimulationError, Solver
-
     quiet_warp(ctx.device)
     shot, entry = ctx.shot, ctx.entry
     origin, size = np.asarray(shot.domain.origin), shot.domain.size

@@ -11,12 +11,14 @@ from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 
 import numpy as np
+import warp as wp
 
 from mpmfx.config import Shot
 from mpmfx.io.frames import GroupSurface, ParticleFrame, SurfaceFrame
 from mpmfx.stages.base import Context, StageError, quiet_warp
 from mpmfx.stages.parallel import FrameJob
 from mpmfx.stages.writer import FrameWriter
+from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, GridTooLarge, SurfaceParams, surface_particles
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "surface", 2, True, SurfaceFrame.EXT
 CODE = ("mpmfx.stages.surface", "mpmfx.surface", "mpmfx.io.frames")
@@ -37,7 +39,6 @@ def inputs(shot: Shot) -> dict[str, str]:
 
 def surface_params(shot: Shot, group: str):
     """The surfacer's parameters for surface group `group` (one of shot.surface_groups())."""
-    from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams
     s = shot.surface
     h = shot.particle_spacing
     # Default voxel: half the particle spacing, fine enough for a smooth render and ~10x cheaper
@@ -54,8 +55,6 @@ def todo(ctx: Context) -> list[int]:
 
 
 def run(ctx: Context) -> dict:
-    import warp as wp
-
     quiet_warp(ctx.device)
     # On a GPU a frame takes ~0.2 s here, less than a worker takes to start and load its kernels
     # (docs/scale-out.md): the default stays serial there; on the CPU, frames go to all cores.
@@ -104,8 +103,6 @@ def _read(job: FrameJob, f: int) -> ParticleFrame:
 
 def _surfaces(job: FrameJob, p: ParticleFrame, f: int) -> tuple[SurfaceFrame, dict]:
     """(frame f's surfaces, one GroupSurface a surface group; its mesh size)."""
-    from mpmfx.surface import GridTooLarge, surface_particles
-
     quiet_warp(job.device)
     shot = job.shot
     names = shot.surface_groups()

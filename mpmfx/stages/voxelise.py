@@ -12,7 +12,11 @@ import numpy as np
 from mpmfx.cache import file_hash, write_json
 from mpmfx.config import Shot, ShotError, Thickness
 from mpmfx.geometry import MESH_LOADING
+from mpmfx.geometry.mesh import MeshError, check_in_domain, load_mesh, transform_mesh
+from mpmfx.geometry.thickness import Verdict, check_thickness, refine_for_heatmap
+from mpmfx.geometry.voxelise import voxelise
 from mpmfx.io.frames import SeedParticles, write_arrays
+from mpmfx.render.thickness import render_thickness_heatmap
 from mpmfx.stages.base import Context, StageError
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "voxelise", 1, False, "npz"
@@ -34,10 +38,6 @@ def inputs(shot: Shot) -> dict[str, str]:
 
 
 def run(ctx: Context) -> dict:
-    from mpmfx.geometry.mesh import MeshError, check_in_domain, load_mesh, transform_mesh
-    from mpmfx.geometry.thickness import Verdict, check_thickness
-    from mpmfx.geometry.voxelise import voxelise
-
     shot, dom = ctx.shot, ctx.shot.domain
     xs, vs, vols, bodies, reports = [], [], [], [], {}
     fluid = shot.fluid_objects()
@@ -78,12 +78,10 @@ def run(ctx: Context) -> dict:
 def _thickness(ctx, obj, mesh, check_thickness, Verdict):
     """Run the five-cell check and obey voxelise.thickness (error | warn | ignore)."""
     dom, mode = ctx.shot.domain, ctx.shot.voxelise.thickness
-    from mpmfx.geometry.thickness import refine_for_heatmap
     mesh = refine_for_heatmap(mesh, grid_n=dom.grid_n, size=dom.size)
     report = check_thickness(mesh, grid_n=dom.grid_n, origin=dom.origin, size=dom.size, name=obj.name)
     if mode is not Thickness.IGNORE:
         try:
-            from mpmfx.render.thickness import render_thickness_heatmap
             render_thickness_heatmap(mesh, report.vertex_thickness_cells, ctx.entry.root / f"thickness_{obj.name}.png")
         except ImportError as exc:  # the report still stands; only the picture is missing
             ctx.notes.append(f"objects.{obj.name}: no thickness heatmap ({exc})")

@@ -27,8 +27,8 @@ import queue
 import threading
 from concurrent.futures import ThreadPoolExecutor
 
-MAX_THREADS = 8
-THREADS_ENV = "MPMFX_SURFACE_THREADS"  # the CPU thread count, where set (a Dask worker's share: mpmfx.stages.parallel)
+from mpmfx.threads import MAX_THREADS, THREADS_ENV, cpu_threads, usable_cores  # noqa: F401 - shared with io
+
 CHUNKS_PER_THREAD = 4
 MIN_SPLIT = 1 << 14  # threads of a launch below which splitting costs more than it gains
 # blocks below which a light block kernel (a few hundred ns a block: the blurs, a flood round) runs
@@ -38,25 +38,6 @@ LIGHT_MIN_SPLIT = 1 << 13
 
 _pool: ThreadPoolExecutor | None = None
 _pool_key = (0, 0)  # (workers, pid): a forked child must not reuse its parent's pool (no threads behind it)
-
-
-def usable_cores() -> int:
-    """The cores this process may run on (its affinity mask where the OS has one)."""
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
-def cpu_threads() -> int:
-    """Threads a CPU launch is split into (MPMFX_SURFACE_THREADS, else the usable cores, capped)."""
-    env = os.environ.get(THREADS_ENV)
-    if env:
-        try:
-            n = int(env)
-        except ValueError:
-            raise ValueError(f"{THREADS_ENV}={env!r}: give a whole number of threads (1 = no splitting)") from None
-        if n < 1:
-            raise ValueError(f"{THREADS_ENV}={env!r}: give at least 1 thread")
-        return n
-    return max(1, min(usable_cores(), MAX_THREADS))
 
 
 def _executor(n: int) -> ThreadPoolExecutor:

@@ -3,7 +3,7 @@ import json
 import pytest
 import trimesh
 
-from mpmfx.geometry.check import run_check
+from mpmfx.check import run_check
 
 from .conftest import slab, sphere_with_fin
 
@@ -54,7 +54,7 @@ def test_check_says_open_and_non_manifold_in_the_table_and_the_json(tmp_path, ca
 
     import trimesh
 
-    from mpmfx.geometry.check import run_check
+    from mpmfx.check import run_check
     box = trimesh.creation.box(extents=[1.0, 1.0, 1.0])
     open_box = trimesh.Trimesh(box.vertices, box.faces[:-2], process=False)  # one side missing
     open_box.export(tmp_path / "open.obj")

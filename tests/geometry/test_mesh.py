@@ -273,7 +273,7 @@ def blender_files(tmp_path_factory):
     import subprocess
     import sys
 
-    from mpmfx.render.cycles import bpy_available
+    from mpmfx.blender import bpy_available
 
     if not bpy_available():
         pytest.fail("bpy (Blender as a module) is part of the test set-up: bash setup.sh test installs it")

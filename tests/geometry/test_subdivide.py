@@ -10,7 +10,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from mpmfx.geometry.subdivide import Creases, catmull_clark
-from mpmfx.render.cycles import bpy_available
+from mpmfx.blender import bpy_available
 
 CUBE_V = [[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)]
 CUBE_F = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]

@@ -13,7 +13,7 @@ import pytest
 
 import mpmfx
 from mpmfx.io.frames import SurfaceFrame
-from mpmfx.render.cycles import bpy_available
+from mpmfx.blender import bpy_available
 from tests.conftest import write_tiny_shot
 
 # Two objects (two surface groups), a keyframed collider: every kind of prim the export writes.

@@ -1,0 +1,35 @@
+"""Blender (bpy) in a child process, for the layers that need it: mesh loading
+(`mpmfx.geometry.blender_export`) and Cycles renders (`mpmfx.render.cycles_job`).
+
+Never imports bpy: Blender bundles its own USD libraries, so it runs as
+`python -m mpmfx.<module> ...` in its own process, never beside pxr. The modules run there
+(blender_export, cycles_job, blender_scene) import bpy at their top and no other module imports
+them; what parent and child share (the lines the child prints) is here.
+"""
+from __future__ import annotations
+
+import importlib.util
+import os
+import sys
+from pathlib import Path
+
+FRAME_LINE = "MPMFX_FRAME"  # a Cycles child's line per finished frame: FRAME_LINE frame wall_s cpu_s
+ERROR = "mpmfx-blender-error: "  # a child's line the parent reads the reason of a failure from
+
+
+def bpy_available() -> bool:
+    """Whether Blender as a Python module (bpy) is installed (found without importing it)."""
+    return importlib.util.find_spec("bpy") is not None
+
+
+def child_env() -> dict:
+    """The environment of a Blender child process (`python -m mpmfx....`): it runs this very
+    mpmfx (a worktree or an editable install alike): the folder that holds this package."""
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).parents[1]), env.get("PYTHONPATH", "")])
+    return env
+
+
+def child_command(module: str, *args: str) -> list[str]:
+    """The command line that runs `module` (`python -m`) in a child process with this Python."""
+    return [sys.executable, "-m", module, *args]
