@@ -68,15 +68,15 @@ def test_advice_names_shot_keys_and_following_it_helps(tmp_path, capsys, setting
 def test_publishing_follows_every_run_and_the_label_names_the_overrides(tmp_path, monkeypatch):
     import json
 
-    import mpmfx.render.frames as frames
+    import mpmfx.stages.render as render_stage
     titles = []
-    real = frames.FrameRenderer
+    real = render_stage.FrameRenderer
 
     def spy(**kw):
         titles.append(kw.get("title", ""))
         return real(**kw)
 
-    monkeypatch.setattr(frames, "FrameRenderer", spy)
+    monkeypatch.setattr(render_stage, "FrameRenderer", spy)
     monkeypatch.chdir(tmp_path)
     shot = write_tiny_shot(tmp_path, frame_end=3)
     cache = tmp_path / "c"
