@@ -42,7 +42,7 @@ def cluster():
 def test_workers_share_the_cores_for_the_surfacers_threads(cluster):
     import os
 
-    from mpmfx.surface.launch import cpu_threads
+    from mpmfx.threads import cpu_threads
     cores = len(os.sched_getaffinity(0))
     threads = cluster.client().run(cpu_threads)  # worker address -> its split
     assert sorted(threads.values()) == [max(1, cores // 2)] * 2
