@@ -13,7 +13,5 @@ def load_shot(path, **kwargs):
 
     The same schema and defaults as `mpmfx run`: a field the file leaves unset takes the
     schema's default, and the solver's defaults are `mpmfx.mpm.SolverConfig`'s own."""
-    from mpmfx.stages.runner import (
-        load_shot as _load,  # backend: warp (keeps import mpmfx light)
-    )
+    from mpmfx.stages.runner import load_shot as _load  # backend: warp (keeps import mpmfx light)
     return _load(path, **kwargs)
