@@ -18,7 +18,7 @@ import numpy as np
 
 from mpmfx.bench.surface_cases import BOX_HALF, OURS, sample_shape, shape_sdf, surface_error
 from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_particles
-from mpmfx.surface import sparse
+from mpmfx.surface import edges
 
 
 def section(mesh) -> np.ndarray:
@@ -33,13 +33,13 @@ def surface(x: np.ndarray, h: float, *, gate: bool):
     setting = dict(OURS["fine"])
     params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False,
                            **setting)
-    kept = sparse.EDGE_CURVATURE
+    kept = edges.EDGE_CURVATURE
     if not gate:
-        sparse.EDGE_CURVATURE = (1e30, 2e30)  # no curvature opens the gate: the limit is 0.5 r everywhere, no pit is filled
+        edges.EDGE_CURVATURE = (1e30, 2e30)  # no curvature opens the gate: the limit is 0.5 r everywhere, no pit is filled
     try:
         return surface_particles(x, None, params, device="cpu").mesh
     finally:
-        sparse.EDGE_CURVATURE = kept
+        edges.EDGE_CURVATURE = kept
 
 
 def main() -> None:

@@ -24,7 +24,7 @@ for shape, sampling in (("torus", "lattice"), ("torus", "random"), ("box", "rand
     x, h = sample_shape(shape, count, sampling)
     kw = dict(OURS["fast"])
     params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=kw.pop("voxel_h") * h, dense_output=False, **kw)
-    d = surface_on_device(wp, wp.array(x, dtype=wp.vec3), None, params)
+    d = surface_on_device(wp.array(x, dtype=wp.vec3), None, params)
     wp.synchronize()
     times = {False: [], True: []}
     last = {}

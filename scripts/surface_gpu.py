@@ -53,7 +53,7 @@ with wp.ScopedDevice(args.device):
             times = []
             for _ in range(3):
                 t0 = time.perf_counter()
-                d = surface_on_device(wp, xd, None, p)
+                d = surface_on_device(xd, None, p)
                 wp.synchronize()
                 t1 = time.perf_counter()
                 res = d.download(p, pinned=pinned)

@@ -3,7 +3,7 @@
 sample: the vertices whose error |sdf| exceeds --threshold (in particle spacings h), each with
 
 - where the surface of each stage crosses the analytic normal through the vertex (signed, h,
-  negative inside): "raw" the distance the blur starts from (sparse._distance, after the closing
+  negative inside): "raw" the distance the blur starts from (the redistance pass, after the closing
   when --close-voids), "blur" the blurred distance without the inward limit, "limited" the
   blur with it (what is meshed);
 - how many particles lie within 1.5 h of the point 1 h under the analytic surface there
@@ -12,33 +12,35 @@ sample: the vertices whose error |sdf| exceeds --threshold (in particle spacings
 
 Then, on the box, the signed / absolute mean error (h) of each stage's own mesh by distance
 to the nearest edge (the raw distance meshed without the blur, the blur without the limit,
-the result). The stages are read by wrapping sparse._smooth (a diagnostic hook, this script only).
+the result). The stages are read by wrapping the smooth pass (a diagnostic hook, this script only).
 
     PYTHONPATH=. python3 scripts/surface_max_error.py --counts 1000000 --device cpu
     PYTHONPATH=. python3 scripts/surface_max_error.py --counts 100000 --shapes box --sampling lattice
 """
 import argparse
+import dataclasses
 
 import numpy as np
 
 from mpmfx.bench.surface_cases import BOX_HALF, OURS, sample_shape, shape_sdf
-from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, sparse, surface_particles
+from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, sparse, surface_particles, variants
 
 EDGE_BINS = ((0, 0.5), (0.5, 1), (1, 2), (2, 3), (3, 5), (5, np.inf))  # distance to the nearest box edge, h
 
 
 class Stages:
-    """Wraps sparse._smooth: records the distance it starts from and its result (voxels, by
+    """Wraps the smooth pass (variants.Variant.smooth): records the distance it starts from and its result (voxels, by
     active block), and the flow without the 0.5 r inward limit (an edge keeps its own: twice its
     samples' noise); `mesh` = "raw" / "blur" makes the surfacer mesh that stage instead of the
     limited flow."""
 
     def __init__(self):
-        self.inner, self.mesh, self.fields, self.origin = sparse._smooth, None, {}, np.zeros(3)
+        self.inner, self.mesh, self.fields, self.origin = {v.name: v.smooth for v in (variants.BY_BLOCK, variants.BY_VOXEL)}, None, {}, np.zeros(3)
 
-    def __call__(self, wp, S, bcoord, bmap, dist, iters, tiles, *, limit, edges):
-        out = self.inner(wp, S, bcoord, bmap, dist, iters, tiles, limit=limit, edges=edges)
-        blur = self.inner(wp, S, bcoord, bmap, dist, iters, tiles, limit=1e9, edges=edges)
+    def __call__(self, bcoord, bmap, dist, iters, tiles, *, limit, edges):
+        inner = self.inner[variants.variant(dist.device).name]
+        out = inner(bcoord, bmap, dist, iters, tiles, limit=limit, edges=edges)
+        blur = inner(bcoord, bmap, dist, iters, tiles, limit=1e9, edges=edges)
         self.fields = {"bcoord": bcoord.numpy(), "raw": dist.numpy().copy(), "blur": blur.numpy(), "limited": out.numpy()}
         return {"raw": dist, "blur": blur}.get(self.mesh, out)
 
@@ -158,7 +160,8 @@ def main() -> None:
         grid_init(grid, lo, hi, params)
         hook.origin = grid.origin.copy()
 
-    sparse._smooth, sparse.SparseGrid.__init__ = hook, record_origin
+    variants.BY_BLOCK, variants.BY_VOXEL = (dataclasses.replace(v, smooth=hook) for v in (variants.BY_BLOCK, variants.BY_VOXEL))
+    sparse.SparseGrid.__init__ = record_origin
     for count in args.counts:
         for shape in args.shapes:
             for label in args.labels:

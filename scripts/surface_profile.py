@@ -26,7 +26,7 @@ def cpu_kernel_timer(agg: dict):
     """Times every CPU launch of the surfacer into agg[kernel key] = [launches, ms]: plain
     wp.launch calls, and the split launches of mpmfx.surface.launch whole (their chunks' own
     launches, recorded commands, are not seen by wp.launch)."""
-    from mpmfx.surface import sparse, topology_cpu
+    from mpmfx.surface import classify, components, field, flood, gather, launch, sharpen
 
     def record(key, t0):
         rec = agg.setdefault(key, [0, 0.0])
@@ -43,7 +43,7 @@ def cpu_kernel_timer(agg: dict):
             return out
         return call
 
-    saved = [(wp, "launch", wp.launch)] + [(m, name, getattr(m, name)) for m in (sparse, topology_cpu)
+    saved = [(wp, "launch", wp.launch)] + [(m, name, getattr(m, name)) for m in (launch, classify, flood, components, sharpen, field, gather)
                                             for name in ("launch_split", "launch_sequence", "launch_split_scratch")
                                             if hasattr(m, name)]
     depth = [0]

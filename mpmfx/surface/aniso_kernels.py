@@ -13,7 +13,8 @@ Units: grid (voxel) coordinates throughout, as in :mod:`mpmfx.surface.sparse_ker
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import cell_range, column_slots, voxel_of, write_field
+from mpmfx.surface.gather import cell_range, column_slots, write_field
+from mpmfx.surface.voxels import voxel_of
 
 
 @wp.kernel

@@ -192,3 +192,28 @@ def launch_sequence(wp, steps: list, dim: int, *, device, min_split: int = MIN_S
                 f.result()
             except threading.BrokenBarrierError:
                 pass  # the thread that broke it raises its own error
+
+
+def split(wp, kernel, dim: int, inputs: list) -> None:
+    """launch_split on the device of inputs[0], with the default threshold."""
+    launch_split(wp, kernel, dim, inputs, device=inputs[0].device)
+
+
+def launch_blocks(wp, kernel, inputs: list, *, light: bool = False) -> None:
+    """Launch a CPU kernel that takes a block per thread (inputs[0]: bcoord, the active blocks),
+    split across CPU threads however few the blocks, or (light: a few hundred ns a block) from
+    LIGHT_MIN_SPLIT blocks on."""
+    launch_split(wp, kernel, inputs[0].shape[0], inputs, device=inputs[0].device, min_split=1, light=int(light))
+
+
+def launch_nonempty(wp, kernel, dim: int, inputs: list) -> None:
+    """wp.launch, nothing for dim 0."""
+    if dim:
+        wp.launch(kernel, dim, inputs=inputs)
+
+
+def scan(wp, a, *, inclusive: bool):
+    """The prefix sum of a (a new array)."""
+    out = wp.empty_like(a)
+    wp.utils.array_scan(a, out, inclusive=inclusive)
+    return out

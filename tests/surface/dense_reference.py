@@ -32,7 +32,9 @@ import numpy as np
 
 from mpmfx.surface.params import LevelSet, SurfaceMesh, SurfaceParams, SurfaceResult, kernel_volume
 from mpmfx.surface.reconstruct import check_inputs
-from mpmfx.surface.sparse import FLOW_BAND, FLOW_DT, NORMAL_STEP, SMOOTH_LIMIT, smooth_reach
+from mpmfx.surface.grid import NORMAL_STEP, smooth_reach
+from mpmfx.surface.smooth import FLOW_BAND, FLOW_DT
+from mpmfx.surface.sparse import SMOOTH_LIMIT
 
 log = logging.getLogger(__name__)
 
@@ -125,7 +127,7 @@ class _Grid:
         if spheres:
             support = r_vox + params.band_voxels + 1.0
         reach = max(support, r_vox + max(params.dilate, 0.0) / voxel + params.band_voxels)
-        # + the smoothing's reach (sparse.smooth_reach); +2 keeps an outside ring
+        # + the smoothing's reach (grid.smooth_reach); +2 keeps an outside ring
         pad = int(math.ceil(reach)) + smooth_reach(params) + 2
         lo = np.floor(x.min(axis=0).astype(np.float64) / voxel).astype(np.int64) - pad
         hi = np.ceil(x.max(axis=0).astype(np.float64) / voxel).astype(np.int64) + pad

@@ -92,7 +92,7 @@ def test_closing_the_voids_brings_random_surfaces_closer_without_growing_them():
     # SurfaceParams.close_voids = one spacing, "fast", 20k random sphere: a ball rolled over the
     # outside fills the dents of sample voids before the blur (docs/surfacing-log.md, "Closing the sample voids");
     # measured 0.126 -> 0.117 h mean, 0.78 -> 0.59 h max, volume -0.6 -> -0.4 % (ungated: 0.109 h,
-    # 0.57 h, -0.5 %; sparse._close_voids)
+    # 0.57 h, -0.5 %; close.close_voids)
     x, h = sample_shape("sphere", 20_000, "random")
     setting = dict(OURS["fast"])
     voxel = setting.pop("voxel_h") * h
@@ -120,7 +120,7 @@ def test_closing_the_voids_leaves_a_lattice_box_where_it_is(label):
     # a flat lattice face has no void to fill; ungated, the closing moved the 20k lattice box's
     # faces out and eroded its edges (mean error "fast" 0.029 -> 0.041 h, "fine" 0.056 -> 0.073 h);
     # only fills deeper than
-    # sparse.CLOSE_GATE x the radius are kept, so the mesh is the one without the closing
+    # close.CLOSE_GATE x the radius are kept, so the mesh is the one without the closing
     x, h = sample_shape("box", 20_000, "lattice")
     setting = dict(OURS[label])
     voxel = setting.pop("voxel_h") * h

@@ -1,26 +1,197 @@
-"""Redistancing a block per thread (its 64 lines along z in turn): the CPU path of :mod:`mpmfx.surface.redistance_kernels`
-and of the renormalise / average steps before it (mpmfx.surface.sparse._distance).
+"""Surfacer pass 6: the field as a signed distance over the narrow band (voxels).
 
-Each kernel does per voxel what the voxel kernels do, with the same arithmetic; the line's
-neighbour lines are read once into registers instead of through a block-map lookup per voxel.
+The Zhu-Bridson field is a distance only near its zero level (it flattens to -r inside), so
+blurring it would move curved surfaces outward once the blur reached the flat part. Here the
+voxels next to the zero crossing keep their first-order distance, and the rest of the band is
+filled by Jacobi sweeps of the Eikonal equation |grad phi| = 1 (the fast iterative method,
+upwind, one voxel of progress per sweep), so the smoothing that follows sees a true distance.
+
+GPU: a voxel (init_eikonal) or a line (eikonal_sweep) per thread. CPU: a block per thread, its
+64 lines along z in turn, the line's neighbour lines read once into registers; the frozen and
+changed voxels as bit words.
 """
+
+from __future__ import annotations
+
+import math
 
 import warp as wp
 
-from mpmfx.surface.line_kernels import block_faces, fmax, fmin, line_neighbours, line_sides, neighbour_rows, vec8, vmax, vmin
-from mpmfx.surface.redistance_kernels import axis_inv2, crossing_fraction, frozen_distance
-from mpmfx.surface.sparse_kernels import BS
+from mpmfx.surface.launch import launch_blocks, launch_nonempty, split
+from mpmfx.surface.lines import block_faces, fmax, fmin, line_neighbours, line_sides, neighbour_rows, rows, vec8, vmax, vmin
+from mpmfx.surface.renormalise import renormalise_by_block, renormalise_by_voxel
+from mpmfx.surface.voxels import BS, BV, line_value, line_z, side_line, step_get, voxel_of
+
+# forward only: nothing differentiates these kernels, and their adjoints lengthen the compile of the unrolled loops
+wp.set_module_options({"enable_backward": False})
+
+
+@wp.kernel
+def average_into(a: wp.array(dtype=float), b: wp.array(dtype=float)):
+    """a = (a + b) / 2."""
+    t = wp.tid()
+    a[t] = 0.5 * (a[t] + b[t])
+
+
+@wp.kernel
+def add_scalar(a: wp.array(dtype=float), value: float):
+    t = wp.tid()
+    a[t] = a[t] + value
+
+
+@wp.func
+def crossing_fraction(v: float, u: float):
+    """|v| / (|v| + |u|): the fraction of the way from v to the zero crossing interpolated
+    towards its neighbour u, where u has the other sign; 2 (none) where it has v's."""
+    f = float(2.0)
+    if (u > 0.0) != (v > 0.0):
+        f = wp.abs(v) / wp.max(wp.abs(v) + wp.abs(u), 1.0e-12)
+    return f
+
+
+@wp.func
+def axis_inv2(v: float, u: float, inv2: float):
+    """max(inv2, 1 / t^2), t = v / (v - u) the zero level's distance from v along the axis
+    towards its neighbour u by linear interpolation (t <= 1: u has the other sign) or
+    extrapolation (t > 1: u has v's sign but is nearer zero); inv2 where the line moves away
+    from zero. 1 / t^2 is continuous as u passes through zero, so the plane start does not jump
+    when a crossing appears on another axis between frames."""
+    out = inv2
+    if (u > 0.0) != (v > 0.0):
+        f = wp.abs(v) / wp.max(wp.abs(v) + wp.abs(u), 1.0e-12)
+        out = wp.max(inv2, 1.0 / wp.max(f * f, 1.0e-24))
+    elif wp.abs(u) < wp.abs(v):
+        g = (wp.abs(v) - wp.abs(u)) / wp.abs(v)
+        out = wp.max(inv2, g * g)
+    return out
+
+
+@wp.func
+def frozen_distance(v: float, inv2: wp.vec3, near: float, plane: int):
+    """The start value (v's sign) of a voxel next to the zero crossing. plane != 0: its distance
+    to the plane through the crossings interpolated along each axis (inv2[a] = 1 / the nearest
+    one's fraction^2 along axis a: axis_inv2), 1 / sqrt(sum inv2): slope 1 across the crossing
+    whatever the field's slope there, the crossings where linear interpolation puts them on an
+    axis-aligned face. plane = 0: |v|, at most the nearest axis crossing `near` (for a field
+    that is a distance already: the closing's grown one)."""
+    d = wp.min(wp.abs(v), near)
+    if plane != 0:
+        d = 1.0 / wp.sqrt(inv2[0] + inv2[1] + inv2[2])
+    return wp.where(v > 0.0, d, -d)
+
+
+@wp.kernel
+def init_eikonal(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    clip: float,
+    plane: int,
+    frozen: wp.array(dtype=wp.int32),
+    dist: wp.array(dtype=float),
+    base: int,
+):
+    """Voxels with a 6-neighbour of the other sign (frozen = 1) start at frozen_distance; the
+    others at +-clip with phi's sign. With plane = 1 (the raw field, sparse._distance) that is
+    the distance to the plane through the axis crossings; it used to be phi itself (at most the
+    nearest axis crossing), but the raw field's slope across its crossing is not 1 (0.97 on a
+    flat lattice face: -0.008 / +0.964 voxels), so the distance had a kink there, and each blur
+    pass moved flat faces out across it (+0.014 h after five passes on the 100k lattice box,
+    "fine"). plane = 0 keeps phi (the closing's grown distance: redistancing it then changes
+    nothing on a smooth surface, and the closing's gate leaves lattices where they were)."""
+    t = wp.tid() + base
+    c = voxel_of(t, bcoord)
+    v = phi[t]
+    inv2 = wp.vec3(0.0)
+    near = float(1.0)
+    cross = int(0)
+    for n in range(6):
+        u = step_get(bmap, phi, t, c, n // 2, 2 * (n % 2) - 1, out_v, in_v)
+        f = crossing_fraction(v, u)
+        if f <= 1.0:
+            cross = 1
+            near = wp.min(near, f)
+        inv2[n // 2] = axis_inv2(v, u, inv2[n // 2])
+    frozen[t] = cross
+    if cross == 1:
+        dist[t] = frozen_distance(v, inv2, near, plane)
+    else:
+        dist[t] = wp.where(v > 0.0, clip, -clip)
+
+
+@wp.kernel
+def eikonal_sweep(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    src: wp.array(dtype=float),
+    frozen: wp.array(dtype=wp.int32),
+    out_v: float,
+    in_v: float,
+    clip: float,
+    dst: wp.array(dtype=float),
+    base: int,
+):
+    """One Jacobi sweep of |grad phi| = 1 (upwind, unit spacing) on |phi|, keeping each sign, on
+    the 8 voxels of one line along z (thread = line, 64 a block): the neighbour lines and the
+    blocks below and above are found once for the line, not at every voxel on a block face
+    (each voxel gets what a voxel per thread with step_get did, bit for bit)."""
+    q = wp.tid() + base
+    b = q // 64
+    l = q - b * 64
+    x = l // BS
+    y = l - x * BS
+    bc = bcoord[b]
+    t0 = b * BV + l * BS
+    xm = side_line(bmap, bc, b, x - 1, y, 0)
+    xp = side_line(bmap, bc, b, x + 1, y, 0)
+    ym = side_line(bmap, bc, b, x, y - 1, 0)
+    yp = side_line(bmap, bc, b, x, y + 1, 0)
+    zm = side_line(bmap, bc, b, x, y, -1)
+    zp = side_line(bmap, bc, b, x, y, 1)
+    for k in range(BS):
+        t = t0 + k
+        v = src[t]
+        if frozen[t] != 0:
+            dst[t] = v
+            continue
+        a = wp.vec3(wp.min(wp.abs(line_value(src, xm, k, out_v, in_v)), wp.abs(line_value(src, xp, k, out_v, in_v))),
+                    wp.min(wp.abs(line_value(src, ym, k, out_v, in_v)), wp.abs(line_value(src, yp, k, out_v, in_v))),
+                    wp.min(wp.abs(line_z(src, t0, zm, zp, k - 1, out_v, in_v)), wp.abs(line_z(src, t0, zm, zp, k + 1, out_v, in_v))))
+        dst[t] = eikonal_update(a, v, clip)
+
+
+@wp.func
+def eikonal_update(a: wp.vec3, v: float, clip: float):
+    """The upwind solution of |grad u| = 1 from the smaller neighbour magnitude per axis `a`,
+    at most |v| and clip, with v's sign."""
+    # sort a[0] <= a[1] <= a[2]
+    a0 = wp.min(a[0], wp.min(a[1], a[2]))
+    a2 = wp.max(a[0], wp.max(a[1], a[2]))
+    a1 = a[0] + a[1] + a[2] - a0 - a2
+    u = a0 + 1.0
+    if u > a1:
+        u = 0.5 * (a0 + a1 + wp.sqrt(wp.max(2.0 - (a0 - a1) * (a0 - a1), 0.0)))
+        if u > a2:
+            s = a0 + a1 + a2
+            u = (s + wp.sqrt(wp.max(s * s - 3.0 * (a0 * a0 + a1 * a1 + a2 * a2 - 1.0), 0.0))) / 3.0
+    u = wp.min(wp.min(u, wp.abs(v)), clip)
+    return wp.where(v > 0.0, u, -u)
 
 vec64i = wp.types.vector(length=64, dtype=wp.int32)
+
 vec8u = wp.types.vector(length=8, dtype=wp.uint64)
+
+
 # masks of a word of eikonal_lines' changed bits (bit y * 8 + z of a block's word x)
 Z_FIRST = wp.constant(wp.uint64(0x0101010101010101))  # z = 0 of each line
-Z_LOW = wp.constant(wp.uint64(0x7F7F7F7F7F7F7F7F))  # z = 0..6
-Z_HIGH = wp.constant(wp.uint64(0xFEFEFEFEFEFEFEFE))  # z = 1..7
-BYTE = wp.constant(wp.uint64(0xFF))
 
-# forward only: nothing differentiates these kernels, and their adjoints lengthened the compile of the unrolled loops
-wp.set_module_options({"enable_backward": False})
+Z_LOW = wp.constant(wp.uint64(0x7F7F7F7F7F7F7F7F))  # z = 0..6
+
+Z_HIGH = wp.constant(wp.uint64(0xFEFEFEFEFEFEFEFE))  # z = 1..7
+
+BYTE = wp.constant(wp.uint64(0xFF))
 
 
 @wp.kernel
@@ -299,3 +470,96 @@ def eikonal_lines(
         moved_words[li] = moved_words[li] | (wp.uint64(moved) << wp.uint64(lj * BS))
     for x in range(BS):
         now[w0 + x] = moved_words[x]
+
+
+def sweep_count(clip: float, read: float) -> int:
+    """Jacobi sweeps of |grad phi| = 1 that leave the values within `read` voxels of the zero
+    level as more sweeps would, to rounding. A sweep advances one voxel along each axis, so from
+    the frozen voxels (within one of the zero level) a face at any slant is converged to read
+    after sqrt(3) (read - 1) sweeps, and along an axis to clip after clip sweeps; further out the
+    values step up to +-clip (the final renormalise keeps those at the band's value)."""
+    return min(int(math.ceil(clip)), int(math.ceil(math.sqrt(3.0) * (read - 1.0)))) + 1
+
+
+def distance_by_voxel(bcoord, bmap, phi, tiles, clip: float, read: float):
+    """The raw field as a distance (voxels, clipped to +-clip) that blurs without moving its zero
+    level, a voxel per thread. phi / |grad phi| has slope 1 at the zero level but, where phi is
+    convex across the surface (Zhu-Bridson is), the opposite curvature of phi itself, so a blur
+    would move the surface outward as far as it would move the raw field inward. Renormalising
+    that once more flips the curvature back; the mean of the two is straight to second order.
+    The raw field is a distance only near its zero level (it flattens to -r inside, and the
+    renormalised values there are no distance either): its zero crossings are kept, the voxels
+    next to them start at their distance to the plane through the axis crossings (init_eikonal,
+    plane = 1: the field's own slope there is not 1, and a kink at the crossing would move flat
+    faces out under the blur), and the rest of the band is recomputed from them (|grad phi| = 1)."""
+    nvox = phi.shape[0]
+    d1, d2 = wp.empty_like(phi), wp.empty_like(phi)
+    renormalise_by_voxel(bcoord, bmap, phi, tiles, 1.0, clip, d1)
+    if nvox == 0:
+        return d1
+    frozen = wp.empty(nvox, dtype=wp.int32)
+    a, b = wp.empty_like(phi), wp.empty_like(phi)
+    renormalise_by_voxel(bcoord, bmap, d1, (clip, -clip), 1.0, clip, d2)
+    launch_nonempty(wp, average_into, nvox, [d1, d2])
+    split(wp, init_eikonal, nvox, [bcoord, bmap, d1, clip, -clip, clip, 1, frozen, a])
+    return sweeps_by_voxel(bcoord, bmap, a, b, frozen, clip, read)
+
+
+def distance_by_block(bcoord, bmap, phi, tiles, clip: float, read: float):
+    """distance_by_voxel, a block per thread: the second renormalise and the average in one pass
+    with the frozen flags, which init_eikonal_lines keeps as bits."""
+    nvox = phi.shape[0]
+    d1, d2 = wp.empty_like(phi), wp.empty_like(phi)
+    renormalise_by_block(bcoord, bmap, phi, tiles, 1.0, clip, d1)
+    if nvox == 0:
+        return d1
+    frozen = wp.empty(nvox, dtype=wp.int32)
+    a, b = wp.empty_like(phi), wp.empty_like(phi)
+    was = wp.empty(nvox // 64, dtype=wp.uint64)  # voxels changed by a sweep, a bit each
+    fbits = wp.empty(nvox // 64, dtype=wp.uint64)  # the frozen voxels, a bit each
+    launch_blocks(wp, crossing_average_lines, [bcoord, bmap, rows(d1), clip, frozen, rows(d2)])
+    launch_blocks(wp, init_eikonal_lines, [bcoord, bmap, d2, clip, 1, 0, frozen, a, b, was, fbits])
+    return sweeps_by_block(bcoord, bmap, a, b, was, fbits, clip, read)
+
+
+def redistance_by_voxel(bcoord, bmap, phi, clip: float, read: float):
+    """phi's zero level with a distance around it (a new array, voxels, clipped to +-clip): the
+    voxels next to the crossing keep theirs (capped at the crossing interpolated along an axis),
+    the rest of the band comes from the Eikonal sweeps, as in distance_by_voxel (tiles read +-clip)."""
+    nvox = phi.shape[0]
+    frozen = wp.empty(nvox, dtype=wp.int32)
+    a, b = wp.empty_like(phi), wp.empty_like(phi)
+    split(wp, init_eikonal, nvox, [bcoord, bmap, phi, clip, -clip, clip, 0, frozen, a])
+    return sweeps_by_voxel(bcoord, bmap, a, b, frozen, clip, read)
+
+
+def redistance_by_block(bcoord, bmap, phi, clip: float, read: float):
+    """redistance_by_voxel, a block per thread: the frozen flags found too, into both sweep
+    buffers, with the changed bits the line sweeps start from."""
+    nvox = phi.shape[0]
+    frozen = wp.empty(nvox, dtype=wp.int32)
+    a, b = wp.empty_like(phi), wp.empty_like(phi)
+    was = wp.empty(nvox // 64, dtype=wp.uint64)
+    fbits = wp.empty(nvox // 64, dtype=wp.uint64)
+    launch_blocks(wp, init_eikonal_lines, [bcoord, bmap, phi, clip, 0, 1, frozen, a, b, was, fbits])
+    return sweeps_by_block(bcoord, bmap, a, b, was, fbits, clip, read)
+
+
+def sweeps_by_voxel(bcoord, bmap, a, b, frozen, clip: float, read: float):
+    """Jacobi sweeps of |grad phi| = 1 from the initial distance a (b: the second buffer), a line
+    per thread, sweep_count(clip, read) of them; the result (a or b)."""
+    for _ in range(sweep_count(clip, read)):
+        split(wp, eikonal_sweep, a.shape[0] // BS, [bcoord, bmap, a, frozen, clip, -clip, clip, b])  # a line each
+        a, b = b, a
+    return a
+
+
+def sweeps_by_block(bcoord, bmap, a, b, was, fbits, clip: float, read: float):
+    """sweeps_by_voxel, a block per thread (b: a copy of a, `was` the voxels init set, fbits the
+    frozen ones, a bit per voxel): a line whose neighbourhood did not change is skipped."""
+    now = wp.empty(a.shape[0] // 64, dtype=wp.uint64)
+    for _ in range(sweep_count(clip, read)):
+        launch_blocks(wp, eikonal_lines, [bcoord, bmap, rows(a), fbits, clip, -clip, clip, rows(b), was, now])
+        was, now = now, was
+        a, b = b, a
+    return a
