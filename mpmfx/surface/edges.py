@@ -68,7 +68,7 @@ def edge_gate(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32)
               offset: wp.array(dtype=wp.vec3), phi: wp.array(dtype=float), band: float, k0: float, k1: float,
               gate: wp.array(dtype=float), sample: wp.array(dtype=float), base: int):
     """Per cell of 2^3 voxels (thread u: its first voxel, the even one, in block u // 64; gate and
-    sample hold 64 cells a block, sparse_kernels.gate_cell maps a voxel to its cell), where that
+    sample hold 64 cells a block, voxels.gate_cell maps a voxel to its cell), where that
     voxel lies within `band` of the raw field's zero level (phi): gate = how much of an edge it
     is, 0 below the convex curvature k0 of the blurred weights' level set, 1 above k1 (1/voxel;
     smooth between); sample = |offset . e| (voxels), the centroid offset x - xbar along the edge
@@ -80,8 +80,7 @@ def edge_gate(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32)
     random samples it wanders along the edge as much as across, by the noise of the field.
 
     The blurred weights vary over their blur width (3-4 voxels), so one value per 2 voxels
-    resolves the gate, at an eighth of the cost of one per voxel (22-46 -> 4-8 ms of a 100k CPU
-    call). A cell's gate sits at a fixed place in the world, so it changes smoothly in time as
+    resolves the gate, at an eighth of the cost of one per voxel. A cell's gate sits at a fixed place in the world, so it changes smoothly in time as
     the particles move."""
     u = wp.tid() + base
     gate[u] = 0.0

@@ -35,8 +35,7 @@ def blur_weight_axis(
     """dst = [1 2 1]/4 blur of the kernel weight sum along `axis` with taps `step` (< BS) voxels
     apart (variance 0.5 step^2 voxel^2; tiles as in weight_at), on the 8 voxels of one line
     along `axis` (thread = line, 64 a block): the blocks before and after the line are looked
-    up once, not by every voxel within `step` of the block's faces (10M random torus "fine", one
-    H200: 21 passes 12.6 ms with a voxel per thread)."""
+    up once, not by every voxel within `step` of the block's faces."""
     q = wp.tid() + base
     b = q // 64
     first, st = line_start(axis, q - b * 64)
@@ -97,8 +96,8 @@ def project_on_wide_normal(
     sideways offset on it opened holes (88 in the bench's random sheet); the thinnest axis is
     the sheet's normal there, and the surface's normal on bodies. (The iterations start from
     the wide normal; inside a sheet its only component across the sheet comes from the 2-voxel
-    ripple the weight blur's 2-voxel taps keep: a blur without it left n in the sheet's plane,
-    docs/surfacing-log.md, sixteenth step.)"""
+    ripple the weight blur's 2-voxel taps keep: a blur without it would leave n in the sheet's
+    plane.)"""
     t = wp.tid() + base
     if w[t] <= 0.0:
         phi[t] = far_vox
@@ -146,7 +145,7 @@ def blur_weight_lines(
     dst: wp.array(dtype=vec8),
     base: int,
 ):
-    """sparse_kernels.blur_weight_axis with step 2 on one block (thread = block), 8 voxels at a
+    """blur_weight_axis with step 2 on one block (thread = block), 8 voxels at a
     time (src, dst: the weights as vec8 rows along z; along x or y a row's neighbours are whole
     rows, along z a row is a line and its neighbours the row shifted): each voxel gets 0.25
     (2 before) + 0.5 itself + 0.25 (2 after), in that order, a tap on an OUTSIDE tile 0, on an
@@ -204,7 +203,7 @@ def project_on_wide_normal_lines(
     phi: wp.array(dtype=float),
     base: int,
 ):
-    """sparse_kernels.project_on_wide_normal (isotropic kernels) on one block (thread = block),
+    """project_on_wide_normal (isotropic kernels) on one block (thread = block),
     the neighbour blocks looked up once (weight_at: 0 on an OUTSIDE tile, the voxel's own value
     on an INSIDE one)."""
     b = wp.tid() + base

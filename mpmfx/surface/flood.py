@@ -143,7 +143,7 @@ def active_blocks(
     neighbour reached a voxel in the previous round (moved). A voxel reached in round k can
     only reach others through blocks swept in round k + 1, and a line sweep carries reach along
     its whole line from either end, so the fill still ends closed, as if every block were swept.
-    The component labels' rounds (sparse._remove_small) are taken the same way: a block whose
+    The component labels' rounds (components.remove_small) are taken the same way: a block whose
     labels and face neighbours' did not move sweeps to the labels it holds."""
     b = wp.tid()
     a = pending[b]
@@ -187,12 +187,12 @@ def seed_bits(
     pending: wp.array(dtype=wp.int32),
     base: int,
 ):
-    """topology_kernels.seed_reached for one block, as bit words (seeds 0: bubbles, 1:
+    """seed_reached for one block, as bit words (seeds 0: bubbles, 1:
     specks, as its `specks`; 2: bodies, every outside voxel, the inside ones next to an
     INSIDE tile, and with min_count > 0 a block's inside voxels where they are one piece
     within the block that holds at least min_count particles' voxels: see small_labels);
     pending[b] = 1 where a voxel is left to reach. phi8: the level set as vec8 rows along z
-    (line_kernels.rows); mark: the particles' voxels as bit words (mark_particle_bits; read by
+    (lines.rows); mark: the particles' voxels as bit words (mark_particle_bits; read by
     the specks' and the bodies' seeds)."""
     b = wp.tid() + base
     bc = bcoord[b]
@@ -209,8 +209,8 @@ def seed_bits(
         s = wp.uint64(0)
         r = wp.uint64(0)
         # a row of 8 voxels along z (bits y * 8 + z) at a time, its bits selected without a
-        # branch per voxel: the sign flips where the surface is, so those branches
-        # mispredicted (4 launches, one thread, 100k "fine": lattice torus 29 -> 11 ms, sphere 21 -> 16)
+        # branch per voxel: the sign flips where the surface is, so those branches would
+        # mispredict
         marks = wp.uint64(0)
         if seeds == 1:  # seeds is the launch's: this branch always goes the same way
             marks = mark[b * BS + x]
@@ -273,7 +273,7 @@ def mark_particle_bits(
     mark: wp.array(dtype=wp.uint64),
     base: int,
 ):
-    """topology_kernels.mark_particle_voxels for active block b (thread = block) as its 8 bit
+    """mark_particle_voxels for active block b (thread = block) as its 8 bit
     words (seed_bits' layout): bit set at the voxel nearest to a particle (wp.round of its grid
     coordinates, as there). A particle whose nearest voxel lies in b lies within half a voxel
     below b's span or in it, so in the gather cells 2 bc - 1 .. 2 bc + 1 along each axis
@@ -366,7 +366,7 @@ def flood_bits(
 @wp.kernel
 def flip_unreached_bits(reached: wp.array(dtype=wp.uint64), inside_value: float, outside_value: float,
                         phi: wp.array(dtype=float), base: int):
-    """topology_kernels.flip_unreached for the 64 voxels of word w (thread = block * 8 + x)."""
+    """flip_unreached for the 64 voxels of word w (thread = block * 8 + x)."""
     w = wp.tid() + base
     r = reached[w]
     if r == ALL:

@@ -206,8 +206,7 @@ def add_particle(gp: wp.vec3, vp: wp.vec3, c: wp.vec3i, r2: float, with_v: int, 
     i = wp.bit_count((rows & (-rows)) - 1)
     i_end = i + wp.bit_count(rows)
     # the lines reached as one 64-bit mask (bit i * 8 + j), visited lowest set bit first: one
-    # loop for all of them, where a loop per row mispredicted its exit once a row (1.9 M rows
-    # at the 100k lattice torus "fine"; the gather alone 74.7 -> 67.8 ms there, one thread).
+    # loop for all of them, where a loop per row would mispredict its exit once a row.
     # While, not range(): Warp's range() with bounds known only at run time steps a (start,
     # end, step) triple and tests the step's sign every iteration
     lines = wp.uint64(0)
@@ -269,15 +268,12 @@ def gather_zhu_bridson_blocks(
     subset of the block's visited in the same (cell, then slot) order, so each voxel sums the
     same particles in the same order with the same arithmetic as the voxel kernel: the same
     field bit for bit. g and v are in the sorted order (g[q] = the positions' [order[q]],
-    sparse_kernels.sorted_copy): the fetches run through memory in order instead of jumping.
+    binning.sorted_copy): the fetches run through memory in order instead of jumping.
 
     A candidate goes on only if its kernel reaches a line of the block, tested exactly at the
     nearest line (lane_d2min; the test is monotone in the distance): 42 % of the candidates
-    do (100k lattice torus "fine": 1.14 M candidates, 0.47 M reach, 7.3 M lines of 19.9 M
-    tested before), and the lines they reach come as bits of one mask (add_particle).
-    With write_sums_line, the gather alone on captured inputs (one thread, best of 11):
-    lattice torus / sphere / box "fine" 79.8 / 76.1 / 41.0 -> 62.1 / 47.5 / 29.6 ms, random
-    torus "fine" with velocities 160 -> 109 ms; w, the offset and the velocity bitwise the same.
+    do on a lattice torus at "fine", and the lines they reach come as bits of one mask
+    (add_particle). w, the offset and the velocity are bitwise the voxel kernel's.
 
     acc: scratch, nacc (7, or 10 with velocities) vec8 sums per line of the block (w, the
     offset's x y z, the weight gradient's x y z, the velocity's x y z; acc[line, sum]), turned

@@ -37,7 +37,7 @@ def match_tiles(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int3
     The 26 neighbours of a voxel on its block's boundary fall in at most 7 other blocks, each
     looked up once, in lexicographic order of the block offset: visiting the neighbours one by
     one in (x, y, z) order meets the same blocks in that order, and a block met again changes
-    nothing more (10M random torus "fine", one H200: 4.8 ms with a lookup per neighbour)."""
+    nothing more."""
     t = wp.tid() + base
     c = voxel_of(t, bcoord)
     if interior(c):
@@ -65,7 +65,7 @@ def match_tiles(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int3
 @wp.kernel
 def match_tiles_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
                       eps: float, base: int):
-    """sparse_kernels.match_tiles on one block (thread = block): the codes of its 26 neighbour
+    """match_tiles on one block (thread = block): the codes of its 26 neighbour
     blocks are looked up once, and a block with no tile among them has nothing to do. The 27
     neighbours of a voxel are visited in match_tiles' order (a voxel next to both kinds of
     tile ends as match_tiles leaves it)."""
@@ -322,7 +322,7 @@ def sign_columns(
 ):
     """masks[line] = the corner signs of the line's column: bit z (0..7) where its voxel z is
     >= 0, bit 8 where the first voxel of the same line of the block above along z is (a
-    tile's value there). phi8: the values as vec8 rows along z (line_kernels.rows); thread = block."""
+    tile's value there). phi8: the values as vec8 rows along z (lines.rows); thread = block."""
     b = wp.tid() + base
     zp = side_code(bmap, bcoord[b], 2, 1)
     for l in range(64):
@@ -380,7 +380,7 @@ def mc_vertices_lines(
     verts: wp.array(dtype=wp.vec3),
     base: int,
 ):
-    """sparse_mesh_kernels.mc_vertices for the 24 edges (voxel * 3 + axis) of each of the 64
+    """mc_vertices for the 24 edges (voxel * 3 + axis) of each of the 64
     lines along z of one block (thread = block), counted per line (counts[line]; offsets:
     their inclusive scan): the same vertices in the same order. Unlike mc_vertices, edges
     without a vertex keep whatever edge_vert held: mc_faces_lines reads only crossing edges.
@@ -400,7 +400,7 @@ def mc_vertices_lines(
         ey = (m0 ^ column_mask(masks, codes, li, lj + 1, out_v, in_v)) & low
         ez = (m0 ^ (m0 >> 1)) & low
         if count_only != 0:
-            counts[tid] = wp.bit_count(ex) + wp.bit_count(ey) + wp.bit_count(ez)  # popcnt (a loop over 9 bits each: 10 -> 3 ms)
+            counts[tid] = wp.bit_count(ex) + wp.bit_count(ey) + wp.bit_count(ez)  # popcnt (not a loop over 9 bits each)
             continue
         own = column(phi, codes, li, lj, out_v, in_v)  # the values, at the lines with a vertex
         cx = column(phi, codes, li + 1, lj, out_v, in_v)
@@ -440,7 +440,7 @@ def mc_faces_lines(
     faces: wp.array(dtype=wp.int32),
     base: int,
 ):
-    """sparse_mesh_kernels.mc_faces for the 8 cells of each of the 64 lines along z of one
+    """mc_faces for the 8 cells of each of the 64 lines along z of one
     block (thread = block), counted per line: the same triangles in the same order. Only the
     corner signs count: masks from sign_columns (out_v, in_v: the tiles' values)."""
     b = wp.tid() + base
@@ -476,9 +476,7 @@ def mc_faces_lines(
                     for s in range(3):
                         le = tri_local[start + 3 * m + s]
                         # the edge's voxel lies in this block or one of its 7 upper neighbours:
-                        # its block from `codes`, as slot() finds it through the block grid (the
-                        # two passes alone, one thread, best of 15: lattice fine sphere / torus /
-                        # box 9.3 / 15.1 / 7.5 -> 8.6 / 13.1 / 6.5 ms, the same faces)
+                        # its block from `codes`, as slot() finds it through the block grid
                         lx = li + edge_offset[le, 0]
                         ly = lj + edge_offset[le, 1]
                         lz = z + edge_offset[le, 2]

@@ -17,7 +17,7 @@ class PinnedPool:
     the last of those arrays (or a view of them) is gone, for the next call's copies.
 
     A device-to-host copy into pageable memory goes through the driver's staging and faults
-    the destination's pages in: 35-52 ms of a 10M torus call's 83-121 ms on an H200. Into
+    the destination's pages in: a large part of a 10M-particle call on a GPU. Into
     page-locked memory it is one DMA. Allocating page-locked memory costs more than it saves,
     so the buffers are kept: a frame's download reuses the last frame's buffers once that frame's
     arrays are gone. At most `limit` bytes are held; past that a download falls back to
@@ -90,10 +90,7 @@ def to_host(wp, arrays: list, *, pinned: bool) -> list:
     numpy views), every copy queued before one wait. pinned (CUDA only): into page-locked buffers
     of the PINNED pool. Else each array is copied into a buffer numpy allocated: numpy asks Linux
     for transparent huge pages on large arrays (madvise), so the copy faults in a few hundred pages
-    where Warp's own host allocation (`wp.array.numpy()`) faulted 10-24 thousand. H100, 10M
-    particles, "fast", the mesh and leaves, whole calls (device + copy), median of 3, two rounds:
-    torus random 146 / 127 -> 97 / 96 ms, torus lattice 119 / 110 -> 93 ms, sphere lattice 75 / 87
-    -> 63 / 60 ms."""
+    where Warp's own host allocation (`wp.array.numpy()`) faults tens of thousands."""
     if all(a is None or a.device.is_cpu for a in arrays):
         return [None if a is None else a.numpy() for a in arrays]
     out = []

@@ -94,7 +94,7 @@ def init_eikonal(
     base: int,
 ):
     """Voxels with a 6-neighbour of the other sign (frozen = 1) start at frozen_distance; the
-    others at +-clip with phi's sign. With plane = 1 (the raw field, sparse._distance) that is
+    others at +-clip with phi's sign. With plane = 1 (the raw field, distance_by_voxel) that is
     the distance to the plane through the axis crossings; it used to be phi itself (at most the
     nearest axis crossing), but the raw field's slope across its crossing is not 1 (0.97 on a
     flat lattice face: -0.008 / +0.964 voxels), so the distance had a kink there, and each blur
@@ -205,11 +205,11 @@ def crossing_average_lines(
     base: int,
 ):
     """The second renormalise and the average of _distance: out = (d1 + renormalise(d1)) / 2 as
-    sparse_kernels.renormalise and average_into give it, and frozen = 1 at voxels with a
+    renormalise.renormalise and average_into give it, and frozen = 1 at voxels with a
     6-neighbour of the other sign (tiles +-clip). Renormalising keeps each sign, so the
     crossings are d1's. (It used to average only the frozen voxels, the only values
     init_eikonal read; its plane start now reads the frozen voxels' same-sign neighbours too.)
-    d1 and out are vec8 rows (line_kernels.rows), as in line_kernels.renormalise_lines."""
+    d1 and out are vec8 rows (lines.rows), as in renormalise.renormalise_lines."""
     b = wp.tid() + base
     faces = block_faces(bmap, bcoord[b])
     for l in range(64):
@@ -230,8 +230,7 @@ def crossing_average_lines(
         for z in range(BS):
             v = own[z]
             # the max and the clamp as compares and selects (fmax, fmin: no value is NaN), the
-            # same bits (this kernel alone, one thread, best of 9: lattice sphere / torus
-            # "fine" 10.6 / 14.7 -> 9.2 / 12.8 ms, with the flags branch-free)
+            # same bits, with the flags branch-free
             frozen[r * BS + z] = wp.where(v > 0.0, wp.where(mn[z] <= 0.0, 1, 0), wp.where(mx[z] > 0.0, 1, 0))
             grad = 0.5 * wp.length(wp.vec3(dx[z], dy[z], dz[z]))
             d2 = fmin(fmax(v / fmax(grad, 0.05) * 1.0, -clip), clip)
@@ -254,7 +253,7 @@ def init_eikonal_lines(
     fbits: wp.array(dtype=wp.uint64),
     base: int,
 ):
-    """redistance_kernels.init_eikonal (tiles +-clip) on one block (thread = block), into both
+    """init_eikonal (tiles +-clip) on one block (thread = block), into both
     buffers of the sweeps (dist, dist2); frozen given (crossing_average_lines, find = 0) or
     found here (find = 1: a 6-neighbour of the other sign, as init_eikonal). changed and fbits:
     the frozen voxels as a block's 8 words (eikonal_lines' layout: word x, bit y * 8 + z; fbits
@@ -302,15 +301,14 @@ def init_eikonal_lines(
 
 @wp.func
 def eikonal_row(xm: vec8, xp: vec8, ym: vec8, yp: vec8, lo: vec8, hi: vec8, v: vec8, clip: float):
-    """redistance_kernels.eikonal_update of the 8 voxels of a row (along z) from their
+    """eikonal_update of the 8 voxels of a row (along z) from their
     neighbours' rows, branch-free: all three candidates are computed and the one
     eikonal_update's branches pick is kept, each with eikonal_update's arithmetic per voxel
     (the same bits). The branches depend on the data (the sorted axis distances), so they
     mispredicted; as vec8 operations the 8 voxels run side by side. The mins and maxes are a
     compare and a select each (vmin, vmax, fmin: the same values, as no distance is NaN) where
-    wp.min's NaN checks made each a compare, an and and a blend on the line's dependency chain
-    (11 captured sweeps, 100k lattice "fine", one thread, alternating: sphere 57 -> 46 ms,
-    torus 81 -> 70, bitwise the same)."""
+    wp.min's NaN checks would make each a compare, an and and a blend on the line's dependency
+    chain (bitwise the same)."""
     ax = vmin(wp.abs(xm), wp.abs(xp))
     ay = vmin(wp.abs(ym), wp.abs(yp))
     az = vmin(wp.abs(lo), wp.abs(hi))
@@ -357,14 +355,14 @@ def eikonal_lines(
     now: wp.array(dtype=wp.uint64),
     base: int,
 ):
-    """redistance_kernels.eikonal_sweep on the 64 lines along z of one block (thread = block);
-    src and dst: the distance as vec8 rows along z (line_kernels.rows), so a line and its x and
+    """eikonal_sweep on the 64 lines along z of one block (thread = block);
+    src and dst: the distance as vec8 rows along z (lines.rows), so a line and its x and
     y neighbour lines are one load each.
 
     was / now: bit z set where the previous / this sweep changed voxel z (before the first
     sweep: the frozen voxels, see init_eikonal_lines); fbits: bit z set where voxel z is
     frozen. Each is a block's 8 words of 64 bits, word x holding line (x, y)'s 8 bits at
-    y * 8 + z (bitfill_kernels' layout), so a line's bits are one byte. A voxel whose 6
+    y * 8 + z (bitwords' layout), so a line's bits are one byte. A voxel whose 6
     neighbours and itself did not change in the previous sweep would compute what it holds,
     and with src and dst swapped every sweep dst holds the values of two sweeps ago, the same
     ones: it is skipped. Only the lines at the moving front work, and the result is the plain
@@ -399,10 +397,8 @@ def eikonal_lines(
         frz[x] = f
         need[x] = n & (~f)
     # first the lines that work, listed without a branch on it (the list only advances where
-    # one does), then those lines back to back: a branch per line on `need` mispredicted and
-    # laid each working line's long dependency chain bare; listed, consecutive lines overlap
-    # (the sweeps alone, 11 captured sweeps, 100k lattice "fine", best of 5, one thread: sphere
-    # 74 -> 56 ms, torus 116 -> 88; dst and the changed bits bitwise the same)
+    # one does), then those lines back to back: a branch per line on `need` would mispredict
+    # and lay each working line's long dependency chain bare; listed, consecutive lines overlap
     todo = vec64i(0)
     cnt = int(0)
     for x in range(BS):
@@ -413,9 +409,7 @@ def eikonal_lines(
     moved_words = vec8u(wp.uint64(0))
     # two lines at a time: a line's update is one long dependency chain (compares, two square
     # roots, a division), and with its neighbour rows loaded first the two chains interleave in
-    # one stretch of code without a branch (the sweeps alone, 11 captured sweeps, 100k lattice
-    # "fine", one thread, best of 12 alternating, two runs: sphere 37.7-39.4 -> 33.2-35.9 ms,
-    # torus 65.8-71.0 -> 55.6-60.5; bitwise the same)
+    # one stretch of code without a branch
     k = int(0)
     while k + 1 < cnt:
         l1 = todo[k]

@@ -68,7 +68,7 @@ def edge_flow_step(p0: float, xm: float, xp: float, ym: float, yp: float, zm: fl
     is pitted along its length (lo < 0: a sample void in the edge), the across-edge part is
     suppressed by gate x clamp(-lo / pit, 0, 1) (pit: 1/voxel), so the flow fills the pit along
     the edge instead of rounding the whole edge into it: the random box's worst vertices sat in
-    such pits (10M "fine" 1.037 -> 0.928 h; docs/surfacing-log.md, nineteenth step)."""
+    such pits."""
     gx = 0.5 * (xp - xm)
     gy = 0.5 * (yp - ym)
     gz = 0.5 * (zp - zm)
@@ -116,8 +116,7 @@ def curvature_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.i
 
     A thread takes the 8 voxels of one line along z (64 a block): its neighbour lines, and the
     lines above and below it across the block's faces, are found once for the line (a voxel
-    per thread with a block-map lookup at every neighbour off its block: 8.7 ms for 8 steps at
-    10M "fine" on an H200). The same values in the same operations as `get` per neighbour."""
+    per thread would look the block map up at every neighbour off its block). The same values in the same operations as `get` per neighbour."""
     q = wp.tid() + base
     b = q // 64
     l = q - b * 64
@@ -189,10 +188,8 @@ def edge_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32)
               dst: wp.array(dtype=float), base: int):
     """After curvature_flow (thread = 2^3-voxel cell, edge_kernels.edge_gate's): the 8 voxels of a
     cell whose edge gate is open take edge_flow_step instead, from the same neighbour values
-    (`get`; the CPU: line_kernels.edge_flow_lines).
-    Its own launch: inside curvature_flow the edge step's code cost every voxel registers (10M
-    "fine" random torus, which has no open gate, on an H200: 8 steps 4.3 -> 6.5 ms; on the CPU
-    twice the time)."""
+    (`get`; the CPU: edge_flow_lines).
+    Its own launch: inside curvature_flow the edge step's code would cost every voxel registers."""
     cell = wp.tid() + base
     g8 = gate[cell]
     if g8 <= 0.0:
@@ -259,11 +256,9 @@ def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtyp
                          out_v: float, in_v: float, dt: float, band: float, dst: wp.array(dtype=vec8), base: int):
     """sparse_kernels.curvature_flow on one block (thread = block), a row of 8 voxels along z at
     a time: the 26 neighbour blocks are looked up once, a row's neighbour rows read once, and
-    sparse_kernels.flow_step's arithmetic runs 8 voxels at a time, the same operations in the
-    same order, so the results are the voxel kernel's bit for bit (a block a thread voxel by
-    voxel took 19 ms a step at 100k torus lattice "fine", this 10 ms; skipping the rows with no
-    value in the band, 14-16 % less again: one step on captured inputs, one thread, best of 21,
-    lattice / random torus 7.8 / 13.0 -> 6.7 / 11.3 ms). The voxels where the edge gate is open
+    flow_step's arithmetic runs 8 voxels at a time, the same operations in the
+    same order, so the results are the voxel kernel's bit for bit; rows with no value in the
+    band are skipped. The voxels where the edge gate is open
     are stepped again by edge_flow_lines."""
     b = wp.tid() + base
     r0 = b * 64
