@@ -1,5 +1,5 @@
 """Cross-section of the bench's box at one edge, with and without the smoothing's edge handling
-(the README's figure; mpmfx.surface.edge_kernels, sparse_kernels.edge_flow_step).
+(the README's figure; mpmfx.surface.edges, smooth.edge_flow_step).
 
 The box's mesh at "fine" (the surface stage's setting) is cut by the plane z = 0 near the edge
 at x = +0.3, y = +0.2 m. Solid: the shipped surface; dashed: the edge gate shut (the flow rounds

@@ -1,5 +1,5 @@
 """The surfacer's copy to the host, pageable against the pool of page-locked buffers
-(sparse_output.PINNED), on the GPU: per case, "fast", rounds of download(pinned=False) and
+(pinned.PINNED), on the GPU: per case, "fast", rounds of download(pinned=False) and
 download(pinned=True) alternating on one device result, each result kept until the next call
 of its kind (as a frame loop keeps the last frame), medians in ms; and whether both give the
 same bytes.

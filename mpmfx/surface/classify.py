@@ -152,7 +152,7 @@ def count_voids(labels: wp.array3d(dtype=wp.int32), count: wp.array(dtype=wp.int
 @wp.kernel
 def void_shells(labels: wp.array3d(dtype=wp.int32), state: wp.array3d(dtype=wp.int32)):
     """A void's blocks (labels above 0) next to (26-neighbourhood) a block of no void become
-    ACTIVE (its shell); the others INSIDE for now (its core: sparse._open_void_cores)."""
+    ACTIVE (its shell); the others INSIDE for now (its core: open_voids)."""
     i, j, k = wp.tid()
     if labels[i, j, k] <= 0:
         return
@@ -299,7 +299,7 @@ def mark_near_tested(
     """After mark_near_certain: the still unmarked blocks that only some points of block c's
     span reach (thread = block c of the grid), tested against c's particles as
     mark_near_blocks tests them (its candidate range, its float32 distance). gs: the grid
-    positions in the cells' order (gs[k] = g[order[k]], sparse._sorted_positions), so a cell's
+    positions in the cells' order (gs[k] = g[order[k]], binning.sorted_positions), so a cell's
     particles are read in memory order."""
     c = block_of(near, wp.tid() + base)
     if span_count(cells, c) == 0:

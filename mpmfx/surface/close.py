@@ -26,7 +26,7 @@ def gate_closing(closed: wp.array(dtype=float), dist: wp.array(dtype=float), lo:
     """Keep the closing's fill dist - closed only where it is deeper than lo voxels (a lattice
     face's uniform shift, an edge it eroded numerically: dist kept), in full from hi voxels
     (the voids it fills), in part in between (no jump as a fill grows past lo between frames).
-    sparse._close_voids."""
+    close_voids."""
     t = wp.tid()
     fill = dist[t] - closed[t]
     w = wp.clamp((fill - lo) / wp.max(hi - lo, 1e-6), 0.0, 1.0)

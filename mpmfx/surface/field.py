@@ -8,14 +8,13 @@ from __future__ import annotations
 import warp as wp
 
 from mpmfx.surface import aniso_kernels as A
+from mpmfx.surface.binning import sorted_copy
 from mpmfx.surface.edges import edges
 from mpmfx.surface.grid import ANISO_MAX_STRETCH, NORMAL_STEP, SparseGrid
-from mpmfx.surface.binning import sorted_copy
 from mpmfx.surface.launch import launch_blocks, launch_sequence, split
 from mpmfx.surface.lines import block_faces, line_neighbours, line_sides, row_steps, rows, side_code, vec8
 from mpmfx.surface.params import SurfaceParams
-from mpmfx.surface.voxels import BS, BV, TILE_INSIDE, line_start, voxel_of, weight_at
-from mpmfx.surface.voxels import block_tile
+from mpmfx.surface.voxels import BS, BV, TILE_INSIDE, block_tile, line_start, voxel_of, weight_at
 
 BLUR_MIN_SPLIT = 1024  # blocks below which the weight blur's passes run on one CPU thread (a pass's barrier costs ~20-50 us)
 ANISO_NORMAL_ITERS = 4  # inverse-power iterations that turn the normal towards the neighbours' thinnest axis

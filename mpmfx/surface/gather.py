@@ -98,7 +98,7 @@ def gather_zhu_bridson(
 ):
     """Zhu-Bridson phi at one active voxel, gathered from particles of the nearby cells (CS^3
     voxels each: a finer bin than the blocks, so few particles beyond the kernel are visited).
-    gs, vs: positions (grid units) and velocities in the cells' order (sparse._sorted_positions),
+    gs, vs: positions (grid units) and velocities in the cells' order (binning.sorted_positions),
     so a cell's particles are read from consecutive memory.
 
     phi = -(x - xbar) . n - r with n = -grad w / |grad w| (analytic kernel gradient). Projecting
@@ -261,7 +261,7 @@ def gather_zhu_bridson_blocks(
     acc: wp.array2d(dtype=vec8),
     base: int,
 ):
-    """sparse_kernels.gather_zhu_bridson for the 512 voxels of one block (thread = active
+    """gather_zhu_bridson for the 512 voxels of one block (thread = active
     block): each candidate particle of the cells within reach of the block is fetched once and
     added to the voxels it reaches, a line of 8 voxels along z at a time (add_particle). A
     voxel's contributing particles all lie in the cells within reach of the voxel, which are a

@@ -144,9 +144,8 @@ def z_pair(src: wp.array(dtype=vec8), codes: vec27i, x: int, y: int, row: vec8, 
 def rows(a):
     """A vec8 view of the float array a (voxels, a block's 512 in order): its rows of 8 voxels
     along z, the same memory (the caller keeps a alive)."""
-    import warp
+    return wp.array(ptr=a.ptr, shape=(a.shape[0] // BS,), dtype=vec8, device=a.device)
 
-    return warp.array(ptr=a.ptr, shape=(a.shape[0] // BS,), dtype=vec8, device=a.device)
 
 vec6 = wp.types.vector(length=6, dtype=wp.float32)
 

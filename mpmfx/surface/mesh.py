@@ -20,8 +20,7 @@ from mpmfx.surface.grid import SparseGrid
 from mpmfx.surface.launch import launch_blocks, scan, split
 from mpmfx.surface.lines import read, row_or_tile, rows, side_code, vec8, vec27i
 from mpmfx.surface.mc_tables import device_tables
-from mpmfx.surface.voxels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, get, interior, slot, step_get, voxel_of
-from mpmfx.surface.voxels import block_tile
+from mpmfx.surface.voxels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, block_tile, get, interior, slot, step_get, voxel_of
 from mpmfx.surface.voxels import block_tile as block_code
 
 # forward only: nothing differentiates these kernels, and their adjoints lengthen the compile of the unrolled loops

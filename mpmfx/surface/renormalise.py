@@ -57,7 +57,7 @@ def renormalise_lines(
     out: wp.array(dtype=vec8),
     base: int,
 ):
-    """sparse_kernels.renormalise on the 64 lines along z of one block (thread = block), phi and
+    """renormalise on the 64 lines along z of one block (thread = block), phi and
     out as vec8 rows (rows): a line's neighbour lines are one load each, the differences vec8
     operations, the gradient's length and the division per voxel as renormalise has them."""
     b = wp.tid() + base

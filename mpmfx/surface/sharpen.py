@@ -10,7 +10,7 @@ fitted on the smoothed field and the field is set to the planes' intersection (t
 their signed distances, a convex wedge or corner, rounded within 2 voxels of the crest) before
 marching cubes, which then needs no change.
 
-Only where the edge gate is open (edge_kernels.edge_gate: the blurred weights curve like an
+Only where the edge gate is open (edges.edge_gate: the blurred weights curve like an
 edge), only outward (material is added at a convex crest, never removed), and only where the
 planes found around a cell support each other (every plane's points lie under the others'), at
 least two (three at a corner) and not back to back (a sheet's rim). Planes come from pairs of
@@ -48,13 +48,13 @@ SHARP = {  # sharpen()'s settings; lengths in particle spacings h unless said
     "cos_flat": math.cos(math.radians(12.0)),  # normals that agree
     "plane_tol": 0.5,  # each point this near the other's tangent plane
     "cos_same": math.cos(math.radians(15.0)),  # planes closer than this are one
-    "votes": 3.0,  # directions that must find a plane (of sharp_kernels.DIRECTIONS, 16; at 2, a spot of a 20k random torus passed)
+    "votes": 3.0,  # directions that must find a plane (of DIRECTIONS, 16; at 2, a spot of a 20k random torus passed)
     "support": 0.3,  # voxels: a plane's points this far over another's at most (convex)
     "cos_apart": math.cos(math.radians(65.0)),  # at least two planes this far apart (an edge, not a face)
     "cos_open": math.cos(math.radians(120.0)),  # and none further (faces back to back: a sheet's rim)
     "limit": 1.5,  # the most the field moves outward
     "rounding": 2.0,  # voxels: the crest's radius (0 flickered twice as much on a moving box, 3 gave back a third of the gain)
-    # cells on each side whose decisions weigh a cell's sharpening (sharp_kernels.sharpen_weight): at
+    # cells on each side whose decisions weigh a cell's sharpening (sharpen_weight): at
     # 0 each cell sharpened all or nothing, and where a narrow face's votes hovered about `votes`
     # along an edge it stopped and started in ledges up to 1.3 h high (water_dam's splash frame)
     "spread": 2,

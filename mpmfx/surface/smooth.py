@@ -21,7 +21,7 @@ wp.set_module_options({"enable_backward": False})
 @wp.func
 def edge_limit(full: float, gate: float, noise: float):
     """How far (voxels) the smoothing may move a voxel's surface inward: `full` on faces and
-    curves; at an edge (gate 1, mpmfx.surface.edge_kernels) no further than the noise of its
+    curves; at an edge (gate 1, mpmfx.surface.edges) no further than the noise of its
     block's samples, or `full` where the block saw none (noise < 0)."""
     lim = full
     if noise >= 0.0:
@@ -62,7 +62,7 @@ def flow_step(p0: float, xm: float, xp: float, ym: float, yp: float, zm: float, 
 @wp.func
 def edge_flow_step(p0: float, xm: float, xp: float, ym: float, yp: float, zm: float, zp: float, fxy: float,
                    fxz: float, fyz: float, dt: float, taper: float, gate: float, pit: float):
-    """flow_step where the edge gate is open (gate > 0, edge_kernels.edge_gate): the speed from the
+    """flow_step where the edge gate is open (gate > 0, edges.edge_gate): the speed from the
     level set's two principal curvatures, lo (the smaller: along an edge) and hi (across it),
     |grad| (lo + hi) being flow_step's Laplacian less its part along the normal. Where the edge
     is pitted along its length (lo < 0: a sample void in the edge), the across-edge part is
@@ -186,7 +186,7 @@ def near(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), t: int, 
 def edge_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
               out_v: float, in_v: float, dt: float, band: float, gate: wp.array(dtype=float), pit: float,
               dst: wp.array(dtype=float), base: int):
-    """After curvature_flow (thread = 2^3-voxel cell, edge_kernels.edge_gate's): the 8 voxels of a
+    """After curvature_flow (thread = 2^3-voxel cell, edges.edge_gate's): the 8 voxels of a
     cell whose edge gate is open take edge_flow_step instead, from the same neighbour values
     (`get`; the CPU: edge_flow_lines).
     Its own launch: inside curvature_flow the edge step's code would cost every voxel registers."""
@@ -220,7 +220,7 @@ def edge_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32)
 def flow_rows(src: wp.array(dtype=vec8), codes: vec27i, r0: int, r: int, c: vec8, out_v: float, in_v: float):
     """The neighbour values flow_step reads, for the 8 voxels of row r of the block whose rows
     start at r0 (c: the row itself): (x - 1, x + 1, y - 1, y + 1, z - 1, z + 1 rows, fxy, fxz,
-    fyz), each the same float as sparse_kernels' `get` reads and combines per voxel."""
+    fyz), each the same float as voxels.get reads and combines per voxel."""
     x = r // BS
     y = r % BS
     xm = vec8()
@@ -254,7 +254,7 @@ def flow_rows(src: wp.array(dtype=vec8), codes: vec27i, r0: int, r: int, c: vec8
 @wp.kernel
 def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=vec8),
                          out_v: float, in_v: float, dt: float, band: float, dst: wp.array(dtype=vec8), base: int):
-    """sparse_kernels.curvature_flow on one block (thread = block), a row of 8 voxels along z at
+    """curvature_flow on one block (thread = block), a row of 8 voxels along z at
     a time: the 26 neighbour blocks are looked up once, a row's neighbour rows read once, and
     flow_step's arithmetic runs 8 voxels at a time, the same operations in the
     same order, so the results are the voxel kernel's bit for bit; rows with no value in the
@@ -311,9 +311,9 @@ def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtyp
 def edge_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=vec8),
                     out_v: float, in_v: float, dt: float, band: float, gate: wp.array(dtype=float), pit: float,
                     dst: wp.array(dtype=vec8), base: int):
-    """sparse_kernels.edge_flow after curvature_flow_lines (thread = block): the rows that cross
+    """edge_flow after curvature_flow_lines (thread = block): the rows that cross
     an open gate cell read their neighbour rows as curvature_flow_lines does (flow_rows), and
-    their voxels in an open cell take sparse_kernels.edge_flow_step, the same values in the
+    their voxels in an open cell take edge_flow_step, the same values in the
     same operations as the voxel kernel. Kept out of the row kernel: there the edge step's
     code, even in a branch never taken, made the flow twice as slow (one step, captured
     inputs, one thread). A voxel per neighbour read (`get`) instead of rows took 16 ms a step
@@ -354,7 +354,7 @@ def edge_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.
 @wp.kernel
 def limit_inward_lines(bcoord: wp.array(dtype=wp.vec3i), a: wp.array(dtype=vec8), ref: wp.array(dtype=vec8), full: float,
                        gate: wp.array(dtype=float), noise: wp.array(dtype=float), base: int):
-    """sparse_kernels.limit_inward for the 64 rows of active block b (thread = block; bcoord
+    """limit_inward for the 64 rows of active block b (thread = block; bcoord
     gives the launch its size), vec8 rows (rows): a = min(a, ref + edge_limit) per voxel, as
     limit_inward (a thread per voxel cost ~2 ns each, 4.4 ms at 2.1 M voxels, one thread)."""
     b = wp.tid() + base

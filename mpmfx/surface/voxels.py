@@ -184,5 +184,5 @@ def weight_at(bmap: wp.array3d(dtype=wp.int32), w: wp.array(dtype=float), t: int
 
 @wp.func
 def gate_cell(b: int, i: int, j: int, k: int):
-    """Index of the 2^3-voxel cell (edge_kernels.edge_gate) of voxel (i, j, k) of active block b."""
+    """Index of the 2^3-voxel cell (edges.edge_gate) of voxel (i, j, k) of active block b."""
     return b * 64 + (i // 2) * 16 + (j // 2) * 4 + k // 2

@@ -83,7 +83,7 @@ def surface_dense(
         distance = wp.array(_redistance(distance.numpy(), wide), dtype=float)
         phi = _smooth(wp, K, wp.clone(distance), params.smooth_iters)
         if params.smooth_iters > 0:  # at most SMOOTH_LIMIT r inward, as the sparse surfacer on bodies without edges (its
-            # edges' limit, mpmfx.surface.edge_kernels, is not modelled here: the cases compared have none)
+            # edges' limit, mpmfx.surface.edges, is not modelled here: the cases compared have none)
             phi = wp.array(np.minimum(phi.numpy(), distance.numpy() + SMOOTH_LIMIT * grid.r_vox), dtype=float)
         timings["smooth"] = _lap(wp, t0)
         if params.smooth_iters > 0:
@@ -203,7 +203,7 @@ def _fill_bubbles(wp, K, phi, *, inside_value: float) -> None:
 
 
 def _redistance(d: np.ndarray, clip: float) -> np.ndarray:
-    """numpy version of the sparse surfacer's redistancing (mpmfx.surface.redistance_kernels):
+    """numpy version of the sparse surfacer's redistancing (mpmfx.surface.redistance):
     voxels next to a sign change keep |d| capped at the axis-interpolated distance to it, the
     rest of the band follows from Jacobi sweeps of |grad d| = 1; values in voxels, +-clip."""
     pos = d > 0

@@ -1,6 +1,7 @@
-"""Sharp edges (SurfaceParams.sharp_edges, mpmfx.surface.sharp_kernels): a random sample thins at
-a body's edges and corners, and the surface used to come out rounded and dented there; now the
-faces' planes meet again, while round bodies and thin sheets come out as before."""
+"""Sharp edges (SurfaceParams.sharp_edges, mpmfx.surface.sharpen): a random sample thins at
+a body's edges and corners, and without sharp edges the surface comes out rounded and dented
+there; with them the faces' planes meet again, while round bodies and thin sheets come out as
+without."""
 
 import numpy as np
 import pytest

@@ -201,9 +201,9 @@ def test_no_bubble_sealed_along_an_inside_tile():
 
 def test_a_lattice_block_keeps_its_edges_at_both_settings():
     # a freshly voxelised block (20k lattice particles): the smoothing moves an edge inward only as
-    # far as the samples' noise there, ~0 on a lattice. Measured: vertices within 1 h of an edge
-    # 0.39-0.40 h inside before the limit, 0.06 / 0.07 h ("fast" / "fine") with it; surface error
-    # 0.040 / 0.047 -> 0.021 / 0.026 h
+    # far as the samples' noise there, ~0 on a lattice. Vertices within 1 h of an edge lie
+    # 0.39-0.40 h inside without the edge limit, 0.06 / 0.07 h ("fast" / "fine") with it; surface
+    # error 0.040 / 0.047 h without, 0.021 / 0.026 h with it
     x, h = sample_shape("box", 20000, "lattice")
     sdf, _, _ = shape_sdf("box")
     for label, setting in OURS.items():
@@ -236,8 +236,8 @@ def test_the_flow_fills_pits_along_a_random_edge_instead_of_rounding_the_edge(mo
     # a sample void in an edge leaves a pit that the flow would deepen by rounding the whole edge
     # into it (the random box's worst vertices: 10M "fine" 1.037 h); where the edge gate is open
     # and the edge is pitted along its length, the across-edge rounding stops there
-    # (smooth.edge_flow_step). Measured, 20k random box, vertices within 1.5 h of an edge:
-    # max 0.974 -> 0.805 h, p99 0.758 -> 0.709 h, signed mean -0.196 -> -0.174 h
+    # (smooth.edge_flow_step). 20k random box, vertices within 1.5 h of an edge, without / with
+    # the stop: max 0.974 / 0.805 h, p99 0.758 / 0.709 h, signed mean -0.196 / -0.174 h
     from mpmfx.surface import smooth
 
     x, h = sample_shape("box", 20000, "random", seed=1)
