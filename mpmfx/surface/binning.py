@@ -1,4 +1,4 @@
-"""Surfacer pass 1: particles to grid coordinates, binned into blocks and gather cells.
+"""Binning pass: particles to grid coordinates, binned into blocks and gather cells.
 
 Counts per block and per gather cell (CELLS_PER_BLOCK per block edge), the order that sorts the
 particles by cell, and their grid positions in that order. GPU: Warp's radix sort; CPU: a

@@ -1,4 +1,4 @@
-"""Surfacer pass 2: the blocks' classes, OUTSIDE, INSIDE or ACTIVE, and the active blocks' list.
+"""Block pass: the blocks' classes, OUTSIDE, INSIDE or ACTIVE, and the active blocks' list.
 
 A block is OUTSIDE when no particle lies within SparseGrid.reach_vox of it, INSIDE when it and
 its neighbours are dense (SparseGrid's dense rule), else ACTIVE. OUTSIDE blocks the grid

@@ -1,4 +1,4 @@
-"""Surfacer pass 7 (SurfaceParams.close_voids): the morphological closing of the inside by a
+"""Closing pass (SurfaceParams.close_voids): the morphological closing of the inside by a
 ball, which fills the dents of sample voids before the smoothing."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Surfacer pass 5: inside components (6-connected) holding fewer than
+"""Small-components pass: inside components (6-connected) holding fewer than
 SurfaceParams.min_feature_particles particles become outside.
 
 GPU: min-label sweeps along block lines over every block. CPU: a fill from the bodies on bit

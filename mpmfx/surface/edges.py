@@ -1,4 +1,4 @@
-"""Surfacer pass 3c: how far the smoothing may round each part of the surface (the same kernels
+"""Edge pass: how far the smoothing may round each part of the surface (the same kernels
 on every device).
 
 The mean-curvature flow moves a convex edge inward wherever it runs, noise or not. Where the

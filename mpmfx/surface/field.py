@@ -1,4 +1,4 @@
-"""Surfacer pass 3: the raw field at the active voxels, from the gather (:mod:`mpmfx.surface.gather`),
+"""Field pass: the raw field at the active voxels, from the gather (:mod:`mpmfx.surface.gather`),
 its normal taken from the kernel weights blurred to SurfaceParams.normal_radius (the wide
 normal), and the edges that bound the smoothing (:mod:`mpmfx.surface.edges`).
 """

@@ -1,4 +1,4 @@
-"""Surfacer pass 4: the topology flood fills. Outside voxels not connected to an OUTSIDE block
+"""Topology pass: the flood fills. Outside voxels not connected to an OUTSIDE block
 are bubbles (-> inside); inside voxels not connected to a particle or an INSIDE block are
 specks of the noisy field (-> outside).
 

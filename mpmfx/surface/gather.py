@@ -1,4 +1,4 @@
-"""Surfacer pass 3a: the Zhu-Bridson field gathered at the active voxels from the particles of
+"""Gather (part of the field pass): the Zhu-Bridson field at the active voxels from the particles of
 the gather cells within the kernel's reach (no atomics).
 
 GPU: a voxel per thread (gather_zhu_bridson). CPU: a block per thread (gather_zhu_bridson_blocks),

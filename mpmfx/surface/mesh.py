@@ -1,4 +1,4 @@
-"""Surfacer pass 10: marching cubes over the active cells (Warp's tables,
+"""Mesh pass: marching cubes over the active cells (Warp's tables,
 :mod:`mpmfx.surface.mc_tables`), vertex normals and velocities; and before it, the tile signs
 (match_tiles: marching cubes needs no crossing on a tile face).
 

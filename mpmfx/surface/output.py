@@ -1,4 +1,4 @@
-"""Surfacer pass 11: the result's host copies. The mesh, the level set as OpenVDB-style leaves
+"""Output pass: the result's host copies. The mesh, the level set as OpenVDB-style leaves
 (with velocity and fog density) and the optional dense arrays; the blocks' output kinds.
 
 GPU: the kept blocks compacted on the device, then copied (into page-locked buffers,

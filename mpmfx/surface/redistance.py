@@ -1,4 +1,4 @@
-"""Surfacer pass 6: the field as a signed distance over the narrow band (voxels).
+"""Redistance pass: the field as a signed distance over the narrow band (voxels).
 
 The Zhu-Bridson field is a distance only near its zero level (it flattens to -r inside), so
 blurring it would move curved surfaces outward once the blur reached the flat part. Here the

@@ -1,4 +1,4 @@
-"""Surfacer pass 9 (SurfaceParams.sharp_edges): a smoothed level set given back its sharp convex
+"""Sharpening pass (SurfaceParams.sharp_edges): a smoothed level set given back its sharp convex
 edges and corners (the same kernels on every device).
 
 A random sample thins where a body's faces meet (a quarter or an eighth of a ball of neighbours),

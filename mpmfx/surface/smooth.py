@@ -1,4 +1,4 @@
-"""Surfacer pass 8: the level set's mean-curvature flow over the distance, with the edges'
+"""Smoothing pass: the level set's mean-curvature flow over the distance, with the edges'
 inward limit (:mod:`mpmfx.surface.edges`). GPU: a voxel or a line per thread; CPU: a block per
 thread in rows of 8, the neighbour rows read once."""
 
