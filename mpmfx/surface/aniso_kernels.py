@@ -110,8 +110,8 @@ def gather_zhu_bridson_aniso(
     longest ellipsoid axis. Also the neighbours' weighted covariance `cov` (voxels^2, for the
     normal: field.project_on_wide_normal) and the voxel's particle radius `offset_r`
     (voxels): r x (1 + mean shortest axis) / 2. The centroid of kernels that are short across
-    a sheet sits nearer the voxel, so the full r made the bench's random sheet 1.9 h thick
-    instead of h; r x the mean shortest axis opened holes again (35) and erased the lattice
+    a sheet sits nearer the voxel, so the full r would make the bench's random sheet 1.9 h
+    thick instead of h, and r x the mean shortest axis would open holes and erase the lattice
     sheet; the midway value keeps both closed."""
     t = wp.tid()
     c = voxel_of(t, bcoord)

@@ -95,8 +95,7 @@ def counting_sort(keys: wp.array(dtype=wp.int32), starts: wp.array(dtype=wp.int3
     cells' first slots `starts` (the exclusive scan of their counts). keys: (n,) cell key of
     each particle (count_blocks); cursor: (cells,) zeros, the particles placed per cell so far.
     One thread (launch dim 1) walks the particles in order: on one CPU core that is one pass
-    over them where the radix sort made four over keys and values (100k particles: 0.5-0.7
-    against 1.9-2.8 ms)."""
+    over them where the radix sort makes four over keys and values."""
     n = keys.shape[0]
     p = int(0)
     while p < n:  # not range(): a run-time bound costs a step-sign test per iteration

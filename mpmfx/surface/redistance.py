@@ -95,11 +95,10 @@ def init_eikonal(
 ):
     """Voxels with a 6-neighbour of the other sign (frozen = 1) start at frozen_distance; the
     others at +-clip with phi's sign. With plane = 1 (the raw field, distance_by_voxel) that is
-    the distance to the plane through the axis crossings; it used to be phi itself (at most the
-    nearest axis crossing), but the raw field's slope across its crossing is not 1 (0.97 on a
-    flat lattice face: -0.008 / +0.964 voxels), so the distance had a kink there, and each blur
-    pass moved flat faces out across it (+0.014 h after five passes on the 100k lattice box,
-    "fine"). plane = 0 keeps phi (the closing's grown distance: redistancing it then changes
+    the distance to the plane through the axis crossings, not phi itself (at most the nearest
+    axis crossing): the raw field's slope across its crossing is not 1 (0.97 on a flat lattice
+    face), so that distance would have a kink there, and each smoothing step would move flat
+    faces out across it. plane = 0 keeps phi (the closing's grown distance: redistancing it then changes
     nothing on a smooth surface, and the closing's gate leaves lattices where they were)."""
     t = wp.tid() + base
     c = voxel_of(t, bcoord)
@@ -204,11 +203,11 @@ def crossing_average_lines(
     out: wp.array(dtype=vec8),
     base: int,
 ):
-    """The second renormalise and the average of _distance: out = (d1 + renormalise(d1)) / 2 as
+    """The second renormalise and the average of distance_by_voxel: out = (d1 + renormalise(d1)) / 2 as
     renormalise.renormalise and average_into give it, and frozen = 1 at voxels with a
     6-neighbour of the other sign (tiles +-clip). Renormalising keeps each sign, so the
-    crossings are d1's. (It used to average only the frozen voxels, the only values
-    init_eikonal read; its plane start now reads the frozen voxels' same-sign neighbours too.)
+    crossings are d1's. (Every voxel is averaged, not only the frozen ones: init_eikonal's
+    plane start reads the frozen voxels' same-sign neighbours too.)
     d1 and out are vec8 rows (lines.rows), as in renormalise.renormalise_lines."""
     b = wp.tid() + base
     faces = block_faces(bmap, bcoord[b])

@@ -315,9 +315,8 @@ def edge_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.
     an open gate cell read their neighbour rows as curvature_flow_lines does (flow_rows), and
     their voxels in an open cell take edge_flow_step, the same values in the
     same operations as the voxel kernel. Kept out of the row kernel: there the edge step's
-    code, even in a branch never taken, made the flow twice as slow (one step, captured
-    inputs, one thread). A voxel per neighbour read (`get`) instead of rows took 16 ms a step
-    on the default shot's water at frame 12 (18k particles, a splash: open gates all over)."""
+    code, even in a branch never taken, would make the flow twice as slow. Rows, not a voxel
+    per neighbour read (`get`): a splash has open gates all over."""
     b = wp.tid() + base
     shut = bool(True)
     u = int(0)
