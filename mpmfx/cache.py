@@ -1,6 +1,6 @@
 """The one place that builds stage keys and paths, writes files atomically and keeps manifests.
 
-Layout (DESIGN.md, "The cache")::
+Layout (docs/architecture.md, "The cache and its keys")::
 
     <root>/<shot>/<stage>/<stage>-<key12>/
         manifest.json      written last: schema version, key inputs, frames, timings, QA

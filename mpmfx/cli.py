@@ -50,7 +50,7 @@ def _parser() -> argparse.ArgumentParser:
     from mpmfx.wedge import add_parallel_args, add_wedge_parser
     add_parallel_args(r)
     add_parallel_args(e)
-    add_wedge_parser(shot_cmd("wedge", "side-by-side variants of a shot that differ in one field (guide 9.4)"))
+    add_wedge_parser(shot_cmd("wedge", "side-by-side variants of a shot that differ in one field"))
     s = shot_cmd("status", "each stage: cached, partial, stale or missing, and why")
     s.add_argument("--qa", action="store_true", help="per-frame observables of the simulation")
     c = shot_cmd("clean", "delete this variant's cached results (listed with sizes first)")
@@ -67,6 +67,10 @@ def _parser() -> argparse.ArgumentParser:
     m.add_argument("--dry-run", action="store_true", help="list what would be deleted, delete nothing")
     m.add_argument("-y", "--yes", action="store_true", help="delete simulations without asking")
 
+    d = sub.add_parser("docs", help="write docs/shots.md, the shot field reference, from the schema")
+    d.add_argument("--check", action="store_true", help="write nothing; exit 1 when docs/shots.md is stale")
+    d.add_argument("--write", action="store_true", help="write it (the default)")
+
     k = sub.add_parser("check", help="five-cell thickness check of an asset (exit 0 pass/warn, 1 fail, 2 bad input)")
     k.add_argument("asset", help="mesh file (obj, ply, stl, glb, gltf, usd, usda, usdc, usdz, blend, fbx)")
     k.add_argument("--grid-n", type=int, default=64, help="grid cells per axis of the domain")
@@ -77,15 +81,18 @@ def _parser() -> argparse.ArgumentParser:
     k.add_argument("--json", action="store_true", help="JSON for pipelines")
 
     b = sub.add_parser("bench", help="speed and accuracy benchmarks (run them on the GPU)")
-    b.add_argument("what", choices=("accuracy", "gpu", "surface", "solver", "voxelise"), help="which benchmark")
+    b.add_argument("what", choices=("accuracy", "gpu", "surface", "surface-times", "solver", "voxelise", "shots"),
+                   help="which benchmark")
     b.add_argument("--quick", action="store_true", help="small CPU-sized sweep")
     b.add_argument("--device", choices=("cpu", "cuda"), default=None)
     b.add_argument("--out", default="renders/bench", help="folder for CSV/JSON/PNG")
     b.add_argument("--peers", nargs="*", default=None, metavar="PEER",
-                   help="surface only: other surfacers on the same particles, any of splashsurf newton "
-                   "newton-aniso; bare --peers runs none (default: all installed; --quick: splashsurf)")
+                   help="surface: other surfacers on the same particles, any of splashsurf newton "
+                   "newton-aniso; bare --peers runs none (default: all installed; --quick: splashsurf); "
+                   "surface-times: splashsurf (default: with --quick only)")
     b.add_argument("--counts", type=int, nargs="+", default=None, metavar="N",
-                   help="surface only: particle counts (default 100000 with --quick, else 1000000 10000000)")
+                   help="surface: particle counts (default 100000 with --quick, else 1000000 10000000); "
+                   "surface-times: likewise (default 100000 with --quick, else 10000000)")
     return p
 
 
@@ -148,6 +155,9 @@ def _dispatch(args) -> int:
 
     if args.cmd == "cache":
         return _prune(args)
+    if args.cmd == "docs":
+        from mpmfx.shotdoc import main as docs_main  # backend: pydantic (keeps --help light)
+        return docs_main(check=args.check)
     if args.cmd == "wedge":
         from mpmfx.wedge import main as wedge_main
         return wedge_main(args)

@@ -1,9 +1,11 @@
 """The shot schema: one typed, validated model for a shot's TOML file.
 
 World units everywhere in this file: metres, seconds, degrees. The solver's normalised domain
-(guide section 2) begins only when particles enter the solver; `mpmfx.stages.simulate` maps.
-Material moduli are the exception: they are the guide's preset units (section 8), which are
-defined in the normalised domain, so a preset looks the same in a 1 m box and a 10 m box.
+[0, 1]^3 (docs/physics.md, "The method") begins only when particles enter the solver;
+`mpmfx.stages.simulate` maps. Material moduli are the exception: they are the presets' units
+(docs/physics.md, "Materials"), defined in the normalised domain, so a preset looks the same in a
+1 m box and a 10 m box. The field descriptions are the shot reference: `mpmfx docs --write`
+renders them into docs/shots.md.
 
 Errors name the file, the key and the fix: `ShotError("shot.toml: [solver].cfl: ...")`.
 """
@@ -57,8 +59,8 @@ class SceneObject(_Section):
                                    "relative to the shot file.")
     prim_path: str | None = Field(None, description="The part of the file taken: a USD prim whose meshes are taken, "
                                   "or a .blend / .fbx object or collection name; default: the whole file.")
-    material: str = Field("Elastic", description="Preset name from the guide's section 8 (Soft, Mushy, Goopy, Wet, "
-                          "Slush, Elastic, Granular, CohesiveGranular, Water, Tracer).")
+    material: str = Field("Elastic", description="Material preset (Soft, Mushy, Goopy, Wet, Slush, Elastic, "
+                          "Granular, CohesiveGranular, Water, Tracer; docs/physics.md, \"Materials\").")
     overrides: dict[str, Real | Bool | str] = Field(
         default_factory=dict, description="Material fields to change, e.g. {youngs_modulus = 3000} or "
         "{friction_fit = \"compression\"}.")
@@ -98,8 +100,9 @@ class Keyframe(_Section):
 
 
 class ColliderCfg(_Section):
-    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$")
-    shape: ColliderShape
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="Collider name (a USD prim name).")
+    shape: ColliderShape = Field(description="plane, box or sphere (analytic), or mesh (a file, as a signed "
+                                 "distance grid).")
     friction: Real = Field(0.3, ge=0, description="Coulomb friction coefficient.")
     normal: Vec3 = Field((0.0, 1.0, 0.0), description="plane: outward normal.")
     half_extents: Vec3 = Field((0.1, 0.1, 0.1), description="box: half extents (m).")
@@ -117,17 +120,18 @@ class Solver(_Section):
     cfl: Real = Field(_SOLVER.cfl, description="CFL number: dt = cfl * dx / (c_max + |v|_max), in (0, 1].")
     gravity: Vec3 = Field((0.0, -STANDARD_GRAVITY, 0.0), description="Gravity (m/s^2, world); the solver sees "
                           "it / domain.size.")
-    damping: Real = Field(_SOLVER.damping, description="Velocity decay rate (1/s): v *= 1 - damping*dt (trap 5).")
+    damping: Real = Field(_SOLVER.damping, description="Velocity decay rate (1/s): v *= 1 - damping*dt, so "
+                         "its effect per second does not depend on dt; without it elastic bodies ring on.")
     drag: Real = Field(_SOLVER.drag, description="PIC blend as a rate (1/s), never a per-substep fraction.")
     time_scale: Real = Field(_SOLVER.time_scale, description="Playback speed: simulated seconds per shot "
-                              "second (trap 1).")
+                              "second (the knob for faster action; gravity changes how material settles).")
     walls: WallName | list[WallName] = Field(_SOLVER.walls[0].value, description="Domain walls: one type, or "
                                              "six for -x,+x,-y,+y,-z,+z.")
     wall_friction: Real = Field(_SOLVER.wall_friction, description="Coulomb friction at the walls.")
     dt_max: Real = Field(_SOLVER.dt_max, description="Largest substep (s).")
     dt_min: Real = Field(_SOLVER.dt_min, description="Substep floor (s): below it the run stops with advice.")
     deterministic: Bool = Field(_SOLVER.deterministic, description="Fixed-point P2G: bit-identical replays "
-                                "(guide 10.1).")
+                                "and resumes on the same device.")
     multi_field: Bool = Field(_SOLVER.multi_field, description="One velocity field per object so bodies "
                               "don't fuse.")
     contact_friction: Real = Field(_SOLVER.contact_friction, description="Coulomb friction between objects "
@@ -138,7 +142,7 @@ class Solver(_Section):
     max_substeps_per_frame: Int = Field(_SOLVER.max_substeps_per_frame, description="A frame needing more "
                                         "substeps stops the run with advice (a runaway guard).")
     checkpoint_every: Int = Field(1, ge=1, description="Frames between full-state checkpoints (resume points; "
-                                  "every frame: 0.1 % of simulate's time on jelly_splash, two states kept on disk).")
+                                  "cheap enough for every frame; the last two are kept on disk).")
 
     @field_validator("walls")
     @classmethod
@@ -210,7 +214,8 @@ class Render(_Section):
                                 "side walls (stone, or render.looks.basin), for a pool that the walls hold; default none.")
     sun_elevation: Real = Field(35.0, ge=0, le=90, description="cycles: sun height above the horizon (degrees).")
     sun_rotation: Real = Field(150.0, description="cycles: sun direction about the up axis (degrees).")
-    mode: Literal["surface", "particles"] = Field("surface", description="particles: the guide's debug look (9.4).")
+    mode: Literal["surface", "particles"] = Field("surface", description="surface: the surfaces; particles: every "
+                                                          "particle as a soft blob, the debug look for tuning motion.")
     camera_position: Vec3 | None = Field(None, description="Camera position (m); default: cycles frames what "
                                          "was simulated, preview a 3/4 view of the domain.")
     camera_look_at: Vec3 | None = Field(None, description="Camera target (m); default the domain centre.")
@@ -227,19 +232,23 @@ class Render(_Section):
 
 
 class Shot(_Section):
-    shot: ShotInfo
-    domain: Domain = Domain()
-    objects: list[SceneObject] = Field(min_length=1)
-    colliders: list[ColliderCfg] = Field(default_factory=list)
-    voxelise: Voxelise = Voxelise()
-    solver: Solver = Solver()
-    surface: Surface = Surface()
-    export: Export = Export()
-    render: Render = Render()
-    # Not part of the schema's TOML: where the file lives (relative paths resolve from here).
-    base_dir: Path = Field(Path("."), exclude=True)
-    source: Path | None = Field(None, exclude=True)                # the shot file, for messages
-    overrides: tuple[str, ...] = Field((), exclude=True)           # the --set values it was loaded with
+    shot: ShotInfo = Field(description="The shot's name and clock.")
+    domain: Domain = Field(Domain(), description="The simulated box: a cube of `size` metres from `origin`, cut "
+                           "into grid_n cells per axis; the solver's walls are its faces.")
+    objects: list[SceneObject] = Field(min_length=1, description="The meshes that become material, one table "
+                                       "each.")
+    colliders: list[ColliderCfg] = Field(default_factory=list, description="Kinematic bodies the material hits: "
+                                         "they push it and are not pushed back, and move by keyframes.")
+    voxelise: Voxelise = Field(Voxelise(), description="How meshes become particles.")
+    solver: Solver = Field(Solver(), description="Time stepping, gravity, walls and contact.")
+    surface: Surface = Field(Surface(), description="How particles become surfaces (level sets and meshes).")
+    export: Export = Field(Export(), description="What the USD stage and the VDB files hold.")
+    render: Render = Field(Render(), description="How frames are drawn.")
+    # Not part of the schema's TOML (excluded from dumps and from docs/shots.md):
+    base_dir: Path = Field(Path("."), exclude=True, description="Where the shot file lives; relative paths "
+                           "resolve from here.")
+    source: Path | None = Field(None, exclude=True, description="The shot file, for messages.")
+    overrides: tuple[str, ...] = Field((), exclude=True, description="The --set values it was loaded with.")
 
     @property
     def frames(self) -> range:
@@ -250,7 +259,7 @@ class Shot(_Section):
 
     def solver_config(self) -> SolverConfig:
         """The solver's config in domain units: every `[solver]` knob that SolverConfig has, by
-        name, plus grid_n and gravity / domain.size (guide section 2). Raises SolverConfigError."""
+        name, plus grid_n and gravity / domain.size (the solver's domain is [0, 1]^3). Raises SolverConfigError."""
         s = self.solver
         knobs = {f.name: getattr(s, f.name) for f in dataclasses.fields(SolverConfig) if f.name in Solver.model_fields}
         knobs |= {"grid_n": self.domain.grid_n, "gravity": tuple(g / self.domain.size for g in s.gravity),

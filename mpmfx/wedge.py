@@ -1,4 +1,7 @@
-"""`mpmfx wedge`: side-by-side variants of one shot that differ in exactly one field (guide 9.4, rule 2).
+"""`mpmfx wedge`: side-by-side variants of one shot that differ in exactly one field.
+
+One axis a round, side by side, as the tutorial "Material Point Method: Step by Step" advises
+in "How to tune, as a process".
 
     mpmfx wedge SHOT --vary surface.smooth_iters=0,2,6
     mpmfx wedge SHOT --vary objects.bear.overrides.youngs_modulus=300:1200:3 --log --keep renders/jelly_splash

@@ -10,8 +10,7 @@ import pytest
 def _run_in_tmp(tmp_path_factory):
     """The suite runs in a folder of its own: a run publishes renders/<shot>/ and
     published/<shot> relative to the working directory, and the suite must not leave them in
-    the checkout (it used to leave renders/tiny and published/tiny there). Session-wide, so
-    module fixtures that run shots are covered too."""
+    the checkout. For the whole test run, so module fixtures that run shots are covered too."""
     import os
 
     cwd = os.getcwd()

@@ -138,7 +138,7 @@ def test_a_bad_material_override_names_the_shot_file_and_the_object(tiny_shot):
 def test_sharp_edges_auto_leaves_fluids_round(tmp_path):
     """surface.sharp_edges = "auto" (the default): sharp edges for each surface group with no
     fluid in it. Water holds no edge, and its narrow faces against a tank's walls sharpened in
-    pieces (ledges; README, "Sharp edges and corners"); true and false apply to every group."""
+    pieces (ledges; docs/benchmarks.md, "Sharp edges and corners"); true and false apply to every group."""
     from mpmfx.stages.surface import surface_params
 
     pool = '\n[[objects]]\nname = "pool"\nmesh = "cube.obj"\nmaterial = "Water"\ntranslate = [0.5, 0.15, 0.5]\n'

@@ -11,11 +11,14 @@ import sys
 
 def main(what: str, *, quick: bool = False, device: str | None = None, out: str = "renders/bench",
          peers: list[str] | None = None, counts: list[int] | None = None) -> int:
-    """Run benchmark `what`; `peers` and `counts` are `surface`'s own options (None: its defaults)."""
+    """Run benchmark `what`; `peers` and `counts` are the options of `surface` and `surface-times`
+    (None: their defaults)."""
     module = {"accuracy": "mpmfx.bench.accuracy", "surface": "mpmfx.bench.surface",
-              "solver": "mpmfx.bench.solver", "gpu": "mpmfx.bench.gpu", "voxelise": "mpmfx.bench.voxelise"}[what]
-    own = {"peers": peers, "counts": counts} if what == "surface" else {}
+              "solver": "mpmfx.bench.solver", "gpu": "mpmfx.bench.gpu", "voxelise": "mpmfx.bench.voxelise",
+              "shots": "mpmfx.bench.shots", "surface-times": "mpmfx.bench.surface_times"}[what]
+    own = {"peers": peers, "counts": counts} if what in ("surface", "surface-times") else {}
     if not own and (peers is not None or counts is not None):
-        print(f"error: --peers / --counts belong to `mpmfx bench surface`, not `{what}`", file=sys.stderr)
+        print(f"error: --peers / --counts belong to `mpmfx bench surface` and `surface-times`, not `{what}`",
+              file=sys.stderr)
         return 2
     return importlib.import_module(module).main(quick=quick, device=device, out=out, **own)

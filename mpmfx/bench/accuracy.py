@@ -1,4 +1,4 @@
-"""`mpmfx bench accuracy`: speed against error on the validation cases (validation.md §1-3).
+"""`mpmfx bench accuracy`: speed against error on the validation cases (docs/physics.md, "Validation").
 
 Sweeps grid_n and CFL per case (mpmfx.bench.cases), prints one table (error, wall time,
 particle-substeps/s, device), the observed convergence orders in space (halve dx at fixed CFL

@@ -1,4 +1,4 @@
-"""Validation cases for `mpmfx bench accuracy` (validation.md §1-3), scaled into the domain.
+"""Validation cases for `mpmfx bench accuracy` (docs/physics.md, "Validation"), scaled into the domain.
 
 Each case runs the solver at fixed substeps dt = cfl * dx / (c + |v|max) (so halving the
 CFL number halves dt exactly, which the time-order measurement needs) and returns a
@@ -143,7 +143,7 @@ def _result(case, solver, state, cfl, ppa, steps, wall, error, metric, **extra) 
                       x_final=solver.state_to_numpy(state)["x"].astype(np.float64))
 
 
-# ---------------------------------------------------------------------------- §1 kinematics
+# ---------------------------------------------------------------------------- exact kinematics
 def free_fall(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, device=None) -> CaseResult:
     """Unstressed block in gravity vs the exact symplectic-Euler discrete trajectory
     x_n = x0 + v0 t + g t^2/2 + g t dt/2. error: max |x - x_n| / |g t^2 / 2| (relative)."""
@@ -201,7 +201,7 @@ def rigid_rotation(*, grid_n: int = 16, cfl: float = 0.4, ppa: int = 2, revoluti
                    err, "|L-L0|/L0", revolutions=revolutions, sim_s=sim_s)
 
 
-# ---------------------------------------------------------------------------- §2 elastic
+# ---------------------------------------------------------------------------- elastic
 def vibrating_bar(*, grid_n: int = 40, cfl: float = 0.4, ppa: int = 2, device=None) -> CaseResult:
     """Buzzi et al. 2008 bar (E=100, L=25, rho=1, v0=0.1, nu=0, period 10 s) as the right half of
     a free-free bar of length 2L (its midpoint is a node of the first mode). error: relative

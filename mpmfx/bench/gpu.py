@@ -200,8 +200,8 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     # the block speeds up as it falls, and the brick P2G re-sorts more often as it does
     # (p2g_brick.sort_cadence): a new cadence is a new graph to capture, so the timed interval
     # keeps the one the warm-up ended with (steady state; a shot pays each capture once), after
-    # two more warm-up intervals that capture that cadence's graphs (without them they were
-    # captured inside the timing: 0.4 ms a substep at 0.3M particles, H100)
+    # two more warm-up intervals that capture that cadence's graphs (without them they would be
+    # captured inside the timing)
     da.sort_every = da.sort_every or state.clock.sort_every or da.last_sort_every
     for i in (2, 3):
         solver.advance(state, i * span, (i + 1) * span)

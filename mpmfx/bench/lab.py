@@ -6,8 +6,8 @@
   Lajeunesse et al. 2005 (quasi-2D) and Lube et al. 2004 (axisymmetric): the Granular preset
   as shipped, and the "repose" fit at a range of angles of repose (the materials differ:
   Lube's natural sands, rice and sugar, Lajeunesse's glass beads);
-- snow: the confined-compression table of validation.md §3 (Stomakhin et al. 2013
-  constants), a per-particle check of the return map (no grid, so one resolution).
+- snow: the confined-compression table derived from Stomakhin et al. 2013 (the paper's
+  constants; docs/physics.md, "Validation"), a per-particle check of the return map (no grid, so one resolution).
 Each at the sweep's resolutions; rows carry the source, the error and the cells across the
 column. Reference data: mpmfx/bench/data/*.csv (each names its source in its header).
 Imports numpy, warp and mpmfx.mpm only, except the plot (pyvista, skipped without it).
@@ -135,7 +135,7 @@ def sand_rows(sweep: LabSweep, device) -> tuple[list[dict], list]:
 def snow_rows(device) -> list[dict]:
     from mpmfx.bench.snow_table import snow_compression
     row = snow_compression(device=device)
-    return [{"case": "snow confined compression", "reference": "validation.md §3 (Stomakhin et al. 2013)",
+    return [{"case": "snow confined compression", "reference": "Stomakhin et al. 2013 (derived table)",
              "grid_n": 0, "error": row["error"], "metric": row.get("metric", "max rel stress error"),
              "device": row.get("device", "")}]
 

@@ -1,8 +1,8 @@
-"""The guide's MLS-MPM substep written plainly in numpy (float64), for tests and benchmarks.
+"""The MLS-MPM substep written plainly in numpy (float64), for tests and benchmarks.
 
-Read it line by line against the guide (/work/shared/reference/mpm-step-by-step.txt):
-§3 the four phases, §4.1-4.2 the stencil and B-spline weights, §4.4 the fused MLS stress,
-§7.1 fixed-corotated, §7.2 the snow clamp and the sand cone, §8.1 the Tait fluid, and the
+Read it line by line against docs/physics.md ("The method", "Materials", "Boundaries") or
+the tutorial "Material Point Method: Step by Step": the four phases, the stencil and B-spline
+weights, the fused MLS stress, fixed-corotated elasticity, the snow clamp and the sand cone, the Tait fluid, and the
 walls of `mpmfx.mpm.config.SolverConfig` (a band of `boundary_cells` nodes on each face,
 sticky / slip / separate, Coulomb `wall_friction`). It is the reference the production
 Warp solver (`mpmfx.mpm.Solver`) must match on the same particles, grid and dt; it is
@@ -28,12 +28,12 @@ from mpmfx.mpm.materials import Material, Mode
 
 __all__ = ["ReferenceSolver"]
 
-_OFFSETS = np.array(list(itertools.product(range(3), repeat=3)))  # the 27 nodes of §4.1
+_OFFSETS = np.array(list(itertools.product(range(3), repeat=3)))  # the 27 nodes of a particle's stencil
 _I3 = np.eye(3)
 
 
 def bspline(fx: np.ndarray) -> np.ndarray:
-    """Guide §4.2: quadratic B-spline weights. fx: (n, 3) offsets from the base node, cells,
+    """Quadratic B-spline weights. fx: (n, 3) offsets from the base node, cells,
     in [0.5, 1.5). Returns (n, 3 nodes, 3 axes); each axis sums to 1."""
     return np.stack([0.5 * (1.5 - fx) ** 2, 0.75 - (fx - 1.0) ** 2, 0.5 * (fx - 0.5) ** 2], axis=1)
 
@@ -62,9 +62,9 @@ def log_strain(s: np.ndarray) -> np.ndarray:
     return np.log(np.maximum(np.abs(s), 1e-4))
 
 
-# ------------------------------------------------------------------ stress (guide §7-8)
+# ------------------------------------------------------------------ stress
 def fixed_corotated_tau(F, mu, lam):
-    """§7.1: tau = P F^T = 2 mu (F - R) F^T + lambda (J - 1) J I; mu, lam per particle."""
+    """Fixed-corotated: tau = P F^T = 2 mu (F - R) F^T + lambda (J - 1) J I; mu, lam per particle."""
     U, s, V = svd(F)
     R = U @ np.transpose(V, (0, 2, 1))
     J = np.prod(s, axis=1)
@@ -80,12 +80,12 @@ def hencky_tau(F, mu, lam):
 
 
 def tait_pressure(m: Material, J):
-    """§8.1: p = K (J^-gamma - 1), clamped to p >= 0 when clamp_pressure."""
+    """Tait: p = K (J^-gamma - 1), clamped to p >= 0 when clamp_pressure."""
     p = m.bulk_modulus * (np.maximum(J, 1e-4) ** (-m.eos_gamma) - 1.0)
     return np.maximum(p, 0.0) if m.clamp_pressure else p
 
 
-# ------------------------------------------------------------------ plasticity (guide §7.2)
+# ------------------------------------------------------------------ plasticity
 def snow_clamp(m: Material, F, Jp):
     """Singular values into [1 - theta_c, 1 + theta_s]; the clamped-away volume into Jp,
     clamped to [jp_min, jp_max] (Stomakhin et al. 2013)."""
@@ -96,7 +96,7 @@ def snow_clamp(m: Material, F, Jp):
 
 
 def sand_project(m: Material, F, vc):
-    """Drucker-Prager return map in Hencky strain (Klar et al. 2016, §7.2 "a cone"), with
+    """Drucker-Prager return map in Hencky strain (Klar et al. 2016: a cone), with
     cohesion (apex at tr = cohesion) and volume correction (vc: log-volume discarded at the
     apex, Tampubolon et al. 2017). Returns (elastic F, new vc)."""
     U, s, V = svd(F)
@@ -167,19 +167,19 @@ class ReferenceSolver:
     def wave_speed(self) -> float:
         return max(m.wave_speed() for m in self.materials)
 
-    # -------------------------------------------------------------- one substep (§3)
+    # -------------------------------------------------------------- one substep: the four phases
     def step(self, s: dict, dt: float) -> None:
         cfg = self.config
         n_nodes = cfg.grid_n + 1
         inv_dx, dx = float(cfg.grid_n), cfg.dx
         live = np.flatnonzero(s["alive"])
         # 1 · clear: the grid is scratch, made fresh every substep (np.bincount below)
-        # §4.1: the 3x3x3 block and where the particle sits in it
+        # the 3x3x3 block and where the particle sits in it
         x = s["x"][live]
         base = np.floor(x * inv_dx - 0.5).astype(int)
         fx = x * inv_dx - base
         w = bspline(fx)
-        # 2 · P2G with the stress fused into the affine term (§4.4)
+        # 2 · P2G with the stress fused into the affine term
         tau = self._stress(s, live)
         m = s["mass"][live]
         affine = (-dt * s["volume"][live] * 4.0 * inv_dx**2)[:, None, None] * tau + m[:, None, None] * s["C"][live]
@@ -210,7 +210,7 @@ class ReferenceSolver:
         s["x"][live] = x_new
 
     def _stress(self, s, live) -> np.ndarray:
-        """Kirchhoff stress tau (n_live, 3, 3) of each particle's mode (§7.1, §8.1)."""
+        """Kirchhoff stress tau (n_live, 3, 3) of each particle's mode."""
         tau = np.zeros((len(live), 3, 3))
         mat = s["material"][live]
         for i, m in enumerate(self.materials):
@@ -247,7 +247,7 @@ class ReferenceSolver:
         return v
 
     def _update_deformation(self, s, live, C, dt) -> None:
-        """F <- return_map((I + dt C) F) for solids (§7.2); J <- det(I + dt C) J for water."""
+        """F <- return_map((I + dt C) F) for solids; J <- det(I + dt C) J for water."""
         mat = s["material"][live]
         for i, m in enumerate(self.materials):
             sel = mat == i

@@ -1,4 +1,7 @@
-"""Snow confined compression (validation.md §3): the solver's own return map, per particle.
+"""Snow confined compression: the solver's own return map, per particle.
+
+The reference table is derived from Stomakhin et al. 2013's model and constants
+(docs/physics.md, "Validation").
 
 One thread per table row drives F = diag(1, 1, 1 - eps) quasi-statically in small increments
 through `snow_return_map` (the Stomakhin clamp the solver's G2P calls) and evaluates the

@@ -1,4 +1,4 @@
-"""`mpmfx bench surface`: the surfacer and its peers on particles sampled in analytic shapes (validation.md 6).
+"""`mpmfx bench surface`: the surfacer and its peers on particles sampled in analytic shapes.
 
 Thin wrapper over `mpmfx.bench.surface_cases`: --quick runs 100k particles (CPU-sized) with
 splashsurf where it is installed; the full run 1M and 10M (GPU) with every peer that is

@@ -1,6 +1,6 @@
 """Accuracy and speed benchmark of the surfacer on particles sampled inside analytic shapes.
 
-Error = distance of output vertices to the analytic surface (validation.md section 6), in
+Error = distance of output vertices to the analytic surface, in
 world units and in units of the particle spacing h, and the mesh's area-weighted distance
 (`surface_error`: the vertex mean moves with where a flat face sits between voxel planes); volume error of the closed mesh against
 the analytic volume; number of connected mesh pieces (1 = no interior bubbles, no specks);
@@ -60,7 +60,7 @@ def sample_shape(
     """About `count` particles inside `shape`; returns ((n, 3) float32 positions m, spacing h m).
 
     lattice: cell centres of a cubic lattice of spacing h, each moved by up to +-jitter * h
-    per axis (uniform; validation.md's "jittered lattice" rows match jitter ~0.1); random:
+    per axis (uniform); random:
     uniform in the volume (what MPM particles after a simulation resemble more), same count.
     """
     sdf, volume, half = shape_sdf(shape)
@@ -114,7 +114,7 @@ def surface_error(vertices: np.ndarray, faces: np.ndarray, sdf: Callable[[np.nda
     triangles by area. The vertex mean samples the surface where marching cubes puts vertices,
     on grid edges, so it depends on where a flat face sits between voxel planes: the 1M random
     box at "fast" reads 0.104-0.123 h as the box moves by fractions of a voxel, while this
-    reads 0.112 h at every offset (docs/surfacing-log.md, seventeenth step)."""
+    reads the same at every offset."""
     if len(faces) == 0:
         return float("nan")
     t = np.asarray(vertices, np.float64)[faces]
@@ -436,7 +436,7 @@ def bench_sheet(count: int, device: str | None = None, *, peers: Sequence[str] =
     one that fails at run time is reported and left out): pieces, holes, open edges, thickness
     error, time."""
     for label in OURS:  # load every setting's kernels first: on a fresh GPU machine a module's first
-        for aniso in (False, True):  # load compiles it (the 1M sheet's first "fine" row took 65 s on an H200)
+        for aniso in (False, True):  # load compiles it (a minute, which would land in the first row)
             measure_sheet(500, "random", label=label, device=device, anisotropic=aniso)
     rows = Table(SHEET_HEADER, format_sheet_row, echo=echo)
     for sampling in ("lattice", "random"):

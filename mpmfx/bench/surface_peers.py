@@ -1,4 +1,4 @@
-"""The surfacers `mpmfx bench surface` compares against, run on the same particles (validation.md 6).
+"""The surfacers `mpmfx bench surface` compares against, run on the same particles.
 
 - splashsurf (PyPI `pysplashsurf`, CPU, Rust + rayon): SPH colour field + marching cubes.
 - Newton's particle surfacer (`newton.geometry.ParticleSurface`, Warp; Yu & Turk 2010
@@ -35,14 +35,14 @@ PEERS = ("splashsurf", "newton", "newton-aniso")
 SPLASHSURF_PIP = "pip install pysplashsurf==0.14.1.0"
 NEWTON_PIP = "pip install newton==1.8.0"
 
-# Settings that reproduce validation.md section 6.
+# Each peer's settings for its best accuracy on these samples.
 # splashsurf: (smoothing length, cube) in multiples of r, per sampling. At smoothing length 2r
 # random samples leave voids that become hundreds of interior bubble surfaces and -16 %
 # volume; 3r restores the volume, but bubbles remain (200k: 1325 pieces at 2r, 395 at 3r).
 # Newton: (voxel, kernel_radius) in multiples of h. Both keep kernel_radius 3h, Newton's
 # default at voxel h: at voxel h/2 its default (3 voxels = 1.5h) finds fewer than the 25
 # neighbours WPCA needs on a lattice, so most kernels stay isotropic (measured on the CPU,
-# lattice sphere 1M: mean 0.17h, against 0.12h at 3h and validation.md's 0.12h; random 1M:
+# lattice sphere 1M: mean 0.17h, against 0.12h at 3h; random 1M:
 # 14h and 12k pieces, against 2.1h and 1.3k pieces).
 SPLASHSURF_SETTINGS = {"lattice": (2.0, 1.0), "random": (3.0, 1.0)}
 NEWTON_SETTINGS = {"newton": (1.0, 3.0), "newton-aniso": (0.5, 3.0)}

@@ -1,7 +1,7 @@
 """Thickness check: is every part of an asset at least a few grid cells thick?
 
-The reference guide (section 9.2, trap 4) explains why: the quadratic B-spline stencil spans
-three cells, so a feature about two cells thick has no interior particles and cannot carry a
+Why (the tutorial "Material Point Method: Step by Step", "The five traps"): the quadratic
+B-spline stencil spans three cells, so a feature about two cells thick has no interior particles and cannot carry a
 bending moment, at any stiffness; around five cells across it survives. This module measures
 the local thickness of a mesh in units of the simulation cell dx = size / grid_n.
 

@@ -94,10 +94,8 @@ class ParticleFrame:
     EXT = "npz"  # frames/NNNN.npz in the simulate stage's entry
     # material and body indices come in long runs and Jp is mostly exactly 1 (snow) or 0 (sand):
     # they deflate 10-100x, fast. Positions, velocities and J (det F, or water's J) are noisy
-    # floats, and ids count up: deflate shrinks them 10-35 % at 35-50 MB/s, which made the frame
-    # writer the GPU shots' bottleneck (2.6M particles, 2-core CPU: a frame written in 809 ms,
-    # 78.5 MB, deflating ids and J too; 356 ms, 88.7 MB without; hero_castle waited 3.3-5.3 s on
-    # its writer in a 9.5-12 s simulate, H200)
+    # floats, and ids count up: deflate shrinks them 10-35 % at 35-50 MB/s, which would make
+    # the frame writer the GPU shots' bottleneck
     _DEFLATE = ("material", "body", "Jp")
 
     def write(self, path: str | Path) -> Path:
@@ -147,7 +145,7 @@ class SurfaceFrame:
     groups: dict[str, GroupSurface]
 
     EXT = "npz"  # frames/NNNN.npz in the surface stage's entry
-    # Measured on jelly_splash (issue 18): the level set is mostly +-background and the velocity
+    # On jelly_splash the level set is mostly +-background and the velocity
     # leaves half exact zeros (both ~2.3-2.5x), the fog mostly exact 0 and 1, faces index runs (~3.5x),
     # vertices sit on lattice edges (~1.9x); normals and mesh velocities barely shrink (1.1x): stored
     _DEFLATE = ("blocks", "density_blocks", "vel_blocks", "faces", "vertices")

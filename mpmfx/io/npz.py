@@ -1,8 +1,8 @@
 """The .npz writer of the frame files: big entries deflated on several threads at once.
 
 zipfile deflates one entry after another on one core, and a GPU shot's surface frame (~330 MB
-of arrays at 3.4M particles) took ~5 s to write: longer than the GPU took to simulate and surface
-it. Here each entry's .npy bytes are cut into CHUNK pieces that are deflated independently on a
+of arrays at 3.4M particles) then takes longer to write than the GPU takes to simulate and
+surface it. Here each entry's .npy bytes are cut into CHUNK pieces that are deflated independently on a
 thread pool (zlib releases the GIL). Every piece but the last ends on a full flush, so the pieces
 join into one raw deflate stream, as pigz's do. The zip is then written around them.
 

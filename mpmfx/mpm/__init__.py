@@ -1,7 +1,7 @@
 """mpmfx.mpm — explicit MLS-MPM solver on Warp (imports numpy and warp only).
 
 The solver works in the normalised domain [0,1]^3 with grid_n cells per axis; every
-input and output here is in domain units and seconds (see the reference guide §2).
+input and output here is in domain units and seconds (docs/physics.md, "The method").
 
     solver = Solver([preset("Soft"), preset("Water")], SolverConfig(grid_n=64, damping=1.0))
     state = solver.init_state(Particles(x, v, volume, material, body))

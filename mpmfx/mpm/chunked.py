@@ -47,10 +47,9 @@ class DeviceAdvance:
         # keyframes on the device: the chunk poses the colliders itself (no host round trip)
         self.keys = ColliderKeys(solver.colliders, solver.device) if solver.colliders else None
         self.graphs = True  # capture chunks in CUDA graphs (off: launch each kernel; for measuring)
-        # P2G: "brick" (p2g_brick.py) on a GPU, measured 4-5x faster there than the reference
-        # (H100, 19M particles, both modes); "reference" (p2g.py) everywhere else: on the CPU
-        # a sorted P2G's extra passes cost more than the atomics it saves (37k particles, one
-        # core, the earlier binned P2G: water 28.8 -> 46.6 ms a substep), and multi-field
+        # P2G: "brick" (p2g_brick.py) on a GPU, several times faster there than the reference;
+        # "reference" (p2g.py) everywhere else: on the CPU a sorted P2G's extra passes cost
+        # more than the atomics it saves, and multi-field
         # scenes scatter mass gradients the brick P2G does not; grids past ~1286 cells an axis
         # would overflow its int32 sort keys
         brick = not solver.flags.multi_field and solver.device.is_cuda and fits_brick_keys(cfg.grid_n + 1)
@@ -116,8 +115,8 @@ class DeviceAdvance:
 
     def _read_back(self):
         """After a chunk: (the clock, the brick P2G's wear counts or None), in one wait for the
-        device; the wear counters are zeroed for the next chunk. (Two read-backs, each its own
-        wait, took 0.19 ms an advance more at 2.4M particles, H200.)"""
+        device (two read-backs would be two waits); the wear counters are zeroed for the next
+        chunk."""
         wp.copy(self._clk_host, self.clk)
         if self._brick is not None:
             if self._frag_host is None:

@@ -1,6 +1,6 @@
 """Kinematic colliders: analytic shapes or a signed-distance grid, moved by keyframes.
 
-A collider acts in the grid update (guide §3: "where contact happens"): at every node
+A collider acts in the grid update (where all contact happens): at every node
 inside it (signed distance < 0) the velocity relative to the collider loses its
 approaching normal part, and its tangential part loses Coulomb friction, mu * |vn|.
 Poses are keyframed on the shot clock and interpolated per substep (translation linear,

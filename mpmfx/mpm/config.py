@@ -1,4 +1,4 @@
-"""Solver knobs (guide §9.1): what the solver owns, as opposed to the material table."""
+"""Solver knobs: what the solver owns, as opposed to the material table (docs/physics.md)."""
 
 from __future__ import annotations
 
@@ -50,33 +50,35 @@ class SolverConfig:
 
     Attributes:
         grid_n: cells per axis; dx = 1 / grid_n. Sets feature size, interaction range and
-            the time-step ceiling (guide §9.1): changing it changes the material.
-        cfl: CFL number; dt = cfl * dx / (c_max + |v|_max) (validation.md §5: 0.3-0.5).
+            the time-step ceiling: changing it changes the material.
+        cfl: CFL number; dt = cfl * dx / (c_max + |v|_max), usually 0.3-0.5 (docs/physics.md,
+            "The method").
         gravity: (3,) domain/s^2; the default is standard gravity for a 1 m domain (a shot
-            gives m/s^2 and the stage divides by the domain's size). A balance knob (mound vs pancake), not a speed knob
-            (guide §9.2 trap 1).
+            gives m/s^2 and the stage divides by the domain's size). A balance knob (mound vs
+            pancake), not a speed knob: time_scale is the speed knob.
         damping: 1/s velocity decay rate, applied per substep as v *= 1 - damping * dt
-            (trap 5), so its effect per second does not depend on dt.
+            so its effect per second does not depend on dt. Without it an elastic body rings on.
         drag: 1/s rate at which the affine velocity C is blended toward PIC,
-            C *= 1 - drag * dt. A rate, never a per-substep fraction (guide §6 trap):
+            C *= 1 - drag * dt. A rate, never a per-substep fraction (one would depend on dt):
             it damps sub-cell rotation and noise, not bulk motion.
-        time_scale: simulated seconds per shot second (playback speed, trap 1).
+        time_scale: simulated seconds per shot second (playback speed).
             `Solver.advance(t0, t1)` simulates (t1 - t0) * time_scale seconds.
             Collider keyframes stay on the shot clock.
         walls: 6 WallTypes for the faces -x, +x, -y, +y, -z, +z.
         wall_friction: Coulomb coefficient mu at the walls: tangential speed drops by
-            mu * |removed normal speed|, an impulse ratio independent of dt (trap 2).
+            mu * |removed normal speed|, an impulse ratio independent of dt (a fraction
+            kept per substep would make creep on a slope depend on dt).
         boundary_cells: thickness of the wall layer, in cells (>= 2 keeps the 3-cell
             stencil inside the grid).
         dt_max, dt_min: bounds on the substep, seconds. A substep that has to go below
             dt_min raises SimulationError.
         max_substeps_per_frame: SimulationError past this many substeps in one advance().
         deterministic: P2G in fixed-point integer atomics so a replay (or a resume from a
-            checkpoint) is bit-identical on the same device (guide §10.1); see `mpmfx.mpm.p2g`
+            checkpoint) is bit-identical on the same device; see `mpmfx.mpm.p2g`
             for range and resolution. A GPU's brick P2G rounds each run of particles' sums,
             the CPU's reference P2G each particle's, so CPU and GPU runs differ in the last bits.
         multi_field: one velocity field per body (Particles.body), so separate bodies collide
-            and part instead of fusing (guide §9.3); costs one grid per body (at most 8).
+            and part instead of fusing (docs/physics.md, "Boundaries"); costs one grid per body (at most 8).
         contact_friction: Coulomb mu between bodies in multi-field mode.
         out_of_domain: OutOfDomain (or its string value).
     """
@@ -128,7 +130,7 @@ class SolverConfig:
         checks = [
             ("grid_n", 8 <= self.grid_n <= 4096, "must be in [8, 4096]"),
             ("cfl", 0 < self.cfl <= 1.0, "must be in (0, 1]: above 1 a particle outruns the grid "
-             "and elastic energy grows without any non-finite value to catch (guide 9.5); 0.3-0.5 is usual"),
+             "and elastic energy grows without any non-finite value to catch; 0.3-0.5 is usual"),
             ("damping", self.damping >= 0, "must be >= 0 (a rate, 1/s)"),
             ("drag", self.drag >= 0, "must be >= 0 (a rate, 1/s)"),
             ("time_scale", self.time_scale > 0, "must be > 0"),

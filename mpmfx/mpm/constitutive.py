@@ -1,4 +1,4 @@
-"""Device-side material rows and the constitutive functions (guide §4.2, §7, §8.1).
+"""Device-side material rows and the constitutive functions (docs/physics.md, "Materials").
 
 Pure `wp.func`s: the B-spline weights shared by both transfers, the stress of each mode
 (as the Kirchhoff stress tau = P F^T that MLS-MPM fuses into the affine term) and the
@@ -84,7 +84,7 @@ def unpack_f(m: wp.mat44) -> wp.mat33:
 
 @wp.func
 def bspline_weights(fx: wp.vec3) -> wp.mat33:
-    """Quadratic B-spline weights (guide §4.2). fx: offset from the base node, cells,
+    """Quadratic B-spline weights. fx: offset from the base node, cells,
     in [0.5, 1.5) per axis. Row k holds the weight of node base + k along each axis;
     each column sums to 1 (partition of unity)."""
     a = wp.vec3(1.5) - fx
@@ -151,7 +151,7 @@ def log_strain(sig: wp.vec3) -> wp.vec3:
 
 @wp.func
 def fixed_corotated_tau(F: wp.mat33, mu: float, la: float) -> wp.mat33:
-    """Kirchhoff stress tau = P F^T of fixed-corotated elasticity (guide §7.1):
+    """Kirchhoff stress tau = P F^T of fixed-corotated elasticity:
     2 mu (F - R) F^T + lambda (J - 1) J I, with R the rotation of F."""
     U, sig, V = wp.svd3(F)
     R = U * wp.transpose(V)
@@ -169,7 +169,7 @@ def hencky_tau(F: wp.mat33, mu: float, la: float) -> wp.mat33:
 
 @wp.func
 def tait_pressure(mat: MaterialParams, J: float) -> float:
-    """Tait equation of state p = K (J^-gamma - 1) (guide §8.1); p >= 0 when clamped."""
+    """Tait equation of state p = K (J^-gamma - 1); p >= 0 when clamped."""
     p = mat.bulk_modulus * (wp.pow(wp.max(J, 1.0e-4), -mat.eos_gamma) - 1.0)
     if mat.clamp_pressure != 0:
         p = wp.max(p, 0.0)
@@ -231,7 +231,7 @@ def polar_rotation(F: wp.mat33) -> wp.mat33:
 
 @wp.func
 def snow_plastic(mat: MaterialParams, F: wp.mat33, jp: float):
-    """Stomakhin clamp (guide §7.2): singular values of the trial elastic F into
+    """Stomakhin clamp (Stomakhin et al. 2013): singular values of the trial elastic F into
     [1 - theta_c, 1 + theta_s]; the clamped-away volume goes into Jp, clamped to
     [jp_min, jp_max]. F must not be inverted (G2P mirrors inverted particles first, see
     `uninvert`). Returns (elastic F, new Jp, tau): tau is the Kirchhoff stress of the
@@ -288,7 +288,7 @@ def sand_plastic(mat: MaterialParams, F: wp.mat33, vc: float):
     tr = eps[0] + eps[1] + eps[2] + vc
     eps_hat = eps - wp.vec3(tr / 3.0)
     norm = wp.length(eps_hat) + 1.0e-20
-    # cohesion shifts the cone apex into tension (guide §7.2 figure)
+    # cohesion shifts the cone apex into tension
     trc = tr - mat.cohesion
     vc_new = float(0.0)
     eps_new = eps
@@ -350,8 +350,7 @@ def solid_energy_density(mat: MaterialParams, F: wp.mat33, jp: float) -> float:
     the stresses `solid_tau` applies.
     Snow whose singular values lie in [POLAR_LO, POLAR_HI] (nearly all of it: its clamp keeps
     them within a few per cent of 1) takes sum (sigma_i - 1)^2 = |F - R|^2 (Frobenius), R from
-    polar_rotation, without the SVD: the once-a-frame report's reduction at 19.4M particles was
-    mostly the SVD's arithmetic."""
+    polar_rotation, without the SVD, which was most of the once-a-frame report's arithmetic."""
     if mat.mode == MODE_SNOW:
         j_fast = wp.determinant(F)
         if j_fast > 0.0 and singular_values_within(F, POLAR_LO, POLAR_HI):

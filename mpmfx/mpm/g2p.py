@@ -1,7 +1,9 @@
-"""Phase 4 — G2P: gather v and C, advance F (or J), return mapping, advect (guide §3).
+"""Phase 4 — G2P: gather v and C, advance F (or J), return mapping, advect.
+
+docs/physics.md, "The method".
 
 A solid's Kirchhoff stress is computed here, from the SVD the return map already took, and
-stored for the next substep's P2G: the guide computes it in P2G from F, which costs a second
+stored for the next substep's P2G: computing it in P2G from F would cost a second
 SVD a particle and substep (stress of the elastic F G2P writes = stress P2G would compute).
 
 Reads the current particle buffers and writes the next ones, so a substep the stepper
@@ -40,14 +42,9 @@ G2P_FAST_MATH = True  # see make_g2p
 
 def g2p_launch_shape() -> tuple[int, int]:
     """(register cap, threads a block) of G2P, every scene: 72 registers in blocks of 128 fit 7
-    blocks a multiprocessor (28 warps), where 256-thread blocks fit 3 at 80 or 72. H100, 19.4M
-    particles, G2P ms a substep with fast math (make_g2p), cap / block: snow 96/256 2.79, 80/256
-    2.25, 72/256 2.33, 96/128 2.44, 80/128 2.25, 72/128 2.17, 64/128 2.55; sand 80/256 2.26,
-    72/128 2.17; at 2.4M snow 80/256 0.307, 72/128 0.306. Water (no SVD), H200, before fast math:
-    80/256 1.16, 72/128 1.065, 64/128 1.12. (Solids before fast math, H200: 80/256 2.19 was best,
-    72/128 2.29.) Re-measured with the polar shortcut (constitutive.snow_plastic), H200, 19.4M: snow
-    80/128 1.77, 72/128 1.71, 64/128 1.87, 80/256 1.80; sand 80/128 1.98, 72/128 2.01, 64/128 2.12,
-    80/256 2.03; 2.4M snow 80/128 0.249, 72/128 0.247, 64/128 0.270."""
+    blocks a multiprocessor (28 warps), where 256-thread blocks fit 3 at 80 or 72: the fastest
+    shape for snow, sand and water alike, with fast math and the polar shortcut
+    (constitutive.snow_plastic)."""
     return G2P_MAX_REGISTERS, G2P_BLOCK
 
 
@@ -73,18 +70,13 @@ class G2PParams:
 @wp.func
 def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float, field_offset: int):
     """Gather from the particle's 3x3x3 nodes: v = sum w v_i, and the APIC/MLS affine
-    velocity C = (sum w v_i dpos^T) D^-1 with D^-1 = 4 / dx^2 (guide §6).
+    velocity C = (sum w v_i dpos^T) D^-1 with D^-1 = 4 / dx^2.
     field_offset: first-axis offset of the particle's velocity field (multi-field).
 
-    Summed as sum (w v_i) (dpos / dx)^T, dx and D^-1 applied once at the end: ~16 operations a
-    node (9 of them multiply-adds) where w * outer(v_i, dpos) and dpos took ~40 (the outer
-    products and matrix sums were 13 % of snow G2P's instructions, Nsight Compute, 19.4M
-    particles, H200). Results move by float rounding only. (Tried with it: one flat row offset
-    per (i, j) instead of the 3-D index, which was slower: G2P water 1.23 -> 1.27 ms at 19.4M.)
-    Now as sum w v_i (i, j, k)^T - v fx^T: with the loops unrolled the offsets are constants, so
-    a node costs v's three adds and three to six for the columns whose offset is 1 or 2, where
-    the outer product with dpos took nine multiply-adds and dpos three subtractions (H200,
-    19.4M: G2P water 1.049 -> 1.034 ms, snow 1.687 -> 1.682)."""
+    Summed as sum w v_i (i, j, k)^T - v fx^T, dx and D^-1 applied once at the end: with the
+    loops unrolled the node offsets are constants, so a node costs v's three adds and three to
+    six for the columns whose offset is 1 or 2, where the outer product with dpos took nine
+    multiply-adds and dpos three subtractions. Results move by float rounding only."""
     xg = x * inv_dx
     bi = int(wp.floor(xg[0] - 0.5))
     bj = int(wp.floor(xg[1] - 0.5))
@@ -152,7 +144,7 @@ def grid_density(gp: G2PParams, grid_m: wp.array3d(dtype=float), grid_fixed: wp.
 @wp.func
 def plastic_update(mat: MaterialParams, F: wp.mat33, jp: float, C: wp.mat33, dt: float):
     """F^{n+1} = (I + dt C) F^n, mirrored out if inverted (see constitutive.uninvert), then
-    the return map of the particle's mode (guide §7.2).
+    the return map of the particle's mode.
     Returns (elastic F, new Jp slot, Kirchhoff stress of both (the next P2G's), det of the
     trial F: <= 0 means it was inverted)."""
     Ft = (wp.identity(n=3, dtype=float) + dt * C) * F
@@ -186,7 +178,7 @@ def recover_volume(gp: G2PParams, mat: MaterialParams, grid_m: wp.array3d(dtype=
     volume ratio the grid measures, capped at 1. Only where every node of the stencil is at
     least half full: near a free surface the grid reads missing neighbours as expansion, and
     relaxing toward it takes the pressure away there, so the top layer packs and the level
-    sinks (measured: 0.25 % of the depth per second in a still tank)."""
+    sinks, even in a still tank."""
     rho, rho_min = grid_density(gp, grid_m, grid_fixed, x, field_offset)
     if rho_min < 0.5 * mat.density:
         return J
@@ -199,8 +191,7 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
     """G2P kernel specialised for the scene's materials (see p2g.make_p2g, also for device_clock).
     sorting: the variant of a substep whose brick P2G sorted, which stores each particle in its new
     slot (State: storage order; `order` is the sort's, slot -> particle), in a module of its own: the
-    variant without that code keeps a register more for the rest (G2P at 19.4M snow, H200: 2.36 ms
-    a substep with one kernel for both, 2.26 before the moves)."""
+    variant without that code keeps a register more for the rest, which makes it faster."""
     has_solid = flags.solid
     has_water = flags.water
     recovery = flags.volume_recovery
@@ -208,18 +199,14 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
     one = flags.one_material
 
     # registers capped (g2p_launch_shape): a solid's return map took the compiler to 128, which
-    # leaves a multiprocessor 512 threads (H100, snow, 2.4M particles, before fast math: G2P
-    # 0.419 ms a substep uncapped, 0.358 at 80)
+    # leaves a multiprocessor 512 threads
     module = flags.key + "_g2p" + ("_dev" if device_clock else "") + ("_sort" if sorting else "")
     # CUDA fast math (G2P's module only; no effect on the CPU): approximate division, square
     # root, exp and log (~2 ulp) and denormals flushed. The return map's SVD divides twice in
-    # each of its 12 Jacobi rotations, the sand return map takes logs and exps. H100, 19.4M
-    # particles, G2P ms a substep, two rounds: snow 2.52 -> 2.25, sand 2.74 -> 2.27, water
-    # 1.20 -> 1.17. Against IEEE G2P after 6 stirred frames in deterministic mode (which still
-    # replays bit for bit), max |dF|: snow 2.1e-5 (the fast mode's own run-to-run: 1.5e-5),
-    # sand 1.0e-4 (scripts/p2g_gpu.py, fastmath); over the bench's experiments section (438
-    # values) the mean error against the published data is unchanged to 4 digits, the largest
-    # single change a runout 2.60 -> 2.64 (1.7 %).
+    # each of its 12 Jacobi rotations, the sand return map takes logs and exps, so G2P is
+    # faster with it. Deterministic mode still replays bit for bit; F moves by about the fast
+    # mode's own run-to-run difference, and the errors of the bench's experiments section
+    # against the published data do not change (lab/p2g_gpu.py compares the two on a GPU).
     wp.set_module_options({"fast_math": G2P_FAST_MATH}, module=module)
 
     @wp.kernel(enable_backward=False, module=module, cuda_max_registers=g2p_launch_shape()[0])
@@ -286,13 +273,12 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
         else:
             # a scene of one field or one material reads neither index: 8 bytes of the 32 a
             # water particle reads here, 64 a snow one, and the material row's load no longer
-            # waits on a per-particle load (H200, 19.4M, G2P ms a substep: snow 1.70 -> 1.57,
-            # water 1.051 -> 1.011)
+            # waits on a per-particle load
             fo = int(0)
             if wp.static(multi):
                 fo = field_id[p] * gp.nodes
             v_new, C_new = gather(grid_v, x[p], gp.inv_dx, fo)
-            C_new = gp.affine_keep * C_new  # drag: blend toward PIC at a rate (guide §6 trap)
+            C_new = gp.affine_keep * C_new  # drag: blend toward PIC at a rate, not a per-substep fraction
             mid = int(0)
             if wp.static(not one):
                 mid = material[p]

@@ -1,9 +1,9 @@
-"""Phase 3 — grid update: v = mv / m, gravity, damping, colliders, walls (guide §3).
+"""Phase 3 — grid update: v = mv / m, gravity, damping, colliders, walls (docs/physics.md, "Boundaries").
 
 This is the only place two pieces of material influence each other, and where all
 contact happens. One thread per node; nodes sit at i * dx, i = 0..grid_n.
 
-Multi-field contact (opt-in, guide §9.3 "two separate bodies fuse on contact"): each body
+Multi-field contact (opt-in: with one field, two separate bodies fuse on contact): each body
 has its own velocity field (its own block of nodes, first grid axis = field * nodes + i).
 Where several fields meet at a node, a field moving toward the others along its outward
 normal (minus its mass gradient) gets that normal velocity replaced by the node's

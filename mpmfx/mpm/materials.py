@@ -1,10 +1,10 @@
-"""Material table: the constitutive constants of each material row (guide §7–8).
+"""Material table: the constitutive constants of each material row (docs/physics.md, "Materials").
 
 A material is a row of constants plus a mode that picks the stress function and the
-yield surface. Units follow the solver's normalised domain (guide §2): lengths in domain
+yield surface. Units follow the solver's normalised domain: lengths in domain
 units (the simulation box is [0,1]^3), time in seconds, density in mass per domain
-unit^3, so moduli are in mass / (domain unit * s^2). With density 1 the guide's §8
-numbers (E = 1500 for Soft) are used as is.
+unit^3, so moduli are in mass / (domain unit * s^2). With density 1 the numbers of
+the material table of the tutorial "Material Point Method: Step by Step" (E = 1500 for Soft) are used as is.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ __all__ = ["Mode", "Material", "PRESETS", "preset"]
 
 
 class Mode(enum.IntEnum):
-    """Constitutive branch of a material (the guide's `mode` column, §8)."""
+    """Constitutive branch of a material (the `mode` column of the presets' table)."""
 
     SNOW = 0  # fixed-corotated elasticity + Stomakhin singular-value clamp (+ hardening)
     SAND = 1  # Drucker-Prager on Hencky strain (Klar et al. 2016)
@@ -35,7 +35,7 @@ class Material:
         mode: constitutive branch, see :class:`Mode`.
         youngs_modulus: E, mass/(domain*s^2) (snow, sand). Stiffness of elastic rebound;
             raising it costs time step (dt ~ 1/sqrt(E)) and buys ringing, not hardness
-            (guide §9.2 trap 3).
+            (hardness comes from cohesion).
         poisson_ratio: nu, dimensionless, in [0, 0.5).
         density: rest density rho0, mass/domain^3. Particle mass = rest volume * density.
         hardening: xi, dimensionless; moduli scale by exp(xi * (1 - Jp)) (snow). 0 = off.
@@ -44,12 +44,12 @@ class Material:
         theta_s: critical stretch, dimensionless; singular values <= 1 + theta_s (snow).
         jp_min: lower clamp of the plastic volume ratio Jp (snow), dimensionless.
         jp_max: upper clamp of Jp (snow), dimensionless.
-        friction_angle: the sand's friction angle, degrees: the angle of repose (guide
-            §8 knob table) under the default fit; see friction_fit.
+        friction_angle: the sand's friction angle, degrees: the angle of repose under
+            the default fit; see friction_fit.
         friction_fit: how friction_angle sets the Drucker-Prager cone (sand). Default
-            "repose" (below): the guide's promise "friction angle = angle of repose",
-            measured against column-collapse experiments (README, `mpmfx bench accuracy`).
-            "compression" (Klar et al. 2016, the guide's alpha formula): the outer cone, exact in triaxial
+            "repose" (below): the tutorial's promise "friction angle = angle of repose",
+            measured against column-collapse experiments (docs/physics.md, "Validation").
+            "compression" (Klar et al. 2016's alpha formula): the outer cone, exact in triaxial
             compression; in plane-strain flow (a slab, a dam, a chute: anything that flows
             in a plane) it is as strong as Mohr-Coulomb at a much larger angle (asin of
             2 sqrt(3) sin(phi) / (3 - sin(phi)): 63.5 deg for phi = 38, 43.9 deg for 30), so
@@ -67,12 +67,12 @@ class Material:
             cone apex moves from tr(log strain) = 0 to tr = cohesion.
         volume_correction: sand only; remember the volume expansion discarded at the
             cone apex (stored in Jp as a log strain) so a re-compacted pile does not stay
-            fluffed (Tampubolon et al. 2017; guide §9.3).
+            fluffed (Tampubolon et al. 2017).
         bulk_modulus: Tait bulk modulus K, mass/(domain*s^2) (water):
             p = K * (J^-gamma - 1).
         eos_gamma: Tait exponent gamma, dimensionless (water).
-        volume_recovery: water only; grid volume recovery (guide §9.3 "fluid level slowly
-            drops"). J integrated through det(I + dt C) does not see particles packing
+        volume_recovery: water only; grid volume recovery, for a fluid level that slowly
+            drops. J integrated through det(I + dt C) does not see particles packing
             closer under shear, so the level sinks while J stays ~1. With this on, every
             substep also measures J from the grid, J_grid = density / (grid density at the
             particle), and relaxes J toward min(J_grid, 1) at `volume_recovery_rate`, where
@@ -85,7 +85,7 @@ class Material:
         volume_recovery_rate: 1/s, how fast J relaxes toward the grid's J (a rate, so the
             result does not depend on dt): J += (J_grid - J) * (1 - exp(-rate * dt)).
         clamp_pressure: water only; clamp the pressure to p >= 0 so water in tension
-            does not clump into strings (validation.md §5).
+            does not clump into strings.
     """
 
     mode: Mode
@@ -176,7 +176,8 @@ class Material:
         return not (self.theta_c >= 1e8 and self.theta_s >= 1e8)
 
     def wave_speed(self, *, hardening_factor: float = 1.0, j_min: float = 1.0) -> float:
-        """Dilatational wave speed c, domain/s (validation.md §5), for the CFL time step.
+        """Dilatational wave speed c, domain/s, for the CFL time step
+        (docs/physics.md, "The method").
 
         hardening_factor: current exp(xi (1 - Jp)) of the stiffest particle (snow).
         j_min: smallest current volume ratio J (water; Tait stiffens under compression).
@@ -192,10 +193,11 @@ class Material:
 
 FRICTION_FITS = ("compression", "plane_strain", "repose")  # see Material.friction_fit
 
-_ELASTIC_YIELD = 1e9  # thetas this large mean "the clamp never fires" (guide §8)
+_ELASTIC_YIELD = 1e9  # thetas this large mean "the clamp never fires"
 
 PRESETS: dict[str, Material] = {
-    # Guide §8 table, verbatim: name -> (mode, E, hardening, extras)
+    # The material table of the tutorial "Material Point Method: Step by Step", verbatim:
+    # name -> (mode, E, hardening, extras)
     "Soft": Material(Mode.SNOW, youngs_modulus=1500.0, hardening=4.0),
     "Mushy": Material(Mode.SNOW, youngs_modulus=600.0, hardening=2.0),
     "Goopy": Material(Mode.SNOW, youngs_modulus=250.0, hardening=1.0),

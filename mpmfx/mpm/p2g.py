@@ -1,12 +1,12 @@
-"""Phase 2 — P2G: scatter mass, momentum and the MLS stress onto the grid (guide §4.3-4.4).
+"""Phase 2 — P2G: scatter mass, momentum and the MLS stress onto the grid (docs/physics.md, "The method").
 
 Each particle writes into its 3x3x3 node block with atomic adds. MLS-MPM fuses the stress
-into the affine term (guide §4.4):
+into the affine term:
 
     affine = -dt * V0 * (4 / dx^2) * tau + m * C        tau = P F^T (Kirchhoff stress)
     node momentum += w * (m v + affine @ dpos),  node mass += w * m
 
-Deterministic mode (guide §10.1): float atomics are not associative, so the order in which
+Deterministic mode: float atomics are not associative, so the order in which
 GPU threads land on a node changes the sum. With `deterministic`, every contribution is
 rounded to a fixed-point int64 and added with integer atomics (associative), so replays
 are bit-identical on the same machine. Quanta are powers of two so scaling is exact:
@@ -67,7 +67,7 @@ def to_fixed(value: float, quantum_inv: float) -> wp.int64:
 
 @functools.lru_cache(maxsize=None)
 def make_particle_affine(flags: SceneFlags):
-    """The MLS affine term of one particle (guide §4.4), specialised like make_p2g:
+    """The MLS affine term of one particle, specialised like make_p2g:
     -dt V0 (4 / dx^2) tau + m C, with tau the Kirchhoff stress of its mode: a solid's as
     the last G2P stored it (g2p.py), water's from J. Shared by the reference P2G and the
     brick one (p2g_brick.py) so both scatter the same numbers."""
@@ -84,7 +84,7 @@ def make_particle_affine(flags: SceneFlags):
         if wp.static(has_water):
             if mat.mode == MODE_WATER:
                 Jw = J[p]
-                # pressure only, isotropic: tau = -p J I (guide §8.1)
+                # pressure only, isotropic: tau = -p J I
                 tau = wp.identity(n=3, dtype=float) * (-tait_pressure(mat, Jw) * Jw)
         inv_dx = pp.inv_dx
         # D^-1 = 4 / dx^2 for quadratic B-splines

@@ -1,7 +1,7 @@
 """Phase 2, by brick: P2G summed in shared memory, one global add per node a brick touches.
 
 The reference P2G (p2g.py) adds each particle's 27 x 4 contributions to the grid with
-global atomics (14.4 ms a substep for 19M particles on an H100). Here the particles are kept
+global atomics, which dominate a GPU substep. Here the particles are kept
 in brick order (a brick: 4^3 stencil corner nodes) and one CUDA block scatters a brick:
 
     1. at the first substep of a chunk (chunked.py), and then every few substeps as the
@@ -32,27 +32,11 @@ in brick order (a brick: 4^3 stencil corner nodes) and one CUDA block scatters a
        marked bricks (clear_grid.py) and the grid update runs only there (grid_update.py), as
        a shot's grid is mostly empty (hero_dam: 12.8k of 274.6k bricks marked).
 
-Measured on an H100 (19.4M particles, grid 256, fast mode, ms a substep for the whole
-P2G; the sort once a chunk left out): water 2.7, snow 3.4, against the reference's 14.5 /
-14.4 and the binned P2G it replaced, 6.1 / 6.2 (runs of particles sharing a stencil, one
-global atomic per run, node and channel, fed by a payload pass; p2g_binned.py before
-commit 00bd0e9, where its own dropped variants are listed). Dropped on the way: each thread adding
-its own particle to the window (same-address shared atomics serialise: 15.1 ms with
-consecutive particles a warp, 7.5 with a warp's particles ~2 cells apart, 6.4 parked first),
-blocks of 192 or 256 threads (5.0 ms: the 128 registers a thread the compiler takes left a
-multiprocessor 512 threads). Capping registers (MAX_REGISTERS) let more blocks in: water /
-snow 3.6 / 4.5 ms at 128 (no cap), 3.0 / 3.8 at 80, 2.7 / 3.4 at 64, 2.7 / 3.3 at 56, 2.8 /
-3.3 at 48 (deterministic: 5.2 / 6.0, 4.7 / 5.5, 4.4 / 5.2, 4.6 / 5.3, 5.1 / 5.8); the same cap
-on G2P made it slower (water 1.49 -> 1.77 ms at 64). Since the particles' stress is stored (g2p.py: no
-SVD here any more) 80 is better than 64; H200, fast mode, the scatter alone, ms a substep at
-19.4M (cap 80 / 72 / 64): snow 2.54 / 2.56 / 2.79, water 2.48 / 2.44 / 2.58, sand 2.53 / 2.55 /
-2.79; at 2.4M (uncapped / 96 / 80 / 64 / 56): snow 0.401 / 0.370 / 0.349 / 0.371 / 0.384, water
-0.506 / 0.376 / 0.351 / 0.353 / 0.365 (scripts/kernel_probe.py, kernel_caps("scatter")). Since a run's
-weights stay in registers (row_weight: W had spilled to local memory), 64 is best: snow at 19.4M
-(cap 96 / 80 / 72 / 64 / 56) 2.24 / 2.07 / 1.94 / 1.84 / 1.89 ms, water (80 / 72 / 64) 2.20 / 2.06 /
-1.93 (H200). Also dropped (H200, 19.4M snow): rounds cut after block // 9 runs so a round's run
-tasks always fit one pass (the barrier after an uneven second pass was 11 % of the scatter's stall
-samples): P2G 2.30 -> 2.56 ms, re-parking the rest of the round costs more than the idle threads.
+Why this shape: same-address shared atomics serialise, so a thread adding its own particle to
+the window is slow; summing a run in registers and adding the sum once is several times
+faster. Capping a thread's registers (MAX_REGISTERS) lets more blocks onto a multiprocessor:
+64 is the fastest cap for this code (the compiler takes 128 unbounded), with the run's weights
+kept in registers (row_weight). Current P2G figures: docs/benchmarks.md.
 
 The window holds fixed point in both modes (the reference's quanta, p2g.py), so its sums are
 exact and order-free. A run's float sums are deterministic too: its particles are summed in
@@ -62,23 +46,10 @@ are bit-identical in deterministic mode, while against the reference (which roun
 particle's contribution) a node differs by about a quantum a particle of its runs: rounding
 the sums instead is ~8x fewer float-to-int64 conversions and int64 registers. A run task
 (add_run) forms its row's momentum q + A (i, j, 0) once a particle and steps column 2 of A for
-k = 1, 2, where it had computed w (m v + aff dpos) for each node: P2G at 19.4M (H200, two rounds
-back to back) snow 2.222 / 2.222 -> 2.057 / 2.058 ms, water 2.255 / 2.254 -> 2.085 / 2.084,
-deterministic snow 2.234 / 2.233 -> 2.067 / 2.067; 2.4M snow 0.289 / 0.279 -> 0.261 / 0.260.
-(Parking the nine weights instead of fx, so no task recomputes them: 2.051 -> 2.223, the larger
-park leaves a multiprocessor 7 blocks where it held 8. A round's work split evenly instead, 13
-threads a stencil row over chunks of 10 slots, one pass where a round of over 14 runs takes two:
-2.057 -> 2.732, water 2.085 -> 2.814: a run the chunks cut adds to the window twice, and
-neighbouring chunks add to the same window nodes at once. Register caps re-measured on this
-code, scatter alone at 19.4M snow, cap 48 / 56 / 64 / 72 / 80: 1.86 / 1.72 / 1.65 / 1.77 / 1.91
-ms.) The window was float (fast) and int64 (deterministic) before, and shared memory adds both with
-compare-and-swap loops; as 32-bit words, measured on an H100 (G particle-substeps/s, bench
-blocks; ms a substep, shots; scripts/p2g_runs.py):
-
-                                  fast: float -> words       deterministic: int64 -> words
-    Water / Snow 2.4M             3.16 -> 3.42 / 2.34 -> 2.60   2.25 -> 3.45 / 1.83 -> 2.54
-    Water / Snow 19.4M            4.12 -> 4.07 / 2.93 -> 2.91   3.06 -> 4.07 / 2.33 -> 2.87
-    hero_dam / hero_castle (ms)   1.41 -> 1.44 / 1.37 -> 1.38   1.85 -> 1.46 / 1.67 -> 1.37
+k = 1, 2, rather than computing w (m v + aff dpos) for each node. The park holds fx, not the
+nine weights, which keeps it small enough for eight blocks a multiprocessor. The window holds
+32-bit words, which shared memory adds natively (float and int64 adds there are
+compare-and-swap loops).
 
 Extra device memory: 28 bytes a particle (keys and order double-buffered for the sort 16,
 flags / offsets / segment starts 12), and 4 bytes a node brick for the marks; no payload array.
@@ -111,8 +82,8 @@ MAX_REGISTERS = 64  # a thread's registers (the compiler takes 128 unbounded: se
 MAX_BLOCKS = 1 << 15  # blocks at most; each walks segments block, block + MAX_BLOCKS, ...
 PARKED = 16  # floats a parked particle: m, q (3), A (9), fx (3) (the scatter's park)
 SORT_TRAVEL = 1.0  # cells the fastest particle may move between two sorts: a window's slack (travel_cadence)
-SORT_PIECES_PER_PARTICLE = 0.32  # a sort's cost in scattered pieces (sort_cadence; H200, 2.4M-19.4M particles:
-SORT_PIECES_FIXED = 2.5e5  # 0.29-1.84 ms a sort with its G2P's moves, 0.28 ns a piece)
+SORT_PIECES_PER_PARTICLE = 0.32  # a sort's cost in scattered pieces (sort_cadence; fitted
+SORT_PIECES_FIXED = 2.5e5  # to the measured time of a sort with its G2P's moves against a piece's)
 FALLBACK_PIECES = 16.0  # a particle out of its window, in pieces: a guess, not fitted (no measured scene fell
 # back; travel_cadence keeps particles inside their windows, so it rarely matters)
 NO_KEY = wp.constant(0x7FFFFFFF)  # tracers and removed particles: sorted last, never scattered
@@ -253,23 +224,10 @@ def sort_cadence(frag, every: int, n: int, cap: int) -> int:
     substeps (every substep sorted) the next chunk tries twice the cadence. The counts are of
     particles, not of time, so a deterministic run picks the same cadences when replayed.
 
-    Measured on an H200 before the particles were stored in the sort's order (ms a substep
-    through advance() with the order sorted every k substeps; * this rule's pick):
-
-        k                     1      2      4       8       16     32
-        hero_dam (3.4M)       1.52   1.40   1.35*   1.37    1.42   1.48
-        hero_castle (2.6M)    1.42   1.30   1.24    1.23*   1.23   1.27
-        Mushy block 19.4M     7.16   7.05   6.71    6.34*   6.37   5.85
-
-    A piece costs 0.22-0.27 ns of scatter in every scene there (slope of scatter time against
-    pieces between cadences); a sort 1.34 ms at 19.4M, 0.23 ms at 2.4M. Refitted since
-    (scripts/cadence_fit.py, renders/readme/cadence_fit_h200.json, same scenes): a piece 0.28 ns,
-    and a sort also costs its substep's G2P moving every particle to its new slot (0.06-0.08 ms
-    at 2.4M-3.4M, 0.46-0.50 at 19.4M): 0.29 ms a sort at 2.4M, 1.8 at 19.4M; scatter + sort
-    ms a substep for hero_dam at k = 2 / 4 / 8 / 16: 0.68 / 0.61 / 0.60 / 0.64. The falling block's runs
-    heal as it falls on (a whole run crosses a face and is one run again), which the linear
-    growth does not see, so it sorts more often there than it needs to; the earlier rule (the
-    fastest particle's travel alone, 1/8 cell) sorted it every substep (7.16 ms)."""
+    The rule's pick is at or next to the fastest fixed cadence on the shipped GPU shots
+    (lab/cadence_fit.py measures the cadences and fits the sort's cost). A
+    falling block's runs heal as it falls on (a whole run crosses a face and is one run again),
+    which the linear growth does not see, so it sorts more often there than it needs to."""
     fresh_sub, stale_sub = float(frag[FRAG_SUBSTEPS]), float(frag[FRAG_SUBSTEPS + 1])
     if fresh_sub == 0:
         return max(1, min(every, cap))
@@ -376,8 +334,8 @@ def _seg_starts(keys: wp.array(dtype=wp.int32), flag: wp.array(dtype=wp.int32), 
 @wp.func
 def row_weight(W: wp.mat33, i: int, axis: int) -> float:
     """W[i, axis] of bspline_weights for a run-time row i, by selects: a matrix indexed with a
-    run-time row lives in local memory (the scatter's add_run spilled its W there: ~75 % of
-    its local traffic, Nsight Compute, 19.4M snow, H200). axis: a constant at every call."""
+    run-time row lives in local memory (the scatter's add_run spilled its W there: most of
+    its local memory traffic). axis: a constant at every call."""
     w = W[0, axis]
     if i == 1:
         w = W[1, axis]

@@ -1,11 +1,11 @@
 """The MLS-MPM solver: model (materials, colliders, grid), state, and the adaptive stepper.
 
-`Solver.step` is the guide's four-phase loop (§3), one phase per file:
+`Solver.step` is the four-phase loop of docs/physics.md ("The method"), one phase per file:
 
     clear grid -> P2G -> grid update -> G2P
 
-`Solver.advance` owns the clock (guide §10: "a stepper that owns the wall-clock-to-substep
-accounting"): dt = cfl * dx / (c_max + |v|max) from the current hardened moduli, a substep
+`Solver.advance` owns the clock, the wall-clock-to-substep accounting:
+dt = cfl * dx / (c_max + |v|max) from the current hardened moduli, a substep
 that produces non-finite values or moves a particle more than a cell is rejected and redone
 at half dt, and the substeps land exactly on the requested time.
 """
@@ -41,7 +41,7 @@ __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
 CHECKPOINT_VERSION = 3  # 3: with the slots' particles (pid); 2: with the solids' stored stress (tau); 1 and 2 are
 # restored too
 MAX_FIELDS = 8  # multi-field contact: grid memory grows with the number of fields
-_SYMPTOM = "Everything explodes / NaNs"  # the guide §9.3 row the errors point at
+_SYMPTOM = "Everything explodes / NaNs"  # the symptom row of the tutorial's tuning table the errors point at
 
 
 class SimulationError(RuntimeError):
@@ -348,16 +348,15 @@ class Solver:
         # 3 · grid update (with the brick P2G: only the node bricks it marked)
         dim = (nn, nn, nn)
         # with the brick P2G the update zeroes what it read, the next substep's sparse clear,
-        # unless G2P reads node masses (water volume recovery); H100, 19.4M snow: the clear
-        # 0.091 -> 0.013 ms a substep, the update 0.240 -> 0.255 (of 5.05 ms)
+        # unless G2P reads node masses (water volume recovery): the clear then costs almost nothing
         self._grid_cleared = brick is not None and not self.flags.volume_recovery and not keep_grid
         max_blocks = 0
         if brick is not None:
             grid = make_grid_update(device_clock=device_clock, sparse=True, clears=self._grid_cleared)
             dim = brick.marks.shape[0] * BRICK**3
             # a grid-stride loop over a few blocks a multiprocessor: one thread per node brick slot
-            # is ~69k short-lived blocks at grid 256, most of whose bricks are unmarked (H200,
-            # 19.4M snow: 0.253 -> 0.211 ms; 2 / 4 / 16 / 32 blocks: 0.282 / 0.276 / 0.206 / 0.202)
+            # is ~69k short-lived blocks at grid 256, most of whose bricks are unmarked; 8 blocks a
+            # multiprocessor is as fast as more, and faster than fewer
             max_blocks = 8 * self.device.sm_count if self.device.is_cuda else 0
         wp.launch(grid, dim=dim, device=self.device, max_blocks=max_blocks, inputs=[
             self._grid_params(dt, state.n_fields), self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
@@ -390,7 +389,7 @@ class Solver:
         gp = GridParams()
         gp.dt, gp.dx = float(dt), cfg.dx
         gp.gravity = wp.vec3(*cfg.gravity)
-        gp.damping_factor = max(0.0, 1.0 - cfg.damping * dt)  # v *= 1 - damping*dt (trap 5)
+        gp.damping_factor = max(0.0, 1.0 - cfg.damping * dt)  # v *= 1 - damping*dt: a rate, so dt does not change it
         codes = [w.code for w in cfg.walls]
         gp.walls_lo = wp.vec3i(codes[0], codes[2], codes[4])
         gp.walls_hi = wp.vec3i(codes[1], codes[3], codes[5])
@@ -499,7 +498,7 @@ class Solver:
             f"t={t:.4f}s: the substep fell to dt={dt:.3g}s < dt_min={self.config.dt_min:g}s "
             f"({state.n} particles, max speed {state.clock.max_speed:.3g} domain/s, c_max "
             f"{self.wave_speed(state.clock):.3g} domain/s); {what}, in {', '.join(names)} "
-            f"('{_SYMPTOM}', guide §9.3). Lower youngs_modulus / bulk_modulus or raise damping; "
+            f"('{_SYMPTOM}'). Lower youngs_modulus / bulk_modulus or raise damping; "
             f"or lower SolverConfig.dt_min if this dt is intended (a lower cfl only shrinks dt further)",
             field="dt_min", needed=dt)
 

@@ -15,8 +15,8 @@ A chunk of such substeps is launched at once (on CUDA: one CUDA graph per chunk 
 buffer parity); the host reads the clock once per chunk. A rejected substep stops its chunk
 and the next chunk retries it at half dt from the same state, exactly as the host loop does,
 so the dt sequence and the particles are the same as the reference: bit-identical on the CPU
-and, measured on an H100 (snow and water, deterministic mode, 300 substeps), on CUDA too
-(with the reference P2G; the brick one differs in the last bits there, see p2g_brick.py).
+and, in deterministic mode with the reference P2G, on CUDA too (the brick one differs in the
+last bits there, see p2g_brick.py).
 """
 
 from __future__ import annotations
@@ -232,8 +232,7 @@ def chunk_particle(b: int, i: int, chunk: int, threads: int, coalesced: int) -> 
     """Particle i of thread b's fixed set of `chunk` (the threads' sets cover 0..threads * chunk;
     a reduction sums its set in i order, so its partial sums never depend on scheduling).
     coalesced (a GPU): the threads' i-th particles are neighbours, so a warp reads consecutive
-    memory (H200, 19.4M particles, ms a call, runs of a thread's own -> coalesced: the elastic
-    energy 3.32 -> 1.05 snow, 1.96 -> 0.39 water; this report 0.63 -> 0.36); else (the
+    memory, several times faster than runs of a thread's own; else (the
     CPU, whose threads run one after another) thread b's set is the run b * chunk + i."""
     if coalesced != 0:
         return b + i * threads

@@ -1,4 +1,4 @@
-"""Offscreen PyVista renders of surfaces (the look) and particles (the guide's debug look, 9.4)."""
+"""Offscreen PyVista renders of surfaces (the look) and particles (the debug look for tuning motion)."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -57,7 +57,8 @@ class FrameRenderer:
         return self._shoot(path, label)
 
     def particles(self, points: dict[str, tuple[np.ndarray, str]], radius: float, path: Path, *, label: str = ""):
-        """The debug look: big soft blobs, one colour per group (guide 9.4, rule 1)."""
+        """The debug look: big soft blobs, one colour per group, for tuning motion before the look
+        (the tutorial "Material Point Method: Step by Step", "How to tune, as a process")."""
         self._clear()
         for name, (x, colour) in points.items():
             if len(x) == 0:

@@ -10,8 +10,8 @@ group (`look_for`), and the Blender child process builds the materials (`LOOKS`)
 """
 from __future__ import annotations
 
-# The look of each preset of the guide's table (section 8), by what the material is, not by
-# its name's promise (the guide's "the name lies" trap): the snow ladder reads as snow from
+# The look of each preset (docs/physics.md, "Materials"), by what the material is, not by
+# its name's promise (the names describe intent, not physics): the snow ladder reads as snow from
 # packed (Soft) to slush (Wet, Slush); CohesiveGranular as damp sand; Elastic as jelly.
 DEFAULT_LOOK = {
     "Soft": "snow", "Mushy": "snow", "Goopy": "snow", "Wet": "slush", "Slush": "slush",

@@ -1,4 +1,4 @@
-"""Independent work as dask.distributed tasks: a stage's frames, a wedge's variants (issue 16).
+"""Independent work as dask.distributed tasks: a stage's frames, a wedge's variants.
 
 A stage whose frames are independent (surface, export, render) does its work in calls
 `frame(job, f)`; `Frames` runs them either here, one after another (`workers=1`: the serial
@@ -42,10 +42,9 @@ WORKERS_ENV = "MPMFX_WORKERS"       # worker processes of the LocalCluster; 1 = 
 AUTO_MIN_TASKS = 10
 # From AUTO_MIN_TASKS frames on, auto runs PROBE_CALLS frames here first and starts workers for
 # the rest only if the probe says they would finish sooner (worth_a_cluster). CLUSTER_COST_S: the
-# wall seconds a LocalCluster costs before it gains any: the default shot's 24 frames on the idle
-# 2-core CPU (scripts/bench_frames.py, thirteenth session): surface 3.9 s serial, 5.9-6.1 on two
-# workers; export 3.3 against 3.6-3.8; Cycles renders 40.6-42.4 against 42.9-43.3 (Cycles already
-# uses every core), where with the sixth session's surfacer two workers took 34.6 s against 61.8.
+# wall seconds a LocalCluster costs before it gains any, as the default shot's 24 frames measure
+# it on a 2-core CPU (lab/bench_frames.py): two workers are slower than serial there for surface and export, and
+# Cycles already uses every core.
 PROBE_CALLS = 2
 CLUSTER_COST_S = 4.0
 

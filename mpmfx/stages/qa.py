@@ -85,7 +85,7 @@ def print_qa(run) -> int:
     return 0
 
 
-# what `status --qa` prints, with units: "domain" = the solver's normalised domain (guide section 2)
+# what `status --qa` prints, with units: "domain" = the solver's normalised domain (docs/physics.md)
 QA_COLUMNS = {"mass": "domain", "kinetic_energy": "domain", "elastic_energy": "domain", "j_min": "1",
               "j_max": "1", "max_speed": "m/s", "substeps": "count", "rejected_substeps": "count",
               "cfl_used": "1 (cap 1)"}

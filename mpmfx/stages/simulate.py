@@ -1,7 +1,7 @@
 """Stage 2: MLS-MPM from the voxelised particles, one particle file per frame, resumable.
 
 World units stop here: particles enter the solver in the normalised domain [0,1]^3
-(x_dom = (x - origin) / size, v_dom = v / size, gravity_dom = g / size; guide section 2) and
+(x_dom = (x - origin) / size, v_dom = v / size, gravity_dom = g / size; docs/physics.md) and
 frames are written back in world units. Frames: `frames/NNNN.npz` with x, v (n,3) float32
 (m, m/s), id, material, body (n,) int32 and Jp, J (n,) float32; `checkpoints/NNNN.npz` hold the
 full solver state every `solver.checkpoint_every` frames (default every frame; the last
@@ -216,7 +216,7 @@ def _write_frame(entry, frame: int, qa: dict | None, checkpoint: dict | None, st
 
 
 def _qa(report, size: float) -> dict:
-    """The frame's observables (issue 5), JSON-safe: max_speed in m/s; mass, momentum and
+    """The frame's observables, JSON-safe: max_speed in m/s; mass, momentum and
     energies in the solver's domain units (the presets' units), comparable frame to frame."""
     d = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in vars(report).items()}
     if "max_speed" in d:

@@ -1,4 +1,4 @@
-"""Quick accuracy checks against validation.md references (tiny sizes, CPU)."""
+"""Quick accuracy checks against the references of docs/physics.md, "Validation" (tiny sizes, CPU)."""
 from __future__ import annotations
 
 import numpy as np
@@ -8,7 +8,7 @@ from mpmfx.bench.snow_table import snow_compression
 
 
 def test_free_fall_follows_exact_discrete_trajectory():
-    # validation.md §1: exact to float32 round-off (~1e-6 relative)
+    # the discrete trajectory is exact: float32 round-off (~1e-6 relative)
     r = cases.free_fall(grid_n=16)
     assert r.error < 1e-5, r.row()
     assert r.extra["F_minus_I"] < 1e-5  # an unstressed body stays unstrained
@@ -31,7 +31,7 @@ def test_apic_keeps_angular_momentum_pic_loses_it():
 
 def test_snow_return_map_matches_table():
     row = snow_compression()
-    assert row["error"] < 0.01, row["table"]  # validation.md §3: < 1 %
+    assert row["error"] < 0.01, row["table"]  # the derived table, within 1 %
 
 
 def test_plot_and_tables_are_written(tmp_path):

@@ -1,7 +1,7 @@
 """Differential tests: the production Warp solver against the plain numpy MLS-MPM step
 (mpmfx.bench.reference_step) on identical set-ups (same particles, grid, walls, dt).
 
-Tolerance: the fronts agree within 1 % of the front distance (issue 13); measured on a
+Tolerance: the fronts agree within 1 % of the front distance; measured on a
 2-core CPU the water fronts agree to ~1e-6 and the sand runout to < 0.1 %: they differ only
 by float32 against float64 round-off.
 """

@@ -54,7 +54,7 @@ def test_surface_error_is_the_area_weighted_distance():
 def test_surface_error_does_not_move_with_the_voxel_grid():
     """The same random box surfaced at three sub-voxel offsets: its surface error holds to
     0.002 h (the vertex mean, which samples the surface where marching cubes puts vertices,
-    moved 0.130-0.137 h here and 0.104-0.123 h at 1M; docs/surfacing-log.md, seventeenth step)."""
+    moved 0.130-0.137 h here)."""
     from mpmfx.bench.surface_cases import shape_sdf, surface_error
     from mpmfx.surface import SurfaceParams, surface_particles
 

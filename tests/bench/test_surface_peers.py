@@ -29,7 +29,7 @@ def test_splashsurf_on_a_lattice_sphere_is_one_accurate_shell():
 
 
 def test_splashsurf_smoothing_3r_closes_most_voids_of_random_samples():
-    # validation.md 6: on random samples smoothing length 2r leaves hundreds of bubbles and
+    # on random samples smoothing length 2r leaves hundreds of bubbles and
     # loses ~16 % of the volume; the bench's 3r keeps the volume (bubbles stay: counted)
     x, h = sample_shape("sphere", 20_000, "random", seed=1)
     _, vol2, pieces2 = errors(peers.run_splashsurf(x, h, kernel=2.0, cube=1.0, repeats=1), x, h)

@@ -1,4 +1,4 @@
-"""Hard cases (validation.md §5): one test per row. The guarantee under test: the solver stays
+"""Hard cases: one test per kind of case that breaks explicit MPM solvers. The guarantee under test: the solver stays
 finite with bounded energy, or adapts its step (rejected substeps counted), or raises
 SimulationError naming a knob: never NaN in the returned state. Run with -s for verdicts."""
 from __future__ import annotations

@@ -158,7 +158,7 @@ def test_missing_pyopenvdb_says_how_to_install(tmp_path, monkeypatch):
 
 
 def test_half_float_grids_are_smaller_and_close(tmp_path):
-    """Export's choice (issue 18): half floats on disk, ~5e-4 relative, a quarter less disk."""
+    """Export's choice: half floats on disk, ~5e-4 relative, a quarter less disk."""
     import numpy as np
 
     from mpmfx.io.vdb import VdbGrid, read_vdb, write_vdb

@@ -28,7 +28,7 @@ def concat(*parts: Particles) -> Particles:
 
 
 def free_bar(*, grid_n: int, half_width: float, length: float = 0.6, E: float = 100.0, v0: float = 0.1):
-    """validation.md §2's bar, free-free, in its first mode: v = v0 cos(kx) and C = dv/dx (for
+    """The axially vibrating bar (Buzzi et al. 2008), free-free, in its first mode: v = v0 cos(kx) and C = dv/dx (for
     APIC). Returns (solver, state, particles, k). No gravity, nu = 0, an Elastic-like clamp."""
     from mpmfx.mpm import Material, Mode, Solver, SolverConfig
     x0 = 0.5 - length / 2

@@ -27,7 +27,7 @@ def test_bspline_partition_of_unity_and_reproduction():
     # first moment: sum_k w_k (k - fx) = 0, so affine fields transfer exactly
     offsets = np.arange(3, dtype=np.float64)[None, :, None]
     np.testing.assert_allclose((W * (offsets - fx[:, None, :])).sum(axis=1), 0.0, atol=1e-6)
-    # the guide's worked example: fx = 1.3 -> (0.02, 0.66, 0.32)
+    # the tutorial's worked example: fx = 1.3 -> (0.02, 0.66, 0.32)
     np.testing.assert_allclose(_weights(np.full((1, 3), 1.3, np.float32))[0, :, 0], [0.02, 0.66, 0.32], atol=1e-6)
 
 
@@ -41,7 +41,7 @@ def _return_map(mat: Material, F, jp):
     return [o.numpy() for o in outs]
 
 
-# validation.md §3: eps -> (Jp, hardening, sigma_axial, sigma_lateral)
+# confined compression with Stomakhin et al. 2013's constants: eps -> (Jp, hardening, sigma_axial, sigma_lateral)
 SNOW_TABLE = [
     (0.025, 1.000, 1.00, -3889, -972),
     (0.05, 0.974, 1.29, -5026, -1256),

@@ -70,7 +70,7 @@ def test_tait_energy_is_the_potential_of_the_pressure():
 
 
 def test_report_energy_is_exchanged_and_conserved_in_a_free_bar():
-    """Undamped free bar in its first mode (validation.md §2): the report's kinetic and
+    """Undamped free bar in its first mode (Buzzi et al. 2008): the report's kinetic and
     elastic energy trade places each quarter period and their sum stays put."""
     solver, state, p, _ = free_bar(grid_n=16, half_width=0.1)
     ke0 = 0.5 * float((state.mass.numpy() * (p.v**2).sum(axis=1)).sum())
@@ -83,8 +83,8 @@ def test_report_energy_is_exchanged_and_conserved_in_a_free_bar():
 
 @pytest.mark.parametrize("kind", ["every other particle", "all particles"])
 def test_inverted_elastic_block_recovers(kind):
-    """guide §7: inversion must be survivable. Mirrored particles (det F = -1) among normal
-    ones used to drag the whole block flat (det F -> 0); now they are mirrored back out,
+    """Inversion must be survivable. Mirrored particles (det F = -1) among normal
+    ones would drag the whole block flat (det F -> 0); they are mirrored back out,
     the frame reports it, and the block keeps its volume."""
     p = block((0.4, 0.4, 0.4), (0.6, 0.6, 0.6), grid_n=16)
     solver = Solver([preset("Elastic")], SolverConfig(grid_n=16, gravity=ZERO_G), device="cpu")

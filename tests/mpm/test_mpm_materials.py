@@ -6,7 +6,7 @@ import pytest
 
 from mpmfx.mpm import PRESETS, Material, Mode, SolverConfig, WallType, preset
 
-# the guide's §8 table: name -> (mode, E, hardening)
+# the material table of the tutorial "Material Point Method: Step by Step": name -> (mode, E, hardening)
 GUIDE_TABLE = {
     "Soft": (Mode.SNOW, 1500, 4), "Mushy": (Mode.SNOW, 600, 2), "Goopy": (Mode.SNOW, 250, 1),
     "Wet": (Mode.SNOW, 150, 0.7), "Slush": (Mode.SNOW, 90, 0.5), "Elastic": (Mode.SNOW, 1200, 0),
@@ -56,7 +56,7 @@ def test_lame_parameters_and_wave_speed():
     m = Material(Mode.SNOW, youngs_modulus=1.4e5, poisson_ratio=0.2, density=400.0)
     assert m.mu0 == pytest.approx(58333.33, rel=1e-6)
     assert m.lambda0 == pytest.approx(38888.89, rel=1e-6)
-    # validation.md §5: 19.7 m/s at h = 1, 146 m/s at h = e^4 (hardened moduli)
+    # Stomakhin et al. 2013's snow: 19.7 m/s at h = 1, 146 m/s at h = e^4 (hardened moduli)
     assert m.wave_speed() == pytest.approx(19.7, rel=0.01)
     assert m.wave_speed(hardening_factor=2.718281828**4) == pytest.approx(146, rel=0.01)
 

@@ -55,7 +55,7 @@ def test_plane_strain_fit_is_mohr_coulomb_in_plane_strain():
         cc = preset("Granular", friction_angle=phi, friction_fit="compression").dp_alpha
         assert 3 / np.sqrt(2) * ps == pytest.approx(s)
         assert 3 / np.sqrt(2) * cc == pytest.approx(2 * np.sqrt(3) * s / (3 - s))
-    # validation.md §4: the compression cone in plane strain is Mohr-Coulomb at 43.9 deg for 30
+    # Klar et al. 2016's compression cone in plane strain is Mohr-Coulomb at 43.9 deg for 30
     cc30 = preset("Granular", friction_angle=30.0, friction_fit="compression").dp_alpha
     assert np.degrees(np.arcsin(3 / np.sqrt(2) * cc30)) == pytest.approx(43.9, abs=0.05)
     with pytest.raises(ValueError, match="friction_fit"):

@@ -67,7 +67,7 @@ def test_tracers_ride_with_the_material():
 
 
 def test_free_elastic_bar_period_matches_the_analytic_mode():
-    """validation.md §2 (Buzzi et al.): a free-free bar of length Lf is two fixed-free bars
+    """Buzzi et al. 2008: a free-free bar of length Lf is two fixed-free bars
     of L = Lf/2; first mode period 4 L / sqrt(E / rho). E = 100, nu = 0: T = 0.12 s."""
     Lf, E = 0.6, 100.0
     solver, state, p, _ = free_bar(grid_n=32, half_width=0.06, length=Lf, E=E)
@@ -149,7 +149,7 @@ def _slide(multi_field, contact_friction=0.0):
 
 
 def test_multi_field_bodies_slide_past_each_other_instead_of_fusing():
-    """guide §9.3: one velocity field per node makes bodies fuse; with one field per
+    """One velocity field per node makes bodies fuse; with one field per
     body a block slides over another (frictionless contact) and rests on it."""
     v_top, v_bottom, _ = _slide(False)
     assert v_top < 0.3 and v_bottom > 0.1  # single field: the top drags the bottom along
@@ -196,7 +196,7 @@ def _tank_level(*, recovery: bool, packing: float, seconds: float) -> tuple[floa
 
 
 def test_grid_volume_recovery_restores_leaked_volume_and_leaves_still_water_alone():
-    """guide §9.3 'fluid level slowly drops -> enable grid volume recovery'. Water whose
+    """A fluid level that slowly drops is what grid volume recovery is for. Water whose
     particles sit 25 % closer (by volume) than their J says keeps the low level forever
     without recovery; with it the level climbs back toward the true volume (here
     0.125 + 1.25 * 0.172 = 0.34). Water that was never packed keeps its level either way

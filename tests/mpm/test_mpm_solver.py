@@ -36,7 +36,7 @@ def test_p2g_conserves_mass_and_momentum():
 
 
 def test_free_fall_matches_the_exact_discrete_formula():
-    """validation.md §1: v_n = v0 + n dt g, x_n = x0 + v0 t + g t^2/2 + g t dt/2; F stays I."""
+    """Free fall is exact: v_n = v0 + n dt g, x_n = x0 + v0 t + g t^2/2 + g t dt/2; F stays I."""
     g, dt, steps = -4.9, 5e-4, 40
     p = block((0.4, 0.6, 0.4), (0.6, 0.75, 0.6), grid_n=16, v=(0.3, 0.5, 0.0))
     solver = Solver([preset("Elastic")], SolverConfig(grid_n=16, gravity=(0.0, g, 0.0)), device="cpu")
@@ -84,7 +84,7 @@ def _spin(drag, revolutions):
 
 
 def test_rigid_rotation_keeps_angular_momentum_with_apic_not_pic():
-    """validation.md §1: APIC/MLS |dL|/L0 <= 1e-3 over 10 revolutions; PIC decays."""
+    """Rigid rotation (Jiang et al. 2015): APIC/MLS |dL|/L0 <= 1e-3 over 10 revolutions; PIC decays."""
     L0, L = _spin(drag=0.0, revolutions=10)
     assert abs(L - L0) / L0 <= 1e-3
     L0, L_pic = _spin(drag=1e6, revolutions=1)  # drag*dt >= 1: C dropped, pure PIC
@@ -135,7 +135,7 @@ def test_checkpoint_restore_equals_uninterrupted_run():
 
 def test_stored_stress_is_the_stress_of_the_stored_deformation():
     """G2P stores each solid's Kirchhoff stress from its return map's SVD for the next P2G
-    (g2p.py); it must be the stress the guide's P2G would compute from the F and Jp it stored
+    (g2p.py); it must be the stress a P2G would compute from the F and Jp it stored
     (solid_tau), also where the snow clamp and the sand projection fired. Then a checkpoint
     without the stored stress (version 1) resumes to the same motion."""
     mats = [preset("Mushy"), preset("Granular"), preset("Elastic")]
@@ -152,7 +152,7 @@ def test_stored_stress_is_the_stress_of_the_stored_deformation():
     assert np.median(out["Jp"][mat == 0]) < 0.99  # the clamp fired
     stored = state.cur.tau.numpy().copy()
     ckpt = {k: v.copy() for k, v in solver.checkpoint(state, 0.0).items()}
-    solver.update_stress(state)  # the guide's way: solid_tau of the stored F and Jp, its own SVD
+    solver.update_stress(state)  # computed in P2G's way: solid_tau of the stored F and Jp, its own SVD
     recomputed = state.cur.tau.numpy()
     F, Jp = out["F"].astype(np.float64), out["Jp"].astype(np.float64)
     for i, m in enumerate(mats):  # both against the stress of the stored F and Jp in float64
@@ -216,7 +216,7 @@ def test_substeps_land_on_the_frame_and_follow_cfl():
 def test_too_large_a_step_is_rejected_and_redone_not_exploded():
     """A gravity far beyond the wave speed's scale accelerates material across more than a
     cell within one CFL-sized substep: those substeps are redone at half dt, and nothing
-    non-finite is ever committed (validation.md §5)."""
+    non-finite is ever committed."""
     solver = Solver([preset("Elastic")], SolverConfig(grid_n=16, cfl=1.0, damping=1.0, gravity=(0, -4e4, 0)),
                     device="cpu")
     state = solver.init_state(block((0.3, 0.2, 0.3), (0.6, 0.45, 0.6), grid_n=16))

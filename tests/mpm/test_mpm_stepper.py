@@ -101,7 +101,7 @@ def test_brick_p2g_deterministic_mode_replays_and_resumes_bit_identically():
     the reference's bits: close to the host loop as fast mode is, and bit-identical with
     itself, run again or resumed from a checkpoint (whatever order the particles were in
     before: a run's order is particle order). On the CPU a block parks one particle at a
-    time, so runs are single particles there; scripts/p2g_gpu.py checks replay and resume
+    time, so runs are single particles there; lab/p2g_gpu.py checks replay and resume
     with real runs on a GPU."""
     mats, make_block, cfg, _ = CASES["water+snow, deterministic"]
 

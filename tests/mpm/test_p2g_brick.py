@@ -144,7 +144,7 @@ def _frag(every, fresh_pieces, growth, fallbacks=0.0, chunk=32):
 def test_sort_cadence_balances_the_sort_against_the_wear_it_removes():
     """k = sqrt(2 S / g): the cadence whose sorts cost what the runs' wear would (S a sort in
     pieces, g the pieces gained a substep). The figures are hero_dam's and hero_castle's on an
-    H200 (scripts/cadence_fit.py), where the measured optimum was 4 and 8."""
+    H200 (lab/cadence_fit.py), where the measured optimum is 4 and 8."""
     from mpmfx.mpm.p2g_brick import SORT_PIECES_FIXED, SORT_PIECES_PER_PARTICLE, sort_cadence
     n = 3_400_000
     S = SORT_PIECES_PER_PARTICLE * n + SORT_PIECES_FIXED

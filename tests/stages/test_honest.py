@@ -1,4 +1,4 @@
-"""Issue 18: nothing stale, nothing misleading. Bad physics is said at run time, advice names
+"""Nothing stale, nothing misleading. Bad physics is said at run time, advice names
 shot keys and helps, published outputs are the current variant's."""
 from __future__ import annotations
 

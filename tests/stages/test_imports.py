@@ -1,4 +1,4 @@
-"""The seams of DESIGN.md, checked on the source: what each room may import."""
+"""The import rules of docs/architecture.md, checked on the source: what each layer may import."""
 from __future__ import annotations
 
 import ast

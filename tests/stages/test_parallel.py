@@ -1,4 +1,4 @@
-"""Issue 16: per-frame stages on a two-worker Dask LocalCluster, killed workers, and wedges."""
+"""Per-frame stages on a two-worker Dask LocalCluster, killed workers, and wedges."""
 from __future__ import annotations
 
 import os
@@ -179,9 +179,9 @@ def test_a_bad_surfacer_thread_count_is_bad_input_not_a_traceback(tiny_shot, tmp
 
 
 def test_auto_starts_workers_only_where_they_would_finish_sooner():
-    # measured on the 2-core CPU (scripts/bench_frames.py): the default shot's surface frames,
-    # 0.16 s a frame on 1.7 cores, took 3.9 s serial and ~6 s on two workers; the sixth session's
-    # heavier ones (5 s on one core) 61.8 s against 34.6; a Cycles frame already uses both cores
+    # on a 2-core CPU (lab/bench_frames.py) the default shot's light surface frames (0.16 s a frame on 1.7 cores) are
+    # slower on two workers than serial; heavy single-core frames (5 s each) are faster there;
+    # a Cycles frame already uses both cores
     assert not worth_a_cluster(22, wall=0.16, cpu=0.27, cores=2)
     assert worth_a_cluster(10, wall=5.0, cpu=5.0, cores=2)
     assert not worth_a_cluster(6, wall=5.0, cpu=10.0, cores=2)

@@ -1,4 +1,4 @@
-"""The cache contract of issue 2, on a tiny shot, end to end on the CPU."""
+"""The cache contract (docs/architecture.md, "The cache and its keys"), on a tiny shot, end to end on the CPU."""
 from __future__ import annotations
 
 import os
@@ -269,7 +269,7 @@ def test_device_cuda_without_gpu_says_what_to_do(tmp_path, capsys):
 
 
 def test_particle_debug_render_reuses_the_simulation(first_run, tmp_path, monkeypatch):
-    """The guide's debug look (9.4): switching render.mode re-runs only render."""
+    """The particle debug look: switching render.mode re-runs only render."""
     shot, cache, _ = first_run
     monkeypatch.chdir(tmp_path)
     results = mpmfx.load_shot(shot, overrides=["render.mode=particles"], cache_root=cache, quiet=True).run()

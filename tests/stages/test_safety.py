@@ -1,4 +1,4 @@
-"""Issue 18: nothing lost. Paths stay inside their roots, clean removes exactly what it lists,
+"""Nothing lost. Paths stay inside their roots, clean removes exactly what it lists,
 one run per shot at a time, and a failing writer leaves nothing under a final name."""
 from __future__ import annotations
 
@@ -185,8 +185,8 @@ def test_temp_files_of_a_killed_run_are_removed_by_the_next(tmp_path):
 
 
 def test_a_killed_simulation_resumes_from_its_last_complete_frame(tmp_path):
-    """The README's promise, with the default checkpoints: killed after frame 3 (of 8, before the
-    first checkpoint of the old every-5 default), the next run keeps frames 1-3 as they are."""
+    """The README's promise, with the default checkpoints: killed after frame 3 (of 8), the next run
+    keeps frames 1-3 as they are."""
     import signal
     import subprocess
     import sys
@@ -240,7 +240,7 @@ def test_status_reports_sizes_and_prune_keeps_the_newest_and_the_published(tmp_p
 
 
 def test_frames_are_stored_compactly_and_byte_deterministic(tmp_path):
-    """Issue 18's measured choices: deflate what shrinks much and fast (material and body
+    """The frame files' measured choices: deflate what shrinks much and fast (material and body
     indices, Jp, leaves, faces, vertices); ids and noisy floats are stored as they are (deflating
     them cost a 2.6M-particle frame 450 ms of the writer for 10 % of its size: io/frames.py)."""
     import zipfile
