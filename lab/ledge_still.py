@@ -19,7 +19,7 @@ from scipy.spatial import cKDTree
 
 from mpmfx.bench.surface_splash import load_splash, splash_params
 from mpmfx.render import import_pyvista
-from mpmfx.surface import sparse, surface_particles
+from mpmfx.surface import sharpen, surface_particles
 
 CAMERA = [(-1.2, -0.25, -0.5), (-0.45, 0.0, -0.1), (0.0, 1.0, 0.0)]
 """Camera (position, focus, up; m): outside the tank, a little under its floor, along the wall x = -0.46."""
@@ -38,14 +38,14 @@ def main() -> None:
     pv = import_pyvista()
     x, h = load_splash()
     params = splash_params(h, anisotropic=False)
-    shipped = sparse.SHARP["spread"]
+    shipped = sharpen.SHARP["spread"]
 
     def sharpened(spread: int):
-        sparse.SHARP["spread"] = spread
+        sharpen.SHARP["spread"] = spread
         try:
             return surface_particles(x, None, dataclasses.replace(params, sharp_edges=True), device=args.device).mesh
         finally:
-            sparse.SHARP["spread"] = shipped
+            sharpen.SHARP["spread"] = shipped
     meshes = [surface_particles(x, None, params, device=args.device).mesh, sharpened(0), sharpened(shipped)]
     moved = cKDTree(meshes[0].vertices).query(meshes[2].vertices)[0] / h
     plotter = pv.Plotter(shape=(2, 2), off_screen=True, window_size=(1600, 1000), border=False)

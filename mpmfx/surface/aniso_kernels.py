@@ -5,15 +5,16 @@ Yu, J. and Turk, G., "Reconstructing surfaces of particle-based fluids using ani
 kernels", ACM TOG 32(1), 2013: per particle, the principal axes of its neighbours' weighted
 covariance stretch its kernel into an ellipsoid, long along a sheet or surface and short
 across it, so a one-particle-thick sheet stays a sheet. (Their "x-bar" step, moving each
-particle towards its neighbours' mean, is left out: on random samples it made the surface
-noisier, std 0.186 -> 0.197 h at lambda 0.3, and shrank it 2-6 % in volume at lambda 0.3-0.6; README.)
+particle towards its neighbours' mean, is left out: on random samples it makes the surface
+noisier and shrinks it by a few percent in volume.)
 
-Units: grid (voxel) coordinates throughout, as in :mod:`mpmfx.surface.sparse_kernels`.
+Units: grid (voxel) coordinates throughout, as in :mod:`mpmfx.surface.voxels`.
 """
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import cell_range, column_slots, voxel_of, write_field
+from mpmfx.surface.gather import cell_range, column_slots, write_field
+from mpmfx.surface.voxels import voxel_of
 
 
 @wp.kernel
@@ -103,14 +104,14 @@ def gather_zhu_bridson_aniso(
     cov: wp.array(dtype=wp.mat33),
     offset_r: wp.array(dtype=float),
 ):
-    """:func:`mpmfx.surface.sparse_kernels.gather_zhu_bridson` with each particle's own ellipsoid:
+    """:func:`mpmfx.surface.gather.gather_zhu_bridson` with each particle's own ellipsoid:
     weight (1 - |G_p (x_p - x)|^2)^3 det(G_p) kernel_vox^3 (G_p = gmat[p], the det keeps every
     particle's weight integral that of the isotropic kernel); `reach` (voxels) bounds the
     longest ellipsoid axis. Also the neighbours' weighted covariance `cov` (voxels^2, for the
-    normal: sparse_kernels.project_on_wide_normal) and the voxel's particle radius `offset_r`
+    normal: field.project_on_wide_normal) and the voxel's particle radius `offset_r`
     (voxels): r x (1 + mean shortest axis) / 2. The centroid of kernels that are short across
-    a sheet sits nearer the voxel, so the full r made the bench's random sheet 1.9 h thick
-    instead of h; r x the mean shortest axis opened holes again (35) and erased the lattice
+    a sheet sits nearer the voxel, so the full r would make the bench's random sheet 1.9 h
+    thick instead of h, and r x the mean shortest axis would open holes and erase the lattice
     sheet; the midway value keeps both closed."""
     t = wp.tid()
     c = voxel_of(t, bcoord)

@@ -3,10 +3,10 @@
 A surfacing call on the CPU allocates and frees some 40-120 MB of Warp arrays (a few MB each
 at 100k particles: the field, its weights and offsets, the sweeps' buffers). By default glibc
 serves blocks above a (dynamic) threshold with fresh mmaps and hands a heap's free top back to
-the kernel above 128 KB, so every call faulted its pages in again: 5-16 thousand page faults,
-15-65 ms of system time a call at 100k on the 2-core VM (the faults and the kernel's zeroing of
-each page). With blocks up to 32 MB (glibc's largest mmap threshold) served from the heap and up
-to MAX_KEPT_FREE of free heap kept, the faults drop to ~10 a call: the process keeps up to that
+the kernel above 128 KB, so every call would fault its pages in again: thousands of page
+faults a call at 100k particles (the faults and the kernel's zeroing of each page). With
+blocks up to 32 MB (glibc's largest mmap threshold) served from the heap and up to
+MAX_KEPT_FREE of free heap kept, the faults drop to ~10 a call: the process keeps up to that
 much more resident memory than it uses (arrays above 32 MB, at millions of particles, are still
 mmapped and returned when freed).
 

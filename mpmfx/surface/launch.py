@@ -9,11 +9,10 @@ in any interleaving, as they are on a GPU). On a GPU the launch is one call with
 
 A split launch costs Python time that a surfacing call (70-100 split launches, 500-800 chunks)
 feels: the calling thread runs chunks itself and n - 1 pool workers take the rest from the same
-list (one wake-up and one hand-back per worker, where a future per chunk paid both for every
-chunk: a round trip to a pool thread takes ~70 us on the 2-core VM), and the kernel's arguments
-are packed once (`wp.launch(record_cmd=True)`), each chunk setting only its size and base
-(~8 us; a `wp.launch` packs every argument again: ~26-36 us). Whole calls, 100k lattices, two
-threads, alternating in one process: 10-25 % less time than a future and a `wp.launch` per chunk.
+list (one wake-up and one hand-back per worker, where a future per chunk would pay both for
+every chunk: a round trip to a pool thread takes tens of microseconds), and the kernel's
+arguments are packed once (`wp.launch(record_cmd=True)`), each chunk setting only its size and
+base (a `wp.launch` would pack every argument again).
 
 MPMFX_SURFACE_THREADS sets the CPU thread count (default: the cores this process may use, at
 most MAX_THREADS); 1 turns splitting off.
@@ -173,3 +172,28 @@ def launch_sequence(wp, steps: list, dim: int, *, device, min_split: int = MIN_S
                 f.result()
             except threading.BrokenBarrierError:
                 pass  # the thread that broke it raises its own error
+
+
+def split(wp, kernel, dim: int, inputs: list) -> None:
+    """launch_split on the device of inputs[0], with the default threshold."""
+    launch_split(wp, kernel, dim, inputs, device=inputs[0].device)
+
+
+def launch_blocks(wp, kernel, inputs: list, *, light: bool = False) -> None:
+    """Launch a CPU kernel that takes a block per thread (inputs[0]: bcoord, the active blocks),
+    split across CPU threads however few the blocks, or (light: a few hundred ns a block) from
+    LIGHT_MIN_SPLIT blocks on."""
+    launch_split(wp, kernel, inputs[0].shape[0], inputs, device=inputs[0].device, min_split=1, light=int(light))
+
+
+def launch_nonempty(wp, kernel, dim: int, inputs: list) -> None:
+    """wp.launch, nothing for dim 0."""
+    if dim:
+        wp.launch(kernel, dim, inputs=inputs)
+
+
+def scan(wp, a, *, inclusive: bool):
+    """The prefix sum of a (a new array)."""
+    out = wp.empty_like(a)
+    wp.utils.array_scan(a, out, inclusive=inclusive)
+    return out

@@ -10,9 +10,9 @@ import numpy as np
 
 PARTICLE_RADIUS_PER_SPACING = 0.6
 """Particle radius r of the surfacer in units of the particle spacing h, as the surface stage,
-the benchmark and the peers use it (one place). 0.6 h rather than half the spacing: the
-shipped setting since the first shots; with kernel_radius 3.7 it keeps thin one-layer parts
-closed (the README's surfacing table is measured at this radius)."""
+the benchmark and the peers use it (one place). 0.6 h rather than half the spacing: with
+kernel_radius 3.7 it keeps thin one-layer parts closed (docs/benchmarks.md's surfacing
+figures are taken at this radius)."""
 
 
 def kernel_volume(radius: float) -> float:
@@ -38,58 +38,53 @@ class SurfaceParams:
         (0.6) x the particle spacing.
     radius_scale: artist multiplier on r (grows / shrinks the surface; the kernel support stays).
     voxel_size: level-set voxel edge; None -> 0.5 * particle_radius (independent of the sim dx).
-        voxel_size = particle_radius with smooth_iters = 4 is the benchmark's "fast" (README).
+        voxel_size = particle_radius with smooth_iters = 4 is the benchmark's "fast".
         The default, 2, keeps a lone particle's drop at 0.68 r (unsmoothed 1.0 r) wherever it sits;
         at 3 or 4 steps it survives only near a voxel corner (3 of 20 random places; 0.47 r there),
         and at voxel_size = r not even at 1 step: spray of single particles goes.
-    smooth_iters: steps of the level set's mean-curvature flow (sparse._smooth: each spreads the
+    smooth_iters: steps of the level set's mean-curvature flow (mpmfx.surface.smooth: each spreads the
         surface's noise along it as a [1 2 1]/4 blur pass would, without eroding a thin sheet),
         after it is made a signed distance over the band; together they move the surface at most
         0.5 particle_radius inward (so a drop or a filament is not shrunk away), and an edge no
         further than twice the noise of its samples (a lattice's edges stay sharp, random
-        samples' are smoothed as before: mpmfx.surface.edge_kernels). The surface
-        stage runs 8 at voxel_size = r / 2 (README: random samples 0.14 -> 0.09-0.12 h mean error;
-        more steps shrink small curved bodies: a 20k random sphere loses 1.3 % of its volume at
-        8, 1.9 % at 12).
+        samples' are smoothed: mpmfx.surface.edges). The surface stage runs 8 at
+        voxel_size = r / 2; more steps shrink small curved bodies (a 20k random sphere loses
+        1.3 % of its volume at 8, 1.9 % at 12).
     dilate: offset of the surface before smoothing, outward (+) or inward (-).
     close_voids: radius of a ball rolled over the outside of the surface before smoothing (m;
         0 = off): the dents it cannot enter fill (a morphological closing), as the voids of
         random samples do, without rounding convex edges. About one particle spacing
-        (particle_radius / 0.6) measured best on random samples (docs/surfacing-log.md,
-        "Closing the sample voids"). Only fills deeper than 0.06 of the radius are kept
-        (sparse.CLOSE_GATE): on the grid the closing shifts a flat face a little, and a
+        (particle_radius / 0.6) works best on random samples. Only fills deeper than 0.06 of
+        the radius are kept (close.CLOSE_GATE): on the grid the closing shifts a flat face a little, and a
         lattice's faces stay where they were.
     min_feature_particles: connected blobs holding fewer particles than this are removed.
     band_voxels: narrow-band half width in voxels; the level set is clipped to +-band*voxel.
     kernel_radius: Zhu-Bridson kernel support R in units of particle_radius. With the
         (1 - s^2)^3 kernel the weighted centroid of a half-space ball sits 0.246 R deep, so
         R = 4.06 r puts the zero level on a flat boundary of a continuum; on discrete layers
-        3.7 measured best (box faces within 0.02 h, sphere volume +0.3 %, r = 0.5 h); at the
-        shipped r = 0.6 h, 4.2 and 4.6 shrink random samples by 2-4 % volume (30k, CPU), so 3.7 stays.
+        3.7 fits best (box faces within 0.02 h, sphere volume +0.3 %, r = 0.5 h); at
+        r = 0.6 h, 4.2 and 4.6 shrink random samples by 2-4 % volume.
     normal_radius: the normal that xbar is projected on comes from a kernel this many times
         wider than kernel_radius (the weight field blurred to that width; 1 = the kernel's own
         gradient). On random samples the kernel's own normal and xbar share their errors and the
-        surface sat ~0.1 h inside (-2 % volume); 3 leaves -0.6 % and lattices unchanged (30k
-        particles, r = 0.6 h; README).
+        surface sits ~0.1 h inside (-2 % volume); 3 leaves -0.6 % and lattices unchanged (30k
+        particles, r = 0.6 h).
     anisotropic: Yu & Turk (2013) anisotropic kernels: each particle's kernel is stretched
         along the principal axes of its neighbours (long along a sheet or surface, short across
         it), so one-particle-thick sheets of water stay sheets instead of beading into holes.
         Particles with fewer than ANISO_MIN_NEIGHBOURS neighbours (spray) stay round. Costs a
-        particle pass and a wider gather (README: thin-sheet case).
+        particle pass and a wider gather.
     sharp_edges: give convex edges and corners back the sharpness a random sample loses
-        there (sparse._sharpen: where the edge gate is open, the field takes the intersection of
+        there (mpmfx.surface.sharpen: where the edge gate is open, the field takes the intersection of
         the faces' planes, fitted where the surface is flat a few spacings away; outward only,
         at most 1.5 spacings; not where the body is thinner than 2.5 spacings; each cell as far
         as the decisions of the cells around it agree). Shots turn it on for every surface group
         without a fluid in it (config.Surface.sharp_edges = "auto"); off here, as the smallest
-        call. Round bodies and sheets
-        come out as they were (a tube 5 spacings across, blobs of 300 particles: not a vertex
-        moves; random spheres and tori: at most 0.07 % of the vertices, by at most 0.01 h). A
-        moving body's vertices jitter a little more (the gliding 20k block: p99 0.040 -> 0.047 h
-        off the previous frame), its rendered pictures no more (0.86-0.91 -> 0.85-0.89 levels a
-        frame; a 3000-particle block 1.32-1.45 -> 1.47-1.58).
-        Random box, 100k, 12 samples: vertex mean 0.115-0.122 -> 0.101-0.107 h, max 0.78-1.23 ->
-        0.53-0.83 h (docs/surfacing-log.md, twenty-third to twenty-fifth steps).
+        call. Round bodies and sheets come out as they are without it (a tube 5 spacings
+        across, blobs of 300 particles: not a vertex moves; random spheres and tori: at most
+        0.07 % of the vertices, by at most 0.01 h). A moving body's vertices jitter a little
+        more, its rendered pictures no more (mpmfx.bench.surface_flicker). On a 100k random box
+        the vertices' mean error drops by about a tenth and the largest by about a third.
     dense_output: also return the level set (and velocity, density) as dense
         arrays over the band's bounding box; False returns only `SurfaceResult.sparse` (the
         dense arrays are then empty) -- what to use at millions of particles.

@@ -25,9 +25,9 @@ def surface_particles(
     Returns a :class:`SurfaceResult` (its `stats` hold the stage timings); n = 0 gives an
     empty level set and mesh.
     """
-    import warp as wp
+    import warp as wp  # backend: warp (imported on the first call, not with mpmfx.surface)
 
-    from mpmfx.surface.sparse import surface_sparse
+    from mpmfx.surface.sparse import surface_sparse  # backend: warp (imported on the first call, not with mpmfx.surface)
 
     wp.init()
     on_device = isinstance(x, wp.array)
@@ -35,7 +35,7 @@ def surface_particles(
     if x.shape[0] == 0:
         return empty_result(params, with_v=v is not None)
     with wp.ScopedDevice(x.device if on_device else wp.get_device(device)):
-        return surface_sparse(wp, x, v, params)
+        return surface_sparse(x, v, params)
 
 
 def check_inputs(x: np.ndarray, v: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:

@@ -11,9 +11,9 @@ LABEL_NONE = wp.constant(-1)  # voxel outside the region being labelled
 LABEL_BIG = wp.constant(2147483647)  # region voxel not (yet) reached by any seed
 
 # The flood fill's line sweep is the product's (the same kernel over any 3-D label grid, the same labels).
-from mpmfx.surface.sparse_kernels import sweep_block_labels as sweep_labels  # noqa: E402,F401
+from mpmfx.surface.classify import sweep_block_labels as sweep_labels  # noqa: E402,F401
 # ... and the smoothing's arithmetic (the dense grid reads its neighbours its own way)
-from mpmfx.surface.sparse_kernels import flow_step, flow_taper  # noqa: E402
+from mpmfx.surface.smooth import flow_step, flow_taper  # noqa: E402
 
 
 @wp.func
@@ -143,7 +143,7 @@ def axis_offset(axis: int, s: int):
 
 @wp.kernel
 def curvature_flow(src: wp.array3d(dtype=float), dt: float, band: float, dst: wp.array3d(dtype=float)):
-    """mpmfx.surface.sparse_kernels.curvature_flow on the dense grid (edge values repeated)."""
+    """mpmfx.surface.smooth.curvature_flow on the dense grid (edge values repeated)."""
     i, j, k = wp.tid()
     p0 = src[i, j, k]
     taper = flow_taper(p0, band)

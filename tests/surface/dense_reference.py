@@ -32,7 +32,9 @@ import numpy as np
 
 from mpmfx.surface.params import LevelSet, SurfaceMesh, SurfaceParams, SurfaceResult, kernel_volume
 from mpmfx.surface.reconstruct import check_inputs
-from mpmfx.surface.sparse import FLOW_BAND, FLOW_DT, NORMAL_STEP, SMOOTH_LIMIT, smooth_reach
+from mpmfx.surface.grid import NORMAL_STEP, smooth_reach
+from mpmfx.surface.smooth import FLOW_BAND, FLOW_DT
+from mpmfx.surface.sparse import SMOOTH_LIMIT
 
 log = logging.getLogger(__name__)
 
@@ -81,7 +83,7 @@ def surface_dense(
         distance = wp.array(_redistance(distance.numpy(), wide), dtype=float)
         phi = _smooth(wp, K, wp.clone(distance), params.smooth_iters)
         if params.smooth_iters > 0:  # at most SMOOTH_LIMIT r inward, as the sparse surfacer on bodies without edges (its
-            # edges' limit, mpmfx.surface.edge_kernels, is not modelled here: the cases compared have none)
+            # edges' limit, mpmfx.surface.edges, is not modelled here: the cases compared have none)
             phi = wp.array(np.minimum(phi.numpy(), distance.numpy() + SMOOTH_LIMIT * grid.r_vox), dtype=float)
         timings["smooth"] = _lap(wp, t0)
         if params.smooth_iters > 0:
@@ -125,7 +127,7 @@ class _Grid:
         if spheres:
             support = r_vox + params.band_voxels + 1.0
         reach = max(support, r_vox + max(params.dilate, 0.0) / voxel + params.band_voxels)
-        # + the smoothing's reach (sparse.smooth_reach); +2 keeps an outside ring
+        # + the smoothing's reach (grid.smooth_reach); +2 keeps an outside ring
         pad = int(math.ceil(reach)) + smooth_reach(params) + 2
         lo = np.floor(x.min(axis=0).astype(np.float64) / voxel).astype(np.int64) - pad
         hi = np.ceil(x.max(axis=0).astype(np.float64) / voxel).astype(np.int64) + pad
@@ -201,7 +203,7 @@ def _fill_bubbles(wp, K, phi, *, inside_value: float) -> None:
 
 
 def _redistance(d: np.ndarray, clip: float) -> np.ndarray:
-    """numpy version of the sparse surfacer's redistancing (mpmfx.surface.redistance_kernels):
+    """numpy version of the sparse surfacer's redistancing (mpmfx.surface.redistance):
     voxels next to a sign change keep |d| capped at the axis-interpolated distance to it, the
     rest of the band follows from Jacobi sweeps of |grad d| = 1; values in voxels, +-clip."""
     pos = d > 0

@@ -1,6 +1,6 @@
-"""The CPU path (mpmfx.surface.line_kernels and its siblings: a block per thread, the topology
-fills on bit words, launches split across CPU threads) surfaces exactly as the voxel kernels a
-GPU runs: same mesh, same leaves (compacted as on a GPU: sparse_output.sparse_output)."""
+"""The CPU variant of each pass (mpmfx.surface.variants.BY_BLOCK: a block per thread, the
+topology fills on bit words, launches split across CPU threads) surfaces exactly as the GPU
+variant (BY_VOXEL): same mesh, same leaves (compacted as on a GPU: output.leaves_by_voxel)."""
 
 import numpy as np
 import pytest
@@ -28,13 +28,13 @@ def splash(count: int) -> tuple[np.ndarray, float]:
 
 
 # the box holds INSIDE tiles (the bodies' fill, tile neighbours in every stencil), the torus none;
-# close_voids runs one more redistance (sparse._close_voids); the splash's sheet and drops go
-# through the component labels of sparse._remove_small
+# close_voids runs one more redistance (close.close_voids); the splash's sheet and drops go
+# through the component labels of components.remove_small
 @pytest.mark.parametrize("shape, count, voxel_h, iters, close", [("torus", 6000, 0.6, 2, 0.0), ("torus", 6000, 0.5, 5, 0.0),
                                                                  ("box", 8000, 0.5, 5, 0.0), ("torus", 6000, 0.6, 2, 1.0),
                                                                  ("splash", 6000, 0.5, 5, 0.0)])
 def test_cpu_line_kernels_and_threads_give_the_voxel_kernels_surface(monkeypatch, shape, count, voxel_h, iters, close):
-    import mpmfx.surface.sparse as sparse
+    from mpmfx.surface import field, variants
 
     x, h = splash(count) if shape == "splash" else sample_shape(shape, count, "random")
     v = np.random.default_rng(1).normal(size=x.shape).astype(np.float32)
@@ -43,9 +43,9 @@ def test_cpu_line_kernels_and_threads_give_the_voxel_kernels_surface(monkeypatch
     monkeypatch.setenv("MPMFX_SURFACE_THREADS", "3")  # more chunks than cores: any split must agree
     monkeypatch.setattr("mpmfx.surface.launch.MIN_SPLIT", 64)
     monkeypatch.setattr("mpmfx.surface.launch.LIGHT_MIN_SPLIT", 8)
-    monkeypatch.setattr(sparse, "BLUR_MIN_SPLIT", 8)  # the weight blur's passes behind a barrier (launch_sequence)
+    monkeypatch.setattr(field, "BLUR_MIN_SPLIT", 8)  # the weight blur's passes behind a barrier (launch_sequence)
     lines = surface_particles(x, v, params, device="cpu")
-    monkeypatch.setattr(sparse, "LINE_KERNELS_ON_CPU", False)
+    monkeypatch.setattr(variants, "LINE_KERNELS_ON_CPU", False)
     monkeypatch.setenv("MPMFX_SURFACE_THREADS", "1")
     voxels = surface_particles(x, v, params, device="cpu")
     assert len(lines.mesh.faces) > 1000
@@ -69,30 +69,29 @@ def test_a_bad_thread_count_names_the_variable(monkeypatch):
 @pytest.mark.parametrize("sampling", ["lattice", "random"])
 @pytest.mark.parametrize("voxel_h, iters", [(0.6, 2), (0.5, 5)])
 def test_cpu_near_blocks_are_mark_near_blocks(monkeypatch, sampling, voxel_h, iters):
-    """near_blocks_cpu (a block of particles per thread, most blocks decided from the block's
-    span) marks exactly the blocks sparse_kernels.mark_near_blocks marks, lattice planes on
-    block faces included."""
+    """classify.near_blocks_by_block (a block of particles per thread, most blocks decided from
+    the block's span) marks exactly the blocks near_blocks_by_voxel (mark_near_blocks) marks,
+    lattice planes on block faces included."""
     import warp as wp
 
-    import mpmfx.surface.sparse as sparse
-    from mpmfx.surface import near_blocks_cpu as N
-    from mpmfx.surface import sparse_kernels as S
+    from mpmfx.surface import binning, classify
+    from mpmfx.surface.grid import SparseGrid
 
     monkeypatch.setenv("MPMFX_SURFACE_THREADS", "3")
     monkeypatch.setattr("mpmfx.surface.launch.MIN_SPLIT", 64)
     x, h = sample_shape("torus", 6000, sampling)
     params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel_h * h, smooth_iters=iters, dense_output=False)
     xd = wp.array(x, dtype=wp.vec3, device="cpu")
-    grid = sparse.SparseGrid(*sparse.particle_bounds(wp, S, xd), params)
-    g = wp.empty(xd.shape[0], dtype=wp.vec3, device="cpu")
-    wp.launch(S.to_grid, xd.shape[0], inputs=[xd, wp.vec3(*grid.origin.astype(np.float32)), 1.0 / grid.voxel, g], device="cpu")
-    _, cells, starts, order = sparse._bin_particles(wp, S, g, grid)
-    want = wp.zeros(grid.nblocks, dtype=wp.int32, device="cpu")
-    wp.launch(S.mark_near_blocks, g.shape[0], inputs=[g, grid.reach_vox, want, 0], device="cpu")
-    got = wp.zeros(grid.nblocks, dtype=wp.int32, device="cpu")
+    with wp.ScopedDevice("cpu"):
+        grid = SparseGrid(*binning.particle_bounds(xd), params)
+        g = binning.grid_positions(xd, grid)
+        _, cells, starts, order = binning.bin_particles_by_block(g, grid)
+        gs = binning.sorted_positions(g, order)
+        want = wp.zeros(grid.nblocks, dtype=wp.int32)
+        wp.launch(classify.mark_near_blocks, g.shape[0], inputs=[g, grid.reach_vox, want, 0])
+        got = wp.zeros(grid.nblocks, dtype=wp.int32)
+        classify.near_blocks_by_block(gs, cells, starts, grid, got)
     nb = int(np.prod(grid.nblocks))
-    sparse._split(wp, N.mark_near_certain, nb, [cells, grid.reach_vox, got])
-    sparse._split(wp, N.mark_near_tested, nb, [cells, starts, sparse._sorted_positions(wp, S, g, order), grid.reach_vox, got])
     assert 0 < want.numpy().sum() < nb
     np.testing.assert_array_equal(got.numpy(), want.numpy())
 

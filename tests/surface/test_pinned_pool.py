@@ -1,4 +1,4 @@
-"""The download's pool of page-locked buffers (sparse_output.PinnedPool) lends a buffer to one
+"""The download's pool of page-locked buffers (pinned.PinnedPool) lends a buffer to one
 result's arrays and reuses it only once they and every view of them are gone: a frame's mesh
 must never change under a caller still holding it. Page-locked memory needs CUDA; here the
 pool allocates ordinary host memory, the bookkeeping is the same."""
@@ -8,7 +8,7 @@ import gc
 import numpy as np
 import warp as wp
 
-from mpmfx.surface.sparse_output import PinnedPool
+from mpmfx.surface.pinned import PinnedPool
 
 
 class HostPool(PinnedPool):

@@ -54,8 +54,8 @@ def test_thin_random_sheet_stays_nearly_whole_at_the_shot_setting():
 
 def test_smoothing_does_not_thin_a_flat_sheet():
     # one lattice layer at "fine": thirty smoothing steps move its faces by 0.03 h (thickness
-    # +0.166 -> +0.136 h); thirty passes of the blur that smoothed before took it to -0.133 h,
-    # held only by the inward limit
+    # +0.166 h unsmoothed, +0.136 h smoothed); thirty passes of a [1 2 1]/4 blur instead of the
+    # flow would take it to -0.133 h, held only by the inward limit
     unsmoothed = measure_sheet(3000, "lattice", label="round", device="cpu", smooth_iters=0)  # sharp edges need smoothing
     smoothed = measure_sheet(3000, "lattice", label="fine", device="cpu", smooth_iters=30)
     assert smoothed["holes"] == 0 and smoothed["components"] == 1
@@ -71,8 +71,8 @@ def test_anisotropic_must_be_a_bool():
 def test_a_random_box_face_lands_on_the_face_wherever_it_cuts_its_block(fill):
     # the shot setting, 20k uniformly random particles in the bench's box, shifted along x so
     # that the +x face cuts its 8^3-voxel block `fill` voxels from the block's inner side. An
-    # INSIDE tile 1-3 voxels under the face used to push patches of it a voxel (0.5 h) outward
-    # (measured +0.18 h at fill 1.5 against +0.04 h at fill 6; now +0.04 h at both)
+    # INSIDE tile 1-3 voxels under the face would push patches of it a voxel (0.5 h) outward
+    # (grid.dense_rule keeps INSIDE tiles deeper: +0.04 h at both fills)
     x, h = sample_shape("box", 20_000, "random")
     setting = dict(OURS["fine"])
     voxel = setting.pop("voxel_h") * h
@@ -90,9 +90,9 @@ def test_a_random_box_face_lands_on_the_face_wherever_it_cuts_its_block(fill):
 
 def test_closing_the_voids_brings_random_surfaces_closer_without_growing_them():
     # SurfaceParams.close_voids = one spacing, "fast", 20k random sphere: a ball rolled over the
-    # outside fills the dents of sample voids before the blur (docs/surfacing-log.md, "Closing the sample voids");
-    # measured 0.126 -> 0.117 h mean, 0.78 -> 0.59 h max, volume -0.6 -> -0.4 % (ungated: 0.109 h,
-    # 0.57 h, -0.5 %; sparse._close_voids)
+    # outside fills the dents of sample voids before the smoothing (close.close_voids); without /
+    # with it: 0.126 / 0.117 h mean, 0.78 / 0.59 h max, volume -0.6 / -0.4 % (ungated: 0.109 h,
+    # 0.57 h, -0.5 %)
     x, h = sample_shape("sphere", 20_000, "random")
     setting = dict(OURS["fast"])
     voxel = setting.pop("voxel_h") * h
@@ -117,10 +117,10 @@ def test_close_voids_must_be_a_non_negative_length():
 
 @pytest.mark.parametrize("label", ["fast", "fine"])
 def test_closing_the_voids_leaves_a_lattice_box_where_it_is(label):
-    # a flat lattice face has no void to fill; ungated, the closing moved the 20k lattice box's
-    # faces out and eroded its edges (mean error "fast" 0.029 -> 0.041 h, "fine" 0.056 -> 0.073 h);
-    # only fills deeper than
-    # sparse.CLOSE_GATE x the radius are kept, so the mesh is the one without the closing
+    # a flat lattice face has no void to fill; ungated, the closing would move the 20k lattice
+    # box's faces out and erode its edges (mean error "fast" 0.029 / 0.041 h, "fine" 0.056 /
+    # 0.073 h without / with it); only fills deeper than close.CLOSE_GATE x the radius are kept,
+    # so the mesh is the one without the closing
     x, h = sample_shape("box", 20_000, "lattice")
     setting = dict(OURS[label])
     voxel = setting.pop("voxel_h") * h
@@ -136,10 +136,10 @@ def test_closing_the_voids_leaves_a_lattice_box_where_it_is(label):
 @pytest.mark.parametrize("label", ["fast", "fine"])
 def test_a_lattice_box_face_stays_on_the_face_through_the_blur(label):
     # 20k lattice box: the faces away from the edges, signed height in h. The distance the blur
-    # starts from had a kink at the zero crossing (the raw field's slope across it is 0.97 on a
-    # flat lattice face), and each of the five "fine" passes moved the face out across it:
-    # measured +0.0148 h "fine" (+0.0030 "fast"); now that the crossing voxels start at their
-    # distance to the plane through the crossings, +0.0049 / +0.0030 h
+    # starts from would have a kink at the zero crossing (the raw field's slope across it is 0.97
+    # on a flat lattice face), and each of the five "fine" passes would move the face out across
+    # it (+0.0148 h "fine", +0.0030 "fast"); with the crossing voxels started at their distance
+    # to the plane through the crossings, +0.0049 / +0.0030 h
     x, h = sample_shape("box", 20_000, "lattice")
     setting = dict(OURS[label])
     voxel = setting.pop("voxel_h") * h
@@ -152,9 +152,9 @@ def test_a_lattice_box_face_stays_on_the_face_through_the_blur(label):
 
 
 def test_a_moving_random_sample_gives_every_vertex_its_velocity_with_the_voids_closed():
-    # the closing fills sample voids where few particles reach; a vertex there used to read the
-    # voxels no particle reaches as velocity 0 (3000 random particles moving at 1 m/s: down to
-    # 0.68 m/s at 6 vertices)
+    # the closing fills sample voids where few particles reach; a vertex there must not read the
+    # voxels no particle reaches as velocity 0 (3000 random particles moving at 1 m/s would show
+    # 0.68 m/s at some vertices)
     x, h = sample_shape("torus", 3000, "random")
     v = np.tile(np.float32([[0.0, 1.0, 0.0]]), (len(x), 1))
     res = surface_particles(x, v, SurfaceParams(0.5 * h, dense_output=False, close_voids=h), device="cpu")

@@ -1,6 +1,7 @@
-"""Sharp edges (SurfaceParams.sharp_edges, mpmfx.surface.sharp_kernels): a random sample thins at
-a body's edges and corners, and the surface used to come out rounded and dented there; now the
-faces' planes meet again, while round bodies and thin sheets come out as before."""
+"""Sharp edges (SurfaceParams.sharp_edges, mpmfx.surface.sharpen): a random sample thins at
+a body's edges and corners, and without sharp edges the surface comes out rounded and dented
+there; with them the faces' planes meet again, while round bodies and thin sheets come out as
+without."""
 
 import numpy as np
 import pytest
@@ -84,15 +85,15 @@ def test_the_sharpening_fades_along_an_edge_instead_of_stepping(monkeypatch):
     from scipy.spatial import cKDTree
 
     from mpmfx.bench.surface_splash import load_splash, splash_params
-    from mpmfx.surface import sparse
+    from mpmfx.surface import sharpen
 
     x, h = load_splash()
     params = splash_params(h, anisotropic=False)
-    shipped = sparse.SHARP["spread"]
+    shipped = sharpen.SHARP["spread"]
     round_mesh = surface_particles(x, None, params, device="cpu").mesh
 
     def largest_step(spread: int) -> float:
-        monkeypatch.setitem(sparse.SHARP, "spread", spread)
+        monkeypatch.setitem(sharpen.SHARP, "spread", spread)
         v = surface_particles(x, None, dataclasses.replace(params, sharp_edges=True), device="cpu").mesh.vertices
         moved = cKDTree(round_mesh.vertices).query(v)[0] / h
         edge = (np.abs(v[:, 1] - v[:, 1].min()) < 2 * h) & (np.abs(v[:, 0] - v[:, 0].min()) < 2 * h)

@@ -81,7 +81,7 @@ def test_a_shell_of_drops_leaves_its_middle_open():
 
 def test_a_hollow_shells_cavity_is_filled_without_surfacing_its_volume():
     # a lattice shell 0.27-0.30 m: its cavity's blocks, which no particle reaches, are sealed
-    # air, filled as a bubble (sparse._settle_voids). Only the cavity's shell of blocks is
+    # air, filled as a bubble (classify.settle_voids). Only the cavity's shell of blocks is
     # surfaced, not its volume: the solid ball's active blocks and a layer more (1.19x; the
     # whole cavity active, 1.41x; at 0.28-0.30 m of a 200k ball, 1.8x the call)
     x, h = sample_shape("sphere", 60000, "lattice")
@@ -103,14 +103,14 @@ def test_the_active_blocks_hold_what_is_read_around_the_raw_surface(monkeypatch)
     import mpmfx.surface.sparse as sparse
 
     raw = {}
-    field = sparse._field
+    field = sparse.field
 
-    def keep(wp, S, bcoord, bmap, *args):
-        out = field(wp, S, bcoord, bmap, *args)
+    def keep(passes, bcoord, bmap, *args):
+        out = field(passes, bcoord, bmap, *args)
         raw.update(phi=out[0].numpy(), bcoord=bcoord.numpy(), bmap=bmap.numpy())
         return out
 
-    monkeypatch.setattr(sparse, "_field", keep)
+    monkeypatch.setattr(sparse, "field", keep)
     rng = np.random.default_rng(4)
     spray = (rng.normal(size=(2000, 3)) * 0.08).astype(np.float32), 0.01
     for x, h in (spray, sample_shape("box", 8000, "random")):
@@ -201,9 +201,9 @@ def test_no_bubble_sealed_along_an_inside_tile():
 
 def test_a_lattice_block_keeps_its_edges_at_both_settings():
     # a freshly voxelised block (20k lattice particles): the smoothing moves an edge inward only as
-    # far as the samples' noise there, ~0 on a lattice. Measured: vertices within 1 h of an edge
-    # 0.39-0.40 h inside before the limit, 0.06 / 0.07 h ("fast" / "fine") with it; surface error
-    # 0.040 / 0.047 -> 0.021 / 0.026 h
+    # far as the samples' noise there, ~0 on a lattice. Vertices within 1 h of an edge lie
+    # 0.39-0.40 h inside without the edge limit, 0.06 / 0.07 h ("fast" / "fine") with it; surface
+    # error 0.040 / 0.047 h without, 0.021 / 0.026 h with it
     x, h = sample_shape("box", 20000, "lattice")
     sdf, _, _ = shape_sdf("box")
     for label, setting in OURS.items():
@@ -221,12 +221,12 @@ def test_a_lattice_block_keeps_its_edges_at_both_settings():
 def test_random_samples_edges_are_smoothed_as_without_the_edge_limit(monkeypatch):
     # random samples are noisy at every edge (the centroid wanders ~0.2 h along it), so twice the
     # noise exceeds the 0.5 r limit and their surface is the one the flow gives with the 0.5 r limit alone
-    from mpmfx.surface import sparse
+    from mpmfx.surface import edges
 
     x, h = sample_shape("box", 20000, "random")
     params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=0.5 * h, smooth_iters=8, dense_output=False)
     kept = surface_particles(x, None, params, device=DEVICE).mesh
-    monkeypatch.setattr(sparse, "EDGE_NOISE", 1e30)  # an edge may move as far as anything else: 0.5 r
+    monkeypatch.setattr(edges, "EDGE_NOISE", 1e30)  # an edge may move as far as anything else: 0.5 r
     plain = surface_particles(x, None, params, device=DEVICE).mesh
     assert np.array_equal(kept.faces, plain.faces)
     assert np.abs(kept.vertices - plain.vertices).max() < 1e-3 * h
@@ -236,9 +236,9 @@ def test_the_flow_fills_pits_along_a_random_edge_instead_of_rounding_the_edge(mo
     # a sample void in an edge leaves a pit that the flow would deepen by rounding the whole edge
     # into it (the random box's worst vertices: 10M "fine" 1.037 h); where the edge gate is open
     # and the edge is pitted along its length, the across-edge rounding stops there
-    # (sparse_kernels.edge_flow_step). Measured, 20k random box, vertices within 1.5 h of an edge:
-    # max 0.974 -> 0.805 h, p99 0.758 -> 0.709 h, signed mean -0.196 -> -0.174 h
-    from mpmfx.surface import sparse
+    # (smooth.edge_flow_step). 20k random box, vertices within 1.5 h of an edge, without / with
+    # the stop: max 0.974 / 0.805 h, p99 0.758 / 0.709 h, signed mean -0.196 / -0.174 h
+    from mpmfx.surface import smooth
 
     x, h = sample_shape("box", 20000, "random", seed=1)
     sdf, _, _ = shape_sdf("box")
@@ -250,7 +250,7 @@ def test_the_flow_fills_pits_along_a_random_edge_instead_of_rounding_the_edge(mo
         return np.abs(e).max(), np.quantile(np.abs(e), 0.99), e.mean()
 
     worst, p99, signed = edge_errors()
-    monkeypatch.setattr(sparse, "EDGE_PIT", 1e30)  # the across-edge rounding never stops
+    monkeypatch.setattr(smooth, "EDGE_PIT", 1e30)  # the across-edge rounding never stops
     worst_off, p99_off, signed_off = edge_errors()
     assert worst < worst_off - 0.1, (worst, worst_off)
     assert p99 < p99_off - 0.03, (p99, p99_off)

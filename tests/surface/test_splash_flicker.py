@@ -87,8 +87,8 @@ def test_a_slowly_moving_block_does_not_flicker_at_the_shot_setting_with_round_e
     # setting itself: tests/surface/test_sharp_edges.py). The voxels next to the zero crossing
     # start the redistancing at their distance to the plane through the crossings, with the
     # other axes' zero levels extrapolated so that the start does not jump when a crossing
-    # appears on another axis between frames. Measured p99 of the vertices' distance to the
-    # previous surface 0.077 h before the plane start, 0.052 h with it ("fast" 0.074 -> 0.049).
+    # appears on another axis between frames. p99 of the vertices' distance to the previous
+    # surface: 0.077 h without the plane start, 0.052 h with it ("fast" 0.074 / 0.049).
     # Smoothing more turns the moving box's rounded edges more between frames: p99 normal turn
     # 4.3 / 5.4 degrees at 5 / 8 steps of the curvature flow (the stage's 8), 4.7 / 7.2 with 5 /
     # 8 passes of the blur it replaced; p99 distance 0.049 / 0.055 h

@@ -1,4 +1,5 @@
-"""Warp kernels that give a smoothed level set back its sharp convex edges and corners (sparse._sharpen).
+"""Sharpening pass (SurfaceParams.sharp_edges): a smoothed level set given back its sharp convex
+edges and corners (the same kernels on every device).
 
 A random sample thins where a body's faces meet (a quarter or an eighth of a ball of neighbours),
 so the field rounds and dents an edge, and the flow rounds it further: on the 100k random box,
@@ -9,7 +10,7 @@ fitted on the smoothed field and the field is set to the planes' intersection (t
 their signed distances, a convex wedge or corner, rounded within 2 voxels of the crest) before
 marching cubes, which then needs no change.
 
-Only where the edge gate is open (edge_kernels.edge_gate: the blurred weights curve like an
+Only where the edge gate is open (edges.edge_gate: the blurred weights curve like an
 edge), only outward (material is added at a convex crest, never removed), and only where the
 planes found around a cell support each other (every plane's points lie under the others'), at
 least two (three at a corner) and not back to back (a sheet's rim). Planes come from pairs of
@@ -23,7 +24,7 @@ shorter spans (4 spacings, 1 to the sides) found "faces" around such a tube and 
 its vertices by up to 1.2 h. Each cell decides (decide_cells), then sharpens as far as the
 decisions around it agree (sharpen_cells, sharpen_weight): a narrow face's votes come and go
 along its edge, and all-or-nothing cells left ledges there. Lengths are voxels; a cell is 2^3
-voxels (sparse_kernels.gate_cell), voxel (i, j, k)'s value sits at the point (i, j, k).
+voxels (voxels.gate_cell), voxel (i, j, k)'s value sits at the point (i, j, k).
 
 On a moving body marching cubes cuts a sharp crest differently as it crosses voxel planes (the
 crest is rounded within 2 voxels: unrounded, the gliding block's edges' shading turned 52 degrees
@@ -32,9 +33,32 @@ each plane's normal is a mean over many directions' normals (DIRECTIONS), and th
 blended by the gates interpolated to each voxel (gate_at). Rendered, the gliding 20k block then
 changes as little from frame to frame as without sharp edges (mpmfx.bench.surface_flicker)."""
 
+import math
+
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, gate_cell, get, slot
+from mpmfx.surface.launch import launch_split, scan, split
+from mpmfx.surface.voxels import BS, BV, gate_cell, get, slot
+
+SHARP = {  # sharpen()'s settings; lengths in particle spacings h unless said
+    "band": 3.0,  # voxels: cells whose centre lies this near the zero level
+    "thin": 2.5,  # and where the body is thicker than this (a sheet is its faces back to back)
+    "near": 2.5, "far": 5.5,  # a direction's two points: near out from the cell, then on along the surface to far
+    "width": 1.5,  # the points to each side whose normals must agree too
+    "cos_flat": math.cos(math.radians(12.0)),  # normals that agree
+    "plane_tol": 0.5,  # each point this near the other's tangent plane
+    "cos_same": math.cos(math.radians(15.0)),  # planes closer than this are one
+    "votes": 3.0,  # directions that must find a plane (of DIRECTIONS, 16; at 2, a spot of a 20k random torus passed)
+    "support": 0.3,  # voxels: a plane's points this far over another's at most (convex)
+    "cos_apart": math.cos(math.radians(65.0)),  # at least two planes this far apart (an edge, not a face)
+    "cos_open": math.cos(math.radians(120.0)),  # and none further (faces back to back: a sheet's rim)
+    "limit": 1.5,  # the most the field moves outward
+    "rounding": 2.0,  # voxels: the crest's radius (0 flickered twice as much on a moving box, 3 gave back a third of the gain)
+    # cells on each side whose decisions weigh a cell's sharpening (sharpen_weight): at
+    # 0 each cell sharpened all or nothing, and where a narrow face's votes hovered about `votes`
+    # along an edge it stopped and started in ledges up to 1.3 h high (water_dam's splash frame)
+    "spread": 2,
+}
 
 # directions around a cell's normal that look for a face: each face's normal is a mean over the
 # directions that found it, and at 8 it turned enough from frame to frame to move a crest 5-10
@@ -478,3 +502,36 @@ def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.in
         f = phi[t]
         target = wp.max(wp.min(f, fs), f - limit)
         phi[t] = f + weight * g * (target - f)
+
+
+def sharpen(bcoord, bmap, phi, tiles, gate, sample, h: float) -> None:
+    """Convex edges and corners of the smoothed field `phi` made sharp again, in place
+    (SHARP's settings; gate, sample: mpmfx.surface.edges'; h: the particle
+    spacing in voxels). The cells whose edge gate is open and that lie near the zero level are
+    numbered (a scan); every other one of them on each axis, and every corner, finds the faces
+    around it; each takes its neighbours' faces' intersection where they form a convex edge or
+    corner. A body with no open gate costs a launch over its cells and one host read."""
+    ncell = gate.shape[0]
+    if ncell == 0:
+        return
+    c = SHARP
+    flags = wp.empty(ncell, dtype=wp.int32)
+    split(wp, flag_cells, ncell, [bcoord, bmap, phi, *tiles, gate, c["band"], c["thin"] * h, flags])
+    slots = scan(wp, flags, inclusive=False)
+    count = int(slots[ncell - 1 : ncell].numpy()[0] + flags[ncell - 1 : ncell].numpy()[0])
+    if count == 0:
+        return
+    cells = wp.empty(count, dtype=wp.int32)
+    pn, pp = wp.empty(count * CELL_PLANES, dtype=wp.vec3), wp.empty(count * CELL_PLANES, dtype=wp.vec3)
+    pw = wp.empty(count * CELL_PLANES, dtype=float)
+    split(wp, cell_planes, ncell, [bcoord, bmap, phi, *tiles, sample, flags, slots, c["near"] * h, c["far"] * h,
+                                      c["width"] * h, c["cos_flat"], c["plane_tol"] * h, c["cos_same"], cells, pn, pp, pw])
+    qn, qp = wp.empty(count * NEAR_PLANES, dtype=wp.vec3), wp.empty(count * NEAR_PLANES, dtype=wp.vec3)
+    qw = wp.empty(count * NEAR_PLANES, dtype=float)
+    state = wp.empty(count, dtype=wp.int32)
+    launch_split(wp, decide_cells, count, [bcoord, bmap, sample, flags, slots, cells, pn, pp, pw, c["cos_same"],
+                                             c["votes"], c["support"], c["cos_apart"], c["cos_open"], qn, qp, qw, state],
+                 device=phi.device, min_split=256)  # a few hundred cells already: each thread does much
+    launch_split(wp, sharpen_cells, count, [bcoord, bmap, phi, gate, flags, slots, cells, state, c["votes"],
+                                              c["limit"] * h, c["rounding"], c["spread"], qn, qp, qw],
+                 device=phi.device, min_split=256)  # a few hundred cells already: each thread does much

@@ -1,18 +1,135 @@
-"""The Zhu-Bridson field gather of the sparse surfacer's CPU path: a block of 8^3 voxels per
-thread (mpmfx.surface.line_kernels: why a block per thread on the CPU), each candidate
-particle fetched once per block and added to the block's lines of 8 voxels along z.
+"""Gather (part of the field pass): the Zhu-Bridson field at the active voxels from the particles of
+the gather cells within the kernel's reach (no atomics).
 
-`base`: the first thread's index, so a launch can be split into chunks run on several CPU
-threads (mpmfx.surface.launch).
+GPU: a voxel per thread (gather_zhu_bridson). CPU: a block per thread (gather_zhu_bridson_blocks),
+each candidate particle fetched once per block and added to the block's lines of 8 voxels
+along z. The anisotropic gather (:mod:`mpmfx.surface.aniso_kernels`) is the same on both.
 """
+
+from __future__ import annotations
 
 import warp as wp
 
-from mpmfx.surface.line_kernels import fmax, fmin, vec8
-from mpmfx.surface.sparse_kernels import BS, BV, CS, write_field
+from mpmfx.surface.launch import launch_split_scratch
+from mpmfx.surface.lines import fmax, fmin, vec8
+from mpmfx.surface.voxels import BS, BV, CS, voxel_of
 
-# forward only: nothing differentiates these kernels
+# forward only: nothing differentiates these kernels, and their adjoints lengthen the compile of the unrolled loops
 wp.set_module_options({"enable_backward": False})
+
+
+@wp.func
+def cell_range(x: wp.vec3, reach: float, shape: wp.vec3i):
+    """(lo, hi) gather-cell indices (CS^3 voxels each) within `reach` voxels of x, clipped."""
+    lo = wp.vec3i(0)
+    hi = wp.vec3i(0)
+    for a in range(3):
+        lo[a] = wp.max(int(wp.floor((x[a] - reach) / float(CS))), 0)
+        hi[a] = wp.min(int(wp.floor((x[a] + reach) / float(CS))), shape[a] - 1)
+    return lo, hi
+
+
+@wp.func
+def column_slots(x: wp.vec3, r2: float, bi: int, bj: int, lo: int, hi: int, cells: wp.array3d(dtype=wp.int32),
+                 starts: wp.array(dtype=wp.int32)):
+    """(first, end) sorted slots of the particles in gather cells (bi, bj, lo..hi) that may lie
+    within sqrt(r2) voxels of x: the cells along z that the ball around x reaches in the column,
+    which hold consecutive slots (particles sorted by cell, starts their exclusive scan), so
+    one loop runs over them in the cells' order. The cube of cells that cell_range spans holds
+    a third more cells than the ball reaches; a particle of a skipped cell lies at least that
+    cell's box distance from x, more than sqrt(r2) (0.001 voxel^2 of slack for float
+    rounding), so a gather sums the same particles in the same order as over the cube."""
+    e = wp.vec2(0.0)
+    for a in range(2):
+        b = wp.where(a == 0, bi, bj)
+        e[a] = wp.max(wp.max(float(b * CS) - x[a], x[a] - float(b * CS + CS)), 0.0)
+    rest = r2 + 0.001 - wp.dot(e, e)
+    if rest <= 0.0:
+        return 0, 0
+    rz = wp.sqrt(rest)
+    k0 = wp.max(int(wp.floor((x[2] - rz) / float(CS))), lo)
+    k1 = wp.min(int(wp.floor((x[2] + rz) / float(CS))), hi)
+    if k1 < k0:
+        return 0, 0
+    lin = (bi * cells.shape[1] + bj) * cells.shape[2]
+    return starts[lin + k0], starts[lin + k1] + cells[bi, bj, k1]
+
+
+@wp.func
+def write_field(t: int, w: float, dw: wp.vec3, gw: wp.vec3, vw: wp.vec3, radius: float, with_v: int,
+                far_vox: float, phi: wp.array(dtype=float), w_out: wp.array(dtype=float),
+                offset: wp.array(dtype=wp.vec3), vel: wp.array(dtype=wp.vec3)):
+    """Voxel t's Zhu-Bridson phi from its gathered sums (w, dw = sum w (x_p - x), gw the
+    weight gradient, vw = sum w v_p): -(x - xbar) . n - radius, n = -gw / |gw|; far_vox
+    where no particle reaches. Also w, the offset x - xbar and the mean velocity."""
+    w_out[t] = w
+    if w <= 0.0:
+        phi[t] = far_vox
+        offset[t] = wp.vec3(0.0)
+        if with_v != 0:
+            vel[t] = wp.vec3(0.0)
+        return
+    d = -dw / w  # x - xbar
+    offset[t] = d
+    dist = wp.length(d)
+    gl = wp.length(gw)
+    if gl > 0.0:
+        dist = -wp.dot(d, gw) / gl  # gw points inward (towards the particles)
+    phi[t] = dist - radius
+    if with_v != 0:
+        vel[t] = vw / w
+
+
+@wp.kernel
+def gather_zhu_bridson(
+    bcoord: wp.array(dtype=wp.vec3i),
+    cells: wp.array3d(dtype=wp.int32),
+    starts: wp.array(dtype=wp.int32),
+    gs: wp.array(dtype=wp.vec3),
+    vs: wp.array(dtype=wp.vec3),
+    with_v: int,
+    reach: float,
+    radius_vox: float,
+    far_vox: float,
+    phi: wp.array(dtype=float),
+    w_out: wp.array(dtype=float),
+    offset: wp.array(dtype=wp.vec3),
+    vel: wp.array(dtype=wp.vec3),
+):
+    """Zhu-Bridson phi at one active voxel, gathered from particles of the nearby cells (CS^3
+    voxels each: a finer bin than the blocks, so few particles beyond the kernel are visited).
+    gs, vs: positions (grid units) and velocities in the cells' order (binning.sorted_positions),
+    so a cell's particles are read from consecutive memory.
+
+    phi = -(x - xbar) . n - r with n = -grad w / |grad w| (analytic kernel gradient). Projecting
+    on the normal matters on irregular samples: xbar jitters sideways as much as along the
+    normal, and |x - xbar| would turn that sideways jitter into an outward bias.
+    """
+    t = wp.tid()
+    c = voxel_of(t, bcoord)
+    x = wp.vec3(float(c[0]), float(c[1]), float(c[2]))
+    r2 = reach * reach
+    lo, hi = cell_range(x, reach, wp.vec3i(cells.shape[0], cells.shape[1], cells.shape[2]))
+    w = float(0.0)
+    dw = wp.vec3(0.0)  # sum w * (x_p - x)
+    gw = wp.vec3(0.0)  # gradient of w (up to the factor 6 / R^2)
+    vw = wp.vec3(0.0)
+    for bi in range(lo[0], hi[0] + 1):
+        for bj in range(lo[1], hi[1] + 1):
+            q, end = column_slots(x, r2, bi, bj, lo[2], hi[2], cells, starts)
+            while q < end:
+                d = gs[q] - x
+                d2 = wp.dot(d, d)
+                if d2 < r2:
+                    u = 1.0 - d2 / r2
+                    wk = u * u * u
+                    w += wk
+                    dw += wk * d
+                    gw += (u * u) * d
+                    if with_v != 0:
+                        vw += wk * vs[q]
+                q += 1
+    write_field(t, w, dw, gw, vw, radius_vox, with_v, far_vox, phi, w_out, offset, vel)
 
 
 @wp.func
@@ -89,8 +206,7 @@ def add_particle(gp: wp.vec3, vp: wp.vec3, c: wp.vec3i, r2: float, with_v: int, 
     i = wp.bit_count((rows & (-rows)) - 1)
     i_end = i + wp.bit_count(rows)
     # the lines reached as one 64-bit mask (bit i * 8 + j), visited lowest set bit first: one
-    # loop for all of them, where a loop per row mispredicted its exit once a row (1.9 M rows
-    # at the 100k lattice torus "fine"; the gather alone 74.7 -> 67.8 ms there, one thread).
+    # loop for all of them, where a loop per row would mispredict its exit once a row.
     # While, not range(): Warp's range() with bounds known only at run time steps a (start,
     # end, step) triple and tests the step's sign every iteration
     lines = wp.uint64(0)
@@ -145,22 +261,19 @@ def gather_zhu_bridson_blocks(
     acc: wp.array2d(dtype=vec8),
     base: int,
 ):
-    """sparse_kernels.gather_zhu_bridson for the 512 voxels of one block (thread = active
+    """gather_zhu_bridson for the 512 voxels of one block (thread = active
     block): each candidate particle of the cells within reach of the block is fetched once and
     added to the voxels it reaches, a line of 8 voxels along z at a time (add_particle). A
     voxel's contributing particles all lie in the cells within reach of the voxel, which are a
     subset of the block's visited in the same (cell, then slot) order, so each voxel sums the
     same particles in the same order with the same arithmetic as the voxel kernel: the same
     field bit for bit. g and v are in the sorted order (g[q] = the positions' [order[q]],
-    sparse_kernels.sorted_copy): the fetches run through memory in order instead of jumping.
+    binning.sorted_copy): the fetches run through memory in order instead of jumping.
 
     A candidate goes on only if its kernel reaches a line of the block, tested exactly at the
     nearest line (lane_d2min; the test is monotone in the distance): 42 % of the candidates
-    do (100k lattice torus "fine": 1.14 M candidates, 0.47 M reach, 7.3 M lines of 19.9 M
-    tested before), and the lines they reach come as bits of one mask (add_particle).
-    With write_sums_line, the gather alone on captured inputs (one thread, best of 11):
-    lattice torus / sphere / box "fine" 79.8 / 76.1 / 41.0 -> 62.1 / 47.5 / 29.6 ms, random
-    torus "fine" with velocities 160 -> 109 ms; w, the offset and the velocity bitwise the same.
+    do on a lattice torus at "fine", and the lines they reach come as bits of one mask
+    (add_particle). w, the offset and the velocity are bitwise the voxel kernel's.
 
     acc: scratch, nacc (7, or 10 with velocities) vec8 sums per line of the block (w, the
     offset's x y z, the weight gradient's x y z, the velocity's x y z; acc[line, sum]), turned
@@ -221,21 +334,19 @@ def gather_zhu_bridson_blocks(
                     wp.vec3(acc[la, 4][z], acc[la, 5][z], acc[la, 6][z]), vw, radius_vox, with_v, far_vox, phi, w_out, offset, vel)
 
 
-@wp.kernel
-def counting_sort(keys: wp.array(dtype=wp.int32), starts: wp.array(dtype=wp.int32), cursor: wp.array(dtype=wp.int32),
-                  order: wp.array(dtype=wp.int32)):
-    """order = the particles sorted by cell key, ties in particle order: what
-    wp.utils.radix_sort_pairs (a stable sort) gives for (keys, order = 0 .. n - 1), from the
-    cells' first slots `starts` (the exclusive scan of their counts). keys: (n,) cell key of
-    each particle (count_blocks); cursor: (cells,) zeros, the particles placed per cell so far.
-    One thread (launch dim 1) walks the particles in order: on one CPU core that is one pass
-    over them where the radix sort made four over keys and values (100k particles: 0.5-0.7
-    against 1.9-2.8 ms)."""
-    n = keys.shape[0]
-    p = int(0)
-    while p < n:  # not range(): a run-time bound costs a step-sign test per iteration
-        k = keys[p]
-        s = cursor[k]
-        order[starts[k] + s] = p
-        cursor[k] = s + 1
-        p += 1
+def gather_by_voxel(bcoord, cells, starts, gs, vs, with_v: int, grid, phi, w, offset, vel) -> None:
+    """The isotropic field at the active voxels, a voxel per thread: phi, w (kernel weight sums),
+    offset and vel (with_v) filled. gs, vs: the particles' grid positions and velocities in the
+    gather cells' order."""
+    wp.launch(gather_zhu_bridson, phi.shape[0],
+              inputs=[bcoord, cells, starts, gs, vs, with_v, grid.kernel_vox, grid.r_vox, grid.far_vox],
+              outputs=[phi, w, offset, vel])
+
+
+def gather_by_block(bcoord, cells, starts, gs, vs, with_v: int, grid, phi, w, offset, vel) -> None:
+    """gather_by_voxel' field, a block per thread: each candidate particle fetched once per block."""
+    nacc = 10 if with_v else 7  # vec8 sums per line: w, offset, weight gradient (, velocity)
+    launch_split_scratch(wp, gather_zhu_bridson_blocks, bcoord.shape[0],
+                         [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w,
+                          offset, vel, nacc, int(grid.normal_passes == 0)],  # else phi comes from the wide normal
+                         lambda: wp.empty((BS * BS, nacc), dtype=vec8), device=phi.device)

@@ -1,20 +1,27 @@
-"""Warp kernels that say how far the smoothing may round each part of the surface (sparse._edges).
+"""Edge pass: how far the smoothing may round each part of the surface (the same kernels
+on every device).
 
 The mean-curvature flow moves a convex edge inward wherever it runs, noise or not. Where the
 samples are regular (a lattice, a freshly voxelised body) the raw field already holds the edge,
-and the flow only rounds it: the 100k lattice box's error went from 0.018 h unsmoothed to 0.027 h
-smoothed ("fast"; docs/surfacing-log.md, eighteenth step). So at an edge the flow may move the surface inward
-only as far as the samples' own noise there, measured from the particles: the kernel centroid's
-offset along the edge, which a regular sampling keeps at ~0 and random samples do not.
+and the flow would only round it. So at an edge the flow may move the surface inward only as
+far as the samples' own noise there, measured from the particles: the kernel centroid's offset
+along the edge, which a regular sampling keeps at ~0 and random samples do not.
 
-An edge is told from noise at the wide normal's scale (the blurred weights, sparse._blur_weights):
+An edge is told from noise at the wide normal's scale (the blurred weights, mpmfx.surface.field):
 their level set curves sharply only at features under a few particle spacings across, however
 noisy the samples. Lengths are voxels; arrays are over the active voxels (or blocks) as in
-sparse_kernels."""
+:mod:`mpmfx.surface.voxels`.
+"""
 
 import warp as wp
 
-from mpmfx.surface.sparse_kernels import BS, BV, in_block, slot, voxel_of, weight_at
+from mpmfx.surface.grid import SparseGrid
+from mpmfx.surface.launch import split
+from mpmfx.surface.voxels import BS, BV, in_block, slot, voxel_of, weight_at
+
+EDGE_CURVATURE = (0.35, 0.5)  # x 1 / the wide normal's blur width: a convex edge starts / is whole
+EDGE_NOISE = 2.0  # x the samples' noise (standard deviation): how far the smoothing may move an edge inward
+EDGE_BAND = 3.0  # voxels from the raw zero level where a 2^3 cell's corner looks for an edge (its voxels within ~2)
 
 
 @wp.func
@@ -61,7 +68,7 @@ def edge_gate(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32)
               offset: wp.array(dtype=wp.vec3), phi: wp.array(dtype=float), band: float, k0: float, k1: float,
               gate: wp.array(dtype=float), sample: wp.array(dtype=float), base: int):
     """Per cell of 2^3 voxels (thread u: its first voxel, the even one, in block u // 64; gate and
-    sample hold 64 cells a block, sparse_kernels.gate_cell maps a voxel to its cell), where that
+    sample hold 64 cells a block, voxels.gate_cell maps a voxel to its cell), where that
     voxel lies within `band` of the raw field's zero level (phi): gate = how much of an edge it
     is, 0 below the convex curvature k0 of the blurred weights' level set, 1 above k1 (1/voxel;
     smooth between); sample = |offset . e| (voxels), the centroid offset x - xbar along the edge
@@ -73,8 +80,7 @@ def edge_gate(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32)
     random samples it wanders along the edge as much as across, by the noise of the field.
 
     The blurred weights vary over their blur width (3-4 voxels), so one value per 2 voxels
-    resolves the gate, at an eighth of the cost of one per voxel (22-46 -> 4-8 ms of a 100k CPU
-    call). A cell's gate sits at a fixed place in the world, so it changes smoothly in time as
+    resolves the gate, at an eighth of the cost of one per voxel. A cell's gate sits at a fixed place in the world, so it changes smoothly in time as
     the particles move."""
     u = wp.tid() + base
     gate[u] = 0.0
@@ -141,3 +147,18 @@ def block_noise(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int3
                 if s >= 0:
                     acc += sums[s // BV]
     noise[b] = wp.where(acc[1] > 0.0, scale * 1.2533141 * acc[0] / wp.max(acc[1], 1.0), -1.0)
+
+
+def edges(bcoord, bmap, wide, offset, phi, grid: SparseGrid) -> tuple:
+    """(gate per 2^3-voxel cell, noise per active block, sample per cell) for the smoothing's
+    inward limit: where the blurred weights' level set bends like an edge, and how noisy the
+    samples are around each block (voxels). `wide`: the weights the normal came from, of blur
+    width grid.wide_sigma voxels."""
+    nact = bcoord.shape[0]
+    gate, sample = wp.empty(nact * 64, dtype=float), wp.empty(nact * 64, dtype=float)  # a 2^3-voxel cell each
+    k0, k1 = (c / grid.wide_sigma for c in EDGE_CURVATURE)
+    split(wp, edge_gate, nact * 64, [bcoord, bmap, wide, offset, phi, EDGE_BAND, k0, k1, gate, sample])
+    sums, noise = wp.empty(nact, dtype=wp.vec2), wp.empty(nact, dtype=float)
+    split(wp, block_samples, nact, [sample, sums])
+    split(wp, block_noise, nact, [bcoord, bmap, sums, EDGE_NOISE, noise])
+    return gate, noise, sample  # sample < 0 where a gate is open: a corner or a blob (mpmfx.surface.sharpen)
