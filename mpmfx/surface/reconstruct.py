@@ -8,8 +8,10 @@ the tests compare it against lives in tests/surface/dense_reference.py.)
 from __future__ import annotations
 
 import numpy as np
+import warp as wp
 
 from mpmfx.surface.params import LevelSet, SparseLevelSet, SurfaceMesh, SurfaceParams, SurfaceResult
+from mpmfx.surface.sparse import surface_sparse
 
 
 def surface_particles(
@@ -25,10 +27,6 @@ def surface_particles(
     Returns a :class:`SurfaceResult` (its `stats` hold the stage timings); n = 0 gives an
     empty level set and mesh.
     """
-    import warp as wp  # backend: warp (imported on the first call, not with mpmfx.surface)
-
-    from mpmfx.surface.sparse import surface_sparse  # backend: warp (imported on the first call, not with mpmfx.surface)
-
     wp.init()
     on_device = isinstance(x, wp.array)
     x, v = check_device_inputs(wp, x, v) if on_device else check_inputs(x, v)

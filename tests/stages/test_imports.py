@@ -79,7 +79,10 @@ def imports() -> tuple[Import, ...]:
                     if child.level:  # relative: resolve against the importing package
                         parts = name.split(".")[: len(name.split(".")) - child.level + is_package]
                         base = ".".join([*parts, base] if base else parts)
-                    names = (base, *(f"{base}.{a.name}" for a in child.names))
+                    # `from pkg import submodule` imports the submodule (pkg's __init__ runs as
+                    # every parent does); `from module import name` imports the module
+                    names = tuple(dict.fromkeys(
+                        f"{base}.{a.name}" if f"{base}.{a.name}" in modules() else base for a in child.names))
                 else:
                     visit(child, in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)))
                     continue
