@@ -2,7 +2,7 @@
 # mpmfx set-up, idempotent. Usage:
 #   bash setup.sh            install only
 #   bash setup.sh demo       install, then run the default shot end to end
-#   bash setup.sh test       install, then run the test suite
+#   bash setup.sh test       install, then lint (ruff) and run the test suite
 # Installs Debian's python3-openvdb (apt), a virtual environment in .venv with numpy<2
 # (Debian's pyopenvdb is built for numpy 1.x) and mpmfx editable with its test extras, which
 # include Blender as a Python module (bpy 4.5 LTS, ~0.9 GB) for the Cycles renders.
@@ -57,6 +57,11 @@ make_venv
 case "${1:-}" in
   "") say "ready: $VENV/bin/mpmfx --help" ;;
   demo) shift; exec "$VENV/bin/mpmfx" run pipeline/shots/jelly_splash.toml "$@" ;;
-  test) shift; exec "$VENV/bin/python" -m pytest "$@" ;;
+  test)
+    shift
+    say "lint and format check (ruff)"
+    "$VENV/bin/ruff" check . || die "ruff check found problems; '$VENV/bin/ruff check --fix .' fixes most"
+    "$VENV/bin/ruff" format --check . || die "files need formatting: run '$VENV/bin/ruff format .'"
+    exec "$VENV/bin/python" -m pytest "$@" ;;
   *) die "unknown command '$1': use 'demo', 'test' or nothing" ;;
 esac

@@ -2,6 +2,7 @@
 
 Run: .venv/bin/python assets/make_assets.py   (deterministic; sizes in metres)
 """
+
 from pathlib import Path
 
 import numpy as np
@@ -25,9 +26,13 @@ def jelly_bear():
     """A gummy bear, ~0.4 m tall, standing on y = 0; every limb >= 0.1 m across (5 cells at dx 2 cm)."""
     body = icosphere(3, 0.09)
     body.apply_scale([1.0, 1.2, 0.85])
-    parts = [at(body, 0, 0.14, 0), at(icosphere(3, 0.08), 0, 0.28, 0),
-             at(icosphere(3, 0.07), -0.07, 0.35, 0), at(icosphere(3, 0.07), 0.07, 0.35, 0),
-             at(icosphere(3, 0.045), 0, 0.26, 0.06)]
+    parts = [
+        at(body, 0, 0.14, 0),
+        at(icosphere(3, 0.08), 0, 0.28, 0),
+        at(icosphere(3, 0.07), -0.07, 0.35, 0),
+        at(icosphere(3, 0.07), 0.07, 0.35, 0),
+        at(icosphere(3, 0.045), 0, 0.26, 0.06),
+    ]
     for s in (-1, 1):
         arm = capsule(height=0.06, radius=0.05)
         arm.apply_transform(trimesh.transformations.rotation_matrix(np.pi / 2.6 * s, [0, 0, 1]))
@@ -64,20 +69,29 @@ def thin_fin():
 def sand_castle():
     """A sand castle for the GPU hero shot, standing on y = 0: a 0.6 m square base 0.16 m tall, four
     corner towers and a central keep (0.5 m tall), each >= 0.14 m across (18 cells at dx 7.8 mm)."""
+
     def tower(r, h, x, z):
         t = cylinder(radius=r, height=h, sections=32)
         t.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1, 0, 0]))
         return at(t, x, h / 2, z)
+
     parts = [slab(0.6, 0.16, 0.6), slab(0.36, 0.3, 0.36), tower(0.13, 0.5, 0, 0)]
     parts += [tower(0.075, 0.34, x, z) for x in (-0.27, 0.27) for z in (-0.27, 0.27)]
     return union(*parts)
 
 
 def main():
-    meshes = {"jelly_bear.obj": jelly_bear(), "snowball.obj": snowball(), "sand_column.obj": sand_column(),
-              "water_pool.obj": slab(0.7, 0.06, 0.7), "water_dam.obj": slab(0.3, 0.4, 0.5),
-              "snow_block.obj": slab(0.3, 0.15, 0.3), "snow_bed.obj": slab(0.45, 0.12, 0.4),
-              "thin_fin.obj": thin_fin(), "sand_castle.obj": sand_castle()}
+    meshes = {
+        "jelly_bear.obj": jelly_bear(),
+        "snowball.obj": snowball(),
+        "sand_column.obj": sand_column(),
+        "water_pool.obj": slab(0.7, 0.06, 0.7),
+        "water_dam.obj": slab(0.3, 0.4, 0.5),
+        "snow_block.obj": slab(0.3, 0.15, 0.3),
+        "snow_bed.obj": slab(0.45, 0.12, 0.4),
+        "thin_fin.obj": thin_fin(),
+        "sand_castle.obj": sand_castle(),
+    }
     for name, m in meshes.items():
         assert m.is_watertight, name
         m.export(HERE / name)

@@ -9,6 +9,7 @@ one-frame serial warm-up first loads (and on a fresh machine compiles) the kerne
 column adds up every process (client and workers): on a shared machine, where wall time
 measures the neighbours, CPU seconds / cores bounds what an idle machine would take.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -21,6 +22,7 @@ import time
 def main() -> int:
     from mpmfx.stages.parallel import Frames
     from mpmfx.stages.runner import load_shot
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("shot")
     ap.add_argument("--cache", default=None)
@@ -35,7 +37,8 @@ def main() -> int:
         frames = list(range(int(a), int(b) + 1))
     t = time.perf_counter()
     load_shot(args.shot, cache_root=args.cache, device=args.device, quiet=True, workers=1).run(
-        until=args.stage, frames=frames[:1] if frames else None, force=[args.stage])
+        until=args.stage, frames=frames[:1] if frames else None, force=[args.stage]
+    )
     print(f"warm-up (1 frame, serial, kernels loaded/compiled): {time.perf_counter() - t:.1f} s", flush=True)
     print(f"{os.cpu_count()} cores; {len(frames) if frames else 'all'} frames of {args.stage}")
     print("| workers | wall s | of which cluster start s | speed-up | CPU s, all processes |")
@@ -50,7 +53,8 @@ def main() -> int:
             start = time.perf_counter() - t
         t, cpu = time.perf_counter(), _cpu()
         load_shot(args.shot, cache_root=args.cache, device=args.device, quiet=True, workers=w).run(
-            until=args.stage, frames=frames, force=[args.stage])
+            until=args.stage, frames=frames, force=[args.stage]
+        )
         wall, cpu = time.perf_counter() - t, _cpu() - cpu
         base = base or wall
         print(f"| {w} | {wall:.1f} | {start:.1f} | {base / wall:.2f} | {cpu:.1f} |", flush=True)

@@ -13,6 +13,7 @@ pieces (f / b). On the GPU:
 
     python lab/cadence_fit.py --out DIR        # bench blocks and both hero shots
 """
+
 from __future__ import annotations
 
 import argparse
@@ -28,9 +29,10 @@ CADENCES = (32, 16, 8, 4, 2, 1)
 
 def measure(label, solver, state, t, span, cadence, rows, restore=None):
     import warp as wp
+    from shot_profile import kernel_split
 
     from mpmfx.bench.gpu import sort_ms
-    from shot_profile import kernel_split
+
     da = solver._device_advance
     da.p2g = "brick"  # (the CPU's default is the reference P2G: --smoke runs the brick one there too)
     da.sort_every = cadence
@@ -48,12 +50,19 @@ def measure(label, solver, state, t, span, cadence, rows, restore=None):
     t += span
     k = rep2.substeps + rep2.rejected_substeps
     frag = np.asarray(da.frag_total, np.float64)  # (advance zeroes the scatter's own counts each chunk)
-    row = {"scene": label, "det": int(solver.config.deterministic), "particles": state.n, "sort_every": cadence,
-           "ms_substep": 1e3 * wall / max(1, rep.substeps + rep.rejected_substeps),
-           "ms_scatter": sum(v for n, v in ms.items() if "scatter" in n) / k,
-           "ms_g2p": sum(v for n, v in ms.items() if "g2p" in n) / k,
-           "pieces": (frag[0] + frag[1]) / k, "fallbacks": frag[2] / k, "ms_sort": sort_ms(solver, state, whole=True),
-           "substeps": k}
+    row = {
+        "scene": label,
+        "det": int(solver.config.deterministic),
+        "particles": state.n,
+        "sort_every": cadence,
+        "ms_substep": 1e3 * wall / max(1, rep.substeps + rep.rejected_substeps),
+        "ms_scatter": sum(v for n, v in ms.items() if "scatter" in n) / k,
+        "ms_g2p": sum(v for n, v in ms.items() if "g2p" in n) / k,
+        "pieces": (frag[0] + frag[1]) / k,
+        "fallbacks": frag[2] / k,
+        "ms_sort": sort_ms(solver, state, whole=True),
+        "substeps": k,
+    }
     rows.append(row)
     print(json.dumps(row), flush=True)
     return state, t
@@ -62,6 +71,7 @@ def measure(label, solver, state, t, span, cadence, rows, restore=None):
 def blocks(rows, device):
     from mpmfx.bench.gpu import scene
     from mpmfx.mpm import Solver, SolverConfig
+
     for name, g in (("Mushy", 256), ("Water", 256), ("Water", 128)):
         mats, parts, colliders = scene(name, g)
         cfg = SolverConfig(grid_n=g, deterministic=False)
@@ -77,8 +87,10 @@ def blocks(rows, device):
 
 
 def shots(rows, device, names, cache, smoke=False):
-    from mpmfx.bench.shots import smoke_overrides
     from shot_profile import build
+
+    from mpmfx.bench.shots import smoke_overrides
+
     for name in names:
         extra = smoke_overrides(24, 10) if smoke else []
         solver, state, shot = build(name, ["solver.deterministic=true", *extra], cache, device)
@@ -105,10 +117,16 @@ def fit(rows):
         slope, _ = np.polyfit([1.0 / r["sort_every"] for r in rs], [r["ms_g2p"] for r in rs], 1)
         moves[scene] = max(0.0, float(slope))
     sort_per_particle = np.median([(r["ms_sort"] + moves[r["scene"]]) / r["particles"] for r in rows])
-    out = {"ms_per_particle": a, "ms_per_piece": b, "ms_per_fallback": f, "sort_ms_per_particle": sort_per_particle,
-           "move_ms": moves,
-           "SORT_PIECES": sort_per_particle / b if b > 0 else None, "FALLBACK_PIECES": f / b if b > 0 else None,
-           "residual_ms": float(np.abs(A @ (coef / scale) - y).max())}
+    out = {
+        "ms_per_particle": a,
+        "ms_per_piece": b,
+        "ms_per_fallback": f,
+        "sort_ms_per_particle": sort_per_particle,
+        "move_ms": moves,
+        "SORT_PIECES": sort_per_particle / b if b > 0 else None,
+        "FALLBACK_PIECES": f / b if b > 0 else None,
+        "residual_ms": float(np.abs(A @ (coef / scale) - y).max()),
+    }
     print("FIT", json.dumps(out), flush=True)
     return out
 

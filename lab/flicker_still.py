@@ -9,6 +9,7 @@ splashsurf where installed. The difference is |frame 1 - frame 0| over RGB, time
 
     python lab/flicker_still.py [--count 20000] [--out docs/images/surface_flicker.png]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -46,8 +47,12 @@ def main() -> None:
         s = stats[1]
         draw.text((8, 8), f"{name}: frame 0", fill=(0, 0, 0))
         draw.text((size[0] + 8, 8), "frame 1 (moved back)", fill=(0, 0, 0))
-        draw.text((2 * size[0] + 8, 8), f"|difference| x{GAIN}: normal turn {s['normal_turn_deg']:.1f} deg faces, "
-                  f"p99 {s['edge_turn_p99_deg']:.0f} deg edges", fill=(255, 255, 255))
+        draw.text(
+            (2 * size[0] + 8, 8),
+            f"|difference| x{GAIN}: normal turn {s['normal_turn_deg']:.1f} deg faces, "
+            f"p99 {s['edge_turn_p99_deg']:.0f} deg edges",
+            fill=(255, 255, 255),
+        )
         rows.append(np.asarray(strip))
         print(name, {k: round(v, 4) for k, v in s.items() if isinstance(v, float)})
     Image.fromarray(np.concatenate(rows, axis=0)).save(args.out)

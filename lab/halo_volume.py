@@ -12,6 +12,7 @@ updated grid velocity back for G2P (vec3 float32). Halo blocks count whole 4^3 b
 Claymore exchanges. Migrants: particles whose subdomain changed since the last frame, per
 substep. Substeps per frame come from the simulation's QA files. Prints one table; writes CSV.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -24,8 +25,8 @@ import numpy as np
 from mpmfx.io.frames import ParticleFrame
 from mpmfx.stages.runner import load_shot
 
-BLOCK = 4                     # Claymore's grid block edge (nodes)
-PARTICLE_BYTES = 128          # x, v, C, F, Jp, J, material, body, volume, ids: ~32 floats
+BLOCK = 4  # Claymore's grid block edge (nodes)
+PARTICLE_BYTES = 128  # x, v, C, F, Jp, J, material, body, volume, ids: ~32 floats
 
 
 def owners(x: np.ndarray, layout: str, k: int) -> np.ndarray:
@@ -104,31 +105,47 @@ def main() -> int:
             full = np.full(int(p.id.max()) + 1, -1)
             full[p.id] = own
             prev = full
-            rows.append({"layout": layout, "k": k, "frame": f, "particles": len(p.x), "active_nodes": active,
-                         "halo_nodes": nodes, "halo_blocks": blocks, "busiest_sender_nodes": busiest,
-                         "bytes_per_substep": nodes * node_bytes,
-                         "block_bytes_per_substep": blocks * BLOCK**3 * node_bytes,
-                         "substeps": substeps,
-                         "migrants_per_substep": migrants / substeps if substeps else 0.0})
+            rows.append(
+                {
+                    "layout": layout,
+                    "k": k,
+                    "frame": f,
+                    "particles": len(p.x),
+                    "active_nodes": active,
+                    "halo_nodes": nodes,
+                    "halo_blocks": blocks,
+                    "busiest_sender_nodes": busiest,
+                    "bytes_per_substep": nodes * node_bytes,
+                    "block_bytes_per_substep": blocks * BLOCK**3 * node_bytes,
+                    "substeps": substeps,
+                    "migrants_per_substep": migrants / substeps if substeps else 0.0,
+                }
+            )
     if args.out:
         with open(args.out, "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=list(rows[0]))
             w.writeheader()
             w.writerows(rows)
-    print(f"{shot.shot.name}: grid {shot.domain.grid_n}, {rows[0]['particles']} particles, {len(frames)} frames, "
-          f"{node_bytes} B per halo node and substep (deterministic={det}, multi_field={multi})")
-    print("| layout | K | halo nodes (mean / max) | % of active nodes | 4^3 halo blocks (mean) | "
-          "KB per substep, nodes / blocks (max) | migrants per substep (mean) |")
+    print(
+        f"{shot.shot.name}: grid {shot.domain.grid_n}, {rows[0]['particles']} particles, {len(frames)} frames, "
+        f"{node_bytes} B per halo node and substep (deterministic={det}, multi_field={multi})"
+    )
+    print(
+        "| layout | K | halo nodes (mean / max) | % of active nodes | 4^3 halo blocks (mean) | "
+        "KB per substep, nodes / blocks (max) | migrants per substep (mean) |"
+    )
     print("|---|---|---|---|---|---|---|")
     for layout, k in (("slabs", 2), ("slabs", 4), ("slabs", 8), ("2x2x2", 8)):
         sel = [r for r in rows if r["layout"] == layout and r["k"] == k]
         h = np.array([r["halo_nodes"] for r in sel])
         frac = np.array([r["halo_nodes"] / r["active_nodes"] for r in sel])
-        print(f"| {layout} | {k} | {h.mean():.0f} / {h.max()} | {100 * frac.mean():.1f} | "
-              f"{np.mean([r['halo_blocks'] for r in sel]):.0f} | "
-              f"{max(r['bytes_per_substep'] for r in sel) / 1e3:.0f} / "
-              f"{max(r['block_bytes_per_substep'] for r in sel) / 1e3:.0f} | "
-              f"{np.mean([r['migrants_per_substep'] for r in sel[1:]]):.1f} |")
+        print(
+            f"| {layout} | {k} | {h.mean():.0f} / {h.max()} | {100 * frac.mean():.1f} | "
+            f"{np.mean([r['halo_blocks'] for r in sel]):.0f} | "
+            f"{max(r['bytes_per_substep'] for r in sel) / 1e3:.0f} / "
+            f"{max(r['block_bytes_per_substep'] for r in sel) / 1e3:.0f} | "
+            f"{np.mean([r['migrants_per_substep'] for r in sel[1:]]):.1f} |"
+        )
     return 0
 
 

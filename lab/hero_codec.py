@@ -12,6 +12,7 @@ leaves are not carried: the hero shots export without VDBs.
 
 numpy + lzma only (it runs on the GPU machine too). Units: metres, m/s.
 """
+
 from __future__ import annotations
 
 import io
@@ -29,27 +30,35 @@ def _pack(arrays: dict[str, np.ndarray], *, preset: int) -> bytes:
     stored in an uncompressed npz with their dtypes and shapes."""
     import json
     from concurrent.futures import ThreadPoolExecutor
+
     names = list(arrays)
     raw = [np.ascontiguousarray(arrays[k]) for k in names]
     with ThreadPoolExecutor(max_workers=16) as pool:
         blobs = list(pool.map(lambda a: lzma.compress(a.tobytes(), preset=preset), raw))
     head = {k: [a.dtype.str, list(a.shape)] for k, a in zip(names, raw)}
     buf = io.BytesIO()
-    np.savez(buf, _head=np.frombuffer(json.dumps(head).encode(), np.uint8),
-             **{k: np.frombuffer(b, np.uint8) for k, b in zip(names, blobs)})
+    np.savez(
+        buf,
+        _head=np.frombuffer(json.dumps(head).encode(), np.uint8),
+        **{k: np.frombuffer(b, np.uint8) for k, b in zip(names, blobs)},
+    )
     return buf.getvalue()
 
 
 def _unpack(blob: bytes) -> dict[str, np.ndarray]:
     import json
+
     with np.load(io.BytesIO(blob), allow_pickle=False) as z:
         head = json.loads(z["_head"].tobytes())
-        return {k: np.frombuffer(lzma.decompress(z[k].tobytes()), np.dtype(dt)).reshape(shape)
-                for k, (dt, shape) in head.items()}
+        return {
+            k: np.frombuffer(lzma.decompress(z[k].tobytes()), np.dtype(dt)).reshape(shape)
+            for k, (dt, shape) in head.items()
+        }
 
 
-def encode_group(vertices: np.ndarray, faces: np.ndarray, velocities: np.ndarray | None, voxel: float,
-                 *, with_velocity: bool = True) -> dict[str, np.ndarray]:
+def encode_group(
+    vertices: np.ndarray, faces: np.ndarray, velocities: np.ndarray | None, voxel: float, *, with_velocity: bool = True
+) -> dict[str, np.ndarray]:
     """Arrays (small ints, deflate/lzma-friendly) for one mesh: (m,3) float m, (k,3) int, (m,3) m/s."""
     v = np.asarray(vertices, np.float64)
     lo = v.min(axis=0) if len(v) else np.zeros(3)
@@ -95,16 +104,27 @@ def _add_at(n: np.ndarray, idx: np.ndarray, vals: np.ndarray) -> None:
         n[:, c] += np.bincount(idx, weights=vals[:, c], minlength=len(n))
 
 
-def write(path: str | Path, groups: dict[str, dict], meta: dict | None = None, *, preset: int = 3,
-          part_bytes: int = 15 * 2**20) -> list[Path]:
+def write(
+    path: str | Path,
+    groups: dict[str, dict],
+    meta: dict | None = None,
+    *,
+    preset: int = 3,
+    part_bytes: int = 15 * 2**20,
+) -> list[Path]:
     """groups: name -> {vertices, faces, velocities, voxel[, with_velocity]}. Written as `path`,
     or split into `path.000`, `path.001`, ... of at most part_bytes each. Returns the files."""
     import json
-    arrays = {"_format": np.int32(FORMAT), "_groups": np.frombuffer(json.dumps(list(groups)).encode(), np.uint8),
-              "_meta": np.frombuffer(json.dumps(meta or {}).encode(), np.uint8)}
+
+    arrays = {
+        "_format": np.int32(FORMAT),
+        "_groups": np.frombuffer(json.dumps(list(groups)).encode(), np.uint8),
+        "_meta": np.frombuffer(json.dumps(meta or {}).encode(), np.uint8),
+    }
     for g, m in groups.items():
-        enc = encode_group(m["vertices"], m["faces"], m.get("velocities"), m["voxel"],
-                           with_velocity=m.get("with_velocity", True))
+        enc = encode_group(
+            m["vertices"], m["faces"], m.get("velocities"), m["voxel"], with_velocity=m.get("with_velocity", True)
+        )
         arrays |= {f"{g}.{k}": np.asarray(x) for k, x in enc.items()}
     blob = _pack(arrays, preset=preset)
     path = Path(path)
@@ -114,7 +134,7 @@ def write(path: str | Path, groups: dict[str, dict], meta: dict | None = None, *
     parts = []
     for i in range(0, len(blob), part_bytes):
         parts.append(path.with_name(f"{path.name}.{i // part_bytes:03d}"))
-        parts[-1].write_bytes(blob[i:i + part_bytes])
+        parts[-1].write_bytes(blob[i : i + part_bytes])
     return parts
 
 
@@ -122,6 +142,7 @@ def read(path: str | Path) -> tuple[dict[str, tuple], dict]:
     """name -> (vertices, faces, normals, velocities), and the meta dict. `path` may be split
     (`path.000`, `path.001`, ...)."""
     import json
+
     path = Path(path)
     parts = [path] if path.exists() else sorted(path.parent.glob(f"{path.name}.[0-9][0-9][0-9]"))
     if not parts:

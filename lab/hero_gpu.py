@@ -11,6 +11,7 @@ DIR/hero_times.json (per shot: particles, grid, frames, substeps, seconds per st
 the device) and DIR/<shot>_<frame>.hm[.NNN], within a return budget of RETURN_BYTES in
 RETURN_FILES files; prints one table at the end.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -26,27 +27,39 @@ import hero_codec
 from mpmfx.bench.shots import SHOTS, SMOKE_GRID, device_name, public, run_shot, smoke_overrides, warm_up
 from mpmfx.bench.shots import table as shots_table
 
-RETURN_BYTES = 58 * 2**20   # what the packed frames may take of a 64 MiB return; the JSON and log need little
-RETURN_FILES = 7            # of 8 returned files: one is hero_times.json
+RETURN_BYTES = 58 * 2**20  # what the packed frames may take of a 64 MiB return; the JSON and log need little
+RETURN_FILES = 7  # of 8 returned files: one is hero_times.json
 
 
 def pack_frame(row: dict, frame: int, out: Path, *, budget: dict) -> dict:
     """Encode one surfaced frame into out/<shot>_<frame>.hm (split if large), within budget."""
     from mpmfx.io.frames import SurfaceFrame
+
     surf = SurfaceFrame.read(Path(row["_surface_entry"]) / "frames" / f"{frame:04d}.npz")
-    groups = {g: {"vertices": d.vertices, "faces": d.faces, "velocities": d.velocities, "voxel": float(d.voxel_size)}
-              for g, d in surf.groups.items()}
+    groups = {
+        g: {"vertices": d.vertices, "faces": d.faces, "velocities": d.velocities, "voxel": float(d.voxel_size)}
+        for g, d in surf.groups.items()
+    }
     row["voxel_m"] = float(next(iter(surf.groups.values())).voxel_size) if surf.groups else None
-    meta = {"shot": row["shot"], "frame": frame, "overrides": row["overrides"],
-            "vertices": {g: len(d.vertices) for g, d in surf.groups.items()},
-            "faces": {g: len(d.faces) for g, d in surf.groups.items()}}
+    meta = {
+        "shot": row["shot"],
+        "frame": frame,
+        "overrides": row["overrides"],
+        "vertices": {g: len(d.vertices) for g, d in surf.groups.items()},
+        "faces": {g: len(d.faces) for g, d in surf.groups.items()},
+    }
     t0 = time.perf_counter()
     tmp = out / ".pack"
     tmp.mkdir(exist_ok=True)
     files = hero_codec.write(tmp / f"{row['shot']}_{frame:04d}.hm", groups, meta)
     size = sum(f.stat().st_size for f in files)
-    info = {"frame": frame, "bytes": size, "files": [f.name for f in files], "encode_s": round(time.perf_counter() - t0, 2),
-            **{k: meta[k] for k in ("vertices", "faces")}}
+    info = {
+        "frame": frame,
+        "bytes": size,
+        "files": [f.name for f in files],
+        "encode_s": round(time.perf_counter() - t0, 2),
+        **{k: meta[k] for k in ("vertices", "faces")},
+    }
     if size > budget["bytes"] or len(files) > budget["files"]:
         info["skipped"] = f"over the return budget ({budget['bytes']} B, {budget['files']} files left)"
         for f in files:
@@ -61,8 +74,10 @@ def pack_frame(row: dict, frame: int, out: Path, *, budget: dict) -> dict:
 
 def table(rows: list[dict], warm: dict | None, dev: str) -> str:
     """`mpmfx bench shots`'s table, and the MiB packed per shot."""
-    packed = [f"{r['shot']} packed: "
-              f"{sum(p['bytes'] for p in r.get('packed', []) if 'skipped' not in p) / 2**20:.1f} MiB" for r in rows]
+    packed = [
+        f"{r['shot']} packed: {sum(p['bytes'] for p in r.get('packed', []) if 'skipped' not in p) / 2**20:.1f} MiB"
+        for r in rows
+    ]
     return "\n".join([shots_table(rows, warm, dev), *packed])
 
 
@@ -73,17 +88,30 @@ def main(argv=None) -> int:
     ap.add_argument("--shots", nargs="*", default=list(SHOTS))
     ap.add_argument("--cache", default="/tmp/hero_cache")
     ap.add_argument("--out", default=os.environ.get("OUT", "hero_out"))
-    ap.add_argument("--budget-s", type=float, default=330.0,
-                    help="start no further shot after this many seconds (a remote call's time limit)")
-    ap.add_argument("--pack", action=argparse.BooleanOptionalAction, default=True,
-                    help="bring the stills' surfaces back (off: times only)")
-    ap.add_argument("--warmup", action=argparse.BooleanOptionalAction, default=None,
-                    help="a small first run that compiles the kernels (default: on, off with --smoke)")
+    ap.add_argument(
+        "--budget-s",
+        type=float,
+        default=330.0,
+        help="start no further shot after this many seconds (a remote call's time limit)",
+    )
+    ap.add_argument(
+        "--pack",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="bring the stills' surfaces back (off: times only)",
+    )
+    ap.add_argument(
+        "--warmup",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="a small first run that compiles the kernels (default: on, off with --smoke)",
+    )
     args = ap.parse_args(argv)
     out, cache = Path(args.out), Path(args.cache)
     out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     import warp as wp
+
     wp.config.quiet = True
     dev = device_name(args.device)
     print(f"hero_gpu: {dev}, warp {wp.config.version}, numpy {__import__('numpy').__version__}", flush=True)
@@ -95,9 +123,15 @@ def main(argv=None) -> int:
     rows = []
 
     def save() -> None:  # after every shot: a run cut short still returns what it finished
-        report = {"device": dev, "warp": wp.config.version, "python": platform.python_version(), "smoke": args.smoke,
-                  "warmup": public(warm) if warm else None, "shots": [public(r) for r in rows],
-                  "elapsed_s": round(time.perf_counter() - t_start, 1)}
+        report = {
+            "device": dev,
+            "warp": wp.config.version,
+            "python": platform.python_version(),
+            "smoke": args.smoke,
+            "warmup": public(warm) if warm else None,
+            "shots": [public(r) for r in rows],
+            "elapsed_s": round(time.perf_counter() - t_start, 1),
+        }
         (out / "hero_times.json").write_text(json.dumps(report, indent=1))
 
     for name in args.shots:
@@ -128,8 +162,11 @@ def main(argv=None) -> int:
 def _pack_into(row: dict, rank: int, out: Path, budget: dict) -> None:
     info = pack_frame(row, row["frames_surfaced"][rank], out, budget=budget)
     row.setdefault("packed", []).append(info)
-    print(f"packed {row['shot']} frame {info['frame']}: {info['bytes'] / 2**20:.1f} MiB in {info['encode_s']} s "
-          f"{info.get('skipped', '')}", flush=True)
+    print(
+        f"packed {row['shot']} frame {info['frame']}: {info['bytes'] / 2**20:.1f} MiB in {info['encode_s']} s "
+        f"{info.get('skipped', '')}",
+        flush=True,
+    )
 
 
 if __name__ == "__main__":

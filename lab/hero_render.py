@@ -9,6 +9,7 @@ and render stages run on those frames exactly as `mpmfx run` runs them (USD stag
 import, Cycles with the shot's [render] settings), and the README still (the first still, or
 README_STILL) is copied to docs/images/<shot>.png. Prints the CPU times of export and render.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -31,28 +32,45 @@ README_STILL = {"hero_dam": 6}
 def import_frames(run, returned: Path, frames: list[int], info: dict) -> list[int]:
     """Write the decoded meshes as surface stage frames of `run`'s cache and its manifest."""
     from mpmfx.io.frames import GroupSurface, SurfaceFrame
+
     entry = run.entries()["surface"]
     done = []
     for f in frames:
         groups, meta = hero_codec.read(returned / f"{run.shot.shot.name}_{f:04d}.hm")
         voxel = info.get("voxel_m") or 0.0
-        out = {g: GroupSurface(vertices=v, faces=fc, normals=n, velocities=vel,
-                               block_ijk=np.zeros((0, 3), np.int64), blocks=np.zeros((0, 8, 8, 8), np.float32),
-                               inside_ijk=np.zeros((0, 3), np.int64), voxel_size=voxel, background=3 * voxel)
-               for g, (v, fc, n, vel) in groups.items()}
+        out = {
+            g: GroupSurface(
+                vertices=v,
+                faces=fc,
+                normals=n,
+                velocities=vel,
+                block_ijk=np.zeros((0, 3), np.int64),
+                blocks=np.zeros((0, 8, 8, 8), np.float32),
+                inside_ijk=np.zeros((0, 3), np.int64),
+                voxel_size=voxel,
+                background=3 * voxel,
+            )
+            for g, (v, fc, n, vel) in groups.items()
+        }
         SurfaceFrame(out).write(entry.frame_path(f, SurfaceFrame.EXT))
         done.append(f)
         print(f"{run.shot.shot.name} frame {f}: " + ", ".join(f"{g} {len(v[0]):,} vertices" for g, v in groups.items()))
-    entry.write_manifest(frames=entry.done_frames(SurfaceFrame.EXT), timings={"gpu_surface_s": info["stages"]["surface"]["seconds"]},
-                         extra={"imported": f"decoded from {returned} (lab/hero_codec.py, lossy: vertices to 1/32 voxel, "
-                                            f"velocities int8); surfaced on {info.get('device', '?')}",
-                                "this_run": {"vertices": info.get("surface_vertices"), "faces": info.get("surface_faces")}})
+    entry.write_manifest(
+        frames=entry.done_frames(SurfaceFrame.EXT),
+        timings={"gpu_surface_s": info["stages"]["surface"]["seconds"]},
+        extra={
+            "imported": f"decoded from {returned} (lab/hero_codec.py, lossy: vertices to 1/32 voxel, "
+            f"velocities int8); surfaced on {info.get('device', '?')}",
+            "this_run": {"vertices": info.get("surface_vertices"), "faces": info.get("surface_faces")},
+        },
+    )
     return done
 
 
 def run_stage(run, name: str, frames: list[int]) -> float:
     """One stage through the runner's own begin / run / end (cached: 0 s)."""
     from mpmfx.stages.runner import StageResult, stage_module
+
     with run.cache.lock():
         ctx = run.begin(name, run.entries(), frames)
         if isinstance(ctx, StageResult):
@@ -76,6 +94,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     import mpmfx
     from mpmfx.config import Export
+
     report = json.loads((args.returned / "hero_times.json").read_text())
     for info in report["shots"]:
         name = info["shot"]
@@ -88,8 +107,9 @@ def main(argv=None) -> int:
         if not frames:
             print(f"{name}: none of frames {want} came back (have {packed}): skipped")
             continue
-        run = mpmfx.load_shot(SHOT_DIR / f"{name}.toml",
-                              overrides=info["overrides"] + args.overrides, cache_root=args.cache, workers=1)
+        run = mpmfx.load_shot(
+            SHOT_DIR / f"{name}.toml", overrides=info["overrides"] + args.overrides, cache_root=args.cache, workers=1
+        )
         # no level set leaves came back: the USD gets the meshes, not the .vdb files
         run.shot = run.shot.model_copy(update={"export": Export(vdb=False, points=False)})
         import_frames(run, args.returned, packed, info)
@@ -99,8 +119,10 @@ def main(argv=None) -> int:
         dst = Path(args.readme) / f"{name}.png"
         shutil.copyfile(png, dst)
         secs = (run.entries()["render"].manifest() or {}).get("cycles_seconds", {})
-        print(f"{name}: frames {frames}: export {t_exp:.1f} s, render {t_ren:.1f} s (Cycles wall/CPU per frame: {secs}) "
-              f"-> {dst}")
+        print(
+            f"{name}: frames {frames}: export {t_exp:.1f} s, render {t_ren:.1f} s (Cycles wall/CPU per frame: {secs}) "
+            f"-> {dst}"
+        )
     return 0
 
 

@@ -9,6 +9,7 @@ sharpened mesh by how far it lies from the round one (in particle spacings h).
 
     python lab/ledge_still.py [--out docs/images/surface_water_ledges.png] [--device cpu]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -46,22 +47,32 @@ def main() -> None:
             return surface_particles(x, None, dataclasses.replace(params, sharp_edges=True), device=args.device).mesh
         finally:
             sharpen.SHARP["spread"] = shipped
+
     meshes = [surface_particles(x, None, params, device=args.device).mesh, sharpened(0), sharpened(shipped)]
     moved = cKDTree(meshes[0].vertices).query(meshes[2].vertices)[0] / h
     plotter = pv.Plotter(shape=(2, 2), off_screen=True, window_size=(1600, 1000), border=False)
-    panels = [(meshes[0], None, "round (the shot's setting)"), (meshes[1], None, "sharp, each cell alone: ledges"),
-              (meshes[2], None, f"sharp, as shipped (spread {shipped})"),
-              (meshes[2], moved, f"moved (h): {np.mean(moved > 0.05):.1%} of the vertices over 0.05 h")]
+    panels = [
+        (meshes[0], None, "round (the shot's setting)"),
+        (meshes[1], None, "sharp, each cell alone: ledges"),
+        (meshes[2], None, f"sharp, as shipped (spread {shipped})"),
+        (meshes[2], moved, f"moved (h): {np.mean(moved > 0.05):.1%} of the vertices over 0.05 h"),
+    ]
     for i, (mesh, scalars, title) in enumerate(panels):
         plotter.subplot(i // 2, i % 2)
-        poly = pv.PolyData(mesh.vertices.astype(np.float64),
-                           np.hstack([np.full((len(mesh.faces), 1), 3), mesh.faces]).ravel())
+        poly = pv.PolyData(
+            mesh.vertices.astype(np.float64), np.hstack([np.full((len(mesh.faces), 1), 3), mesh.faces]).ravel()
+        )
         if scalars is None:
             plotter.add_mesh(poly, color="#5fa8d3", smooth_shading=True, specular=0.4)
         else:
             poly["moved"] = scalars
-            plotter.add_mesh(poly, scalars="moved", clim=[0.0, 0.6], smooth_shading=True,
-                             scalar_bar_args={"title": "moved (h)", "n_labels": 4})
+            plotter.add_mesh(
+                poly,
+                scalars="moved",
+                clim=[0.0, 0.6],
+                smooth_shading=True,
+                scalar_bar_args={"title": "moved (h)", "n_labels": 4},
+            )
         plotter.add_text(title, font_size=11)
         plotter.camera_position = camera
         plotter.camera.view_angle = 25.0

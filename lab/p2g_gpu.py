@@ -5,6 +5,7 @@ advance() back to back. One table each; rows also under --out ($OUT or renders/b
 
     python lab/p2g_gpu.py [grid ...] [--skip agreement|fastmath|kernels|paths ...]   (grids: 128 256)
 """
+
 import argparse
 import json
 import os
@@ -37,7 +38,7 @@ def stirred_run(name, grid_n, det, frames, p2g=None, restart=False):
 
     s = solver()
     st = s.init_state(parts)
-    subs = 0
+    subs, ckpt = 0, None
     for f in range(frames):
         if restart and f == frames // 2:
             s = solver()
@@ -55,14 +56,26 @@ def agreement(grid_n=32, frames=6):
     rows = []
     for name in ("Mushy", "Water"):
         for det in (True, False):
+
             def run(p2g, restart=False):
                 return stirred_run(name, grid_n, det, frames, p2g, restart)
+
             (a, na), (b, nb) = run("reference"), run("brick")
             same = lambda o: all(np.array_equal(o[0][k], b[k]) for k in b)  # noqa: E731
-            rows.append({"scene": name, "det": int(det), "p2g": "brick", "substeps_ref": na, "substeps": nb,
-                         "max_dx": float(np.abs(a["x"] - b["x"]).max()), "max_dv": float(np.abs(a["v"] - b["v"]).max()),
-                         "max_dF": float(np.abs(a["F"] - b["F"]).max()) if "F" in a else 0.0,
-                         "replay_identical": int(same(run("brick"))), "resume_identical": int(same(run("brick", True)))})
+            rows.append(
+                {
+                    "scene": name,
+                    "det": int(det),
+                    "p2g": "brick",
+                    "substeps_ref": na,
+                    "substeps": nb,
+                    "max_dx": float(np.abs(a["x"] - b["x"]).max()),
+                    "max_dv": float(np.abs(a["v"] - b["v"]).max()),
+                    "max_dF": float(np.abs(a["F"] - b["F"]).max()) if "F" in a else 0.0,
+                    "replay_identical": int(same(run("brick"))),
+                    "resume_identical": int(same(run("brick", True))),
+                }
+            )
     print_table(rows, list(rows[0]))
     return rows
 
@@ -117,8 +130,7 @@ def kernels(name, grid_n, det, p2g, sort1=False):
     for r in res:
         nm = r.name.split("(")[0].split(" ")[-1][:40]
         ms[nm] = ms.get(nm, 0.0) + r.elapsed / k
-    row = {"scene": name, "grid_n": grid_n, "det": int(det), "p2g": p2g, "sort1": int(sort1),
-           "substeps": k, "n": st.n}
+    row = {"scene": name, "grid_n": grid_n, "det": int(det), "p2g": p2g, "sort1": int(sort1), "substeps": k, "n": st.n}
     row.update({kk: round(v, 3) for kk, v in sorted(ms.items(), key=lambda kv: -kv[1])[:12]})
     print(json.dumps(row), flush=True)
     return row
@@ -148,8 +160,13 @@ def main():
     rows = []
     for g in grids if "paths" not in skip else ():
         for name in ("Mushy", "Water"):
-            for det, path in ((False, "device-unbinned"), (False, "device"), (False, "device-sort1"),
-                              (True, "device-unbinned"), (True, "device")):
+            for det, path in (
+                (False, "device-unbinned"),
+                (False, "device"),
+                (False, "device-sort1"),
+                (True, "device-unbinned"),
+                (True, "device"),
+            ):
                 rows.append(safe_case(name, g, det, None, bw, substeps=50, path=path))
                 print_table(rows[-1:], COLS)
     if rows:

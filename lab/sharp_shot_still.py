@@ -8,6 +8,7 @@ the README's picture of surface.sharp_edges on a real simulation (snow_smash's s
 Each argument is a shot's cache folder; its newest surface entry is read. Every group of a
 frame is drawn in one grey, smooth-shaded with area-weighted vertex normals, one key light.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,8 +44,9 @@ def picture(pv, path: Path, size: tuple[int, int]) -> np.ndarray:
             v, f = group.vertices.astype(np.float64), group.faces
             mesh = pv.PolyData(v, np.hstack([np.full((len(f), 1), 3), f]).ravel())
             mesh.point_data["Normals"] = vertex_normals(v, f)
-            plotter.add_mesh(mesh, color="#e8eef4", smooth_shading=True, specular=0.8, specular_power=50,
-                             diffuse=0.7, ambient=0.1)
+            plotter.add_mesh(
+                mesh, color="#e8eef4", smooth_shading=True, specular=0.8, specular_power=50, diffuse=0.7, ambient=0.1
+            )
     plotter.camera_position = CAMERA
     img = np.asarray(plotter.screenshot(return_img=True))[..., :3]
     plotter.close()

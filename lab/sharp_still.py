@@ -7,6 +7,7 @@ plane; the vertex error of each mesh (mean and max over the whole box) in the le
 
     python lab/sharp_still.py [--count 100000] [--seed 2] [--out docs/images/surface_sharp.png]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -19,8 +20,9 @@ from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_pa
 
 def surface(x: np.ndarray, h: float, label: str):
     setting = dict(OURS[label])
-    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False,
-                           **setting)
+    params = SurfaceParams(
+        PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False, **setting
+    )
     return surface_particles(x, None, params, device="cpu").mesh
 
 
@@ -48,19 +50,29 @@ def main() -> None:
     x, h = sample_shape("box", args.count, "random", seed=args.seed)
     meshes = {label: surface(x, h, label) for label in ("round", "fine")}
     fig, axes = plt.subplots(1, 2, figsize=(11, 5.4))
-    for ax, (z, where) in zip(axes, ((0.0, "the middle of an edge (z = 0)"),
-                                     (BOX_HALF[2] - h, "a corner, one spacing under the top face"))):
+    for ax, (z, where) in zip(
+        axes, ((0.0, "the middle of an edge (z = 0)"), (BOX_HALF[2] - h, "a corner, one spacing under the top face"))
+    ):
         lo, hi = BOX_HALF[:2] - 5 * h, BOX_HALF[:2] + 1.5 * h
         near = (np.abs(x[:, 2] - z) < 0.5 * h) & np.all(x[:, :2] > lo - h, axis=1)
         ax.scatter(x[near, 0], x[near, 1], s=14, c="0.75", zorder=1)
-        ax.plot([lo[0], BOX_HALF[0], BOX_HALF[0]], [BOX_HALF[1], BOX_HALF[1], lo[1]], c="k", lw=1, zorder=2,
-                label="the box")
+        ax.plot(
+            [lo[0], BOX_HALF[0], BOX_HALF[0]], [BOX_HALF[1], BOX_HALF[1], lo[1]], c="k", lw=1, zorder=2, label="the box"
+        )
         for label, style, colour in (("round", "--", "tab:red"), ("fine", "-", "tab:blue")):
             mesh = meshes[label]
             err = np.abs(sdf(mesh.vertices.astype(np.float64))) / h
             what = '"fine" (shots\' default)' if label == "fine" else '"round" (surface.sharp_edges = false)'
-            ax.add_collection(LineCollection(section(mesh, z), colors=colour, linestyles=style, lw=2, zorder=3,
-                                             label=f"{what}: vertex mean {err.mean():.3f} h, max {err.max():.2f} h"))
+            ax.add_collection(
+                LineCollection(
+                    section(mesh, z),
+                    colors=colour,
+                    linestyles=style,
+                    lw=2,
+                    zorder=3,
+                    label=f"{what}: vertex mean {err.mean():.3f} h, max {err.max():.2f} h",
+                )
+            )
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_aspect("equal")
@@ -68,8 +80,11 @@ def main() -> None:
         ax.set_yticks([])
         ax.set_title(f"{where}; h = {h * 1000:.1f} mm", fontsize=10)
         ax.legend(loc="lower left", fontsize=8)
-    fig.suptitle(f"The bench's box, {len(x)} uniformly random particles (seed {args.seed}), cut beside an edge: "
-                 "sharp edges put the faces' planes back where the sample thins", fontsize=10)
+    fig.suptitle(
+        f"The bench's box, {len(x)} uniformly random particles (seed {args.seed}), cut beside an edge: "
+        "sharp edges put the faces' planes back where the sample thins",
+        fontsize=10,
+    )
     fig.tight_layout()
     fig.savefig(args.out, dpi=110)
     print(args.out)

@@ -6,6 +6,7 @@ side with PyVista, holes counted in the titles.
 
     python lab/sheet_still.py [--count 10000] [--out docs/images/surface_sheet.png] [--device cpu]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,17 +30,22 @@ def main() -> None:
     voxel = setting.pop("voxel_h") * h
     plotter = pv.Plotter(shape=(1, 2), off_screen=True, window_size=(1600, 800), border=False)
     for col, aniso in enumerate((False, True)):
-        params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel, dense_output=False, anisotropic=aniso,
-                               **setting)
+        params = SurfaceParams(
+            PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel, dense_output=False, anisotropic=aniso, **setting
+        )
         mesh = surface_particles(x, None, params, device=args.device).mesh
         stats = sheet_stats(mesh.vertices, mesh.faces, h)
         faces = np.hstack([np.full((len(mesh.faces), 1), 3), mesh.faces]).ravel()
         plotter.subplot(0, col)
-        plotter.add_mesh(pv.PolyData(mesh.vertices.astype(np.float64), faces), color="#5fa8d3", smooth_shading=True,
-                         specular=0.4)
+        plotter.add_mesh(
+            pv.PolyData(mesh.vertices.astype(np.float64), faces), color="#5fa8d3", smooth_shading=True, specular=0.4
+        )
         kind = "anisotropic (Yu & Turk)" if aniso else "isotropic"
-        plotter.add_text(f"{kind}: {stats['components']} piece, {stats['holes']} holes, thickness "
-                         f"{1 + stats['thickness_err']:.2f} h", font_size=12)
+        plotter.add_text(
+            f"{kind}: {stats['components']} piece, {stats['holes']} holes, thickness "
+            f"{1 + stats['thickness_err']:.2f} h",
+            font_size=12,
+        )
         plotter.camera_position = [(0.42, -0.62, 0.52), (0.0, 0.02, 0.0), (0.0, 0.0, 1.0)]
         print(kind, stats)
     plotter.screenshot(args.out)

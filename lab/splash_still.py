@@ -7,6 +7,7 @@ the titles.
 
     python lab/splash_still.py [--out docs/images/surface_splash.png] [--device cpu]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -36,11 +37,14 @@ def main() -> None:
         stats = sheet_stats(mesh.vertices, mesh.faces, h)
         faces = np.hstack([np.full((len(mesh.faces), 1), 3), mesh.faces]).ravel()
         plotter.subplot(0, col)
-        plotter.add_mesh(pv.PolyData(mesh.vertices.astype(np.float64), faces), color="#5fa8d3", smooth_shading=True,
-                         specular=0.4)
+        plotter.add_mesh(
+            pv.PolyData(mesh.vertices.astype(np.float64), faces), color="#5fa8d3", smooth_shading=True, specular=0.4
+        )
         kind = "anisotropic (Yu & Turk)" if aniso else "isotropic"
-        plotter.add_text(f"water_dam frame {SPLASH_FRAME}, {kind}: {stats['components']} piece(s), "
-                         f"{stats['holes']} holes", font_size=11)
+        plotter.add_text(
+            f"water_dam frame {SPLASH_FRAME}, {kind}: {stats['components']} piece(s), {stats['holes']} holes",
+            font_size=11,
+        )
         plotter.camera_position = CAMERA
         print(kind, stats)
     plotter.screenshot(args.out)

@@ -8,6 +8,7 @@ them (mpmfx.bench.surface_splash).
 
     python lab/splash_sweep.py FRAMES_DIR [--frames 9 10 12 13 15 16 18] [--device cpu]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -38,9 +39,12 @@ def main() -> None:
                 t0 = time.perf_counter()
                 mesh = surface_particles(x, None, params, device=args.device).mesh
                 r = _row("", x, h, time.perf_counter() - t0, mesh.vertices, mesh.faces, args.device, "")
-                print(f"{frame:5d} {scale:12g} {'anisotropic' if aniso else 'isotropic':12} {r['seconds']:7.1f} "
-                      f"{r['components']:6d} {r['pieces_big']:5d} {r['holes']:5d} {r['open_edges']:4d} "
-                      f"{r['volume_ratio']:7.3f}", flush=True)
+                print(
+                    f"{frame:5d} {scale:12g} {'anisotropic' if aniso else 'isotropic':12} {r['seconds']:7.1f} "
+                    f"{r['components']:6d} {r['pieces_big']:5d} {r['holes']:5d} {r['open_edges']:4d} "
+                    f"{r['volume_ratio']:7.3f}",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ sub-voxel offset so no two frames are the same particles.
 Each worker process warms up (a first call, Warp's kernels loaded) and says so before the clock
 starts; the time is from the start signal to the last frame done.
 """
+
 import argparse
 import json
 import multiprocessing as mp
@@ -61,9 +62,24 @@ def run(method: str, procs: int, threads: int, args) -> float:
     """Frames per second with `procs` worker processes of `threads` threads each."""
     ctx = mp.get_context("spawn")
     ready, go, done = ctx.Queue(), ctx.Event(), ctx.Queue()
-    ps = [ctx.Process(target=worker, args=(method, threads, args.shape, args.sampling, args.count,
-                                          list(range(k, args.frames, procs)), args.frames, ready, go, done))
-          for k in range(procs)]
+    ps = [
+        ctx.Process(
+            target=worker,
+            args=(
+                method,
+                threads,
+                args.shape,
+                args.sampling,
+                args.count,
+                list(range(k, args.frames, procs)),
+                args.frames,
+                ready,
+                go,
+                done,
+            ),
+        )
+        for k in range(procs)
+    ]
     for p in ps:
         p.start()
     for _ in ps:  # every worker past its warm-up call
@@ -91,9 +107,14 @@ def main() -> int:
         for method in ("fast", "fine", PEER):
             for procs, threads in ((1, cores), (cores, 1)):
                 fps = run(method, procs, threads, args)
-                rows.append({"round": rnd, "method": method, "processes": procs, "threads": threads, "frames_per_s": fps})
-                print(f"round {rnd} {args.shape} {args.sampling} {args.count}: {method:10} {procs} x {threads} threads: "
-                      f"{fps:6.2f} frames/s ({1000 / fps:6.1f} ms a frame)", flush=True)
+                rows.append(
+                    {"round": rnd, "method": method, "processes": procs, "threads": threads, "frames_per_s": fps}
+                )
+                print(
+                    f"round {rnd} {args.shape} {args.sampling} {args.count}: {method:10} {procs} x {threads} threads: "
+                    f"{fps:6.2f} frames/s ({1000 / fps:6.1f} ms a frame)",
+                    flush=True,
+                )
     if args.out:
         with open(args.out, "w") as fh:
             json.dump({"args": vars(args), "cores": cores, "rows": rows}, fh, indent=1)

@@ -5,6 +5,7 @@ exactly two faces, and at the edge's bisector (mean / p99 / max), smoothed and r
 
     python lab/surface_seeds.py [--counts 100000 1000000] [--seeds 12 6] [--device cpu] [--out X.csv] [--edges]
 """
+
 import argparse
 import csv
 import sys
@@ -20,8 +21,9 @@ def mesh(shape: str, count: int, seed: int, label: str, device: str, **overrides
     """(vertices, faces, h) of our surface of a random sample at setting OURS[label]."""
     x, h = sample_shape(shape, count, "random", seed=seed)
     setting = {**OURS[label], **overrides}
-    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False,
-                           **setting)
+    params = SurfaceParams(
+        PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False, **setting
+    )
     m = surface_particles(x, None, params, device=device).mesh
     return m.vertices, m.faces, h
 
@@ -38,14 +40,26 @@ def sweep(counts, seeds, device):
                     e = np.abs(sdf(v.astype(np.float64))) / h
                     r.append((e.mean(), surface_error(v, f, sdf) / h, e.max()))
                 r = np.array(r)
-                row = {"shape": shape, "count": count, "setting": label, "seeds": n_seeds,
-                       "mean_lo": r[:, 0].min(), "mean_hi": r[:, 0].max(), "surface_lo": r[:, 1].min(),
-                       "surface_hi": r[:, 1].max(), "max_lo": r[:, 2].min(), "max_hi": r[:, 2].max(),
-                       "seeds_over_1h": int((r[:, 2] > 1.0).sum())}
+                row = {
+                    "shape": shape,
+                    "count": count,
+                    "setting": label,
+                    "seeds": n_seeds,
+                    "mean_lo": r[:, 0].min(),
+                    "mean_hi": r[:, 0].max(),
+                    "surface_lo": r[:, 1].min(),
+                    "surface_hi": r[:, 1].max(),
+                    "max_lo": r[:, 2].min(),
+                    "max_hi": r[:, 2].max(),
+                    "seeds_over_1h": int((r[:, 2] > 1.0).sum()),
+                }
                 rows.append(row)
-                print(f"{shape:6} {count:>8} {label:4} x{n_seeds:<3} vertex mean {row['mean_lo']:.3f}-{row['mean_hi']:.3f} h, "
-                      f"surface {row['surface_lo']:.3f}-{row['surface_hi']:.3f} h, max {row['max_lo']:.2f}-{row['max_hi']:.2f} h, "
-                      f"over 1 h: {row['seeds_over_1h']}", flush=True)
+                print(
+                    f"{shape:6} {count:>8} {label:4} x{n_seeds:<3} vertex mean {row['mean_lo']:.3f}-{row['mean_hi']:.3f} h, "
+                    f"surface {row['surface_lo']:.3f}-{row['surface_hi']:.3f} h, max {row['max_lo']:.2f}-{row['max_hi']:.2f} h, "
+                    f"over 1 h: {row['seeds_over_1h']}",
+                    flush=True,
+                )
     return rows
 
 
@@ -68,14 +82,19 @@ def edges(counts, device, n_seeds: int = 3):
                     out.append((inset[edge].mean(), inset[bis].mean(), np.percentile(inset[bis], 99), inset[bis].max()))
                 m = np.mean(out, axis=0)
                 what = "raw field (no flow)" if overrides else "smoothed"
-                print(f"box {count:>8} {label:4} {what:20} edge vertices' mean inset {m[0]:+.3f} h; "
-                      f"at the bisector mean / p99 / max {m[1]:.3f} / {m[2]:.3f} / {m[3]:.3f} h ({n_seeds} seeds)", flush=True)
+                print(
+                    f"box {count:>8} {label:4} {what:20} edge vertices' mean inset {m[0]:+.3f} h; "
+                    f"at the bisector mean / p99 / max {m[1]:.3f} / {m[2]:.3f} / {m[3]:.3f} h ({n_seeds} seeds)",
+                    flush=True,
+                )
 
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--counts", type=int, nargs="+", default=[100_000, 1_000_000])
-    ap.add_argument("--seeds", type=int, nargs="+", default=[12, 6], help="seeds per count (one number: the same for all)")
+    ap.add_argument(
+        "--seeds", type=int, nargs="+", default=[12, 6], help="seeds per count (one number: the same for all)"
+    )
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--out", default=None, help="also write the rows as CSV here")
     ap.add_argument("--edges", action="store_true", help="also the random box's edge profile")

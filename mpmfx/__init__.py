@@ -5,6 +5,7 @@
 
 Importing mpmfx is cheap: warp, pxr, pyopenvdb and pyvista load only when a stage needs them.
 """
+
 __version__ = "0.1.0"
 
 
@@ -14,4 +15,5 @@ def load_shot(path, **kwargs):
     The same schema and defaults as `mpmfx run`: a field the file leaves unset takes the
     schema's default, and the solver's defaults are `mpmfx.mpm.SolverConfig`'s own."""
     from mpmfx.stages.runner import load_shot as _load  # backend: warp (keeps import mpmfx light)
+
     return _load(path, **kwargs)

@@ -6,6 +6,7 @@ Never imports bpy: Blender bundles its own USD libraries, so it runs as
 (blender_export, cycles_job, blender_scene) import bpy at their top and no other module imports
 them; what parent and child share (the lines the child prints) is here.
 """
+
 from __future__ import annotations
 
 import importlib.util

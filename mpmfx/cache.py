@@ -13,6 +13,7 @@ declares (`code_hash`)}. A frame file exists only when it is complete
 (temp name + os.replace), so a killed run leaves complete frames or none; the manifest is written
 only when a run finishes, so an entry without one is "partial" and resumes.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -22,9 +23,9 @@ import fcntl
 import hashlib
 import json
 import os
+import shutil
 import socket
 import sys
-import shutil
 import time
 import uuid
 from dataclasses import dataclass
@@ -50,8 +51,10 @@ def child(root: str | Path, *parts: str, what: str = "shot.name") -> Path:
     base = root.resolve()
     real = base.joinpath(*parts)  # the last part is not followed: it may be a link we replace
     if any(p in ("", ".", "..") or "/" in p or os.sep in p for p in parts) or base not in real.parents:
-        raise PathError(f"{what} {'/'.join(parts)!r}: resolves to {real}, outside {base}; "
-                        f"use letters, digits, '_', '-' and '.', not starting with '.'")
+        raise PathError(
+            f"{what} {'/'.join(parts)!r}: resolves to {real}, outside {base}; "
+            f"use letters, digits, '_', '-' and '.', not starting with '.'"
+        )
     return path
 
 
@@ -124,8 +127,12 @@ def _verify(tmp: Path, path: Path, verify: Callable[[Path], object] | None) -> N
     else:
         why = ""
     if not ok:
-        raise WriteError(errno.EIO, f"the written file is incomplete or unreadable{why}; is the disk full? "
-                         f"free space (or point --cache / $MPMFX_CACHE at a larger disk) and run again", str(path))
+        raise WriteError(
+            errno.EIO,
+            f"the written file is incomplete or unreadable{why}; is the disk full? "
+            f"free space (or point --cache / $MPMFX_CACHE at a larger disk) and run again",
+            str(path),
+        )
 
 
 def write_json(path: str | Path, data: Any) -> None:
@@ -206,18 +213,33 @@ class Entry:
         out = {}
         for p in sorted(self.root.rglob("*")):
             rel = p.relative_to(self.root)
-            if p.is_file() and not p.name.startswith(".") and rel.parts[0] not in ("checkpoints", "qa") \
-                    and p != self.manifest_path:
+            if (
+                p.is_file()
+                and not p.name.startswith(".")
+                and rel.parts[0] not in ("checkpoints", "qa")
+                and p != self.manifest_path
+            ):
                 out[rel.as_posix()] = p.stat().st_size
         return out
 
     def write_manifest(self, *, frames: list[int], timings: dict, qa: dict | None = None, extra: dict | None = None):
         files = self.files()
-        write_json(self.manifest_path, {
-            "schema": MANIFEST_SCHEMA, "stage": self.stage, "key": self.key, "key_inputs": self.key_inputs,
-            "frames": sorted(frames), "timings": timings, "qa": qa or {}, "written": time.time(),
-            "files": files, "bytes": sum(files.values()), **(extra or {}),
-        })
+        write_json(
+            self.manifest_path,
+            {
+                "schema": MANIFEST_SCHEMA,
+                "stage": self.stage,
+                "key": self.key,
+                "key_inputs": self.key_inputs,
+                "frames": sorted(frames),
+                "timings": timings,
+                "qa": qa or {},
+                "written": time.time(),
+                "files": files,
+                "bytes": sum(files.values()),
+                **(extra or {}),
+            },
+        )
 
     def invalidate(self) -> None:
         """Drop the manifest so the entry counts as partial (its complete frames stay)."""
@@ -234,8 +256,7 @@ class Cache:
         self.root = Path(root)
         self.shot_dir = child(self.root, shot)
 
-    def entry(self, stage: str, version: int, params: dict, upstream: dict[str, str],
-              inputs: dict[str, str]) -> Entry:
+    def entry(self, stage: str, version: int, params: dict, upstream: dict[str, str], inputs: dict[str, str]) -> Entry:
         key = stage_key(stage, version, params, upstream, inputs)
         key_inputs = {"version": version, "params": params, "upstream": upstream, "inputs": inputs}
         return Entry(self.shot_dir / stage / f"{stage}-{key[:12]}", stage, key, key_inputs)
@@ -252,11 +273,17 @@ class Cache:
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
-                raise BusyError(f"another run is using {self.shot_dir}: {_holder(os.pread(fd, 4096, 0))}; "
-                                f"wait for it to finish, or stop it first (a killed run keeps its complete "
-                                f"frames and the next run resumes)") from None
-            info = {"host": socket.gethostname(), "pid": os.getpid(), "argv": sys.argv,
-                    "since": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC")}
+                raise BusyError(
+                    f"another run is using {self.shot_dir}: {_holder(os.pread(fd, 4096, 0))}; "
+                    f"wait for it to finish, or stop it first (a killed run keeps its complete "
+                    f"frames and the next run resumes)"
+                ) from None
+            info = {
+                "host": socket.gethostname(),
+                "pid": os.getpid(),
+                "argv": sys.argv,
+                "since": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC"),
+            }
             os.ftruncate(fd, 0)
             os.pwrite(fd, json.dumps(info).encode(), 0)
             yield

@@ -14,8 +14,16 @@ from mpmfx.geometry.thickness import Verdict
 from mpmfx.render.thickness import render_thickness_heatmap
 
 
-def run_check(asset: str, *, grid_n: int, origin=None, size=None, as_json: bool = False,
-              out_dir: str | Path | None = None, prim_path: str | None = None) -> int:
+def run_check(
+    asset: str,
+    *,
+    grid_n: int,
+    origin=None,
+    size=None,
+    as_json: bool = False,
+    out_dir: str | Path | None = None,
+    prim_path: str | None = None,
+) -> int:
     """Check ``asset``'s thickness at ``grid_n`` cells per domain edge (only its part
     ``prim_path``, as mpmfx.geometry.mesh.load_mesh takes it, where given).
 
@@ -34,8 +42,9 @@ def run_check(asset: str, *, grid_n: int, origin=None, size=None, as_json: bool 
     out.mkdir(parents=True, exist_ok=True)
     data = checked.to_dict()
     (out / "report.json").write_text(json.dumps(data, indent=2) + "\n")
-    png = render_thickness_heatmap(checked.mesh, report.vertex_thickness_cells, out / "thickness.png",
-                                   warn_cells=report.warn_cells)
+    png = render_thickness_heatmap(
+        checked.mesh, report.vertex_thickness_cells, out / "thickness.png", warn_cells=report.warn_cells
+    )
     if as_json:
         print(json.dumps(data, indent=2))
     else:

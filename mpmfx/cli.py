@@ -3,6 +3,7 @@
 
 Exit codes: 0 success, 1 a stage failed (or a check failed), 2 bad input (config, file, arguments).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -23,16 +24,23 @@ from mpmfx.stages.qa import print_qa
 
 
 def _parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="mpmfx", description="Meshes to simulated, surfaced and rendered MPM "
-                                "snow, sand, mud, water and jelly.")
+    p = argparse.ArgumentParser(
+        prog="mpmfx", description="Meshes to simulated, surfaced and rendered MPM snow, sand, mud, water and jelly."
+    )
     p.add_argument("--version", action="version", version=f"mpmfx {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True, metavar="COMMAND")
 
     def shot_cmd(name, help_):
         s = sub.add_parser(name, help=help_, description=help_)
         s.add_argument("shot", help="shot file, e.g. pipeline/shots/jelly_splash.toml")
-        s.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                       help="override any shot field, e.g. --set solver.cfl=0.3 --set objects.0.material=Water")
+        s.add_argument(
+            "--set",
+            dest="overrides",
+            action="append",
+            default=[],
+            metavar="KEY=VALUE",
+            help="override any shot field, e.g. --set solver.cfl=0.3 --set objects.0.material=Water",
+        )
         s.add_argument("--cache", default=None, help="cache root (default $MPMFX_CACHE or ./cache)")
         return s
 
@@ -58,8 +66,13 @@ def _parser() -> argparse.ArgumentParser:
 
     m = sub.add_parser("cache", help="cache housekeeping")
     m.add_argument("action", choices=("prune",), help="prune: delete old variants (listed with sizes first)")
-    m.add_argument("--keep", type=int, default=2, metavar="N", help="newest variants kept per shot and stage "
-                   "(entries a published output uses are always kept)")
+    m.add_argument(
+        "--keep",
+        type=int,
+        default=2,
+        metavar="N",
+        help="newest variants kept per shot and stage (entries a published output uses are always kept)",
+    )
     m.add_argument("--cache", default=None, help="cache root (default $MPMFX_CACHE or ./cache)")
     m.add_argument("--dry-run", action="store_true", help="list what would be deleted, delete nothing")
     m.add_argument("-y", "--yes", action="store_true", help="delete simulations without asking")
@@ -71,25 +84,47 @@ def _parser() -> argparse.ArgumentParser:
     k = sub.add_parser("check", help="five-cell thickness check of an asset (exit 0 pass/warn, 1 fail, 2 bad input)")
     k.add_argument("asset", help="mesh file (obj, ply, stl, glb, gltf, usd, usda, usdc, usdz, blend, fbx)")
     k.add_argument("--grid-n", type=int, default=64, help="grid cells per axis of the domain")
-    k.add_argument("--domain", default=None, metavar="OX,OY,OZ,SIZE",
-                   help="domain min corner and edge (m); default: the mesh's bounding cube + 10 %%")
-    k.add_argument("--prim-path", default=None, metavar="PART",
-                   help="check one part: a USD prim, or a .blend / .fbx object or collection name")
+    k.add_argument(
+        "--domain",
+        default=None,
+        metavar="OX,OY,OZ,SIZE",
+        help="domain min corner and edge (m); default: the mesh's bounding cube + 10 %%",
+    )
+    k.add_argument(
+        "--prim-path",
+        default=None,
+        metavar="PART",
+        help="check one part: a USD prim, or a .blend / .fbx object or collection name",
+    )
     k.add_argument("--json", action="store_true", help="JSON for pipelines")
 
     b = sub.add_parser("bench", help="speed and accuracy benchmarks (run them on the GPU)")
-    b.add_argument("what", choices=("accuracy", "gpu", "surface", "surface-times", "solver", "voxelise", "shots"),
-                   help="which benchmark")
+    b.add_argument(
+        "what",
+        choices=("accuracy", "gpu", "surface", "surface-times", "solver", "voxelise", "shots"),
+        help="which benchmark",
+    )
     b.add_argument("--quick", action="store_true", help="small CPU-sized sweep")
     b.add_argument("--device", choices=("cpu", "cuda"), default=None)
     b.add_argument("--out", default="renders/bench", help="folder for CSV/JSON/PNG")
-    b.add_argument("--peers", nargs="*", default=None, metavar="PEER",
-                   help="surface: other surfacers on the same particles, any of splashsurf newton "
-                   "newton-aniso; bare --peers runs none (default: all installed; --quick: splashsurf); "
-                   "surface-times: splashsurf (default: with --quick only)")
-    b.add_argument("--counts", type=int, nargs="+", default=None, metavar="N",
-                   help="surface: particle counts (default 100000 with --quick, else 1000000 10000000); "
-                   "surface-times: likewise (default 100000 with --quick, else 10000000)")
+    b.add_argument(
+        "--peers",
+        nargs="*",
+        default=None,
+        metavar="PEER",
+        help="surface: other surfacers on the same particles, any of splashsurf newton "
+        "newton-aniso; bare --peers runs none (default: all installed; --quick: splashsurf); "
+        "surface-times: splashsurf (default: with --quick only)",
+    )
+    b.add_argument(
+        "--counts",
+        type=int,
+        nargs="+",
+        default=None,
+        metavar="N",
+        help="surface: particle counts (default 100000 with --quick, else 1000000 10000000); "
+        "surface-times: likewise (default 100000 with --quick, else 10000000)",
+    )
     return p
 
 
@@ -103,6 +138,7 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - every error becomes a message and an exit code
         from mpmfx.config import ShotError  # backend: pydantic (keeps --help light)
         from mpmfx.stages.base import StageError  # backend: warp (keeps --help light)
+
         if isinstance(exc, (ShotError, PathError)):
             print(f"error: {exc}", file=sys.stderr)
             return 2
@@ -119,17 +155,22 @@ def _os_message(exc: OSError) -> str:
     """A file system error as the path and what to do (no traceback)."""
     keep = "complete frames are kept: run again to resume"
     if exc.errno == errno.ENOSPC:
-        return (f"no space left on the device writing {exc.filename}: free space, or point --cache "
-                f"(or $MPMFX_CACHE) at a larger disk; {keep}")
+        return (
+            f"no space left on the device writing {exc.filename}: free space, or point --cache "
+            f"(or $MPMFX_CACHE) at a larger disk; {keep}"
+        )
     if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
-        return (f"permission denied writing {exc.filename}: make it writable for this user, or point "
-                f"--cache (or $MPMFX_CACHE) at a folder you own; {keep}")
+        return (
+            f"permission denied writing {exc.filename}: make it writable for this user, or point "
+            f"--cache (or $MPMFX_CACHE) at a folder you own; {keep}"
+        )
     return f"{exc.filename}: {exc.strerror}; {keep}"
 
 
 def _dispatch(args) -> int:
     if args.cmd == "check":
         from mpmfx.check import run_check  # backend: trimesh (keeps --help light)
+
         origin = size = None
         if args.domain:
             try:
@@ -139,32 +180,54 @@ def _dispatch(args) -> int:
                 print(f"error: --domain {args.domain!r}: expected OX,OY,OZ,SIZE in metres", file=sys.stderr)
                 return 2
             origin, size = tuple(o), s
-        return run_check(args.asset, grid_n=args.grid_n, origin=origin, size=size, as_json=args.json,
-                         prim_path=args.prim_path)
+        return run_check(
+            args.asset, grid_n=args.grid_n, origin=origin, size=size, as_json=args.json, prim_path=args.prim_path
+        )
     if args.cmd == "bench":
         from mpmfx.stages.base import quiet_warp  # backend: warp (keeps --help light)
+
         quiet_warp()  # stdout carries the benchmark's tables only, never Warp's banner
-        return bench_main(args.what, quick=args.quick, device=args.device, out=args.out, peers=args.peers,
-                          counts=args.counts)
+        return bench_main(
+            args.what, quick=args.quick, device=args.device, out=args.out, peers=args.peers, counts=args.counts
+        )
 
     if args.cmd == "cache":
         return _prune(args)
     if args.cmd == "docs":
         from mpmfx.shotdoc import main as docs_main  # backend: pydantic (keeps --help light)
+
         return docs_main(check=args.check)
     if args.cmd == "wedge":
         from mpmfx.wedge import main as wedge_main  # backend: warp (keeps --help light)
+
         return wedge_main(args)
 
     from mpmfx.stages.runner import load_shot  # backend: warp (keeps --help light)
-    run = load_shot(args.shot, overrides=args.overrides, cache_root=args.cache,
-                    device=getattr(args, "device", None), quiet=getattr(args, "quiet", False),
-                    workers=getattr(args, "workers", None), scheduler=getattr(args, "scheduler", None))
+
+    run = load_shot(
+        args.shot,
+        overrides=args.overrides,
+        cache_root=args.cache,
+        device=getattr(args, "device", None),
+        quiet=getattr(args, "quiet", False),
+        workers=getattr(args, "workers", None),
+        scheduler=getattr(args, "scheduler", None),
+    )
     if args.cmd == "run":
         results = run.run(until=args.until, force=args.force, frames=args.frames)
-        _print_table(["stage", "result", "wall s", "frames", "qa"],
-                     [[r.stage, r.state, f"{r.seconds:.1f}", str(r.frames),
-                       f"{r.flagged} frame{'s' * (r.flagged != 1)} flagged" if r.flagged else ""] for r in results])
+        _print_table(
+            ["stage", "result", "wall s", "frames", "qa"],
+            [
+                [
+                    r.stage,
+                    r.state,
+                    f"{r.seconds:.1f}",
+                    str(r.frames),
+                    f"{r.flagged} frame{'s' * (r.flagged != 1)} flagged" if r.flagged else "",
+                ]
+                for r in results
+            ],
+        )
         _print_outputs(run, results)
         flagged = sum(r.flagged for r in results)
         if flagged and args.strict:
@@ -179,13 +242,17 @@ def _dispatch(args) -> int:
         _print_outputs(run, results)
         return 0
     if args.cmd == "status":
-        rows = [[s.stage, s.state, s.why, human(tree_size(s.entry)) if s.entry.exists() else "",
-                 os.path.relpath(s.entry)] for s in run.status()]
+        rows = [
+            [s.stage, s.state, s.why, human(tree_size(s.entry)) if s.entry.exists() else "", os.path.relpath(s.entry)]
+            for s in run.status()
+        ]
         _print_table(["stage", "state", "why", "disk", "entry"], rows)
         shot_dir = run.cache.shot_dir
         if shot_dir.is_dir():
-            print(f"\nall variants of this shot: {human(tree_size(shot_dir))} in {os.path.relpath(shot_dir)} "
-                  f"(`mpmfx clean SHOT --all-variants` or `mpmfx cache prune` to free it)")
+            print(
+                f"\nall variants of this shot: {human(tree_size(shot_dir))} in {os.path.relpath(shot_dir)} "
+                f"(`mpmfx clean SHOT --all-variants` or `mpmfx cache prune` to free it)"
+            )
         if args.qa:
             return print_qa(run)
         return 0

@@ -9,6 +9,7 @@ renders them into docs/shots.md.
 
 Errors name the file, the key and the fix: `ShotError("shot.toml: [solver].cfl: ...")`.
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -42,8 +43,10 @@ class _Section(BaseModel):
 
 
 class ShotInfo(_Section):
-    name: str = Field(pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$", description="Shot name; names the cache and "
-                      "renders/<name>/ (letters, digits, _ - ., not starting with '.').")
+    name: str = Field(
+        pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$",
+        description="Shot name; names the cache and renders/<name>/ (letters, digits, _ - ., not starting with '.').",
+    )
     frame_start: Int = Field(1, ge=0, description="First frame number (frame_start is the initial state, t = 0).")
     frame_end: Int = Field(48, ge=0, description="Last frame number, inclusive.")
     fps: Real = Field(24.0, gt=0, le=1000, description="Frames per second; one frame is 1/fps seconds.")
@@ -57,15 +60,24 @@ class Domain(_Section):
 
 class SceneObject(_Section):
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="Object name (a USD prim name).")
-    mesh: Path = Field(description="Mesh file (obj, ply, stl, glb, gltf, usd, usda, usdc, usdz, blend, fbx), "
-                                   "relative to the shot file.")
-    prim_path: str | None = Field(None, description="The part of the file taken: a USD prim whose meshes are taken, "
-                                  "or a .blend / .fbx object or collection name; default: the whole file.")
-    material: str = Field("Elastic", description="Material preset (Soft, Mushy, Goopy, Wet, Slush, Elastic, "
-                          "Granular, CohesiveGranular, Water, Tracer; docs/physics.md, \"Materials\").")
+    mesh: Path = Field(
+        description="Mesh file (obj, ply, stl, glb, gltf, usd, usda, usdc, usdz, blend, fbx), "
+        "relative to the shot file."
+    )
+    prim_path: str | None = Field(
+        None,
+        description="The part of the file taken: a USD prim whose meshes are taken, "
+        "or a .blend / .fbx object or collection name; default: the whole file.",
+    )
+    material: str = Field(
+        "Elastic",
+        description="Material preset (Soft, Mushy, Goopy, Wet, Slush, Elastic, "
+        'Granular, CohesiveGranular, Water, Tracer; docs/physics.md, "Materials").',
+    )
     overrides: dict[str, Real | Bool | str] = Field(
-        default_factory=dict, description="Material fields to change, e.g. {youngs_modulus = 3000} or "
-        "{friction_fit = \"compression\"}.")
+        default_factory=dict,
+        description='Material fields to change, e.g. {youngs_modulus = 3000} or {friction_fit = "compression"}.',
+    )
     translate: Vec3 = Field((0.0, 0.0, 0.0), description="Translation (m), applied after rotate and scale.")
     rotate: Vec3 = Field((0.0, 0.0, 0.0), description="XYZ Euler rotation (degrees).")
     scale: Real = Field(1.0, gt=0, description="Uniform scale of the mesh file's units to metres.")
@@ -103,16 +115,18 @@ class Keyframe(_Section):
 
 class ColliderCfg(_Section):
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="Collider name (a USD prim name).")
-    shape: ColliderShape = Field(description="plane, box or sphere (analytic), or mesh (a file, as a signed "
-                                 "distance grid).")
+    shape: ColliderShape = Field(
+        description="plane, box or sphere (analytic), or mesh (a file, as a signed distance grid)."
+    )
     friction: Real = Field(0.3, ge=0, description="Coulomb friction coefficient.")
     normal: Vec3 = Field((0.0, 1.0, 0.0), description="plane: outward normal.")
     half_extents: Vec3 = Field((0.1, 0.1, 0.1), description="box: half extents (m).")
     radius: Real = Field(0.1, gt=0, description="sphere: radius (m).")
     mesh: Path | None = Field(None, description="mesh: file, relative to the shot file.")
     scale: Real = Field(1.0, gt=0, description="mesh: uniform scale.")
-    keyframes: list[Keyframe] = Field(default_factory=lambda: [Keyframe(time=0.0)],
-                                      description="Rigid transform keys, interpolated per substep.")
+    keyframes: list[Keyframe] = Field(
+        default_factory=lambda: [Keyframe(time=0.0)], description="Rigid transform keys, interpolated per substep."
+    )
 
 
 class Solver(_Section):
@@ -120,31 +134,47 @@ class Solver(_Section):
     (checked when the shot loads: `Shot.solver_config()`), so the CLI and the Python API agree."""
 
     cfl: Real = Field(_SOLVER.cfl, description="CFL number: dt = cfl * dx / (c_max + |v|_max), in (0, 1].")
-    gravity: Vec3 = Field((0.0, -STANDARD_GRAVITY, 0.0), description="Gravity (m/s^2, world); the solver sees "
-                          "it / domain.size.")
-    damping: Real = Field(_SOLVER.damping, description="Velocity decay rate (1/s): v *= 1 - damping*dt, so "
-                         "its effect per second does not depend on dt; without it elastic bodies ring on.")
+    gravity: Vec3 = Field(
+        (0.0, -STANDARD_GRAVITY, 0.0), description="Gravity (m/s^2, world); the solver sees it / domain.size."
+    )
+    damping: Real = Field(
+        _SOLVER.damping,
+        description="Velocity decay rate (1/s): v *= 1 - damping*dt, so "
+        "its effect per second does not depend on dt; without it elastic bodies ring on.",
+    )
     drag: Real = Field(_SOLVER.drag, description="PIC blend as a rate (1/s), never a per-substep fraction.")
-    time_scale: Real = Field(_SOLVER.time_scale, description="Playback speed: simulated seconds per shot "
-                              "second (the knob for faster action; gravity changes how material settles).")
-    walls: WallName | list[WallName] = Field(_SOLVER.walls[0].value, description="Domain walls: one type, or "
-                                             "six for -x,+x,-y,+y,-z,+z.")
+    time_scale: Real = Field(
+        _SOLVER.time_scale,
+        description="Playback speed: simulated seconds per shot "
+        "second (the knob for faster action; gravity changes how material settles).",
+    )
+    walls: WallName | list[WallName] = Field(
+        _SOLVER.walls[0].value, description="Domain walls: one type, or six for -x,+x,-y,+y,-z,+z."
+    )
     wall_friction: Real = Field(_SOLVER.wall_friction, description="Coulomb friction at the walls.")
     dt_max: Real = Field(_SOLVER.dt_max, description="Largest substep (s).")
     dt_min: Real = Field(_SOLVER.dt_min, description="Substep floor (s): below it the run stops with advice.")
-    deterministic: Bool = Field(_SOLVER.deterministic, description="Fixed-point P2G: bit-identical replays "
-                                "and resumes on the same device.")
-    multi_field: Bool = Field(_SOLVER.multi_field, description="One velocity field per object so bodies "
-                              "don't fuse.")
-    contact_friction: Real = Field(_SOLVER.contact_friction, description="Coulomb friction between objects "
-                                    "(multi_field).")
-    out_of_domain: Literal["clamp", "remove"] = Field(_SOLVER.out_of_domain.value, description="Particles "
-                                                      "reaching the domain edge: clamped in, or removed and "
-                                                      "counted in the QA.")
-    max_substeps_per_frame: Int = Field(_SOLVER.max_substeps_per_frame, description="A frame needing more "
-                                        "substeps stops the run with advice (a runaway guard).")
-    checkpoint_every: Int = Field(1, ge=1, description="Frames between full-state checkpoints (resume points; "
-                                  "cheap enough for every frame; the last two are kept on disk).")
+    deterministic: Bool = Field(
+        _SOLVER.deterministic, description="Fixed-point P2G: bit-identical replays and resumes on the same device."
+    )
+    multi_field: Bool = Field(_SOLVER.multi_field, description="One velocity field per object so bodies don't fuse.")
+    contact_friction: Real = Field(
+        _SOLVER.contact_friction, description="Coulomb friction between objects (multi_field)."
+    )
+    out_of_domain: Literal["clamp", "remove"] = Field(
+        _SOLVER.out_of_domain.value,
+        description="Particles reaching the domain edge: clamped in, or removed and counted in the QA.",
+    )
+    max_substeps_per_frame: Int = Field(
+        _SOLVER.max_substeps_per_frame,
+        description="A frame needing more substeps stops the run with advice (a runaway guard).",
+    )
+    checkpoint_every: Int = Field(
+        1,
+        ge=1,
+        description="Frames between full-state checkpoints (resume points; "
+        "cheap enough for every frame; the last two are kept on disk).",
+    )
 
     @field_validator("walls")
     @classmethod
@@ -161,25 +191,46 @@ class SurfaceGroup(str, enum.Enum):
 
 
 class Surface(_Section):
-    radius_scale: Real = Field(1.0, gt=0, description="Multiplier on the particle radius (0.6 x the spacing: mpmfx.surface.PARTICLE_RADIUS_PER_SPACING).")
+    radius_scale: Real = Field(
+        1.0,
+        gt=0,
+        description="Multiplier on the particle radius (0.6 x the spacing: mpmfx.surface.PARTICLE_RADIUS_PER_SPACING).",
+    )
     voxel_size: Real | None = Field(None, gt=0, description="Level-set voxel (m); default half the particle spacing.")
-    smooth_iters: Int = Field(8, ge=0, le=50, description="Level-set smoothing steps (mean-curvature flow along the surface; together they move the surface inward at most 0.3 x the particle spacing).")
+    smooth_iters: Int = Field(
+        8,
+        ge=0,
+        le=50,
+        description="Level-set smoothing steps (mean-curvature flow along the surface; together they move the surface inward at most 0.3 x the particle spacing).",
+    )
     dilate: Real = Field(0.0, description="Offset (m): + dilates, - erodes.")
     min_feature_particles: Int = Field(8, ge=0, description="Blobs of fewer particles are removed (specks).")
     group: SurfaceGroup = Field(SurfaceGroup.MATERIAL, description="One surface per material, per object, or one.")
-    close_voids: Real = Field(0.0, ge=0, description="Radius (m) of a ball rolled over the surface before smoothing: "
-                                                    "fills the dents of sparse particles without rounding edges (~ the "
-                                                    "particle spacing; 0 = off; slower, random sheets get thicker).")
-    anisotropic: Bool = Field(False, description="Yu & Turk anisotropic kernels: thin sheets of water stay sheets "
-                                                 "(no holes); slower, and sharp box edges round off more.")
+    close_voids: Real = Field(
+        0.0,
+        ge=0,
+        description="Radius (m) of a ball rolled over the surface before smoothing: "
+        "fills the dents of sparse particles without rounding edges (~ the "
+        "particle spacing; 0 = off; slower, random sheets get thicker).",
+    )
+    anisotropic: Bool = Field(
+        False,
+        description="Yu & Turk anisotropic kernels: thin sheets of water stay sheets "
+        "(no holes); slower, and sharp box edges round off more.",
+    )
     sharp_edges: Literal["auto"] | Bool = Field(
-        "auto", description="Give convex edges and corners back the sharpness the particles lost there (the "
-                            "faces' planes meet again; outward only; round bodies come out as they were); false "
-                            "leaves them rounded as the particles' kernels make them; auto: on for every surface "
-                            "group without a fluid (water, tracers) in it, as a liquid holds no edge of its own. "
-                            "Works while smoothing: smooth_iters = 0 turns it off.")
-    density: Bool = Field(False, description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "
-                                             "the material) for granular / volume looks.")
+        "auto",
+        description="Give convex edges and corners back the sharpness the particles lost there (the "
+        "faces' planes meet again; outward only; round bodies come out as they were); false "
+        "leaves them rounded as the particles' kernels make them; auto: on for every surface "
+        "group without a fluid (water, tracers) in it, as a liquid holds no edge of its own. "
+        "Works while smoothing: smooth_iters = 0 turns it off.",
+    )
+    density: Bool = Field(
+        False,
+        description="Also write a fog density grid (0..1, dimensionless: 1 in the bulk of "
+        "the material) for granular / volume looks.",
+    )
 
 
 class Export(_Section):
@@ -199,27 +250,49 @@ class Render(_Section):
     shaded, per-material looks; Blender runs in its own process); `preview`: a fast PyVista
     viewport capture of the surfaces."""
 
-    engine: RenderEngine = Field(RenderEngine.CYCLES, description="cycles (Blender, the look) or preview "
-                                 "(PyVista, seconds a frame).")
+    engine: RenderEngine = Field(
+        RenderEngine.CYCLES, description="cycles (Blender, the look) or preview (PyVista, seconds a frame)."
+    )
     width: Int = Field(960, ge=16, le=8192, description="Picture width (pixels).")
     height: Int = Field(540, ge=16, le=8192, description="Picture height (pixels).")
     samples: Int = Field(16, ge=1, le=65536, description="cycles: path-tracing samples per pixel.")
     denoise: Bool = Field(True, description="cycles: OpenImageDenoise on the finished frame.")
-    shutter: Real = Field(0.5, ge=0, le=1, description="cycles: motion blur along the exported velocities, "
-                           "shutter open this fraction of a frame (0.5: a 180-degree shutter; 0: no blur).")
-    frame_step: Int = Field(1, ge=1, description="Render every n-th frame; the frames between hold the last "
-                            "rendered one, so the movie keeps the shot's timing.")
-    looks: dict[str, str] = Field(default_factory=dict, description="cycles: look per preset, object or surface "
-                                  "group, e.g. {Goopy = \"mud\"}, or of the basin, {basin = \"glass\"} "
-                                  "(looks: mpmfx/render/looks.py).")
-    basin: Real | None = Field(None, gt=0, description="cycles: height (m) of a basin drawn along the solver's "
-                                "side walls (stone, or render.looks.basin), for a pool that the walls hold; default none.")
+    shutter: Real = Field(
+        0.5,
+        ge=0,
+        le=1,
+        description="cycles: motion blur along the exported velocities, "
+        "shutter open this fraction of a frame (0.5: a 180-degree shutter; 0: no blur).",
+    )
+    frame_step: Int = Field(
+        1,
+        ge=1,
+        description="Render every n-th frame; the frames between hold the last "
+        "rendered one, so the movie keeps the shot's timing.",
+    )
+    looks: dict[str, str] = Field(
+        default_factory=dict,
+        description="cycles: look per preset, object or surface "
+        'group, e.g. {Goopy = "mud"}, or of the basin, {basin = "glass"} '
+        "(looks: mpmfx/render/looks.py).",
+    )
+    basin: Real | None = Field(
+        None,
+        gt=0,
+        description="cycles: height (m) of a basin drawn along the solver's "
+        "side walls (stone, or render.looks.basin), for a pool that the walls hold; default none.",
+    )
     sun_elevation: Real = Field(35.0, ge=0, le=90, description="cycles: sun height above the horizon (degrees).")
     sun_rotation: Real = Field(150.0, description="cycles: sun direction about the up axis (degrees).")
-    mode: Literal["surface", "particles"] = Field("surface", description="surface: the surfaces; particles: every "
-                                                          "particle as a soft blob, the debug look for tuning motion.")
-    camera_position: Vec3 | None = Field(None, description="Camera position (m); default: cycles frames what "
-                                         "was simulated, preview a 3/4 view of the domain.")
+    mode: Literal["surface", "particles"] = Field(
+        "surface",
+        description="surface: the surfaces; particles: every "
+        "particle as a soft blob, the debug look for tuning motion.",
+    )
+    camera_position: Vec3 | None = Field(
+        None,
+        description="Camera position (m); default: cycles frames what was simulated, preview a 3/4 view of the domain.",
+    )
     camera_look_at: Vec3 | None = Field(None, description="Camera target (m); default the domain centre.")
     movie: Bool = Field(True, description="Also write an mp4 of the frames.")
 
@@ -234,20 +307,25 @@ class Render(_Section):
 
 class Shot(_Section):
     shot: ShotInfo = Field(description="The shot's name and clock.")
-    domain: Domain = Field(Domain(), description="The simulated box: a cube of `size` metres from `origin`, cut "
-                           "into grid_n cells per axis; the solver's walls are its faces.")
-    objects: list[SceneObject] = Field(min_length=1, description="The meshes that become material, one table "
-                                       "each.")
-    colliders: list[ColliderCfg] = Field(default_factory=list, description="Kinematic bodies the material hits: "
-                                         "they push it and are not pushed back, and move by keyframes.")
+    domain: Domain = Field(
+        Domain(),
+        description="The simulated box: a cube of `size` metres from `origin`, cut "
+        "into grid_n cells per axis; the solver's walls are its faces.",
+    )
+    objects: list[SceneObject] = Field(min_length=1, description="The meshes that become material, one table each.")
+    colliders: list[ColliderCfg] = Field(
+        default_factory=list,
+        description="Kinematic bodies the material hits: they push it and are not pushed back, and move by keyframes.",
+    )
     voxelise: Voxelise = Field(Voxelise(), description="How meshes become particles.")
     solver: Solver = Field(Solver(), description="Time stepping, gravity, walls and contact.")
     surface: Surface = Field(Surface(), description="How particles become surfaces (level sets and meshes).")
     export: Export = Field(Export(), description="What the USD stage and the VDB files hold.")
     render: Render = Field(Render(), description="How frames are drawn.")
     # Not part of the schema's TOML (excluded from dumps and from docs/shots.md):
-    base_dir: Path = Field(Path("."), exclude=True, description="Where the shot file lives; relative paths "
-                           "resolve from here.")
+    base_dir: Path = Field(
+        Path("."), exclude=True, description="Where the shot file lives; relative paths resolve from here."
+    )
     source: Path | None = Field(None, exclude=True, description="The shot file, for messages.")
     overrides: tuple[str, ...] = Field((), exclude=True, description="The --set values it was loaded with.")
 
@@ -263,8 +341,11 @@ class Shot(_Section):
         name, plus grid_n and gravity / domain.size (the solver's domain is [0, 1]^3). Raises SolverConfigError."""
         s = self.solver
         knobs = {f.name: getattr(s, f.name) for f in dataclasses.fields(SolverConfig) if f.name in Solver.model_fields}
-        knobs |= {"grid_n": self.domain.grid_n, "gravity": tuple(g / self.domain.size for g in s.gravity),
-                  "walls": (s.walls,) * 6 if isinstance(s.walls, str) else tuple(s.walls)}
+        knobs |= {
+            "grid_n": self.domain.grid_n,
+            "gravity": tuple(g / self.domain.size for g in s.gravity),
+            "walls": (s.walls,) * 6 if isinstance(s.walls, str) else tuple(s.walls),
+        }
         return SolverConfig(**knobs)
 
     @property
@@ -276,8 +357,10 @@ class Shot(_Section):
         """Per object: is its material a fluid (a water or tracer preset)? A fluid holds no shape:
         no thickness rule (voxelise), no sharp edges by default (sharp_edges_for)."""
         by_name = {k.lower(): m for k, m in PRESETS.items()}
-        return [o.material.lower() in by_name and by_name[o.material.lower()].mode in (Mode.WATER, Mode.TRACER)
-                for o in self.objects]
+        return [
+            o.material.lower() in by_name and by_name[o.material.lower()].mode in (Mode.WATER, Mode.TRACER)
+            for o in self.objects
+        ]
 
     def sharp_edges_for(self, group: str) -> bool:
         """surface.sharp_edges for surface group `group` (one of surface_groups()): "auto" is on
@@ -321,8 +404,10 @@ def apply_override(data: dict, path: list[str], value: Any, *, source: str) -> N
     for i, part in enumerate(path[:-1]):
         if isinstance(node, list):
             if not part.isdigit() or int(part) >= len(node):
-                raise ShotError(f"{source}: --set {'.'.join(path)}: '{part}' is not an index of "
-                                f"[{'.'.join(path[:i])}] (0..{len(node) - 1})")
+                raise ShotError(
+                    f"{source}: --set {'.'.join(path)}: '{part}' is not an index of "
+                    f"[{'.'.join(path[:i])}] (0..{len(node) - 1})"
+                )
             node = node[int(part)]
         else:
             node = node.setdefault(part, {})
@@ -387,7 +472,7 @@ def _either(errs: list[dict]) -> str:
     msgs = list(dict.fromkeys(e["msg"] for e in errs))
     head = "Input should be "
     if len(msgs) > 1 and all(m.startswith(head) for m in msgs):
-        return head + " or ".join(m[len(head):] for m in msgs)
+        return head + " or ".join(m[len(head) :] for m in msgs)
     return msgs[0]
 
 
@@ -395,8 +480,9 @@ def load_shot_config(path: str | Path, overrides: list[str] = ()) -> Shot:
     """Read, override and validate a shot file. Raises ShotError naming file, key and fix."""
     path = Path(path)
     if not path.is_file():
-        raise ShotError(f"{path}: shot file not found (run from the project root, e.g. "
-                        f"mpmfx run pipeline/shots/jelly_splash.toml)")
+        raise ShotError(
+            f"{path}: shot file not found (run from the project root, e.g. mpmfx run pipeline/shots/jelly_splash.toml)"
+        )
     try:
         data = tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
@@ -405,14 +491,16 @@ def load_shot_config(path: str | Path, overrides: list[str] = ()) -> Shot:
         key, value = parse_override(text)
         apply_override(data, key, value, source=str(path))
     try:
-        shot = Shot.model_validate({**data, "base_dir": path.resolve().parent, "source": path,
-                                    "overrides": tuple(overrides)})
+        shot = Shot.model_validate(
+            {**data, "base_dir": path.resolve().parent, "source": path, "overrides": tuple(overrides)}
+        )
     except ValidationError as exc:
         by_key: dict[str, list[dict]] = {}
         for e in exc.errors():  # a union ("auto" | bool) reports each member: one line per key says all
             by_key.setdefault(_format_error(e, str(path)).split("' = ")[0], []).append(e)
-        raise ShotError("\n".join(_format_error({**errs[0], "msg": _either(errs)}, str(path))
-                                  for errs in by_key.values())) from None
+        raise ShotError(
+            "\n".join(_format_error({**errs[0], "msg": _either(errs)}, str(path)) for errs in by_key.values())
+        ) from None
     _check_semantics(shot, str(path))
     return shot
 
@@ -421,8 +509,9 @@ def _check_semantics(shot: Shot, source: str) -> None:
     """Checks that need more than one field: frame order, file existence, time step bounds."""
     problems = []
     if shot.shot.frame_end <= shot.shot.frame_start:
-        problems.append(f"{source}: shot.frame_end ({shot.shot.frame_end}) must be after shot.frame_start "
-                        f"({shot.shot.frame_start})")
+        problems.append(
+            f"{source}: shot.frame_end ({shot.shot.frame_end}) must be after shot.frame_start ({shot.shot.frame_start})"
+        )
     try:
         shot.solver_config()
     except SolverConfigError as exc:
@@ -430,22 +519,28 @@ def _check_semantics(shot: Shot, source: str) -> None:
         problems.append(f"{source}: {key}: {exc.what}")
     else:
         if shot.solver.dt_max * shot.shot.fps * 0.999 > 1.0 / shot.solver.time_scale:
-            problems.append(f"{source}: solver.dt_max ({shot.solver.dt_max} s) is longer than one frame "
-                            f"(1/{shot.shot.fps} s): lower solver.dt_max")
+            problems.append(
+                f"{source}: solver.dt_max ({shot.solver.dt_max} s) is longer than one frame "
+                f"(1/{shot.shot.fps} s): lower solver.dt_max"
+            )
     if shot.surface.sharp_edges is True and shot.surface.smooth_iters == 0:
-        problems.append(f"{source}: surface.sharp_edges: needs surface.smooth_iters > 0 (the edges are found while "
-                        f"smoothing): raise surface.smooth_iters or set surface.sharp_edges = false")
+        problems.append(
+            f"{source}: surface.sharp_edges: needs surface.smooth_iters > 0 (the edges are found while "
+            f"smoothing): raise surface.smooth_iters or set surface.sharp_edges = false"
+        )
     names = [o.name for o in shot.objects] + [c.name for c in shot.colliders]
     for dup in sorted({n for n in names if names.count(n) > 1}):
         problems.append(f"{source}: name '{dup}' is used twice in objects/colliders: names must be unique")
     for i, obj in enumerate(shot.objects):
         if not shot.resolve(obj.mesh).is_file():
-            problems.append(f"{source}: objects[{i}].mesh: file not found: {shot.resolve(obj.mesh)} "
-                            f"(paths are relative to the shot file)")
+            problems.append(
+                f"{source}: objects[{i}].mesh: file not found: {shot.resolve(obj.mesh)} "
+                f"(paths are relative to the shot file)"
+            )
     for i, col in enumerate(shot.colliders):
         if col.shape is ColliderShape.MESH:
             if col.mesh is None:
-                problems.append(f"{source}: colliders[{i}].mesh: a shape = \"mesh\" collider needs mesh = \"file\"")
+                problems.append(f'{source}: colliders[{i}].mesh: a shape = "mesh" collider needs mesh = "file"')
             elif not shot.resolve(col.mesh).is_file():
                 problems.append(f"{source}: colliders[{i}].mesh: file not found: {shot.resolve(col.mesh)}")
         times = [k.time for k in col.keyframes]

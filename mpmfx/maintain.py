@@ -3,6 +3,7 @@
 Both act only on entry folders (`<root>/<shot>/<stage>/<stage>-<key>`), each checked to lie
 inside the cache root; a simulation (minutes of work) is deleted only after a yes.
 """
+
 from __future__ import annotations
 
 import json
@@ -55,8 +56,11 @@ def delete(targets: list[Path], *, root: Path, dry_run: bool, yes: bool, verb: s
     costly = [t for t in targets if t.parent.name in ASK_BEFORE]
     if costly and not yes:
         if not sys.stdin.isatty():
-            print(f"error: this deletes {len(costly)} simulation(s), which take minutes to redo; "
-                  f"run again with --yes to confirm (or --dry-run to only list)", file=sys.stderr)
+            print(
+                f"error: this deletes {len(costly)} simulation(s), which take minutes to redo; "
+                f"run again with --yes to confirm (or --dry-run to only list)",
+                file=sys.stderr,
+            )
             return 2
         if input(f"delete {len(costly)} simulation(s)? [y/N] ").strip().lower() not in ("y", "yes"):
             print("nothing deleted")

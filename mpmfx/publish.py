@@ -11,6 +11,7 @@
 Both run after every `mpmfx run` that reaches the stage, cached or not (a run of the plain
 shot after a variant publishes the plain shot again).
 """
+
 from __future__ import annotations
 
 import json
@@ -34,8 +35,15 @@ def publish_renders(shot, entry, *, root: Path = RENDERS) -> Path:
     files = sorted(entry.frames_dir.glob("[0-9]*.png")) + [p for p in extras if p.is_file()]
     for p in files:
         shutil.copyfile(p, tmp / p.name)
-    write_json(tmp / "published.json", {"shot": shot.shot.name, "overrides": list(shot.overrides),
-                                        "render_entry": str(entry.root.resolve()), "files": [p.name for p in files]})
+    write_json(
+        tmp / "published.json",
+        {
+            "shot": shot.shot.name,
+            "overrides": list(shot.overrides),
+            "render_entry": str(entry.root.resolve()),
+            "files": [p.name for p in files],
+        },
+    )
     old = out.with_name(f".{out.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.old")
     if out.exists():
         os.replace(out, old)

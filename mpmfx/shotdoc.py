@@ -3,6 +3,7 @@
 `mpmfx docs --write` writes it, `mpmfx docs --check` exits 1 when it is stale; the text of every
 row is the `description` of a field of `mpmfx.config`, so the reference is edited there.
 """
+
 from __future__ import annotations
 
 import enum

@@ -16,6 +16,7 @@ Dask task each (`mpmfx.stages.parallel`). Output, under `renders/<shot>/wedge-<f
 per frame (`NNNN.png`, the tiles labelled field=value), `wedge.mp4`, `contact.png` (a row per
 variant, four frames each) and `wedge.json`.
 """
+
 from __future__ import annotations
 
 import json
@@ -40,8 +41,8 @@ from mpmfx.stages.base import Context
 from mpmfx.stages.parallel import Frames, task_key
 from mpmfx.stages.runner import ShotRun, stage_module
 
-SHEET_WIDTH = 1920      # px: a frame's sheet is scaled to at most this width
-CONTACT_FRAMES = 4      # columns of contact.png
+SHEET_WIDTH = 1920  # px: a frame's sheet is scaled to at most this width
+CONTACT_FRAMES = 4  # columns of contact.png
 
 
 def _bad(message: str) -> Exception:
@@ -57,8 +58,7 @@ def parse_vary(text: str, *, log: bool = False) -> tuple[str, list[Any]]:
     """`key=1,2,3` or `key=lo:hi:n` (`log`: geometric steps) -> (key, values)."""
     key, sep, raw = text.partition("=")
     if not sep or not key.strip() or not raw.strip():
-        raise _bad(f"--vary {text!r}: expected KEY=V1,V2,... or KEY=LO:HI:N, "
-                        f"e.g. --vary surface.smooth_iters=0,2,6")
+        raise _bad(f"--vary {text!r}: expected KEY=V1,V2,... or KEY=LO:HI:N, e.g. --vary surface.smooth_iters=0,2,6")
     key, raw = key.strip(), raw.strip()
     span = raw.split(":")
     if len(span) == 3 and "," not in raw:
@@ -128,8 +128,15 @@ def variant_shots(path: str | Path, field: str, values: list[Any], overrides: li
     return [load_shot_config(path, [*fixed, f"{field}={_toml_text(v)}"]) for v in values]
 
 
-def run_wedge(shots: list, *, cache_root: str | Path | None = None, executor=None, frames: list[int] | None = None,
-              device: str | None = None, quiet: bool = False) -> list[dict[str, Any]]:
+def run_wedge(
+    shots: list,
+    *,
+    cache_root: str | Path | None = None,
+    executor=None,
+    frames: list[int] | None = None,
+    device: str | None = None,
+    quiet: bool = False,
+) -> list[dict[str, Any]]:
     """Run every variant to `render`, stage by stage over all variants; each distinct entry once.
     Returns, per variant, each stage's entry root. `executor`: `mpmfx.stages.parallel.Frames`."""
     if not shots:
@@ -141,12 +148,14 @@ def run_wedge(shots: list, *, cache_root: str | Path | None = None, executor=Non
     # (their runs and tasks write under it and never take it themselves).
     with cache.lock():
         cache.remove_orphans()
-        runs = [ShotRun(s, cache_root=root, device=device, quiet=quiet, executor=ex, publish=False, locked=True)
-                for s in shots]
+        runs = [
+            ShotRun(s, cache_root=root, device=device, quiet=quiet, executor=ex, publish=False, locked=True)
+            for s in shots
+        ]
         runs[0].check(frames=frames)
         entries = [r.entries() for r in runs]
         for name in STAGES:
-            first: dict[str, int] = {}          # distinct entry key -> first variant that has it
+            first: dict[str, int] = {}  # distinct entry key -> first variant that has it
             for i, e in enumerate(entries):
                 first.setdefault(e[name].key, i)
             mod = stage_module(name)
@@ -155,15 +164,21 @@ def run_wedge(shots: list, *, cache_root: str | Path | None = None, executor=Non
                 continue
             todo = [i for i in first.values() if not entries[i][name].complete(runs[i]._wanted(name, frames))]
             in_tasks = ex.parallel(len(todo), auto_min=2)
-            ex.calls(_run_stage, [(shots[i], root, name, frames, device, quiet or in_tasks) for i in todo],
-                     keys=[task_key(entries[i][name]) for i in todo], desc=name, quiet=quiet or not in_tasks)
+            ex.calls(
+                _run_stage,
+                [(shots[i], root, name, frames, device, quiet or in_tasks) for i in todo],
+                keys=[task_key(entries[i][name]) for i in todo],
+                desc=name,
+                quiet=quiet or not in_tasks,
+            )
         return [{name: e[name].root for name in STAGES} for e in entries]
 
 
 def _run_stage(shot, cache_root: Path, name: str, frames, device, quiet: bool):
     """One variant's whole-shot stage (voxelise, simulate), its upstream already cached: a task."""
-    return ShotRun(shot, cache_root=cache_root, device=device, quiet=quiet, workers=1,
-                   publish=False, locked=True).run(until=name, frames=frames)[-1]
+    return ShotRun(shot, cache_root=cache_root, device=device, quiet=quiet, workers=1, publish=False, locked=True).run(
+        until=name, frames=frames
+    )[-1]
 
 
 def _frame_stage(mod, runs: list, entries: list[dict], frames: list[int] | None) -> None:
@@ -198,8 +213,9 @@ def _frame_stage(mod, runs: list, entries: list[dict], frames: list[int] | None)
 # Sheets
 
 
-def write_sheets(out: Path, tiles: list[tuple[str, dict[int, Path]]], frames: list[int], *, fps: float,
-                 movie: bool = True) -> dict[str, Path]:
+def write_sheets(
+    out: Path, tiles: list[tuple[str, dict[int, Path]]], frames: list[int], *, fps: float, movie: bool = True
+) -> dict[str, Path]:
     """Per frame, the tiles side by side (a grid of up to 3 columns) with their labels; then a
     movie of the sheets and `contact.png` (a row per tile, CONTACT_FRAMES frames each)."""
     out.mkdir(parents=True, exist_ok=True)
@@ -214,10 +230,14 @@ def write_sheets(out: Path, tiles: list[tuple[str, dict[int, Path]]], frames: li
     result = {"sheets": out}
     if movie and len(sheets) > 1:
         result["movie"] = write_movie(sheets, out / "wedge.mp4", fps=fps)
-    picks = [frames[round(i * (len(frames) - 1) / max(CONTACT_FRAMES - 1, 1))]
-             for i in range(min(CONTACT_FRAMES, len(frames)))]
-    rows = [np.concatenate([_labelled(paths.get(f), text if j == 0 else "", scale=4) for j, f in enumerate(picks)],
-                           axis=1) for text, paths in tiles]
+    picks = [
+        frames[round(i * (len(frames) - 1) / max(CONTACT_FRAMES - 1, 1))]
+        for i in range(min(CONTACT_FRAMES, len(frames)))
+    ]
+    rows = [
+        np.concatenate([_labelled(paths.get(f), text if j == 0 else "", scale=4) for j, f in enumerate(picks)], axis=1)
+        for text, paths in tiles
+    ]
     with atomic_path(out / "contact.png") as tmp:
         _save(np.concatenate(rows, axis=0), tmp)
     result["contact"] = out / "contact.png"
@@ -244,8 +264,10 @@ def _grid(images: list, cols: int, *, max_width: int):
     h, w = images[0].shape[:2]
     images = [np.asarray(Image.fromarray(a).resize((w, h))) if a.shape[:2] != (h, w) else a for a in images]
     blank = np.zeros_like(images[0])
-    rows = [np.concatenate([*images[i:i + cols], *[blank] * (cols - len(images[i:i + cols]))], axis=1)
-            for i in range(0, len(images), cols)]
+    rows = [
+        np.concatenate([*images[i : i + cols], *[blank] * (cols - len(images[i : i + cols]))], axis=1)
+        for i in range(0, len(images), cols)
+    ]
     sheet = np.concatenate(rows, axis=0)
     if sheet.shape[1] > max_width:
         k = max_width / sheet.shape[1]
@@ -302,7 +324,9 @@ def _toml_text(value: Any) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, float):
-        return repr(value) if math.isfinite(value) else ("nan" if math.isnan(value) else ("inf" if value > 0 else "-inf"))
+        return (
+            repr(value) if math.isfinite(value) else ("nan" if math.isnan(value) else ("inf" if value > 0 else "-inf"))
+        )
     if isinstance(value, int):
         return str(value)
     if isinstance(value, str):
@@ -352,22 +376,36 @@ def main(args) -> int:
     labels = [label(key, v) for v in values]
     with Frames(workers=args.workers, scheduler=args.scheduler) as ex:
         t0 = time.perf_counter()
-        roots = run_wedge(shots, cache_root=args.cache, executor=ex, frames=frames, device=args.device,
-                          quiet=args.quiet)
+        roots = run_wedge(
+            shots, cache_root=args.cache, executor=ex, frames=frames, device=args.device, quiet=args.quiet
+        )
         seconds = time.perf_counter() - t0
     shot = shots[0]
     out = Path("renders") / shot.shot.name / f"wedge-{_slug(key)}"
     tiles = [(f"champion: {Path(args.keep).name}", _keep_tile(args.keep, frames))] if args.keep else []
     tiles += [(text, {f: r["render"] / "frames" / f"{f:04d}.png" for f in frames}) for text, r in zip(labels, roots)]
     made = write_sheets(out, tiles, frames, fps=shot.shot.fps, movie=shot.render.movie)
-    (out / "wedge.json").write_text(json.dumps({
-        "shot": str(path), "field": field, "values": values, "overrides": args.overrides, "keep": args.keep,
-        "frames": frames, "wall_s": round(seconds, 1),
-        "variants": [{"value": v, **{k: str(p) for k, p in r.items()}} for v, r in zip(values, roots)]},
-        indent=2, default=str))
+    (out / "wedge.json").write_text(
+        json.dumps(
+            {
+                "shot": str(path),
+                "field": field,
+                "values": values,
+                "overrides": args.overrides,
+                "keep": args.keep,
+                "frames": frames,
+                "wall_s": round(seconds, 1),
+                "variants": [{"value": v, **{k: str(p) for k, p in r.items()}} for v, r in zip(values, roots)],
+            },
+            indent=2,
+            default=str,
+        )
+    )
     _report(key, values, roots)
-    print(f"wedge: {len(values)} variants in {seconds:.1f} s -> {made['sheets']}/ (NNNN.png, "
-          f"{'wedge.mp4, ' if 'movie' in made else ''}contact.png, wedge.json)")
+    print(
+        f"wedge: {len(values)} variants in {seconds:.1f} s -> {made['sheets']}/ (NNNN.png, "
+        f"{'wedge.mp4, ' if 'movie' in made else ''}contact.png, wedge.json)"
+    )
     return 0
 
 

@@ -1,4 +1,5 @@
 """Shared fixtures: a tiny shot that runs end to end on a 2-core CPU in seconds."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -60,6 +61,7 @@ movie = false
 
 def write_tiny_shot(folder: Path, *, material: str = "Elastic", frame_end: int = 6, extra: str = "") -> Path:
     import trimesh
+
     trimesh.creation.box(extents=[0.25, 0.25, 0.25]).export(folder / "cube.obj")
     path = folder / "tiny.toml"
     path.write_text(TINY.format(material=material, frame_end=frame_end) + extra)

@@ -1,4 +1,5 @@
 """Cache keys and atomic writes."""
+
 import pytest
 
 from mpmfx.cache import Cache, atomic_path, stage_key
@@ -32,6 +33,7 @@ def test_entry_complete_only_with_manifest(tmp_path):
 
 def test_code_hash_tracks_the_named_sources():
     from mpmfx.cache import code_hash
+
     assert code_hash(["mpmfx.mpm"]) == code_hash(("mpmfx.mpm",))  # stable
     assert code_hash(["mpmfx.mpm"]) != code_hash(["mpmfx.surface"])
     assert code_hash(["mpmfx.surface.params"]) != code_hash(["mpmfx.surface"])  # a module is not its package
@@ -64,8 +66,9 @@ def test_keys_hash_exactly_the_code_each_stage_declares(tmp_path):
 
     def keys() -> dict[str, str]:
         env = {**os.environ, "PYTHONPATH": str(copy)}
-        out = subprocess.run([sys.executable, "-c", _KEYS, str(shot)], env=env, cwd=tmp_path,
-                             capture_output=True, text=True, check=True).stdout
+        out = subprocess.run(
+            [sys.executable, "-c", _KEYS, str(shot)], env=env, cwd=tmp_path, capture_output=True, text=True, check=True
+        ).stdout
         return json.loads(out)
 
     before = keys()

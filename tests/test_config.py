@@ -1,4 +1,5 @@
 """The shot schema: what an artist's typo produces."""
+
 from pathlib import Path
 
 import pytest
@@ -59,8 +60,10 @@ def test_bad_toml(tmp_path):
 
 
 def test_set_overrides_any_field(tiny_shot):
-    shot = load_shot_config(tiny_shot, ["solver.cfl=0.25", "objects.0.material=Water", "surface.group=all",
-                                        "objects.0.overrides.youngs_modulus=3000"])
+    shot = load_shot_config(
+        tiny_shot,
+        ["solver.cfl=0.25", "objects.0.material=Water", "surface.group=all", "objects.0.overrides.youngs_modulus=3000"],
+    )
     assert shot.solver.cfl == 0.25 and shot.objects[0].material == "Water"
     assert shot.surface.group.value == "all" and shot.objects[0].overrides == {"youngs_modulus": 3000}
     with pytest.raises(ShotError, match="not an index"):
@@ -84,6 +87,7 @@ def test_a_shot_and_the_python_api_share_the_solver_defaults(tiny_shot):
     import dataclasses
 
     from mpmfx.mpm.config import STANDARD_GRAVITY, SolverConfig
+
     shot = load_shot_config(tiny_shot)  # sets cfl, damping, walls; leaves the rest unset
     cfg, default = shot.solver_config(), SolverConfig()
     for f in dataclasses.fields(SolverConfig):
@@ -93,16 +97,29 @@ def test_a_shot_and_the_python_api_share_the_solver_defaults(tiny_shot):
 
 
 def test_solver_ranges_are_checked_once_and_named_as_shot_keys(tiny_shot):
-    for override, key in (("solver.cfl=1.5", "solver.cfl"), ("solver.damping=-1.0", "solver.damping"),
-                          ("solver.dt_min=0.5", "solver.dt_min"), ("domain.grid_n=4", "domain.grid_n")):
+    for override, key in (
+        ("solver.cfl=1.5", "solver.cfl"),
+        ("solver.damping=-1.0", "solver.damping"),
+        ("solver.dt_min=0.5", "solver.dt_min"),
+        ("domain.grid_n=4", "domain.grid_n"),
+    ):
         with pytest.raises(ShotError, match=f"tiny.toml: {key}: "):
             load_shot_config(tiny_shot, [override])
 
 
-NON_FINITE = ["solver.gravity=[0.0, inf, 0.0]", "domain.origin=[nan, 0.0, 0.0]", "objects.0.translate=[inf, 0, 0]",
-              "objects.0.velocity=[0.0, -inf, 0.0]", "solver.damping=inf", "solver.time_scale=inf",
-              "domain.size=inf", "surface.dilate=nan", "objects.0.overrides.youngs_modulus=inf",
-              "surface.voxel_size=inf", "shot.fps=nan"]
+NON_FINITE = [
+    "solver.gravity=[0.0, inf, 0.0]",
+    "domain.origin=[nan, 0.0, 0.0]",
+    "objects.0.translate=[inf, 0, 0]",
+    "objects.0.velocity=[0.0, -inf, 0.0]",
+    "solver.damping=inf",
+    "solver.time_scale=inf",
+    "domain.size=inf",
+    "surface.dilate=nan",
+    "objects.0.overrides.youngs_modulus=inf",
+    "surface.voxel_size=inf",
+    "shot.fps=nan",
+]
 
 
 @pytest.mark.parametrize("override", NON_FINITE)
@@ -113,8 +130,9 @@ def test_non_finite_numbers_are_refused_naming_the_key(tiny_shot, override):
     assert key.replace(".0.", "[0].") in str(err.value) and "finite" in str(err.value)
 
 
-@pytest.mark.parametrize("override", ['solver.cfl="0.3"', 'domain.grid_n="32"', 'objects.0.velocity=["1", 0, 0]',
-                                      'export.vdb="yes"'])
+@pytest.mark.parametrize(
+    "override", ['solver.cfl="0.3"', 'domain.grid_n="32"', 'objects.0.velocity=["1", 0, 0]', 'export.vdb="yes"']
+)
 def test_numbers_given_as_strings_are_errors(tiny_shot, override):
     with pytest.raises(ShotError, match="quotes"):
         load_shot_config(tiny_shot, [override])
@@ -122,6 +140,7 @@ def test_numbers_given_as_strings_are_errors(tiny_shot, override):
 
 def test_cli_non_finite_exits_2(tiny_shot, tmp_path, capsys):
     from mpmfx.cli import main
+
     assert main(["run", str(tiny_shot), "--set", "solver.damping=inf", "--cache", str(tmp_path / "c")]) == 2
     assert "solver.damping" in capsys.readouterr().err
 
@@ -130,6 +149,7 @@ def test_a_bad_material_override_names_the_shot_file_and_the_object(tiny_shot):
     """An angle of repose of 50 deg has no friction coefficient under the default fit: the
     message names the shot file, the object and the limit."""
     from mpmfx.stages.simulate import materials
+
     shot = load_shot_config(tiny_shot, ["objects.0.material=Granular", "objects.0.overrides.friction_angle=50"])
     with pytest.raises(ShotError, match=rf"{tiny_shot.name}: objects\[0\] .*friction_angle = 50.*must be < 45"):
         materials(shot)
@@ -152,5 +172,7 @@ def test_sharp_edges_auto_leaves_fluids_round(tmp_path):
     assert load_shot_config(path, ["surface.sharp_edges=true"]).sharp_edges_for("Water")
     assert not load_shot_config(path, ["surface.sharp_edges=false"]).sharp_edges_for("Elastic")
     assert not load_shot_config(path, ["surface.smooth_iters=0"]).sharp_edges_for("Elastic")  # found while smoothing
-    with pytest.raises(ShotError, match="surface.sharp_edges' = 'sometimes': Input should be 'auto' or a valid boolean"):
+    with pytest.raises(
+        ShotError, match="surface.sharp_edges' = 'sometimes': Input should be 'auto' or a valid boolean"
+    ):
         load_shot_config(path, ["surface.sharp_edges=sometimes"])

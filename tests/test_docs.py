@@ -1,4 +1,5 @@
 """docs/shots.md is the schema's own reference: generated from mpmfx/config.py, never stale."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -35,8 +36,11 @@ def test_write_makes_a_stale_file_current(tmp_path):
 def test_docs_command_does_not_start_warp():
     import subprocess
     import sys
-    code = ("import sys; from mpmfx.cli import main; rc = main(['docs', '--check']); "
-            "assert 'warp' not in sys.modules; sys.exit(rc)")
+
+    code = (
+        "import sys; from mpmfx.cli import main; rc = main(['docs', '--check']); "
+        "assert 'warp' not in sys.modules; sys.exit(rc)"
+    )
     root = Path(__file__).resolve().parents[1]
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root)
     assert out.returncode == 0, out.stdout + out.stderr

@@ -8,6 +8,7 @@
   are never cited.
 - docs/images/ holds exactly the pictures the Markdown documents show.
 """
+
 from __future__ import annotations
 
 import re
@@ -44,15 +45,18 @@ def _text_files() -> dict[str, str]:
     return out
 
 
-_ORDINALS = ("first|second|third|fourth|fifth|sixth|seventh|eighth|ninth|tenth|eleventh|twelfth|thirteenth|"
-             "fourteenth|fifteenth|sixteenth|seventeenth|eighteenth|nineteenth|twentieth")
+_ORDINALS = (
+    "first|second|third|fourth|fifth|sixth|seventh|eighth|ninth|tenth|eleventh|twelfth|thirteenth|"
+    "fourteenth|fifteenth|sixteenth|seventeenth|eighteenth|nineteenth|twentieth"
+)
 HISTORY = {
     "a working period": re.compile(r"\bsessions?\b", re.I),
     "a lease": re.compile(r"\bleas(e|es|ed|ing)\b", re.I),
     "an issue number": re.compile(r"\bissues? #?\d+", re.I),
     # "the eighteenth" and its like number working periods; "first run" or "second pass" do not
     "an ordinal of a working period": re.compile(
-        rf"\b({_ORDINALS})[- ](session|working period|lease)s?\b|\b({_ORDINALS.split('|tenth|')[1]})\b", re.I),
+        rf"\b({_ORDINALS})[- ](session|working period|lease)s?\b|\b({_ORDINALS.split('|tenth|')[1]})\b", re.I
+    ),
     "a dated run": re.compile(r"\b20\d\d-\d\d-\d\d\b"),
 }
 # Technical words that happen to match: pytest's fixture scope.
@@ -73,8 +77,11 @@ def _history(rel: str, text: str) -> list[str]:
 
 def test_no_history_in_text():
     bad = [hit for rel, text in _text_files().items() for hit in _history(rel, text)]
-    assert not bad, ("how the project was built belongs in CHANGELOG.md and git, not here:\n"
-                     + "\n".join(bad[:80]) + (f"\n... and {len(bad) - 80} more" if len(bad) > 80 else ""))
+    assert not bad, (
+        "how the project was built belongs in CHANGELOG.md and git, not here:\n"
+        + "\n".join(bad[:80])
+        + (f"\n... and {len(bad) - 80} more" if len(bad) > 80 else "")
+    )
 
 
 def test_no_history_in_file_names():
@@ -92,7 +99,7 @@ MD_LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)|<img[^>]*\bsr
 
 def _is_template(text: str, end: int) -> bool:
     """A path pattern rather than a path: `pipeline/shots/*.toml`, `docs/{name}.md`, `frames/<n>`."""
-    return text[end:end + 1] in ("*", "<", "{", "[") or text[end:end + 2] in ("/*", "/<", "/{", "/[")
+    return text[end : end + 1] in ("*", "<", "{", "[") or text[end : end + 2] in ("/*", "/<", "/{", "/[")
 
 
 PLACEHOLDER = re.compile(r"(^|/)(?!README\b|CHANGELOG\b|LICENSE\b)[A-Z][A-Z0-9_]*(\.\w+)?$")  # lab/NAME.py
@@ -111,8 +118,12 @@ def test_cited_paths_exist():
     tracked = set(_tracked())
     folders = {parent.as_posix() for p in tracked for parent in Path(p).parents}
     known = tracked | folders | {p[:-3] for p in tracked if p.endswith(".py")}  # a module, named without .py
-    bad = [f"{rel}: cites {path}, which is not in the repository"
-           for rel, text in _text_files().items() for path in sorted(_cited_paths(text)) if path not in known]
+    bad = [
+        f"{rel}: cites {path}, which is not in the repository"
+        for rel, text in _text_files().items()
+        for path in sorted(_cited_paths(text))
+        if path not in known
+    ]
     assert not bad, "\n".join(bad)
 
 
@@ -122,8 +133,10 @@ def test_cited_markdown_documents_exist():
     for rel, text in _text_files().items():
         for name in sorted(set(CITED_MD.findall(text))):
             if name in OUTSIDE:
-                bad.append(f"{rel}: cites {name}, a document outside the repository: cite docs/architecture.md "
-                           f"or docs/physics.md, or a public source by its title")
+                bad.append(
+                    f"{rel}: cites {name}, a document outside the repository: cite docs/architecture.md "
+                    f"or docs/physics.md, or a public source by its title"
+                )
             elif name not in names:
                 bad.append(f"{rel}: cites {name}, which is not in the repository")
     assert not bad, "\n".join(bad)
@@ -141,19 +154,21 @@ def _md_targets(rel: str, text: str) -> list[Path]:
 
 
 def test_markdown_links_resolve():
-    bad = [f"{rel}: links to {t.relative_to(ROOT) if t.is_relative_to(ROOT) else t}, which does not exist"
-           for rel, text in _text_files().items() if rel.endswith(".md")
-           for t in _md_targets(rel, text) if not t.resolve().exists()]
+    bad = [
+        f"{rel}: links to {t.relative_to(ROOT) if t.is_relative_to(ROOT) else t}, which does not exist"
+        for rel, text in _text_files().items()
+        if rel.endswith(".md")
+        for t in _md_targets(rel, text)
+        if not t.resolve().exists()
+    ]
     assert not bad, "\n".join(bad)
 
 
 def test_images_are_exactly_those_the_docs_show():
     images = ROOT / "docs" / "images"
-    shown = {t.resolve() for rel, text in _text_files().items() if rel.endswith(".md")
-             for t in _md_targets(rel, text)}
+    shown = {t.resolve() for rel, text in _text_files().items() if rel.endswith(".md") for t in _md_targets(rel, text)}
     kept = {(ROOT / p).resolve() for p in _tracked() if p.startswith("docs/images/")}
     uncited = sorted(p.relative_to(ROOT).as_posix() for p in kept - shown)
-    missing = sorted(p.relative_to(ROOT).as_posix() for p in shown
-                     if p.is_relative_to(images) and not p.exists())
+    missing = sorted(p.relative_to(ROOT).as_posix() for p in shown if p.is_relative_to(images) and not p.exists())
     assert not uncited, "docs/images/ holds pictures no document shows (delete them):\n" + "\n".join(uncited)
     assert not missing, "documents show pictures that docs/images/ lacks:\n" + "\n".join(missing)

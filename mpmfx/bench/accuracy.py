@@ -10,6 +10,7 @@ column collapse against published laboratory data at three resolutions, with the
 trend, experiments.csv/json, experiments_trend.csv and experiments_{water,sand}.png. Needs numpy + warp + mpmfx.mpm only; the PNG needs pyvista and is
 skipped with a message without it.
 """
+
 from __future__ import annotations
 
 import json
@@ -42,15 +43,26 @@ class Sweep:
 
 
 QUICK = Sweep()
-FULL = Sweep(free_fall=(32, 64, 128), rotation=(32, 64), revolutions=10.0, bar=(40, 80, 160),
-             wave=(16, 32, 64, 128, 256), wave_cfls=(0.8, 0.4, 0.2, 0.1, 0.05), wave_cfl_grid=64,
-             wave_cfl_ref=0.00625, hydrostatic=(32, 64, 128), disks=(32, 64, 128))
+FULL = Sweep(
+    free_fall=(32, 64, 128),
+    rotation=(32, 64),
+    revolutions=10.0,
+    bar=(40, 80, 160),
+    wave=(16, 32, 64, 128, 256),
+    wave_cfls=(0.8, 0.4, 0.2, 0.1, 0.05),
+    wave_cfl_grid=64,
+    wave_cfl_ref=0.00625,
+    hydrostatic=(32, 64, 128),
+    disks=(32, 64, 128),
+)
 
 
 def observed_order(h: list[float], err: list[float]) -> list[float]:
     """Orders log(e_i / e_{i+1}) / log(h_i / h_{i+1}) between successive settings."""
-    return [math.log(err[i] / err[i + 1]) / math.log(h[i] / h[i + 1])
-            if err[i] > 0 and err[i + 1] > 0 else float("nan") for i in range(len(err) - 1)]
+    return [
+        math.log(err[i] / err[i + 1]) / math.log(h[i] / h[i + 1]) if err[i] > 0 and err[i + 1] > 0 else float("nan")
+        for i in range(len(err) - 1)
+    ]
 
 
 def time_sweep(sweep: Sweep, device) -> tuple[list[cases.CaseResult], list[float]]:
@@ -91,11 +103,11 @@ def run_sweep(sweep: Sweep, device=None) -> tuple[list[dict], list[dict]]:
 # beside the order, so a low number is read as what it measures, not as a broken solver.
 WHY = {
     ("hydrostatic", "space"): "stress error is the particle quadrature's (cell-crossing noise and the "
-                              "-2.6..-2.9 % bias CB-Geo also reports), which refining dx at fixed particles "
-                              "per cell does not reduce: order ~0 is expected",
+    "-2.6..-2.9 % bias CB-Geo also reports), which refining dx at fixed particles "
+    "per cell does not reduce: order ~0 is expected",
     ("colliding_disks", "space"): "energy lost at single-field contact shrinks with dx at first order at best",
     ("standing_wave", "time"): "the error is spatial: at grid 64 the time-step error is below it for every "
-                               "CFL tried, so halving dt changes nothing (order ~0); spend on grid_n",
+    "CFL tried, so halving dt changes nothing (order ~0); spend on grid_n",
 }
 LOW_ORDER = 1.5  # below this a space order gets its WHY note
 
@@ -108,25 +120,66 @@ def _order_rows(results, t_runs, t_errs) -> list[dict]:
     for case in ("standing_wave", "vibrating_bar", "hydrostatic", "colliding_disks"):
         rs = sorted(by_case.get(case, []), key=lambda r: r.grid_n)
         orders = observed_order([1 / r.grid_n for r in rs], [r.error for r in rs])
-        out += [{"case": case, "in": "space", "from": f"grid_n={a.grid_n}", "to": f"grid_n={b.grid_n}",
-                 "error_from": a.error, "error_to": b.error, "order": o}
-                for a, b, o in zip(rs, rs[1:], orders)]
+        out += [
+            {
+                "case": case,
+                "in": "space",
+                "from": f"grid_n={a.grid_n}",
+                "to": f"grid_n={b.grid_n}",
+                "error_from": a.error,
+                "error_to": b.error,
+                "order": o,
+            }
+            for a, b, o in zip(rs, rs[1:], orders)
+        ]
     orders = observed_order([r.extra["dt"] for r in t_runs], t_errs)
-    out += [{"case": "standing_wave", "in": "time", "from": f"cfl={a.cfl}", "to": f"cfl={b.cfl}",
-             "error_from": ea, "error_to": eb, "order": o}
-            for a, b, ea, eb, o in zip(t_runs, t_runs[1:], t_errs, t_errs[1:], orders)]
+    out += [
+        {
+            "case": "standing_wave",
+            "in": "time",
+            "from": f"cfl={a.cfl}",
+            "to": f"cfl={b.cfl}",
+            "error_from": ea,
+            "error_to": eb,
+            "order": o,
+        }
+        for a, b, ea, eb, o in zip(t_runs, t_runs[1:], t_errs, t_errs[1:], orders)
+    ]
     for row in out:
         low = row["in"] == "time" or not (row["order"] >= LOW_ORDER)  # NaN counts as low
         row["why"] = WHY.get((row["case"], row["in"]), "") if low else ""
     return out
 
 
-COLUMNS = ["case", "grid_n", "cfl", "ppc", "particles", "substeps", "error", "metric", "wall_s",
-           "Mparticle_substeps_per_s", "device"]
+COLUMNS = [
+    "case",
+    "grid_n",
+    "cfl",
+    "ppc",
+    "particles",
+    "substeps",
+    "error",
+    "metric",
+    "wall_s",
+    "Mparticle_substeps_per_s",
+    "device",
+]
 
 
-LAB_COLUMNS = ["case", "reference", "a", "grid_n", "cells_across", "value", "law", "error", "metric",
-               "particles", "wall_s", "device"]
+LAB_COLUMNS = [
+    "case",
+    "reference",
+    "a",
+    "grid_n",
+    "cells_across",
+    "value",
+    "law",
+    "error",
+    "metric",
+    "particles",
+    "wall_s",
+    "device",
+]
 
 
 def experiments(*, quick: bool, device, out) -> list[dict]:

@@ -10,6 +10,7 @@ s^2, gravity by s, times unchanged.
 are needed: under uniaxial strain with lambda = 0 the lateral stress is exactly zero.
 Imports numpy, warp and mpmfx.mpm only (the GPU machine has nothing else).
 """
+
 from __future__ import annotations
 
 import math
@@ -23,8 +24,17 @@ from mpmfx.mpm import Particles, Solver, SolverConfig, preset
 
 from ..mpm.state import m33_assign
 
-__all__ = ["CaseResult", "lattice", "fc_energy", "free_fall", "rigid_rotation", "vibrating_bar",
-           "standing_wave", "hydrostatic_column", "colliding_disks"]
+__all__ = [
+    "CaseResult",
+    "lattice",
+    "fc_energy",
+    "free_fall",
+    "rigid_rotation",
+    "vibrating_bar",
+    "standing_wave",
+    "hydrostatic_column",
+    "colliding_disks",
+]
 
 
 @dataclass
@@ -46,11 +56,19 @@ class CaseResult:
     x_final: np.ndarray | None = None  # (n, 3) positions at the end, for self-convergence
 
     def row(self) -> dict:
-        r = {"case": self.case, "grid_n": self.grid_n, "cfl": self.cfl, "ppc": self.ppc,
-             "particles": self.particles, "substeps": self.substeps, "error": self.error,
-             "metric": self.metric, "wall_s": self.wall_s,
-             "Mparticle_substeps_per_s": self.particles * self.substeps / max(self.wall_s, 1e-9) / 1e6,
-             "device": self.device}
+        r = {
+            "case": self.case,
+            "grid_n": self.grid_n,
+            "cfl": self.cfl,
+            "ppc": self.ppc,
+            "particles": self.particles,
+            "substeps": self.substeps,
+            "error": self.error,
+            "metric": self.metric,
+            "wall_s": self.wall_s,
+            "Mparticle_substeps_per_s": self.particles * self.substeps / max(self.wall_s, 1e-9) / 1e6,
+            "device": self.device,
+        }
         r.update(self.extra)
         return r
 
@@ -109,13 +127,21 @@ def _setup(mat, x, v, spacing, *, grid_n, gravity=(0.0, 0.0, 0.0), device=None, 
     config = SolverConfig(grid_n=grid_n, gravity=gravity, damping=damping, **cfg)
     solver = Solver([mat], config, device=device)
     n = len(x)
-    one = Particles(x=np.full((1, 3), 0.5, np.float32), v=np.zeros((1, 3), np.float32),
-                    volume=np.ones(1, np.float32) * spacing**3, material=np.zeros(1, np.int32),
-                    body=np.zeros(1, np.int32))
+    one = Particles(
+        x=np.full((1, 3), 0.5, np.float32),
+        v=np.zeros((1, 3), np.float32),
+        volume=np.ones(1, np.float32) * spacing**3,
+        material=np.zeros(1, np.int32),
+        body=np.zeros(1, np.int32),
+    )
     solver.step(solver.init_state(one), 1e-6)  # compile + load modules now
-    parts = Particles(x=np.asarray(x, np.float32), v=np.asarray(v, np.float32),
-                      volume=np.full(n, spacing**3, np.float32), material=np.zeros(n, np.int32),
-                      body=np.zeros(n, np.int32))
+    parts = Particles(
+        x=np.asarray(x, np.float32),
+        v=np.asarray(v, np.float32),
+        volume=np.full(n, spacing**3, np.float32),
+        material=np.zeros(n, np.int32),
+        body=np.zeros(n, np.int32),
+    )
     return solver, solver.init_state(parts)
 
 
@@ -137,10 +163,20 @@ def _march(solver, state, dt: float, steps: int, observe=None, every: int = 1) -
 
 
 def _result(case, solver, state, cfl, ppa, steps, wall, error, metric, **extra) -> CaseResult:
-    return CaseResult(case=case, grid_n=solver.config.grid_n, cfl=cfl, ppc=ppa**3, particles=state.n,
-                      substeps=steps, wall_s=wall, error=float(error), metric=metric,
-                      device=device_name(solver), extra=extra,
-                      x_final=solver.state_to_numpy(state)["x"].astype(np.float64))
+    return CaseResult(
+        case=case,
+        grid_n=solver.config.grid_n,
+        cfl=cfl,
+        ppc=ppa**3,
+        particles=state.n,
+        substeps=steps,
+        wall_s=wall,
+        error=float(error),
+        metric=metric,
+        device=device_name(solver),
+        extra=extra,
+        x_final=solver.state_to_numpy(state)["x"].astype(np.float64),
+    )
 
 
 # ---------------------------------------------------------------------------- exact kinematics
@@ -151,8 +187,9 @@ def free_fall(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, device=None) 
     v0 = np.array([0.3, 0.0, 0.0])
     dx = 1.0 / grid_n
     x0 = lattice([0.3, 0.55, 0.4], [0.5, 0.75, 0.6], dx / ppa)
-    solver, state = _setup(_elastic(1.0, 0.2), x0, np.tile(v0, (len(x0), 1)), dx / ppa,
-                           grid_n=grid_n, gravity=tuple(g), device=device)
+    solver, state = _setup(
+        _elastic(1.0, 0.2), x0, np.tile(v0, (len(x0), 1)), dx / ppa, grid_n=grid_n, gravity=tuple(g), device=device
+    )
     t_end = 0.25
     dt0 = _dt(solver, state, cfl, float(np.linalg.norm(v0 + g * t_end)))
     steps = math.ceil(t_end / dt0)
@@ -162,8 +199,9 @@ def free_fall(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, device=None) 
     exact = x0 + v0 * t_end + 0.5 * g * t_end**2 + 0.5 * g * t_end * dt
     err = np.abs(s["x"] - exact).max() / (0.5 * np.linalg.norm(g) * t_end**2)
     f_dev = float(np.abs(s["F"] - np.eye(3)).max())
-    return _result("free_fall", solver, state, cfl, ppa, steps, wall, err, "max|x-x_exact|/drop",
-                   F_minus_I=f_dev, sim_s=sim_s)
+    return _result(
+        "free_fall", solver, state, cfl, ppa, steps, wall, err, "max|x-x_exact|/drop", F_minus_I=f_dev, sim_s=sim_s
+    )
 
 
 def _angular_momentum(s, c, dx) -> np.ndarray:
@@ -176,8 +214,9 @@ def _angular_momentum(s, c, dx) -> np.ndarray:
     return L + (m * axial).sum(0) * dx**2 / 4.0
 
 
-def rigid_rotation(*, grid_n: int = 16, cfl: float = 0.4, ppa: int = 2, revolutions: float = 1.0,
-                   pic: bool = False, device=None) -> CaseResult:
+def rigid_rotation(
+    *, grid_n: int = 16, cfl: float = 0.4, ppa: int = 2, revolutions: float = 1.0, pic: bool = False, device=None
+) -> CaseResult:
     """Spinning elastic ball, no gravity, no walls reached (Jiang et al. 2015). v = w x r,
     C = skew(w); rho w^2 R^2 / E = 1e-3. error: |L(T) - L0| / |L0| after `revolutions`.
     pic=True drops the affine velocity every substep (drag -> inf): the PIC baseline."""
@@ -197,8 +236,19 @@ def rigid_rotation(*, grid_n: int = 16, cfl: float = 0.4, ppa: int = 2, revoluti
     wall, sim_s = _march(solver, state, t_end / steps, steps)
     L = _angular_momentum(solver.state_to_numpy(state), c, dx)
     err = np.linalg.norm(L - L0) / np.linalg.norm(L0)
-    return _result("rotation_pic" if pic else "rotation_apic", solver, state, cfl, ppa, steps, wall,
-                   err, "|L-L0|/L0", revolutions=revolutions, sim_s=sim_s)
+    return _result(
+        "rotation_pic" if pic else "rotation_apic",
+        solver,
+        state,
+        cfl,
+        ppa,
+        steps,
+        wall,
+        err,
+        "|L-L0|/L0",
+        revolutions=revolutions,
+        sim_s=sim_s,
+    )
 
 
 # ---------------------------------------------------------------------------- elastic
@@ -222,20 +272,34 @@ def vibrating_bar(*, grid_n: int = 40, cfl: float = 0.4, ppa: int = 2, device=No
     dt = T / steps
     right = x[:, 0] > xc
     vcm = [float(v[right, 0].mean())]
-    wall, sim_s = _march(solver, state, dt, int(steps * 1.05),
-                  observe=lambda k: vcm.append(float(state.cur.v.numpy()[right, 0].mean())))
+    wall, sim_s = _march(
+        solver, state, dt, int(steps * 1.05), observe=lambda k: vcm.append(float(state.cur.v.numpy()[right, 0].mean()))
+    )
     t = np.arange(len(vcm)) * dt
     vc = np.array(vcm)
     cross = [t[i] - vc[i] * dt / (vc[i + 1] - vc[i]) for i in range(len(vc) - 1) if vc[i] * vc[i + 1] < 0]
     period = 2.0 * (cross[1] - cross[0]) if len(cross) >= 2 else float("nan")
     amp = 2 * v0 / math.pi
     amp_err = np.abs(vc[t <= T] - amp * np.cos(2 * math.pi * t[t <= T] / T)).max() / amp
-    return _result("vibrating_bar", solver, state, cfl, ppa, len(vcm) - 1, wall, abs(period - T) / T,
-                   "|T-10|/10", period_s=period, vcm_error=float(amp_err), sim_s=sim_s)
+    return _result(
+        "vibrating_bar",
+        solver,
+        state,
+        cfl,
+        ppa,
+        len(vcm) - 1,
+        wall,
+        abs(period - T) / T,
+        "|T-10|/10",
+        period_s=period,
+        vcm_error=float(amp_err),
+        sim_s=sim_s,
+    )
 
 
-def standing_wave(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, strain: float = 0.2,
-                  periods: float = 1.0, device=None) -> CaseResult:
+def standing_wave(
+    *, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, strain: float = 0.2, periods: float = 1.0, device=None
+) -> CaseResult:
     """Exact large-amplitude fixed-corotated standing wave (free-free, nu = 0, E = rho = 1):
     u(X, t) = A cos(k X) sin(w t), k = pi / L, w = k c, A k = strain. error: RMS over particles
     and the quarter-period samples of |u - u_exact| / A."""
@@ -260,8 +324,9 @@ def standing_wave(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, strain: f
 
     wall, sim_s = _march(solver, state, dt, per_q * quarters, observe=observe, every=per_q)
     err = math.sqrt(np.mean(sq)) / A
-    return _result("standing_wave", solver, state, cfl, ppa, per_q * quarters, wall, err, "rms|u-u_exact|/A",
-                   dt=dt, sim_s=sim_s)
+    return _result(
+        "standing_wave", solver, state, cfl, ppa, per_q * quarters, wall, err, "rms|u-u_exact|/A", dt=dt, sim_s=sim_s
+    )
 
 
 def hydrostatic_column(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, device=None) -> CaseResult:
@@ -273,8 +338,16 @@ def hydrostatic_column(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, devi
     E = rho * g * H / 0.02  # 2 % strain at the foot
     y0 = 3 * dx  # first node above the wall layer
     x0 = lattice([0.5 - dx, y0, 0.5 - dx], [0.5 + dx, y0 + H, 0.5 + dx], dx / ppa)
-    solver, state = _setup(_elastic(E, 0.0, rho), x0, np.zeros_like(x0), dx / ppa, grid_n=grid_n,
-                           gravity=(0.0, -g, 0.0), damping=40.0, device=device)
+    solver, state = _setup(
+        _elastic(E, 0.0, rho),
+        x0,
+        np.zeros_like(x0),
+        dx / ppa,
+        grid_n=grid_n,
+        gravity=(0.0, -g, 0.0),
+        damping=40.0,
+        device=device,
+    )
     t_end = 0.4
     steps = math.ceil(t_end / _dt(solver, state, cfl, 0.0))
     wall, sim_s = _march(solver, state, t_end / steps, steps)
@@ -286,12 +359,22 @@ def hydrostatic_column(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, devi
     bulk = x0[:, 1] > y0 + 2 * dx
     sig, exact = sig[bulk], exact[bulk]
     err = np.linalg.norm(sig - exact) / np.linalg.norm(exact)
-    return _result("hydrostatic", solver, state, cfl, ppa, steps, wall, err, "L2|s_yy-exact|/|exact|",
-                   bias=float(sig.sum() / exact.sum() - 1.0), sim_s=sim_s)
+    return _result(
+        "hydrostatic",
+        solver,
+        state,
+        cfl,
+        ppa,
+        steps,
+        wall,
+        err,
+        "L2|s_yy-exact|/|exact|",
+        bias=float(sig.sum() / exact.sum() - 1.0),
+        sim_s=sim_s,
+    )
 
 
-def colliding_disks(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, t_end: float = 4.0,
-                    device=None) -> CaseResult:
+def colliding_disks(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, t_end: float = 4.0, device=None) -> CaseResult:
     """Sulsky, Chen & Schreyer 1994 disks (E = 1000, nu = 0.3, rho = 1000, r = 0.2, v = +-(0.1, 0.1)),
     scaled by s = 0.6 into the domain, as 2-cell-thick slabs (plane stress). error: total energy
     change |E(t) - E0| / E0 at t_end; extra: |momentum| / sum(m |v0|), first-touch time."""
@@ -301,8 +384,12 @@ def colliding_disks(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, t_end: 
     cs = [np.array([off + 0.2 * s, off + 0.2 * s, 0.5]), np.array([off + 0.8 * s, off + 0.8 * s, 0.5])]
     blobs, vel = [], []
     for c, sign in zip(cs, (1.0, -1.0)):
-        xb = lattice(c - [r, r, dx], c + [r, r, dx], dx / ppa,
-                     inside=lambda p, c=c: np.linalg.norm(p[:, :2] - c[:2], axis=1) <= r)
+        xb = lattice(
+            c - [r, r, dx],
+            c + [r, r, dx],
+            dx / ppa,
+            inside=lambda p, c=c: np.linalg.norm(p[:, :2] - c[:2], axis=1) <= r,
+        )
         blobs.append(xb)
         vel.append(np.tile([sign * 0.1 * s, sign * 0.1 * s, 0.0], (len(xb), 1)))
     x, v = np.concatenate(blobs), np.concatenate(vel).astype(np.float32)
@@ -320,5 +407,16 @@ def colliding_disks(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, t_end: 
     wall, sim_s = _march(solver, state, t_end / steps, steps)
     e1, st = energy()
     p = np.abs((m[:, None] * st["v"]).sum(0)).max() / (m * np.linalg.norm(v, axis=1)).sum()
-    return _result("colliding_disks", solver, state, cfl, ppa, steps, wall, abs(e1 - e0) / e0,
-                   "|E-E0|/E0", momentum_error=float(p), sim_s=sim_s)
+    return _result(
+        "colliding_disks",
+        solver,
+        state,
+        cfl,
+        ppa,
+        steps,
+        wall,
+        abs(e1 - e0) / e0,
+        "|E-E0|/E0",
+        momentum_error=float(p),
+        sim_s=sim_s,
+    )

@@ -15,6 +15,7 @@ particles do not count):
 - height: thickest column of the deposit, domain units.
 Imports numpy, warp and mpmfx.mpm only (the GPU machine has nothing else).
 """
+
 from __future__ import annotations
 
 import math
@@ -61,14 +62,17 @@ def _engine(engine, materials, config, device):
     return solver, (solver.device.name if solver.device.is_cuda else "cpu")
 
 
-def simulate(engine, materials, config, x, spacing, *, dt, t_end, observe_times=(), observe=None,
-             device=None) -> Run:
+def simulate(engine, materials, config, x, spacing, *, dt, t_end, observe_times=(), observe=None, device=None) -> Run:
     """Run `x` (n, 3) at rest, one material (index 0), fixed dt until t_end (s).
     observe(positions) is called at each of observe_times (s, rounded to whole steps)."""
     n = len(x)
-    parts = Particles(x=np.asarray(x, np.float32), v=np.zeros((n, 3), np.float32),
-                      volume=np.full(n, spacing**3, np.float32), material=np.zeros(n, np.int32),
-                      body=np.zeros(n, np.int32))
+    parts = Particles(
+        x=np.asarray(x, np.float32),
+        v=np.zeros((n, 3), np.float32),
+        volume=np.full(n, spacing**3, np.float32),
+        material=np.zeros(n, np.int32),
+        body=np.zeros(n, np.int32),
+    )
     solver, dev = _engine(engine, materials, config, device)
     state = solver.init_state(parts)
     steps = int(math.ceil(t_end / dt))
@@ -132,16 +136,28 @@ def tip_and_height(x, volume, dx, depth, **kw):
 
 
 # ---------------------------------------------------------------------------- water
-def dam_break(*, grid_n=32, width=0.2, t_star=(1.0, 1.5, 2.0, 2.5, 3.0), engine="warp", ppa=2, ppz=None,
-              wall_friction=0.0, floor="separate", cfl=0.4, device=None) -> Run:
+def dam_break(
+    *,
+    grid_n=32,
+    width=0.2,
+    t_star=(1.0, 1.5, 2.0, 2.5, 3.0),
+    engine="warp",
+    ppa=2,
+    ppz=None,
+    wall_friction=0.0,
+    floor="separate",
+    cfl=0.4,
+    device=None,
+) -> Run:
     """Water column `width` wide and 2 width tall against the back wall of a channel filling
     the domain depth (Martin & Moyce 1952 n^2 = 2; Koshizuka & Oka 1996). Fronts (surge tip
     from the back wall) at T = t sqrt(2 g / width) = each of t_star. floor/wall_friction:
     the frictionless case is all walls `separate` with mu = 0; the rough case gives the
     walls Coulomb friction (or a sticky floor)."""
     mat = preset("Water")
-    cfg = SolverConfig(grid_n=grid_n, gravity=(0.0, -G, 0.0), walls=channel_walls(floor),
-                       wall_friction=wall_friction, cfl=cfl)
+    cfg = SolverConfig(
+        grid_n=grid_n, gravity=(0.0, -G, 0.0), walls=channel_walls(floor), wall_friction=wall_friction, cfl=cfl
+    )
     dx = cfg.dx
     x, spacing, depth = _quasi2d_block(dx, width, 2 * width, ppa, ppz)
     vmax = math.sqrt(2 * G * 2 * width)  # free fall from the top
@@ -149,13 +165,29 @@ def dam_break(*, grid_n=32, width=0.2, t_star=(1.0, 1.5, 2.0, 2.5, 3.0), engine=
     scale = math.sqrt(2 * G / width)
     times = [T / scale for T in t_star]
     x0 = cfg.boundary_cells * dx
-    run = simulate(engine, [mat], cfg, x, spacing, dt=dt, t_end=max(times), observe_times=times,
-                   observe=lambda p: (tip_and_height(p, np.full(len(p), spacing**3), dx, depth, origin=(x0,))[0],
-                                      front_quantile(p, origin=x0)),
-                   device=device)
-    run.extra = {"width": width, "dt": dt, "T": [t * scale for t in run.times],
-                 "Z": [f[0] / width for f in run.fronts], "Zq": [f[1] / width for f in run.fronts],
-                 "cells_across": width / dx}
+    run = simulate(
+        engine,
+        [mat],
+        cfg,
+        x,
+        spacing,
+        dt=dt,
+        t_end=max(times),
+        observe_times=times,
+        observe=lambda p: (
+            tip_and_height(p, np.full(len(p), spacing**3), dx, depth, origin=(x0,))[0],
+            front_quantile(p, origin=x0),
+        ),
+        device=device,
+    )
+    run.extra = {
+        "width": width,
+        "dt": dt,
+        "T": [t * scale for t in run.times],
+        "Z": [f[0] / width for f in run.fronts],
+        "Zq": [f[1] / width for f in run.fronts],
+        "cells_across": width / dx,
+    }
     return run
 
 
@@ -190,18 +222,58 @@ def runout_law(a: float, source: str = "lube2005") -> tuple[float, float]:
 # coefficients of data/granular_collapse_laws.csv (kept here too: the GPU machine reads
 # the package without its data files; tests check the two agree)
 GRANULAR_LAWS = {
-    "lube2005": {"geometry": "quasi2d", "l1": 1.2, "l2": 1.9, "alpha": 2 / 3, "a0": 2.8,
-                 "h_a0": 1.15, "h2": 1.0, "h_alpha": 0.4},
-    "lajeunesse2005": {"geometry": "quasi2d", "l1": 1.8, "l2": 2.3, "alpha": 2 / 3, "a0": 3.0,
-                       "h_a0": 1.15, "h2": 1.0, "h_alpha": 0.4},
-    "lube2004": {"geometry": "axisymmetric", "l1": 1.24, "l2": 1.6, "alpha": 0.5, "a0": 1.7,
-                 "h_a0": 0.74, "h2": 0.88, "h_alpha": 1 / 6},
+    "lube2005": {
+        "geometry": "quasi2d",
+        "l1": 1.2,
+        "l2": 1.9,
+        "alpha": 2 / 3,
+        "a0": 2.8,
+        "h_a0": 1.15,
+        "h2": 1.0,
+        "h_alpha": 0.4,
+    },
+    "lajeunesse2005": {
+        "geometry": "quasi2d",
+        "l1": 1.8,
+        "l2": 2.3,
+        "alpha": 2 / 3,
+        "a0": 3.0,
+        "h_a0": 1.15,
+        "h2": 1.0,
+        "h_alpha": 0.4,
+    },
+    "lube2004": {
+        "geometry": "axisymmetric",
+        "l1": 1.24,
+        "l2": 1.6,
+        "alpha": 0.5,
+        "a0": 1.7,
+        "h_a0": 0.74,
+        "h2": 0.88,
+        "h_alpha": 1 / 6,
+    },
 }
 
 
-def column_collapse(*, a=1.0, grid_n=32, engine="warp", friction_angle=38.0, fit=None, ppa=2, ppz=None,
-                    floor="sticky", wall_friction=0.0, t_scale=5.0, cfl=0.4, axisymmetric=False,
-                    length=None, device=None, material=None, config=None) -> Run:
+def column_collapse(
+    *,
+    a=1.0,
+    grid_n=32,
+    engine="warp",
+    friction_angle=38.0,
+    fit=None,
+    ppa=2,
+    ppz=None,
+    floor="sticky",
+    wall_friction=0.0,
+    t_scale=5.0,
+    cfl=0.4,
+    axisymmetric=False,
+    length=None,
+    device=None,
+    material=None,
+    config=None,
+) -> Run:
     """Granular column of aspect ratio a = H0 / L0 released against the back wall (quasi-2D,
     Lube et al. 2005) or a quarter cylinder in the corner (axisymmetric, Lube et al. 2004;
     the x and z walls are frictionless symmetry planes). Runs t_scale * sqrt(H0 / g) after
@@ -212,8 +284,14 @@ def column_collapse(*, a=1.0, grid_n=32, engine="warp", friction_angle=38.0, fit
     if fit is not None:
         over["friction_fit"] = fit
     mat = material or preset("Granular", **over)
-    cfg = SolverConfig(grid_n=grid_n, gravity=(0.0, -G, 0.0), walls=channel_walls(floor),
-                       wall_friction=wall_friction, cfl=cfl, **(config or {}))
+    cfg = SolverConfig(
+        grid_n=grid_n,
+        gravity=(0.0, -G, 0.0),
+        walls=channel_walls(floor),
+        wall_friction=wall_friction,
+        cfl=cfl,
+        **(config or {}),
+    )
     dx = cfg.dx
     source = "lube2004" if axisymmetric else "lube2005"
     law_run, law_h = runout_law(a, source)
@@ -223,8 +301,9 @@ def column_collapse(*, a=1.0, grid_n=32, engine="warp", friction_angle=38.0, fit
     x0 = cfg.boundary_cells * dx  # the channel's back wall and floor
     if axisymmetric:
         sp = dx / ppa
-        x = lattice([x0, x0, x0], [x0 + L0, x0 + H0, x0 + L0], sp,
-                    inside=lambda p: np.hypot(p[:, 0] - x0, p[:, 2] - x0) <= L0)
+        x = lattice(
+            [x0, x0, x0], [x0 + L0, x0 + H0, x0 + L0], sp, inside=lambda p: np.hypot(p[:, 0] - x0, p[:, 2] - x0) <= L0
+        )
         spacing, depth = sp, None
     else:
         x, spacing, depth = _quasi2d_block(dx, L0, H0, ppa, ppz, cfg.boundary_cells)
@@ -235,9 +314,21 @@ def column_collapse(*, a=1.0, grid_n=32, engine="warp", friction_angle=38.0, fit
     tip, height = tip_and_height(run.final, run.volume, dx, depth, **kw)
     if axisymmetric:  # the annuli near the axis hold too few particles to give a thickness
         height = float(np.quantile(run.final[:, 1] - x0, 0.999)) + 0.5 * spacing
-    run.extra = {**run.extra, "a": a, "L0": L0, "H0": H0, "dt": dt, "cells_across": L0 / dx,
-                 "flank_angle": flank_angle(run.final, run.volume, dx, depth, **kw),
-                 "runout": (tip - L0) / L0, "runout_q": (front_quantile(run.final, origin=x0) - L0) / L0, "height": height / L0, "law_runout": law_run, "law_height": law_h,
-                 "source": source, "friction_angle": mat.friction_angle,
-                 "fit": getattr(mat, "friction_fit", "compression")}
+    run.extra = {
+        **run.extra,
+        "a": a,
+        "L0": L0,
+        "H0": H0,
+        "dt": dt,
+        "cells_across": L0 / dx,
+        "flank_angle": flank_angle(run.final, run.volume, dx, depth, **kw),
+        "runout": (tip - L0) / L0,
+        "runout_q": (front_quantile(run.final, origin=x0) - L0) / L0,
+        "height": height / L0,
+        "law_runout": law_run,
+        "law_height": law_h,
+        "source": source,
+        "friction_angle": mat.friction_angle,
+        "fit": getattr(mat, "friction_fit", "compression"),
+    }
     return run

@@ -15,6 +15,7 @@ bytes per particle (particle buffers; the grid separately), the bytes one subste
 same run. The peer, Taichi's mpm3d step (`taichi_peer.py`), runs in a child process at the
 same sizes and the dt our solver took. --quick: tiny sizes on the CPU, no peer.
 """
+
 from __future__ import annotations
 
 import json
@@ -37,9 +38,30 @@ MATERIALS = ("Water", "Mushy", "Granular", "Elastic")
 MIXED = MATERIALS  # the mixed scene's four columns
 SUBSTEPS = 50  # CFL substeps per timed advance() interval
 REGION_LO, REGION_SIZE = (0.2, 0.1, 0.2), (0.6, 0.4, 0.6)
-COLS = ["impl", "path", "scene", "grid_n", "particles", "det", "substeps", "G_per_s", "ms_substep", "ms_clear",
-        "ms_p2g", "ms_grid", "ms_g2p", "ms_sort", "ms_host", "captures", "B_per_particle", "grid_MB", "GBs", "copy_GBs",
-        "x_taichi", "device"]
+COLS = [
+    "impl",
+    "path",
+    "scene",
+    "grid_n",
+    "particles",
+    "det",
+    "substeps",
+    "G_per_s",
+    "ms_substep",
+    "ms_clear",
+    "ms_p2g",
+    "ms_grid",
+    "ms_g2p",
+    "ms_sort",
+    "ms_host",
+    "captures",
+    "B_per_particle",
+    "grid_MB",
+    "GBs",
+    "copy_GBs",
+    "x_taichi",
+    "device",
+]
 
 
 def block(grid_n: int, *, seed: int = 0) -> tuple[np.ndarray, float]:
@@ -50,7 +72,8 @@ def block(grid_n: int, *, seed: int = 0) -> tuple[np.ndarray, float]:
     idx = idx.reshape(-1, 3)
     rng = np.random.default_rng(seed)
     x = np.asarray(REGION_LO, np.float32) + (idx + 0.5 + rng.uniform(-0.3, 0.3, idx.shape).astype(np.float32)) * (
-        0.5 * dx)
+        0.5 * dx
+    )
     return x.astype(np.float32), dx**3 / 8
 
 
@@ -61,9 +84,15 @@ def sphere_collider(grid_n: int):
     g = (np.arange(res) * voxel - 1.3 * r).astype(np.float32)
     X, Y, Z = np.meshgrid(g, g, g, indexing="ij")
     sdf = (np.sqrt(X**2 + Y**2 + Z**2) - r).astype(np.float32)
-    return Collider(kind=ColliderKind.SDF, friction=0.2, times=np.array([0.0, 0.5]),
-                    translations=np.array([[0.1, 0.3, 0.5], [0.9, 0.3, 0.5]], np.float32),
-                    sdf=sdf, sdf_origin=(-1.3 * r,) * 3, sdf_voxel=voxel)
+    return Collider(
+        kind=ColliderKind.SDF,
+        friction=0.2,
+        times=np.array([0.0, 0.5]),
+        translations=np.array([[0.1, 0.3, 0.5], [0.9, 0.3, 0.5]], np.float32),
+        sdf=sdf,
+        sdf_origin=(-1.3 * r,) * 3,
+        sdf_voxel=voxel,
+    )
 
 
 def scene(name: str, grid_n: int):
@@ -76,8 +105,9 @@ def scene(name: str, grid_n: int):
         colliders = [sphere_collider(grid_n)]
     else:
         mats, col, colliders = [preset(name)], np.zeros(n, np.int32), []
-    parts = Particles(x=x, v=np.zeros_like(x), volume=np.full(n, vol, np.float32), material=col,
-                      body=np.zeros(n, np.int32))
+    parts = Particles(
+        x=x, v=np.zeros_like(x), volume=np.full(n, vol, np.float32), material=col, body=np.zeros(n, np.int32)
+    )
     return mats, parts, colliders
 
 
@@ -114,7 +144,9 @@ def traffic(solver, state) -> tuple[int, int, int]:
     grid_arrays = [solver._grid_m, solver._grid_mv, solver._grid_fixed, solver._grid_v, solver._grid_normal]
     grid = _bytes(grid_arrays)
     acc = _bytes([solver._grid_fixed] if solver.config.deterministic else [solver._grid_m, solver._grid_mv])
-    moved = (_bytes(cur) + _bytes(const) - state.body.capacity) + 2 * _bytes(cur) + 3 * acc + 2 * solver._grid_v.capacity
+    moved = (
+        (_bytes(cur) + _bytes(const) - state.body.capacity) + 2 * _bytes(cur) + 3 * acc + 2 * solver._grid_v.capacity
+    )
     return part, grid, moved
 
 
@@ -132,10 +164,17 @@ def _phase_split(solver, state, t: float, span: float) -> tuple[dict, float]:
     ms = {"clear": 0.0, "p2g": 0.0, "grid": 0.0, "g2p": 0.0}
     for r in results:
         name = r.name.lower()
-        key = ("g2p" if "g2p" in name else "grid" if "grid_update" in name
-               else "clear" if "memset" in name or "clear" in name
-               else None if ("begin" in name or "end" in name or "report" in name or "sum_rows" in name)
-               else "p2g")  # p2g, and the brick P2G's keys, sort, scan, segments, scatter
+        key = (
+            "g2p"
+            if "g2p" in name
+            else "grid"
+            if "grid_update" in name
+            else "clear"
+            if "memset" in name or "clear" in name
+            else None
+            if ("begin" in name or "end" in name or "report" in name or "sum_rows" in name)
+            else "p2g"
+        )  # p2g, and the brick P2G's keys, sort, scan, segments, scatter
         if key:
             ms[key] += r.elapsed
     k = max(1, report.substeps + report.rejected_substeps)
@@ -172,8 +211,16 @@ def sort_ms(solver, state, reps: int = 10, *, whole: bool = False) -> float:
     return 1e3 * (time.perf_counter() - t0) / reps
 
 
-def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: float, *, substeps: int = SUBSTEPS,
-             path: str = "device") -> dict:
+def run_case(
+    name: str,
+    grid_n: int,
+    deterministic: bool,
+    device,
+    copy_gbs: float,
+    *,
+    substeps: int = SUBSTEPS,
+    path: str = "device",
+) -> dict:
     """One scene through advance(). path: "device" (the default stepper), "device-nograph"
     (same, CUDA graphs off), "device-unbinned" (same, with the reference P2G instead of the
     brick P2G, the default on a GPU), "device-sortK" (the brick P2G re-sorted every K
@@ -186,7 +233,7 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     da = solver._device_advance
     if path == "device-unbinned":  # (multi-field scenes and the CPU have only the reference P2G)
         da.p2g = "reference"
-    da.sort_every = int(path[len("device-sort"):]) if path.startswith("device-sort") else 0
+    da.sort_every = int(path[len("device-sort") :]) if path.startswith("device-sort") else 0
     state = solver.init_state(parts)
     c = max(m.wave_speed() for m in mats)
     span = substeps * cfg.cfl * cfg.dx / c  # ~substeps CFL substeps at rest
@@ -213,12 +260,28 @@ def run_case(name: str, grid_n: int, deterministic: bool, device, copy_gbs: floa
     part, grid, moved = traffic(solver, state)
     k = report.substeps + report.rejected_substeps
     ms = 1e3 * wall / k
-    row = {"impl": "mpmfx", "path": path, "scene": name, "grid_n": grid_n, "particles": state.n, "det": int(deterministic),
-           "substeps": report.substeps, "rejected": report.rejected_substeps, "dt_mean": span / max(1, report.substeps),
-           "G_per_s": state.n * report.substeps / wall / 1e9, "ms_substep": ms, **phases, "captures": captured,
-           "B_per_particle": part / state.n, "grid_MB": grid / 2**20, "moved_MB": moved / 2**20,
-           "GBs": moved / (ms * 1e-3) / 1e9, "copy_GBs": copy_gbs,
-           "finite": bool(np.isfinite(state.cur.x.numpy()).all()), "device": _device_name(solver.device)}
+    row = {
+        "impl": "mpmfx",
+        "path": path,
+        "scene": name,
+        "grid_n": grid_n,
+        "particles": state.n,
+        "det": int(deterministic),
+        "substeps": report.substeps,
+        "rejected": report.rejected_substeps,
+        "dt_mean": span / max(1, report.substeps),
+        "G_per_s": state.n * report.substeps / wall / 1e9,
+        "ms_substep": ms,
+        **phases,
+        "captures": captured,
+        "B_per_particle": part / state.n,
+        "grid_MB": grid / 2**20,
+        "moved_MB": moved / 2**20,
+        "GBs": moved / (ms * 1e-3) / 1e9,
+        "copy_GBs": copy_gbs,
+        "finite": bool(np.isfinite(state.cur.x.numpy()).all()),
+        "device": _device_name(solver.device),
+    }
     if phases:  # the sorts: one every `sort_every` substeps (the cadence the timed interval kept)
         row["sort_every"] = da.sort_every
         row["ms_sort"] = sort_ms(solver, state) / max(1, da.sort_every)
@@ -232,8 +295,15 @@ def safe_case(*args, **kw) -> dict:
         return run_case(*args, **kw)
     except Exception as err:  # noqa: BLE001 (reported in the row and the table)
         traceback.print_exc()
-        return {"impl": "mpmfx", "path": kw.get("path", "device"), "scene": args[0], "grid_n": args[1],
-                "det": int(args[2]), "error": repr(err)[:200], "finite": False}
+        return {
+            "impl": "mpmfx",
+            "path": kw.get("path", "device"),
+            "scene": args[0],
+            "grid_n": args[1],
+            "det": int(args[2]),
+            "error": repr(err)[:200],
+            "finite": False,
+        }
 
 
 def _device_name(device) -> str:
@@ -244,11 +314,25 @@ def _device_name(device) -> str:
 def taichi_rows(cases: list[tuple], *, arch: str = "cuda") -> list[dict]:
     """Run the Taichi peer in a child process (its own memory pool); rows it printed."""
     m = preset("Mushy")
-    spec = {"cases": cases, "arch": arch, "snow": {"mu0": m.mu0, "lambda0": m.lambda0, "hardening": m.hardening,
-                                                   "theta_c": m.theta_c, "theta_s": m.theta_s}}
+    spec = {
+        "cases": cases,
+        "arch": arch,
+        "snow": {
+            "mu0": m.mu0,
+            "lambda0": m.lambda0,
+            "hardening": m.hardening,
+            "theta_c": m.theta_c,
+            "theta_s": m.theta_s,
+        },
+    }
     try:
-        out = subprocess.run([sys.executable, "-m", "mpmfx.bench.taichi_peer", json.dumps(spec)], capture_output=True,
-                             text=True, timeout=900, env=dict(os.environ))
+        out = subprocess.run(
+            [sys.executable, "-m", "mpmfx.bench.taichi_peer", json.dumps(spec)],
+            capture_output=True,
+            text=True,
+            timeout=900,
+            env=dict(os.environ),
+        )
     except (OSError, subprocess.TimeoutExpired) as err:
         print(f"taichi peer: did not run ({err})")
         return []
@@ -258,8 +342,9 @@ def taichi_rows(cases: list[tuple], *, arch: str = "cuda") -> list[dict]:
     return rows
 
 
-def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench",
-         sizes: tuple[int, ...] | None = None) -> int:
+def main(
+    *, quick: bool = False, device: str | None = None, out: str = "renders/bench", sizes: tuple[int, ...] | None = None
+) -> int:
     """sizes: grid sizes to run (default 64, 128, 256; the mixed scene runs at 128 if listed)."""
     if quick:
         device = device or "cpu"
@@ -278,19 +363,29 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
         for path in ("device", "host"):
             rows.append(safe_case("Mixed", mixed, det, device, copy_gbs, substeps=k, path=path))
     # the levers, back to back in this run: the reference host loop, and no CUDA graphs
-    levers = (("Mushy", "host", False), ("Water", "host", False), ("Mushy", "device-nograph", False),
-              ("Mushy", "device-unbinned", False), ("Water", "device-unbinned", False),
-              ("Mushy", "device-unbinned", True), ("Mushy", "device-sort1", False), ("Mushy", "device-sort32", False),
-              ("Water", "device-sort32", False),
-              ("Mushy", "host", True))
+    levers = (
+        ("Mushy", "host", False),
+        ("Water", "host", False),
+        ("Mushy", "device-nograph", False),
+        ("Mushy", "device-unbinned", False),
+        ("Water", "device-unbinned", False),
+        ("Mushy", "device-unbinned", True),
+        ("Mushy", "device-sort1", False),
+        ("Mushy", "device-sort32", False),
+        ("Water", "device-sort32", False),
+        ("Mushy", "host", True),
+    )
     for g in sizes:
         for name, path, det in levers:
             if name in MATERIALS:
                 rows.append(safe_case(name, g, det, device, copy_gbs, substeps=k, path=path))
                 print_table(rows[-1:], COLS)
     if not quick and os.environ.get("MPMFX_BENCH_PEER", "1") != "0":
-        cases = [[r["grid_n"], "water" if r["scene"] == "Water" else "snow", r["dt_mean"], r["substeps"]]
-                 for r in rows if r["scene"] in ("Water", "Mushy") and not r["det"] and r["path"] == "device"]
+        cases = [
+            [r["grid_n"], "water" if r["scene"] == "Water" else "snow", r["dt_mean"], r["substeps"]]
+            for r in rows
+            if r["scene"] in ("Water", "Mushy") and not r["det"] and r["path"] == "device"
+        ]
         for t in taichi_rows(cases):
             t.update(scene="Water" if t["material"] == "water" else "Mushy", device=rows[0]["device"])
             ours = [r for r in rows if r["scene"] == t["scene"] and r["grid_n"] == t["grid_n"] and r["impl"] == "mpmfx"]
@@ -311,6 +406,7 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
 
 if __name__ == "__main__":  # the GPU machine has no pydantic, so not through mpmfx.cli there
     import argparse
+
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default="renders/bench")

@@ -4,6 +4,7 @@ it is missing).
 
     python -m mpmfx.bench.gpu_plot renders/bench      # redraw from renders/bench/gpu.csv
 """
+
 from __future__ import annotations
 
 import csv
@@ -13,6 +14,7 @@ from pathlib import Path
 
 def throughput_plot(rows: list[dict], out: str | Path, *, name: str = "gpu") -> Path:
     import matplotlib  # optional: matplotlib
+
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # optional: matplotlib
 
@@ -28,7 +30,12 @@ def throughput_plot(rows: list[dict], out: str | Path, *, name: str = "gpu") -> 
         lines.setdefault((impl, r["scene"]), []).append((int(r["particles"]), float(r["G_per_s"])))
     for (impl, sc), pts in sorted(lines.items()):
         pts.sort()
-        ax.plot([p for p, _ in pts], [g for _, g in pts], "o-" if impl == "mpmfx" else "o:" if impl.startswith("mpmfx") else "s--", label=f"{impl} {sc}")
+        ax.plot(
+            [p for p, _ in pts],
+            [g for _, g in pts],
+            "o-" if impl == "mpmfx" else "o:" if impl.startswith("mpmfx") else "s--",
+            label=f"{impl} {sc}",
+        )
     device = next((r.get("device") for r in rows if r.get("device")), "?")
     ax.set_xscale("log")
     ax.set_yscale("log")

@@ -12,6 +12,7 @@ Each at the sweep's resolutions; rows carry the source, the error and the cells 
 column. Reference data: mpmfx/bench/data/*.csv (each names its source in its header).
 Imports numpy, warp and mpmfx.mpm only, except the plot (pyvista, skipped without it).
 """
+
 from __future__ import annotations
 
 import csv
@@ -47,10 +48,16 @@ class LabSweep:
 
 
 QUICK = LabSweep(axi_grids=(16,))
-FULL = LabSweep(dam_grids=(32, 64, 128), dam_width=0.2, dam_t_star=(0.8, 1.2, 1.6, 2.0, 2.4, 2.8),
-                sand_grids=(32, 64, 128), aspects=(0.5, 1.0, 2.0, 4.0, 8.0),
-                materials=(("compression", 38.0),) + tuple(("repose", p) for p in (24.0, 28.0, 32.0, 36.0)),
-                axi_grids=(32, 64, 128), axi_aspects=(0.5, 1.0, 2.0, 4.0))
+FULL = LabSweep(
+    dam_grids=(32, 64, 128),
+    dam_width=0.2,
+    dam_t_star=(0.8, 1.2, 1.6, 2.0, 2.4, 2.8),
+    sand_grids=(32, 64, 128),
+    aspects=(0.5, 1.0, 2.0, 4.0, 8.0),
+    materials=(("compression", 38.0),) + tuple(("repose", p) for p in (24.0, 28.0, 32.0, 36.0)),
+    axi_grids=(32, 64, 128),
+    axi_aspects=(0.5, 1.0, 2.0, 4.0),
+)
 
 
 def read_csv(name: str) -> list[dict]:
@@ -92,19 +99,36 @@ def front_error(T, Z, ref) -> float:
 def water_rows(sweep: LabSweep, device) -> tuple[list[dict], list]:
     refs = water_references()
     rows, runs = [], []
-    for walls, kw in (("frictionless", {"floor": "separate", "wall_friction": 0.0}),
-                      ("rough floor", {"floor": "sticky", "wall_friction": 0.0})):
+    for walls, kw in (
+        ("frictionless", {"floor": "separate", "wall_friction": 0.0}),
+        ("rough floor", {"floor": "sticky", "wall_friction": 0.0}),
+    ):
         for n in sweep.dam_grids:
-            r = ex.dam_break(grid_n=n, width=sweep.dam_width, t_star=sweep.dam_t_star, ppz=sweep.ppz,
-                             device=device, **kw)
+            r = ex.dam_break(
+                grid_n=n, width=sweep.dam_width, t_star=sweep.dam_t_star, ppz=sweep.ppz, device=device, **kw
+            )
             runs.append((walls, r))
-            print(f"  dam_break {walls} grid {n}: Z {r.extra['Z'][-1]:.3f} at T {r.extra['T'][-1]:.2f}, "
-                  f"{r.particles} particles, {r.wall_s:.1f} s", flush=True)
+            print(
+                f"  dam_break {walls} grid {n}: Z {r.extra['Z'][-1]:.3f} at T {r.extra['T'][-1]:.2f}, "
+                f"{r.particles} particles, {r.wall_s:.1f} s",
+                flush=True,
+            )
             for name, ref in refs.items():
-                rows.append({"case": f"dam_break {walls}", "reference": name, "grid_n": n,
-                             "cells_across": r.extra["cells_across"], "error": front_error(r.extra["T"], r.extra["Z"], ref),
-                             "metric": "mean (Z-Z_exp)/Z_exp", "value": r.extra["Z"][-1],
-                             "T": r.extra["T"][-1], "particles": r.particles, "wall_s": r.wall_s, "device": r.device})
+                rows.append(
+                    {
+                        "case": f"dam_break {walls}",
+                        "reference": name,
+                        "grid_n": n,
+                        "cells_across": r.extra["cells_across"],
+                        "error": front_error(r.extra["T"], r.extra["Z"], ref),
+                        "metric": "mean (Z-Z_exp)/Z_exp",
+                        "value": r.extra["Z"][-1],
+                        "T": r.extra["T"][-1],
+                        "particles": r.particles,
+                        "wall_s": r.wall_s,
+                        "device": r.device,
+                    }
+                )
     return rows, runs
 
 
@@ -114,32 +138,67 @@ def sand_rows(sweep: LabSweep, device) -> tuple[list[dict], list]:
     todo += [(True, a, n) for a in sweep.axi_aspects for n in sweep.axi_grids]
     for fit, phi in sweep.materials:
         for axi, a, n in todo:
-            r = ex.column_collapse(a=a, grid_n=n, fit=fit, friction_angle=phi, ppz=sweep.ppz,
-                                   axisymmetric=axi, device=device)
+            r = ex.column_collapse(
+                a=a, grid_n=n, fit=fit, friction_angle=phi, ppz=sweep.ppz, axisymmetric=axi, device=device
+            )
             e = r.extra
             runs.append(r)
-            print(f"  collapse {'axi' if axi else '2d'} {fit} {phi:g} a={a:g} grid {n}: runout {e['runout']:.3f} "
-                  f"(law {e['law_runout']:.3f}) height {e['height']:.3f} (law {e['law_height']:.3f}) "
-                  f"flank {e['flank_angle']:.1f} deg, "
-                  f"{e['cells_across']:.1f} cells, {r.particles} particles, {r.wall_s:.1f} s", flush=True)
+            print(
+                f"  collapse {'axi' if axi else '2d'} {fit} {phi:g} a={a:g} grid {n}: runout {e['runout']:.3f} "
+                f"(law {e['law_runout']:.3f}) height {e['height']:.3f} (law {e['law_height']:.3f}) "
+                f"flank {e['flank_angle']:.1f} deg, "
+                f"{e['cells_across']:.1f} cells, {r.particles} particles, {r.wall_s:.1f} s",
+                flush=True,
+            )
             geom = "axisymmetric" if axi else "quasi2d"
-            base = {"case": f"collapse {geom} {fit} {phi:g}", "grid_n": n, "a": a,
-                    "cells_across": e["cells_across"], "friction_angle": phi, "flank_angle": e["flank_angle"],
-                    "particles": r.particles, "wall_s": r.wall_s, "device": r.device}
-            for source in (("lube2004",) if axi else ("lube2005", "lajeunesse2005")):
+            base = {
+                "case": f"collapse {geom} {fit} {phi:g}",
+                "grid_n": n,
+                "a": a,
+                "cells_across": e["cells_across"],
+                "friction_angle": phi,
+                "flank_angle": e["flank_angle"],
+                "particles": r.particles,
+                "wall_s": r.wall_s,
+                "device": r.device,
+            }
+            for source in ("lube2004",) if axi else ("lube2005", "lajeunesse2005"):
                 law_run, law_h = ex.runout_law(a, source)
-                rows.append({**base, "reference": source, "metric": "runout (L-L0)/L0 / law - 1",
-                             "value": e["runout"], "law": law_run, "error": e["runout"] / law_run - 1.0})
-                rows.append({**base, "reference": source, "metric": "height H/L0 / law - 1",
-                             "value": e["height"], "law": law_h, "error": e["height"] / law_h - 1.0})
+                rows.append(
+                    {
+                        **base,
+                        "reference": source,
+                        "metric": "runout (L-L0)/L0 / law - 1",
+                        "value": e["runout"],
+                        "law": law_run,
+                        "error": e["runout"] / law_run - 1.0,
+                    }
+                )
+                rows.append(
+                    {
+                        **base,
+                        "reference": source,
+                        "metric": "height H/L0 / law - 1",
+                        "value": e["height"],
+                        "law": law_h,
+                        "error": e["height"] / law_h - 1.0,
+                    }
+                )
     return rows, runs
 
 
 def snow_rows(device) -> list[dict]:
     row = snow_compression(device=device)
-    return [{"case": "snow confined compression", "reference": "Stomakhin et al. 2013 (derived table)",
-             "grid_n": 0, "error": row["error"], "metric": row.get("metric", "max rel stress error"),
-             "device": row.get("device", "")}]
+    return [
+        {
+            "case": "snow confined compression",
+            "reference": "Stomakhin et al. 2013 (derived table)",
+            "grid_n": 0,
+            "error": row["error"],
+            "metric": row.get("metric", "max rel stress error"),
+            "device": row.get("device", ""),
+        }
+    ]
 
 
 def trend(rows: list[dict]) -> list[dict]:
@@ -151,10 +210,17 @@ def trend(rows: list[dict]) -> list[dict]:
     for (case, ref, a, metric), rs in groups.items():
         rs = sorted(rs, key=lambda r: r["grid_n"])
         errs = [r["error"] for r in rs]
-        out.append({"case": case, "reference": ref, "a": a, "metric": metric,
-                    "grids": "/".join(str(r["grid_n"]) for r in rs),
-                    "errors": "/".join(f"{e:+.3f}" for e in errs),
-                    "shrinks": bool(len(errs) > 1 and abs(errs[-1]) <= abs(errs[0]))})
+        out.append(
+            {
+                "case": case,
+                "reference": ref,
+                "a": a,
+                "metric": metric,
+                "grids": "/".join(str(r["grid_n"]) for r in rs),
+                "errors": "/".join(f"{e:+.3f}" for e in errs),
+                "shrinks": bool(len(errs) > 1 and abs(errs[-1]) <= abs(errs[0])),
+            }
+        )
     return out
 
 
@@ -162,11 +228,22 @@ def run_lab(sweep: LabSweep, device=None) -> tuple[list[dict], dict]:
     """All experiment rows and the plotted series (JSON-able: experiments_series.json)."""
     w_rows, w_runs = water_rows(sweep, device)
     s_rows, s_runs = sand_rows(sweep, device)
-    series = {"water": [{"label": f"{walls} grid {r.grid_n}", "T": list(r.extra["T"]), "Z": list(r.extra["Z"])}
-                        for walls, r in w_runs],
-              "sand": [{"geom": "axi" if r.extra["source"] == "lube2004" else "2d",
-                        "fit": f"{r.extra['fit']} {r.extra['friction_angle']:g}",
-                        "grid_n": r.grid_n, "a": r.extra["a"], "runout": r.extra["runout"]} for r in s_runs]}
+    series = {
+        "water": [
+            {"label": f"{walls} grid {r.grid_n}", "T": list(r.extra["T"]), "Z": list(r.extra["Z"])}
+            for walls, r in w_runs
+        ],
+        "sand": [
+            {
+                "geom": "axi" if r.extra["source"] == "lube2004" else "2d",
+                "fit": f"{r.extra['fit']} {r.extra['friction_angle']:g}",
+                "grid_n": r.grid_n,
+                "a": r.extra["a"],
+                "runout": r.extra["runout"],
+            }
+            for r in s_runs
+        ],
+    }
     return w_rows + s_rows + snow_rows(device), series
 
 
@@ -196,9 +273,14 @@ def lab_plot(series: dict, out, *, name: str = "experiments") -> list[Path]:
         if r["grid_n"] == finest[(r["geom"], r["fit"])]:
             groups.setdefault((r["geom"], r["fit"], r["grid_n"]), []).append(r)
     for k, ((geom, fit, n), rs) in enumerate(sorted(groups.items())):
-        chart.scatter(np.array([r["a"] for r in rs]), np.array([r["runout"] for r in rs]),
-                      color=COLORS[(3 + k) % len(COLORS)], size=8, style="d" if fit.startswith("compression") else "s",
-                      label=f"{geom} {fit} grid {n}")
+        chart.scatter(
+            np.array([r["a"] for r in rs]),
+            np.array([r["runout"] for r in rs]),
+            color=COLORS[(3 + k) % len(COLORS)],
+            size=8,
+            style="d" if fit.startswith("compression") else "s",
+            label=f"{geom} {fit} grid {n}",
+        )
     top = max([r["runout"] for r in series["sand"]] + [ex.runout_law(8.5, "lajeunesse2005")[0]])
     chart.y_range = [0.0, 1.7 * top]  # headroom: the legend sits top right, over no data
     paths.append(_shot(pv, chart, out / f"{name}_sand.png"))
@@ -224,5 +306,7 @@ def summary(rows: list[dict]) -> list[str]:
     for (case, ref, a, metric), r in sorted(finest.items(), key=lambda kv: str(kv[0])):
         if math.isfinite(r["error"]):
             where = f" a={a:g}" if a != "" else ""
-            lines.append(f"{case}{where} vs {ref}: {100 * r['error']:+.0f} % at {r['cells_across']:.0f} cells across ({metric})")
+            lines.append(
+                f"{case}{where} vs {ref}: {100 * r['error']:+.0f} % at {r['cells_across']:.0f} cells across ({metric})"
+            )
     return lines

@@ -3,6 +3,7 @@
 Imported only by `mpmfx bench accuracy` / `mpmfx bench surface` when they draw; raises
 ImportError (with the fix) where pyvista is missing, e.g. on the GPU machine.
 """
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -11,8 +12,18 @@ import numpy as np
 
 from mpmfx.render import import_pyvista
 
-COLORS = ["tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple", "tab:brown", "tab:pink",
-          "tab:gray", "tab:olive", "tab:cyan"]
+COLORS = [
+    "tab:blue",
+    "tab:orange",
+    "tab:green",
+    "tab:red",
+    "tab:purple",
+    "tab:brown",
+    "tab:pink",
+    "tab:gray",
+    "tab:olive",
+    "tab:cyan",
+]
 
 
 def cost(row: dict) -> float:
@@ -45,8 +56,9 @@ def speed_error_plot(rows: list[dict], out: str | Path, *, name: str = "accuracy
     drawn = 0
     cases = list(dict.fromkeys(r["case"] for r in rows))
     for i, case in enumerate(cases):
-        pts = sorted((cost(r), float(r["error"])) for r in rows
-                     if r["case"] == case and float(r["error"]) > 0 and cost(r) > 0)
+        pts = sorted(
+            (cost(r), float(r["error"])) for r in rows if r["case"] == case and float(r["error"]) > 0 and cost(r) > 0
+        )
         if not pts:
             continue
         x, y = (np.array(a) for a in zip(*pts))
@@ -81,14 +93,23 @@ def surface_plot(rows: list[dict], out: str | Path, *, name: str = "surface") ->
     drawn = 0
     for i, method in enumerate(methods):
         for j, count in enumerate(counts):
-            pts = [(float(r["particles_per_s"]), float(r.get("err_surface_h", r["err_mean_h"]))) for r in rows
-                   if r["method"] == method and int(r.get("count", r["particles"])) == count]
+            pts = [
+                (float(r["particles_per_s"]), float(r.get("err_surface_h", r["err_mean_h"])))
+                for r in rows
+                if r["method"] == method and int(r.get("count", r["particles"])) == count
+            ]
             pts = [(x, y) for x, y in pts if np.isfinite(x) and np.isfinite(y) and x > 0 and y > 0]
             if not pts:
                 continue
             x, y = (np.array(a) for a in zip(*pts))
-            chart.scatter(x, y, color=COLORS[i % len(COLORS)], size=10, style=MARKERS[j % len(MARKERS)],
-                          label=f"{method} @ {count_label(count)}")
+            chart.scatter(
+                x,
+                y,
+                color=COLORS[i % len(COLORS)],
+                size=10,
+                style=MARKERS[j % len(MARKERS)],
+                label=f"{method} @ {count_label(count)}",
+            )
             drawn += 1
     if drawn == 0:
         raise ValueError("surface_plot: no row has a positive speed and error; nothing to plot")

@@ -17,6 +17,7 @@ tracers, water volume recovery or adaptive stepping.
 
 Units as the solver's: domain units ([0, 1]^3), seconds, mass = rest volume * density.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -145,8 +146,10 @@ class ReferenceSolver:
         self.config = config
         for i, m in enumerate(self.materials):
             if m.mode == Mode.TRACER or (m.mode == Mode.WATER and m.volume_recovery):
-                raise ValueError(f"ReferenceSolver: materials[{i}] uses {m.mode.name} "
-                                 "(tracers / volume recovery are not in the reference)")
+                raise ValueError(
+                    f"ReferenceSolver: materials[{i}] uses {m.mode.name} "
+                    "(tracers / volume recovery are not in the reference)"
+                )
         if config.multi_field:
             raise ValueError("ReferenceSolver: multi_field is not in the reference")
 
@@ -156,10 +159,18 @@ class ReferenceSolver:
         mat = np.asarray(p.material, int)
         dens = np.array([m.density for m in self.materials])[mat]
         sand = np.array([m.mode == Mode.SAND for m in self.materials])[mat]
-        return {"x": np.asarray(p.x, float).copy(), "v": np.asarray(p.v, float).copy(),
-                "C": np.zeros((n, 3, 3)), "F": np.tile(_I3, (n, 1, 1)), "J": np.ones(n),
-                "Jp": np.where(sand, 0.0, 1.0), "volume": np.asarray(p.volume, float),
-                "mass": np.asarray(p.volume, float) * dens, "material": mat, "alive": np.ones(n, bool)}
+        return {
+            "x": np.asarray(p.x, float).copy(),
+            "v": np.asarray(p.v, float).copy(),
+            "C": np.zeros((n, 3, 3)),
+            "F": np.tile(_I3, (n, 1, 1)),
+            "J": np.ones(n),
+            "Jp": np.where(sand, 0.0, 1.0),
+            "volume": np.asarray(p.volume, float),
+            "mass": np.asarray(p.volume, float) * dens,
+            "material": mat,
+            "alive": np.ones(n, bool),
+        }
 
     def state_to_numpy(self, state: dict) -> dict:
         return dict(state)
@@ -274,4 +285,3 @@ class ReferenceSolver:
 def cfl_dt(config: SolverConfig, wave_speed: float, vmax: float) -> float:
     """The solver's step rule, dt = cfl dx / (c + |v|max), for fixed-dt comparisons."""
     return config.cfl * config.dx / max(wave_speed + vmax, 1e-12)
-

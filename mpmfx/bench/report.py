@@ -1,4 +1,5 @@
 """Writing a benchmark's rows: one printed table, a CSV and a JSON beside it."""
+
 from __future__ import annotations
 
 import csv

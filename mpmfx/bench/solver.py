@@ -4,6 +4,7 @@ A block of particles (8 per cell) is dropped in the domain; after warm-up (compi
 few substeps) a fixed number of substeps at a fixed dt is timed with the device synchronised.
 Full run: about one million particles per material (GPU). --quick: ~20k on the CPU.
 """
+
 from __future__ import annotations
 
 import time
@@ -33,8 +34,13 @@ def block_particles(n_target: int, grid_n: int, ppc: int = 8, seed: int = 0):
 def run_case(material: str, n_target: int, grid_n: int, substeps: int, device):
     x, vol = block_particles(n_target, grid_n)
     n = len(x)
-    parts = Particles(x=x, v=np.zeros_like(x), volume=np.full(n, vol, np.float32),
-                      material=np.zeros(n, np.int32), body=np.zeros(n, np.int32))
+    parts = Particles(
+        x=x,
+        v=np.zeros_like(x),
+        volume=np.full(n, vol, np.float32),
+        material=np.zeros(n, np.int32),
+        body=np.zeros(n, np.int32),
+    )
     solver = Solver([preset(material)], SolverConfig(grid_n=grid_n, gravity=(0, -9.8, 0)), device=device)
     state = solver.init_state(parts)
     dt = 1e-4
@@ -47,9 +53,16 @@ def run_case(material: str, n_target: int, grid_n: int, substeps: int, device):
     wp.synchronize_device(solver.device)
     wall = time.perf_counter() - t0
     x_out = solver.state_to_numpy(state)["x"]
-    return {"material": material, "particles": n, "grid_n": grid_n, "substeps": substeps, "wall_s": wall,
-            "Mparticle_substeps_per_s": n * substeps / wall / 1e6, "finite": bool(np.isfinite(x_out).all()),
-            "device": _device_name(solver.device)}
+    return {
+        "material": material,
+        "particles": n,
+        "grid_n": grid_n,
+        "substeps": substeps,
+        "wall_s": wall,
+        "Mparticle_substeps_per_s": n * substeps / wall / 1e6,
+        "finite": bool(np.isfinite(x_out).all()),
+        "device": _device_name(solver.device),
+    }
 
 
 def _device_name(device) -> str:

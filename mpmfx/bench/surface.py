@@ -11,6 +11,7 @@ every installed peer): surface_sheet.csv/json; a real splash frame of water_dam
 (mpmfx.bench.surface_splash): surface_splash.csv/json; and the flicker of a slowly moving block
 over 10 frames (mpmfx.bench.surface_flicker): surface_flicker.csv/json.
 """
+
 from __future__ import annotations
 
 import sys
@@ -49,8 +50,14 @@ def choose_peers(peers: Sequence[str] | None, *, quick: bool) -> list[str]:
     return chosen
 
 
-def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench",
-         peers: Sequence[str] | None = None, counts: Sequence[int] | None = None) -> int:
+def main(
+    *,
+    quick: bool = False,
+    device: str | None = None,
+    out: str = "renders/bench",
+    peers: Sequence[str] | None = None,
+    counts: Sequence[int] | None = None,
+) -> int:
     """Run the sweep; 0 on success, 2 on bad --peers / --counts."""
     try:
         chosen = choose_peers(peers, quick=quick)
@@ -62,8 +69,9 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
         print(f"error: --counts {' '.join(map(str, counts))}: use at least 1000 particles", file=sys.stderr)
         return 2
     print(HEADER)
-    rows = bench_surface(counts, ("sphere", "torus", "box"), ("lattice", "random"), device,
-                         peers=chosen, repeats=1 if quick else 3)
+    rows = bench_surface(
+        counts, ("sphere", "torus", "box"), ("lattice", "random"), device, peers=chosen, repeats=1 if quick else 3
+    )
     path = write_rows(rows, out, "surface")
     print(f"tables: {path} (+ .json)")
     try:

@@ -38,8 +38,10 @@ BOX_HALF = np.array([0.3, 0.2, 0.25])
 def shape_sdf(shape: str) -> tuple[Callable[[np.ndarray], np.ndarray], float, np.ndarray]:
     """(signed distance of (n, 3) points, analytic volume m^3, (3,) half extent of the bounds)."""
     if shape == "sphere":
-        return (lambda p: np.linalg.norm(p, axis=1) - SPHERE_RADIUS), 4 / 3 * math.pi * SPHERE_RADIUS**3, np.full(
-            3, SPHERE_RADIUS
+        return (
+            (lambda p: np.linalg.norm(p, axis=1) - SPHERE_RADIUS),
+            4 / 3 * math.pi * SPHERE_RADIUS**3,
+            np.full(3, SPHERE_RADIUS),
         )
     if shape == "torus":
         big, small = TORUS_RADII
@@ -126,8 +128,17 @@ def surface_error(vertices: np.ndarray, faces: np.ndarray, sdf: Callable[[np.nda
     return float((err * area).sum() / max(area.sum(), 1e-300))
 
 
-def _row(shape: str, sampling: str, x: np.ndarray, h: float, method: str, grid: str, seconds: float,
-         verts: np.ndarray, faces: np.ndarray) -> dict:
+def _row(
+    shape: str,
+    sampling: str,
+    x: np.ndarray,
+    h: float,
+    method: str,
+    grid: str,
+    seconds: float,
+    verts: np.ndarray,
+    faces: np.ndarray,
+) -> dict:
     """One result row: timing, vertex distance to the analytic surface (m and h) and the
     surface's area-weighted distance (surface_error), volume, pieces."""
     sdf, volume, _ = shape_sdf(shape)
@@ -135,11 +146,23 @@ def _row(shape: str, sampling: str, x: np.ndarray, h: float, method: str, grid: 
     surf = surface_error(verts, faces, sdf)
     mesh_volume, pieces = mesh_stats(verts, faces)
     return {
-        "shape": shape, "sampling": sampling, "particles": len(x), "h": h, "method": method, "grid": grid,
-        "seconds": seconds, "particles_per_s": len(x) / seconds,
-        "err_mean": float(err.mean()), "err_p99": float(np.percentile(err, 99)), "err_max": float(err.max()),
-        "err_mean_h": float(err.mean() / h), "err_surface_h": surf / h, "err_p99_h": float(np.percentile(err, 99) / h),
-        "err_max_h": float(err.max() / h), "volume_err": mesh_volume / volume - 1.0, "components": pieces,
+        "shape": shape,
+        "sampling": sampling,
+        "particles": len(x),
+        "h": h,
+        "method": method,
+        "grid": grid,
+        "seconds": seconds,
+        "particles_per_s": len(x) / seconds,
+        "err_mean": float(err.mean()),
+        "err_p99": float(np.percentile(err, 99)),
+        "err_max": float(err.max()),
+        "err_mean_h": float(err.mean() / h),
+        "err_surface_h": surf / h,
+        "err_p99_h": float(np.percentile(err, 99) / h),
+        "err_max_h": float(err.max() / h),
+        "volume_err": mesh_volume / volume - 1.0,
+        "components": pieces,
         "vertices": len(verts),
     }
 
@@ -158,7 +181,9 @@ def sample_sheet(count: int, sampling: str, *, seed: int = 0) -> tuple[np.ndarra
         a = np.arange(-SHEET_RADIUS, SHEET_RADIUS, h) + h / 2
         p = np.stack(np.meshgrid(a, a, [0.0], indexing="ij"), -1).reshape(-1, 3)
     elif sampling == "random":
-        p = rng.uniform([-SHEET_RADIUS, -SHEET_RADIUS, -h / 2], [SHEET_RADIUS, SHEET_RADIUS, h / 2], size=(int(count * 1.3), 3))
+        p = rng.uniform(
+            [-SHEET_RADIUS, -SHEET_RADIUS, -h / 2], [SHEET_RADIUS, SHEET_RADIUS, h / 2], size=(int(count * 1.3), 3)
+        )
     else:
         raise ValueError(f"bench sampling {sampling!r}: use lattice or random")
     p = p[np.hypot(p[:, 0], p[:, 1]) < SHEET_RADIUS][:count]
@@ -180,12 +205,23 @@ def sheet_stats(vertices: np.ndarray, faces: np.ndarray, h: float) -> dict:
     v = np.asarray(vertices, np.float64)
     flat = np.hypot(v[:, 0], v[:, 1]) < SHEET_RADIUS - 2 * h
     thickness = float(2 * np.abs(v[flat, 2]).mean() / h - 1.0) if flat.any() else float("nan")
-    return {"components": pieces, "holes": int(round((2 * pieces - euler) / 2)), "open_edges": int((uses == 1).sum()),
-            "thickness_err": thickness}
+    return {
+        "components": pieces,
+        "holes": int(round((2 * pieces - euler) / 2)),
+        "open_edges": int((uses == 1).sum()),
+        "thickness_err": thickness,
+    }
 
 
-def measure_sheet(count: int, sampling: str, *, label: str = "fine", device: str | None = None,
-                  radius_factor: float = PARTICLE_RADIUS_PER_SPACING, **overrides) -> dict:
+def measure_sheet(
+    count: int,
+    sampling: str,
+    *,
+    label: str = "fine",
+    device: str | None = None,
+    radius_factor: float = PARTICLE_RADIUS_PER_SPACING,
+    **overrides,
+) -> dict:
     """Our surfacer (setting OURS[label], plus SurfaceParams `overrides`, e.g. anisotropic=True)
     on the thin-sheet case: time (s, whole call), pieces, holes, open edges, thickness error."""
     x, h = sample_sheet(count, sampling)
@@ -195,12 +231,24 @@ def measure_sheet(count: int, sampling: str, *, label: str = "fine", device: str
     t0 = time.perf_counter()
     res = surface_particles(x, None, params, device=device)
     seconds = time.perf_counter() - t0
-    method = f"mpmfx {label}" + (" anisotropic" if overrides.pop("anisotropic", False) else "") + "".join(
-        f" {k}={v}" for k, v in overrides.items())
+    method = (
+        f"mpmfx {label}"
+        + (" anisotropic" if overrides.pop("anisotropic", False) else "")
+        + "".join(f" {k}={v}" for k, v in overrides.items())
+    )
     settings = f"r {radius_factor:g}h voxel {voxel_h:g}h smooth {params.smooth_iters}"
-    return {"shape": "sheet", "sampling": sampling, "particles": len(x), "h": h, "method": method, "seconds": seconds,
-            **sheet_stats(res.mesh.vertices, res.mesh.faces, h), "vertices": len(res.mesh.vertices),
-            "device": str(wp.get_device(device)), "settings": settings}
+    return {
+        "shape": "sheet",
+        "sampling": sampling,
+        "particles": len(x),
+        "h": h,
+        "method": method,
+        "seconds": seconds,
+        **sheet_stats(res.mesh.vertices, res.mesh.faces, h),
+        "vertices": len(res.mesh.vertices),
+        "device": str(wp.get_device(device)),
+        "settings": settings,
+    }
 
 
 def measure_sheet_peer(name: str, count: int, sampling: str, *, device: str | None = None, repeats: int = 1) -> dict:
@@ -211,9 +259,18 @@ def measure_sheet_peer(name: str, count: int, sampling: str, *, device: str | No
     "newton-aniso" is Newton's Yu & Turk mode. Time: median of `repeats` after a warm-up."""
     x, h = sample_sheet(count, sampling)
     res = run_peer(name, x, h, sampling, device=device, repeats=repeats)
-    return {"shape": "sheet", "sampling": sampling, "particles": len(x), "h": h, "method": res.name,
-            "seconds": res.seconds, **sheet_stats(res.vertices, res.faces, h), "vertices": len(res.vertices),
-            "device": res.device, "settings": res.settings}
+    return {
+        "shape": "sheet",
+        "sampling": sampling,
+        "particles": len(x),
+        "h": h,
+        "method": res.name,
+        "seconds": res.seconds,
+        **sheet_stats(res.vertices, res.faces, h),
+        "vertices": len(res.vertices),
+        "device": res.device,
+        "settings": res.settings,
+    }
 
 
 REST_NOISE = 0.01
@@ -221,12 +278,14 @@ REST_NOISE = 0.01
 an MPM block settled on the floor creeps by about this much per frame."""
 
 
-def rest_jitter(x: np.ndarray, h: float, params: SurfaceParams, first, *, device: str | None = None,
-                seed: int = 0) -> tuple[float, float]:
+def rest_jitter(
+    x: np.ndarray, h: float, params: SurfaceParams, first, *, device: str | None = None, seed: int = 0
+) -> tuple[float, float]:
     """(mean vertex displacement / h between two frames of a body at rest, the same for the very
     same particles surfaced again). x: (n, 3) m; first: the SurfaceResult of x. The second frame
     moves each particle by N(0, REST_NOISE h) per axis. Where both frames have the same triangles
     (the usual case) vertices are compared one to one, else each to the other frame's nearest."""
+
     def moved(a, b) -> float:
         if a.faces.shape == b.faces.shape and np.array_equal(a.faces, b.faces):
             return float(np.linalg.norm(a.vertices - b.vertices, axis=1).mean() / h)
@@ -248,8 +307,9 @@ MOVE_STEP = 0.1
 """How far a slowly moving body travels between two frames, in particle spacings h."""
 
 
-def moving_jitter(x: np.ndarray, h: float, params: SurfaceParams, first, *, device: str | None = None,
-                  seed: int = 1) -> float:
+def moving_jitter(
+    x: np.ndarray, h: float, params: SurfaceParams, first, *, device: str | None = None, seed: int = 1
+) -> float:
     """Flicker of a slowly moving body: the particles x (m) travel MOVE_STEP h along a fixed
     oblique direction and creep as at rest (REST_NOISE h); returns the mean distance / h of the
     second frame's vertices, moved back, to the first frame's surface (point to the tangent
@@ -262,8 +322,9 @@ def moving_jitter(x: np.ndarray, h: float, params: SurfaceParams, first, *, devi
     noise = np.random.default_rng(seed).normal(0.0, REST_NOISE * h, size=x.shape)
     dev = wp.get_device(device)
     y = (x + noise + step).astype(np.float32)
-    later = surface_particles(y if dev.is_cpu else wp.array(y, dtype=wp.vec3, device=dev), None, params,
-                              device=device).mesh
+    later = surface_particles(
+        y if dev.is_cpu else wp.array(y, dtype=wp.vec3, device=dev), None, params, device=device
+    ).mesh
     if len(later.vertices) == 0:
         return float("nan")
     back = later.vertices.astype(np.float64) - step
@@ -273,9 +334,17 @@ def moving_jitter(x: np.ndarray, h: float, params: SurfaceParams, first, *, devi
 
 
 def measure(
-    shape: str, count: int, sampling: str, *, radius_factor: float = PARTICLE_RADIUS_PER_SPACING,
-    device: str | None = None, sample: tuple[np.ndarray, float] | None = None, repeats: int = 1, label: str = "",
-    voxel_h: float | None = None, **overrides
+    shape: str,
+    count: int,
+    sampling: str,
+    *,
+    radius_factor: float = PARTICLE_RADIUS_PER_SPACING,
+    device: str | None = None,
+    sample: tuple[np.ndarray, float] | None = None,
+    repeats: int = 1,
+    label: str = "",
+    voxel_h: float | None = None,
+    **overrides,
 ) -> dict:
     """Reconstruct one sample with our surfacer and measure it (particle_radius = radius_factor * h).
 
@@ -315,12 +384,27 @@ def measure(
     if params.min_feature_particles:
         settings += f" specks<{params.min_feature_particles}"
     jitter, repeat = rest_jitter(x, h, params, res, device=device)
-    return {**row, "seconds_host": seconds_host, "device": str(dev), "settings": settings, "stages": res.stats,
-            "jitter_h": jitter, "repeat_h": repeat, "moving_h": moving_jitter(x, h, params, res, device=device)}
+    return {
+        **row,
+        "seconds_host": seconds_host,
+        "device": str(dev),
+        "settings": settings,
+        "stages": res.stats,
+        "jitter_h": jitter,
+        "repeat_h": repeat,
+        "moving_h": moving_jitter(x, h, params, res, device=device),
+    }
 
 
-def measure_peer(name: str, shape: str, sampling: str, sample: tuple[np.ndarray, float], *,
-                 device: str | None = None, repeats: int = 3) -> dict:
+def measure_peer(
+    name: str,
+    shape: str,
+    sampling: str,
+    sample: tuple[np.ndarray, float],
+    *,
+    device: str | None = None,
+    repeats: int = 3,
+) -> dict:
     """Peer `name` (mpmfx.bench.surface_peers.PEERS) on `sample` = (x (n, 3) m, h m); one row like ours."""
     x, h = sample
     res = run_peer(name, x, h, sampling, device=device, repeats=repeats)
@@ -377,8 +461,20 @@ def bench_surface(
             for sampling in samplings:
                 sample = sample_shape(shape, count, sampling)
                 for label, setting in OURS.items():
-                    emit(measure(shape, count, sampling, device=device, sample=sample, repeats=repeats,
-                                 label=label, dense_output=dense_output, **setting), count)
+                    emit(
+                        measure(
+                            shape,
+                            count,
+                            sampling,
+                            device=device,
+                            sample=sample,
+                            repeats=repeats,
+                            label=label,
+                            dense_output=dense_output,
+                            **setting,
+                        ),
+                        count,
+                    )
                 for name in peers:
                     try:
                         emit(measure_peer(name, shape, sampling, sample, device=device, repeats=repeats), count)
@@ -431,23 +527,30 @@ def bench_sheet(count: int, device: str | None = None, *, peers: Sequence[str] =
     for sampling in ("lattice", "random"):
         for label in OURS:
             for aniso in (False, True):
-                rows.emit({**measure_sheet(count, sampling, label=label, device=device, anisotropic=aniso),
-                           "count": count})
+                rows.emit(
+                    {**measure_sheet(count, sampling, label=label, device=device, anisotropic=aniso), "count": count}
+                )
         for name in peers:
-            rows.attempt(f"sheet {sampling} {count}: peer {name}",
-                         lambda: {**measure_sheet_peer(name, count, sampling, device=device), "count": count})
+            rows.attempt(
+                f"sheet {sampling} {count}: peer {name}",
+                lambda: {**measure_sheet_peer(name, count, sampling, device=device), "count": count},
+            )
     return list(rows)
 
 
-SHEET_HEADER = (f"{'shape':7} {'sampling':8} {'n':>8} {'method':34} {'time s':>7} {'pieces':>6} {'holes':>6} {'open':>5} "
-                f"{'thick err':>9} {'device':>7}  settings")
+SHEET_HEADER = (
+    f"{'shape':7} {'sampling':8} {'n':>8} {'method':34} {'time s':>7} {'pieces':>6} {'holes':>6} {'open':>5} "
+    f"{'thick err':>9} {'device':>7}  settings"
+)
 
 
 def format_sheet_row(r: dict) -> str:
     """One line of the thin-sheet table (columns of SHEET_HEADER; thickness error in h)."""
-    return (f"{r['shape']:7} {r['sampling']:8} {r['particles']:8d} {r['method']:34} {r['seconds']:7.3f} "
-            f"{r['components']:6d} {r['holes']:6d} {r['open_edges']:5d} {r['thickness_err']:+9.3f} "
-            f"{r.get('device', ''):>7}  {r.get('settings', '')}")
+    return (
+        f"{r['shape']:7} {r['sampling']:8} {r['particles']:8d} {r['method']:34} {r['seconds']:7.3f} "
+        f"{r['components']:6d} {r['holes']:6d} {r['open_edges']:5d} {r['thickness_err']:+9.3f} "
+        f"{r.get('device', ''):>7}  {r.get('settings', '')}"
+    )
 
 
 HEADER = (
@@ -490,8 +593,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     ap.add_argument("--stages", action="store_true", help="print our cumulative stage times")
     ap.add_argument("--dense-output", action="store_true", help="also return dense arrays (slower)")
     ap.add_argument("--device", default=None)
-    ap.add_argument("--peers", nargs="*", default=[], help="also run these on the same particles: "
-                    "splashsurf, newton, newton-aniso")
+    ap.add_argument(
+        "--peers", nargs="*", default=[], help="also run these on the same particles: splashsurf, newton, newton-aniso"
+    )
     ap.add_argument("--repeats", type=int, default=1, help="> 1: warm-up, then the median of this many")
     ap.add_argument("--sheet", type=int, default=0, help="also the thin-sheet case with this many particles")
     args = ap.parse_args(argv)

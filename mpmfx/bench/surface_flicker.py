@@ -20,6 +20,7 @@ Every method gets its normals the same way (area-weighted face normals), so peer
 
     python -m mpmfx.bench.surface_flicker [--count 20000] [--peers splashsurf newton] [--device cpu]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -43,7 +44,9 @@ DIRECTION = np.array([0.57, 0.41, 0.71]) / np.linalg.norm([0.57, 0.41, 0.71])
 """Direction of motion: oblique, so the body crosses voxel faces on all three axes."""
 
 
-def moving_frames(count: int, *, frames: int = FLICKER_FRAMES, seed: int = 0) -> tuple[list[np.ndarray], float, np.ndarray]:
+def moving_frames(
+    count: int, *, frames: int = FLICKER_FRAMES, seed: int = 0
+) -> tuple[list[np.ndarray], float, np.ndarray]:
     """([frames] (n, 3) float32 positions m, spacing h m, (3,) step m per frame): a random box
     moving MOVE_STEP h a frame along DIRECTION, each particle creeping REST_NOISE h a frame."""
     x, h = sample_shape("box", count, "random", seed=seed)
@@ -66,7 +69,9 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 def surface_area(vertices: np.ndarray, faces: np.ndarray) -> float:
     """Total triangle area (m^2)."""
     v = vertices.astype(np.float64)
-    return float(np.linalg.norm(np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]]), axis=1).sum() / 2)
+    return float(
+        np.linalg.norm(np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]]), axis=1).sum() / 2
+    )
 
 
 def _segment_closest(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -76,8 +81,9 @@ def _segment_closest(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a + t[..., None] * ab
 
 
-def closest_on_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def closest_on_mesh(
+    points: np.ndarray, vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """For each of `points` (q, 3), the closest point of the triangles around its nearest vertex
     of the mesh (vertices (m, 3), faces (k, 3)) and the vertex `normals` (m, 3) interpolated there
     (barycentric, renormalised: what smooth shading shows). Returns ((q, 3) points, (q, 3) normals)."""
@@ -98,8 +104,12 @@ def closest_on_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,
     wa = np.einsum("...i,...i->...", np.cross(c - b, proj - b), n) / nn
     wb = np.einsum("...i,...i->...", np.cross(a - c, proj - c), n) / nn
     inside = (wa >= 0) & (wb >= 0) & (1 - wa - wb >= 0)
-    cands = [np.where(inside[..., None], proj, np.inf), _segment_closest(p, a, b), _segment_closest(p, b, c),
-             _segment_closest(p, c, a)]
+    cands = [
+        np.where(inside[..., None], proj, np.inf),
+        _segment_closest(p, a, b),
+        _segment_closest(p, b, c),
+        _segment_closest(p, c, a),
+    ]
     cands = np.stack(cands, axis=-2)  # (q, K, 4, 3)
     d = np.linalg.norm(cands - p[..., None, :], axis=-1)
     d = np.where(np.isfinite(d), d, np.inf).reshape(len(points), -1)
@@ -113,13 +123,21 @@ def closest_on_mesh(points: np.ndarray, vertices: np.ndarray, faces: np.ndarray,
     ua = np.einsum("ij,ij->i", np.cross(tc - tb, x - tb), nt) / ntn
     ub = np.einsum("ij,ij->i", np.cross(ta - tc, x - tc), nt) / ntn
     tri_q = tri[q, t]
-    normal = (ua[:, None] * normals[tri_q[:, 0]] + ub[:, None] * normals[tri_q[:, 1]]
-              + (1 - ua - ub)[:, None] * normals[tri_q[:, 2]])
+    normal = (
+        ua[:, None] * normals[tri_q[:, 0]]
+        + ub[:, None] * normals[tri_q[:, 1]]
+        + (1 - ua - ub)[:, None] * normals[tri_q[:, 2]]
+    )
     return x, normal / np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-30)
 
 
-def frame_change(prev: tuple[np.ndarray, np.ndarray], cur: tuple[np.ndarray, np.ndarray], h: float,
-                 *, edges: np.ndarray | None = None) -> dict:
+def frame_change(
+    prev: tuple[np.ndarray, np.ndarray],
+    cur: tuple[np.ndarray, np.ndarray],
+    h: float,
+    *,
+    edges: np.ndarray | None = None,
+) -> dict:
     """Flicker between two consecutive meshes (vertices (m, 3) m, faces (k, 3)), both already moved
     back to the body's rest place: distance of each vertex of `cur` to the surface of `prev` (its
     closest point; a re-triangulation of the same surface reads 0), mean / p99 in h, and the turn
@@ -134,9 +152,13 @@ def frame_change(prev: tuple[np.ndarray, np.ndarray], cur: tuple[np.ndarray, np.
     turn = np.degrees(np.arccos(np.clip(np.einsum("ij,ij->i", n, nb), -1.0, 1.0)))
     flat = turn if edges is None else turn[~edges]
     sharp = turn[edges] if edges is not None and edges.any() else np.array([np.nan])
-    return {"normal_jitter_h": float(off.mean()), "normal_jitter_p99_h": float(np.percentile(off, 99)),
-            "normal_turn_deg": float(flat.mean()), "normal_turn_p99_deg": float(np.percentile(flat, 99)),
-            "edge_turn_p99_deg": float(np.percentile(sharp, 99))}
+    return {
+        "normal_jitter_h": float(off.mean()),
+        "normal_jitter_p99_h": float(np.percentile(off, 99)),
+        "normal_turn_deg": float(flat.mean()),
+        "normal_turn_p99_deg": float(np.percentile(flat, 99)),
+        "edge_turn_p99_deg": float(np.percentile(sharp, 99)),
+    }
 
 
 def box_edges(vertices: np.ndarray, h: float) -> np.ndarray:
@@ -167,8 +189,9 @@ def render(pv, vertices: np.ndarray, faces: np.ndarray, size: tuple[int, int] = 
     plotter.add_light(pv.Light(position=(-0.5, 0.8, 0.3), focal_point=(0, 0, 0), intensity=0.3))
     mesh = pv.PolyData(np.asarray(vertices, np.float64), np.hstack([np.full((len(faces), 1), 3), faces]).ravel())
     mesh.point_data["Normals"] = vertex_normals(vertices, faces)
-    plotter.add_mesh(mesh, color="#8fb8d8", smooth_shading=True, specular=0.9, specular_power=60, diffuse=0.6,
-                     ambient=0.1)
+    plotter.add_mesh(
+        mesh, color="#8fb8d8", smooth_shading=True, specular=0.9, specular_power=60, diffuse=0.6, ambient=0.1
+    )
     plotter.camera_position = CAMERA
     img = plotter.screenshot(return_img=True)
     plotter.close()
@@ -194,8 +217,9 @@ def picture_change(meshes: list[tuple[np.ndarray, np.ndarray]]) -> dict:
     return {"pixel_change": float(np.mean(means)), "pixels_changed": float(np.mean(shares))}
 
 
-def flicker_run(surface: Callable[[np.ndarray], tuple], frames: list[np.ndarray], h: float,
-                step: np.ndarray) -> tuple[list[dict], list[tuple[np.ndarray, np.ndarray]]]:
+def flicker_run(
+    surface: Callable[[np.ndarray], tuple], frames: list[np.ndarray], h: float, step: np.ndarray
+) -> tuple[list[dict], list[tuple[np.ndarray, np.ndarray]]]:
     """Surface every frame with `surface` (positions -> (vertices, faces), or (vertices, faces,
     seconds) when it times itself); returns one row per frame (seconds, area, volume, and from
     the second frame on its change against the previous: `frame_change`, box edges apart, plus
@@ -227,15 +251,20 @@ def ours(label: str, h: float, device: str | None = None) -> Callable[[np.ndarra
     def run(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         mesh = surface_particles(x, None, params, device=device).mesh
         return mesh.vertices, mesh.faces
+
     return run
 
 
-def peer(name: str, h: float, device: str | None = None) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, float]]:
+def peer(
+    name: str, h: float, device: str | None = None
+) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, float]]:
     """Peer `name` at its bench settings for random samples as a positions -> (vertices, faces,
     seconds) function; seconds = its timed call (run_peer warms up first, untimed)."""
+
     def run(x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
         res = run_peer(name, x, h, "random", device=device, repeats=1)
         return res.vertices, res.faces, res.seconds
+
     return run
 
 
@@ -245,18 +274,33 @@ def summarise(method: str, rows: list[dict], n: int, h: float) -> dict:
 
     def mean(key: str) -> float:
         return float(np.mean([r[key] for r in pairs]))
-    return {"case": "moving random box", "particles": n, "h": h, "frames": len(rows), "method": method,
-            "seconds": float(np.mean([r["seconds"] for r in rows])),
-            "normal_jitter_h": mean("normal_jitter_h"), "normal_jitter_p99_h": mean("normal_jitter_p99_h"),
-            "normal_turn_deg": mean("normal_turn_deg"), "normal_turn_p99_deg": mean("normal_turn_p99_deg"),
-            "edge_turn_p99_deg": mean("edge_turn_p99_deg"),
-            "area_change_max": float(max(abs(r["area_change"]) for r in pairs)),
-            "volume_change_max": float(max(abs(r["volume_change"]) for r in pairs)),
-            "components_max": int(max(r["components"] for r in rows))}
+
+    return {
+        "case": "moving random box",
+        "particles": n,
+        "h": h,
+        "frames": len(rows),
+        "method": method,
+        "seconds": float(np.mean([r["seconds"] for r in rows])),
+        "normal_jitter_h": mean("normal_jitter_h"),
+        "normal_jitter_p99_h": mean("normal_jitter_p99_h"),
+        "normal_turn_deg": mean("normal_turn_deg"),
+        "normal_turn_p99_deg": mean("normal_turn_p99_deg"),
+        "edge_turn_p99_deg": mean("edge_turn_p99_deg"),
+        "area_change_max": float(max(abs(r["area_change"]) for r in pairs)),
+        "volume_change_max": float(max(abs(r["volume_change"]) for r in pairs)),
+        "components_max": int(max(r["components"] for r in rows)),
+    }
 
 
-def bench_flicker(count: int = FLICKER_COUNT, device: str | None = None, *, peers: Sequence[str] = (),
-                  frames: int = FLICKER_FRAMES, echo: bool = True) -> list[dict]:
+def bench_flicker(
+    count: int = FLICKER_COUNT,
+    device: str | None = None,
+    *,
+    peers: Sequence[str] = (),
+    frames: int = FLICKER_FRAMES,
+    echo: bool = True,
+) -> list[dict]:
     """The moving block with each of our settings and each peer; one summary row per method."""
     xs, h, step = moving_frames(count, frames=frames)
     surface_particles(xs[0][:500], None, SurfaceParams(h), device=device)  # compile
@@ -273,18 +317,22 @@ def bench_flicker(count: int = FLICKER_COUNT, device: str | None = None, *, peer
     return list(out)
 
 
-FLICKER_HEADER = (f"{'case':18} {'n':>7} {'method':16} {'s/frame':>7} {'jitter/h':>8} {'p99/h':>6} {'turn deg':>8} "
-                  f"{'p99 deg':>7} {'edge p99':>8} {'dA max':>7} {'dV max':>7} {'pieces':>6} {'px lvl':>6} "
-                  f"{'px >' + str(VISIBLE_LEVELS):>6}")
+FLICKER_HEADER = (
+    f"{'case':18} {'n':>7} {'method':16} {'s/frame':>7} {'jitter/h':>8} {'p99/h':>6} {'turn deg':>8} "
+    f"{'p99 deg':>7} {'edge p99':>8} {'dA max':>7} {'dV max':>7} {'pieces':>6} {'px lvl':>6} "
+    f"{'px >' + str(VISIBLE_LEVELS):>6}"
+)
 
 
 def format_flicker_row(r: dict) -> str:
     """One line of the flicker table (columns of FLICKER_HEADER; changes in %)."""
-    return (f"{r['case']:18} {r['particles']:7d} {r['method']:16} {r['seconds']:7.3f} {r['normal_jitter_h']:8.4f} "
-            f"{r['normal_jitter_p99_h']:6.3f} {r['normal_turn_deg']:8.2f} {r['normal_turn_p99_deg']:7.2f} "
-            f"{r['edge_turn_p99_deg']:8.2f} "
-            f"{r['area_change_max']:7.3%} {r['volume_change_max']:7.3%} {r['components_max']:6d} "
-            + (f"{r['pixel_change']:6.2f} {r['pixels_changed']:6.2%}" if "pixel_change" in r else f"{'-':>6} {'-':>6}"))
+    return (
+        f"{r['case']:18} {r['particles']:7d} {r['method']:16} {r['seconds']:7.3f} {r['normal_jitter_h']:8.4f} "
+        f"{r['normal_jitter_p99_h']:6.3f} {r['normal_turn_deg']:8.2f} {r['normal_turn_p99_deg']:7.2f} "
+        f"{r['edge_turn_p99_deg']:8.2f} "
+        f"{r['area_change_max']:7.3%} {r['volume_change_max']:7.3%} {r['components_max']:6d} "
+        + (f"{r['pixel_change']:6.2f} {r['pixels_changed']:6.2%}" if "pixel_change" in r else f"{'-':>6} {'-':>6}")
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> None:

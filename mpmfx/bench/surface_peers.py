@@ -104,9 +104,11 @@ def _splashsurf_threads(threads: int | None) -> str:
     env = os.environ.get("RAYON_NUM_THREADS")
     fixed = _rayon_threads or (int(env) if env else None)
     if threads is not None and fixed is not None and fixed != threads:
-        raise ValueError(f"splashsurf threads={threads}: its thread pool already has {fixed} threads "
-                         f"(RAYON_NUM_THREADS / an earlier call); set RAYON_NUM_THREADS={threads} "
-                         "before starting Python")
+        raise ValueError(
+            f"splashsurf threads={threads}: its thread pool already has {fixed} threads "
+            f"(RAYON_NUM_THREADS / an earlier call); set RAYON_NUM_THREADS={threads} "
+            "before starting Python"
+        )
     if threads is not None and fixed is None:
         os.environ["RAYON_NUM_THREADS"] = str(threads)
         fixed = threads
@@ -115,8 +117,14 @@ def _splashsurf_threads(threads: int | None) -> str:
 
 
 def run_splashsurf(
-    x: np.ndarray, h: float, *, kernel: float = 2.0, cube: float = 1.0, threshold: float = 0.6,
-    threads: int | None = None, repeats: int = 3,
+    x: np.ndarray,
+    h: float,
+    *,
+    kernel: float = 2.0,
+    cube: float = 1.0,
+    threshold: float = 0.6,
+    threads: int | None = None,
+    repeats: int = 3,
 ) -> PeerResult:
     """splashsurf on `x` with particle radius r = PEER_RADIUS_PER_SPACING * h.
 
@@ -149,7 +157,11 @@ def splashsurf_call(x: np.ndarray, h: float, *, kernel: float, cube: float, thre
 
     def call():
         return ss.reconstruct_surface(
-            pts, particle_radius=r, rest_density=1000.0, smoothing_length=kernel, cube_size=cube,
+            pts,
+            particle_radius=r,
+            rest_density=1000.0,
+            smoothing_length=kernel,
+            cube_size=cube,
             iso_surface_threshold=threshold,
         )
 
@@ -165,8 +177,15 @@ def _import_newton():
 
 
 def run_newton(
-    x: np.ndarray, h: float, *, anisotropic: bool, voxel: float, device: str | None = "cuda",
-    kernel_radius: float | None = None, threshold: float = 0.25, repeats: int = 3,
+    x: np.ndarray,
+    h: float,
+    *,
+    anisotropic: bool,
+    voxel: float,
+    device: str | None = "cuda",
+    kernel_radius: float | None = None,
+    threshold: float = 0.25,
+    repeats: int = 3,
 ) -> PeerResult:
     """Newton's ParticleSurface on `x` with particle radius r = PEER_RADIUS_PER_SPACING * h.
 
@@ -191,7 +210,10 @@ def run_newton(
     pos = wp.array(np.ascontiguousarray(x, dtype=np.float32), dtype=wp.vec3, device=dev)
     radii = wp.full(pos.shape[0], PEER_RADIUS_PER_SPACING * h, dtype=wp.float32, device=dev)
     surf = ParticleSurface(
-        voxel * h, anisotropic=anisotropic, threshold=threshold, device=dev,
+        voxel * h,
+        anisotropic=anisotropic,
+        threshold=threshold,
+        device=dev,
         kernel_radius=None if kernel_radius is None else kernel_radius * h,
     )
 
@@ -220,8 +242,9 @@ def peer_missing(name: str) -> str | None:
     return None
 
 
-def run_peer(name: str, x: np.ndarray, h: float, sampling: str, *, device: str | None = None,
-             repeats: int = 3) -> PeerResult:
+def run_peer(
+    name: str, x: np.ndarray, h: float, sampling: str, *, device: str | None = None, repeats: int = 3
+) -> PeerResult:
     """Peer `name` with the settings the bench uses for `sampling` ("lattice" or "random").
 
     splashsurf runs on the CPU whatever `device`; Newton on `device`.
@@ -231,6 +254,13 @@ def run_peer(name: str, x: np.ndarray, h: float, sampling: str, *, device: str |
         return run_splashsurf(x, h, kernel=kernel, cube=cube, repeats=repeats)
     if name in NEWTON_SETTINGS:
         voxel, kernel_radius = NEWTON_SETTINGS[name]
-        return run_newton(x, h, anisotropic=name == "newton-aniso", voxel=voxel, kernel_radius=kernel_radius,
-                          device=device, repeats=repeats)
+        return run_newton(
+            x,
+            h,
+            anisotropic=name == "newton-aniso",
+            voxel=voxel,
+            kernel_radius=kernel_radius,
+            device=device,
+            repeats=repeats,
+        )
     raise ValueError(f"peer {name!r}: use one of {', '.join(PEERS)}")

@@ -13,6 +13,7 @@ anisotropic; the peers at their "random" settings (MPM particles are irregular, 
 
     python -m mpmfx.bench.surface_splash [--peers splashsurf newton newton-aniso] [--device cpu]
 """
+
 from __future__ import annotations
 
 import argparse
@@ -42,8 +43,9 @@ SPLASH_FRAME = 14
 (frames 11-17 of the shot; its crest reaches 0.32 m at frame 17)."""
 
 
-def write_splash_asset(frame_npz: str | Path, out: str | Path = SPLASH_ASSET, *,
-                       shot: str | Path = SPLASH_SHOT, frame: int = SPLASH_FRAME) -> Path:
+def write_splash_asset(
+    frame_npz: str | Path, out: str | Path = SPLASH_ASSET, *, shot: str | Path = SPLASH_SHOT, frame: int = SPLASH_FRAME
+) -> Path:
     """Store the positions `x` of a simulate-stage frame (.npz) of `shot` as the bench's asset:
     uint16 per axis over the shot's domain cube, with origin, size, spacing h (m) and frame."""
     cfg = load_shot_config(shot)
@@ -59,8 +61,10 @@ def load_splash(path: str | Path = SPLASH_ASSET) -> tuple[np.ndarray, float]:
     """((n, 3) float32 positions m, particle spacing h m) of the splash asset."""
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"{path}: splash asset missing; make it with "
-                                "mpmfx.bench.surface_splash.write_splash_asset(<simulate frame .npz>)")
+        raise FileNotFoundError(
+            f"{path}: splash asset missing; make it with "
+            "mpmfx.bench.surface_splash.write_splash_asset(<simulate frame .npz>)"
+        )
     d = np.load(path)
     x = d["origin"] + d["q"].astype(np.float64) / 65535.0 * float(d["size"])
     return x.astype(np.float32), float(d["h"])
@@ -72,8 +76,10 @@ def splash_params(h: float, *, anisotropic: bool, shot: str | Path = SPLASH_SHOT
     spacing (checked: the asset's shot)."""
     cfg = load_shot_config(shot)
     if not np.isclose(cfg.particle_spacing, h):
-        raise ValueError(f"{shot}: spacing {cfg.particle_spacing:g} m, the splash asset's {h:g} m; "
-                         "make the asset again (write_splash_asset) from this shot")
+        raise ValueError(
+            f"{shot}: spacing {cfg.particle_spacing:g} m, the splash asset's {h:g} m; "
+            "make the asset again (write_splash_asset) from this shot"
+        )
     return dataclasses.replace(surface_params(cfg, cfg.surface_groups()[0]), anisotropic=anisotropic)
 
 
@@ -97,15 +103,33 @@ MIN_PIECE_VOLUME = 8.0
 (our shot setting removes blobs of fewer than 8 particles; the peers keep them)."""
 
 
-def _row(method: str, x: np.ndarray, h: float, seconds: float, vertices: np.ndarray, faces: np.ndarray,
-         device: str, settings: str) -> dict:
+def _row(
+    method: str,
+    x: np.ndarray,
+    h: float,
+    seconds: float,
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    device: str,
+    settings: str,
+) -> dict:
     stats = sheet_stats(vertices, faces, h)
     stats.pop("thickness_err")  # a disc's measure; this frame has no analytic thickness
     volume, _ = mesh_stats(vertices, faces)
     big = int((piece_volumes(vertices, faces) >= MIN_PIECE_VOLUME * h**3).sum())
-    return {"shape": "water_dam splash", "particles": len(x), "h": h, "method": method, "seconds": seconds,
-            **stats, "pieces_big": big, "volume_ratio": volume / (len(x) * h**3), "vertices": len(vertices),
-            "device": device, "settings": settings}
+    return {
+        "shape": "water_dam splash",
+        "particles": len(x),
+        "h": h,
+        "method": method,
+        "seconds": seconds,
+        **stats,
+        "pieces_big": big,
+        "volume_ratio": volume / (len(x) * h**3),
+        "vertices": len(vertices),
+        "device": device,
+        "settings": settings,
+    }
 
 
 def measure_splash(x: np.ndarray, h: float, *, anisotropic: bool, device: str | None = None) -> dict:
@@ -114,10 +138,20 @@ def measure_splash(x: np.ndarray, h: float, *, anisotropic: bool, device: str | 
     t0 = time.perf_counter()
     mesh = surface_particles(x, None, params, device=device).mesh
     seconds = time.perf_counter() - t0
-    settings = (f"shot: radius_scale {params.radius_scale:g} voxel {params.resolved_voxel_size / h:g}h "
-                f"smooth {params.smooth_iters}")
-    return _row("mpmfx fine" + (" anisotropic" if anisotropic else ""), x, h, seconds, mesh.vertices, mesh.faces,
-                str(wp.get_device(device)), settings)
+    settings = (
+        f"shot: radius_scale {params.radius_scale:g} voxel {params.resolved_voxel_size / h:g}h "
+        f"smooth {params.smooth_iters}"
+    )
+    return _row(
+        "mpmfx fine" + (" anisotropic" if anisotropic else ""),
+        x,
+        h,
+        seconds,
+        mesh.vertices,
+        mesh.faces,
+        str(wp.get_device(device)),
+        settings,
+    )
 
 
 def measure_splash_peer(name: str, x: np.ndarray, h: float, *, device: str | None = None, repeats: int = 1) -> dict:
@@ -126,8 +160,9 @@ def measure_splash_peer(name: str, x: np.ndarray, h: float, *, device: str | Non
     return _row(res.name, x, h, res.seconds, res.vertices, res.faces, res.device, res.settings)
 
 
-def bench_splash(device: str | None = None, *, peers: Sequence[str] = (), echo: bool = True,
-                 asset: str | Path = SPLASH_ASSET) -> list[dict]:
+def bench_splash(
+    device: str | None = None, *, peers: Sequence[str] = (), echo: bool = True, asset: str | Path = SPLASH_ASSET
+) -> list[dict]:
     """The splash frame with ours isotropic and anisotropic and each peer (a failing peer is
     reported and left out); prints SPLASH_HEADER rows when `echo`."""
     x, h = load_splash(asset)
@@ -140,14 +175,18 @@ def bench_splash(device: str | None = None, *, peers: Sequence[str] = (), echo: 
     return list(rows)
 
 
-SPLASH_HEADER = (f"{'frame':16} {'n':>7} {'method':22} {'time s':>7} {'pieces':>6} {'>=8h3':>5} {'holes':>6} "
-                 f"{'open':>5} {'vol/nh3':>7} {'device':>7}  settings")
+SPLASH_HEADER = (
+    f"{'frame':16} {'n':>7} {'method':22} {'time s':>7} {'pieces':>6} {'>=8h3':>5} {'holes':>6} "
+    f"{'open':>5} {'vol/nh3':>7} {'device':>7}  settings"
+)
 
 
 def format_splash_row(r: dict) -> str:
     """One line of the splash table (columns of SPLASH_HEADER)."""
-    return (f"{r['shape']:16} {r['particles']:7d} {r['method']:22} {r['seconds']:7.3f} {r['components']:6d} "
-            f"{r['pieces_big']:5d} {r['holes']:6d} {r['open_edges']:5d} {r['volume_ratio']:7.3f} {r['device']:>7}  {r['settings']}")
+    return (
+        f"{r['shape']:16} {r['particles']:7d} {r['method']:22} {r['seconds']:7.3f} {r['components']:6d} "
+        f"{r['pieces_big']:5d} {r['holes']:6d} {r['open_edges']:5d} {r['volume_ratio']:7.3f} {r['device']:>7}  {r['settings']}"
+    )
 
 
 def main(argv: Sequence[str] | None = None) -> None:

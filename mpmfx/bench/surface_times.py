@@ -12,6 +12,7 @@ before the clock starts. Full run: 10M particles, 11 calls, no peer unless --pee
 --quick: 100k, 9 calls, with splashsurf where it is installed. Prints one table; writes
 surface_times.csv/json under --out.
 """
+
 from __future__ import annotations
 
 import sys
@@ -40,8 +41,9 @@ def time_case(shape: str, sampling: str, count: int, calls: int, device, peers: 
     calls_of = {}
     for label in OURS:
         kw = dict(OURS[label])
-        params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=kw.pop("voxel_h") * h,
-                               dense_output=False, **kw)
+        params = SurfaceParams(
+            PARTICLE_RADIUS_PER_SPACING * h, voxel_size=kw.pop("voxel_h") * h, dense_output=False, **kw
+        )
         calls_of[f"mpmfx {label}"] = lambda params=params: surface_particles(xd, None, params, device=dev.alias)
     for peer in peers:
         kernel, cube = SPLASHSURF_SETTINGS[sampling]
@@ -60,22 +62,42 @@ def time_case(shape: str, sampling: str, count: int, calls: int, device, peers: 
     rows = []
     for name in calls_of:
         t = float(np.median(total[name]))
-        row = {"shape": shape, "sampling": sampling, "particles": len(x), "method": name, "calls": calls,
-               "ms_end_to_end": 1e3 * t, "Mps_end_to_end": len(x) / t / 1e6}
+        row = {
+            "shape": shape,
+            "sampling": sampling,
+            "particles": len(x),
+            "method": name,
+            "calls": calls,
+            "ms_end_to_end": 1e3 * t,
+            "Mps_end_to_end": len(x) / t / 1e6,
+        }
         if on_device[name]:
             d = float(np.median(on_device[name]))
             mesh = last[name].mesh
             err = np.abs(sdf(mesh.vertices.astype(np.float64))) / h
-            row.update({"ms_device": 1e3 * d, "Mps_device": len(x) / d / 1e6, "err_mean_h": float(err.mean()),
-                        "err_surface_h": surface_error(mesh.vertices, mesh.faces, sdf) / h,
-                        "err_max_h": float(err.max()), "vertices": len(mesh.vertices)})
+            row.update(
+                {
+                    "ms_device": 1e3 * d,
+                    "Mps_device": len(x) / d / 1e6,
+                    "err_mean_h": float(err.mean()),
+                    "err_surface_h": surface_error(mesh.vertices, mesh.faces, sdf) / h,
+                    "err_max_h": float(err.max()),
+                    "vertices": len(mesh.vertices),
+                }
+            )
         row["device"] = dev.name if name.startswith("mpmfx") else "cpu"  # the peer runs on the CPU
         rows.append(row)
     return rows
 
 
-def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench",
-         peers: Sequence[str] | None = None, counts: Sequence[int] | None = None) -> int:
+def main(
+    *,
+    quick: bool = False,
+    device: str | None = None,
+    out: str = "renders/bench",
+    peers: Sequence[str] | None = None,
+    counts: Sequence[int] | None = None,
+) -> int:
     """Every shape and sampling at each of --counts; 0 on success, 2 on a bad --peers / --counts."""
     count, calls = QUICK if quick else FULL
     counts = tuple(counts) if counts else (count,)
@@ -87,9 +109,11 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
     unknown = [p for p in peers if p not in PEERS]
     missing = [f"{p} ({peer_missing(p)})" for p in peers if p in PEERS and peer_missing(p)]
     if unknown or missing:
-        print(f"error: --peers: {'unknown here: ' + ' '.join(unknown) if unknown else ''}"
-              f"{'not installed: ' + '; '.join(missing) if missing else ''} (surface-times runs: {' '.join(PEERS)})",
-              file=sys.stderr)
+        print(
+            f"error: --peers: {'unknown here: ' + ' '.join(unknown) if unknown else ''}"
+            f"{'not installed: ' + '; '.join(missing) if missing else ''} (surface-times runs: {' '.join(PEERS)})",
+            file=sys.stderr,
+        )
         return 2
     rows = []
     for n in counts:

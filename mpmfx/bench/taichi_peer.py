@@ -12,6 +12,7 @@ on the device. Prints one JSON row per case on stdout (the parent process reads 
 
     python -m mpmfx.bench.taichi_peer '{"cases": [[64, "water", 2e-4, 50]], "arch": "cuda"}'
 """
+
 from __future__ import annotations
 
 import json
@@ -131,16 +132,31 @@ def run_case(ti, grid_n: int, material: str, dt: float, substeps: int, snow: dic
     ti.sync()
     wall = time.perf_counter() - t0
     xs = x.to_numpy()
-    return {"impl": "taichi", "material": material, "grid_n": grid_n, "particles": n, "dt": dt,
-            "substeps": substeps, "wall_s": wall, "G_per_s": n * substeps / wall / 1e9,
-            "ms_substep": 1e3 * wall / substeps, "finite": bool(np.isfinite(xs).all())}
+    return {
+        "impl": "taichi",
+        "material": material,
+        "grid_n": grid_n,
+        "particles": n,
+        "dt": dt,
+        "substeps": substeps,
+        "wall_s": wall,
+        "G_per_s": n * substeps / wall / 1e9,
+        "ms_substep": 1e3 * wall / substeps,
+        "finite": bool(np.isfinite(xs).all()),
+    }
 
 
 def main(spec: dict) -> int:
     import taichi as ti  # optional: taichi
+
     for grid_n, material, dt, substeps in spec["cases"]:
-        ti.init(arch=getattr(ti, spec.get("arch", "cuda")), default_fp=ti.f32, offline_cache=True,
-                device_memory_GB=spec.get("memory_GB", 12), log_level=ti.WARN)
+        ti.init(
+            arch=getattr(ti, spec.get("arch", "cuda")),
+            default_fp=ti.f32,
+            offline_cache=True,
+            device_memory_GB=spec.get("memory_GB", 12),
+            log_level=ti.WARN,
+        )
         try:
             row = run_case(ti, int(grid_n), material, float(dt), int(substeps), spec["snow"])
         except Exception as err:  # report, do not hide: the row says what failed

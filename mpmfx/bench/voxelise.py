@@ -24,7 +24,6 @@ def bench_voxelise(n_tris: int = 100_000, grid_n: int = 256, *, ppc: int = 8, ho
     Returns {"mesh", "n_tris", "grid_n", "particles", "voxelise_s", "check_s", "verdict"}.
     """
 
-
     count = max(8, int(round(np.sqrt(n_tris / 4.0))))  # uv_sphere: ~4 count^2 faces
     mesh = trimesh.creation.uv_sphere(radius=0.3, count=[count, count])
     mesh.apply_translation((0.5, 0.5, 0.5))
@@ -35,10 +34,15 @@ def bench_voxelise(n_tris: int = 100_000, grid_n: int = 256, *, ppc: int = 8, ho
     t1 = time.perf_counter()
     report = check_thickness(mesh, grid_n=grid_n, origin=(0, 0, 0), size=1.0)
     t2 = time.perf_counter()
-    return {"mesh": "open" if holes else "closed", "n_tris": int(len(mesh.faces)), "grid_n": grid_n,
-            "particles": int(len(vox.points)),
-            "voxelise_s": round(t1 - t0, 2), "check_s": round(t2 - t1, 2),
-            "verdict": report.verdict.name}
+    return {
+        "mesh": "open" if holes else "closed",
+        "n_tris": int(len(mesh.faces)),
+        "grid_n": grid_n,
+        "particles": int(len(vox.points)),
+        "voxelise_s": round(t1 - t0, 2),
+        "check_s": round(t2 - t1, 2),
+        "verdict": report.verdict.name,
+    }
 
 
 def main(*, quick: bool = False, device: str | None = None, out: str = "renders/bench") -> int:

@@ -15,6 +15,7 @@ metres (the scene's unit scale applied; Blender's FBX importer applies the file'
 Y-up world: Blender's Z-up (x, y, z) becomes (x, z, -y), as its own USD and glTF exporters do.
 OUT holds vertices (n, 3) float64 and faces (f, 3) int64, wound outward as Blender winds them.
 """
+
 from __future__ import annotations
 
 import sys
@@ -72,8 +73,9 @@ def triangles(chosen: set[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
     for inst in depsgraph.object_instances:
         ob = inst.object
         owner = inst.parent if inst.is_instance and inst.parent else ob  # an instance belongs to its instancer
-        if ob.type not in SURFACES or (chosen is not None and ob.original.name not in chosen
-                                       and owner.original.name not in chosen):
+        if ob.type not in SURFACES or (
+            chosen is not None and ob.original.name not in chosen and owner.original.name not in chosen
+        ):
             continue
         mesh = ob.to_mesh()
         try:

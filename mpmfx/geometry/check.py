@@ -28,15 +28,16 @@ def mesh_topology(mesh) -> dict:
     inside/outside ambiguous there, which voxelise warns about and the thickness check inherits."""
     _, counts = np.unique(np.asarray(mesh.edges_sorted), axis=0, return_counts=True)
     open_, non_manifold = int((counts == 1).sum()), int((counts > 2).sum())
-    return {"watertight": open_ == 0 and non_manifold == 0, "open_edges": open_,
-            "non_manifold_edges": non_manifold}
+    return {"watertight": open_ == 0 and non_manifold == 0, "open_edges": open_, "non_manifold_edges": non_manifold}
 
 
 def topology_line(t: dict) -> str:
     if t["watertight"]:
         return "closed (watertight, manifold)"
-    return (f"OPEN: {t['open_edges']} open edges, {t['non_manifold_edges']} non-manifold edges; inside is "
-            f"guessed near them: close the holes in your DCC")
+    return (
+        f"OPEN: {t['open_edges']} open edges, {t['non_manifold_edges']} non-manifold edges; inside is "
+        f"guessed near them: close the holes in your DCC"
+    )
 
 
 @dataclass
@@ -69,8 +70,7 @@ def check_asset(asset: str, *, grid_n: int, origin=None, size=None, prim_path: s
         raise MeshError(f"--grid-n {grid_n}: must be a positive number of cells")
     mesh = load_mesh(asset, prim_path=prim_path)
     if (origin is None) != (size is None):
-        raise MeshError("--domain needs all of ox,oy,oz,size (or leave it out to use "
-                        "the asset's padded bounding cube)")
+        raise MeshError("--domain needs all of ox,oy,oz,size (or leave it out to use the asset's padded bounding cube)")
     if origin is None:
         origin, size = default_domain(mesh)
     elif size <= 0:

@@ -6,6 +6,7 @@ shot's collider settings (`mpmfx.stages.base.collider_geometry`). The solver get
 keyframes always come from the solver's own interpolation (`mpmfx.mpm.colliders.pose_matrix`),
 so USD and renders show what the material felt.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable

@@ -23,5 +23,4 @@ def fan_triangulate(counts: np.ndarray, indices: np.ndarray) -> np.ndarray:
     face_start = np.repeat(starts, n_tris)
     # k-th triangle of a face uses vertices (0, k+1, k+2) of that face.
     k = np.arange(n_tris.sum()) - np.repeat(np.cumsum(n_tris) - n_tris, n_tris)
-    return np.stack([indices[face_start], indices[face_start + k + 1],
-                     indices[face_start + k + 2]], axis=1)
+    return np.stack([indices[face_start], indices[face_start + k + 1], indices[face_start + k + 2]], axis=1)

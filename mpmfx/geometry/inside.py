@@ -84,8 +84,9 @@ def ray_winding(mesh, lattice: Lattice, *, axis: int, signed: bool) -> np.ndarra
 
     signed: count +1 entering / -1 leaving (outward normals), else +1 per crossing.
     """
-    return _ray_crossings(np.asarray(mesh.triangles, float), np.asarray(mesh.face_normals, float),
-                          lattice, axis=axis, signed=signed)
+    return _ray_crossings(
+        np.asarray(mesh.triangles, float), np.asarray(mesh.face_normals, float), lattice, axis=axis, signed=signed
+    )
 
 
 def _ray_crossings(tris: np.ndarray, normals: np.ndarray, lattice: Lattice, *, axis: int, signed: bool) -> np.ndarray:
@@ -185,7 +186,7 @@ def boundary_caps(mesh) -> np.ndarray:
     verts = np.asarray(mesh.vertices, float)
     used, local = np.unique(np.concatenate([a, b]), return_inverse=True)
     m = len(used)
-    graph = coo_matrix((np.ones(len(a)), (local[: len(a)], local[len(a):])), shape=(m, m))
+    graph = coo_matrix((np.ones(len(a)), (local[: len(a)], local[len(a) :])), shape=(m, m))
     _, loop = connected_components(graph, directed=False)
     apex = np.zeros((loop.max() + 1, 3))
     np.add.at(apex, loop, verts[used])
@@ -223,14 +224,18 @@ def winding_number(triangles: np.ndarray, points: np.ndarray) -> np.ndarray:
     out = np.empty(len(points))
     step = max(1, _CHUNK // max(1, len(triangles)))
     for s in range(0, len(points), step):
-        p = points[s: s + step, None, None, :]
+        p = points[s : s + step, None, None, :]
         d = triangles[None, :, :, :] - p  # (m, f, 3, 3)
         a, b, c = d[:, :, 0], d[:, :, 1], d[:, :, 2]
         la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
         det = np.einsum("mfi,mfi->mf", a, np.cross(b, c))
-        den = (la * lb * lc + np.einsum("mfi,mfi->mf", a, b) * lc
-               + np.einsum("mfi,mfi->mf", b, c) * la + np.einsum("mfi,mfi->mf", c, a) * lb)
-        out[s: s + step] = np.arctan2(det, den).sum(axis=1) / (2.0 * np.pi)
+        den = (
+            la * lb * lc
+            + np.einsum("mfi,mfi->mf", a, b) * lc
+            + np.einsum("mfi,mfi->mf", b, c) * la
+            + np.einsum("mfi,mfi->mf", c, a) * lb
+        )
+        out[s : s + step] = np.arctan2(det, den).sum(axis=1) / (2.0 * np.pi)
     return out
 
 

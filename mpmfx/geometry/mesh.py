@@ -44,25 +44,30 @@ def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Tri
     """
     path = Path(path)
     if not path.is_file():
-        raise MeshError(f"{path}: no such file; check the asset path (relative paths are "
-                        f"relative to {Path.cwd()})")
+        raise MeshError(f"{path}: no such file; check the asset path (relative paths are relative to {Path.cwd()})")
     suffix = path.suffix.lower()
     if suffix in USD_SUFFIXES:
         vertices, faces = load_usd(path, prim_path)
     elif suffix in BLENDER_SUFFIXES or _compressed_gltf(path):  # Blender decodes Draco and meshopt
         vertices, faces = _load_blender(path, prim_path)
     elif prim_path is not None and suffix in TRIMESH_SUFFIXES:
-        raise MeshError(f"{path}: prim_path '{prim_path}' names a part of a USD, .blend or .fbx file; a "
-                        f"{suffix} file is taken whole: drop prim_path or export the part on its own")
+        raise MeshError(
+            f"{path}: prim_path '{prim_path}' names a part of a USD, .blend or .fbx file; a "
+            f"{suffix} file is taken whole: drop prim_path or export the part on its own"
+        )
     elif suffix in TRIMESH_SUFFIXES:
         vertices, faces = _load_trimesh(path)
     else:
-        raise MeshError(f"{path}: unsupported format '{suffix}'; export the asset as one of "
-                        f"{', '.join(TRIMESH_SUFFIXES + BLENDER_SUFFIXES + USD_SUFFIXES)}")
+        raise MeshError(
+            f"{path}: unsupported format '{suffix}'; export the asset as one of "
+            f"{', '.join(TRIMESH_SUFFIXES + BLENDER_SUFFIXES + USD_SUFFIXES)}"
+        )
     bad = np.flatnonzero(~np.isfinite(vertices).all(axis=1))
     if len(bad):  # checked before trimesh, which would drop them (and their faces) silently
-        raise MeshError(f"{path}: {len(bad)} vertices are NaN or inf (the first is vertex {bad[0]}); "
-                        "clean up the asset in your DCC and re-export it")
+        raise MeshError(
+            f"{path}: {len(bad)} vertices are NaN or inf (the first is vertex {bad[0]}); "
+            "clean up the asset in your DCC and re-export it"
+        )
     mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=True)
     _validate(mesh, path)
     return mesh
@@ -94,14 +99,16 @@ def _compressed_gltf(path: Path) -> bool:
 def _load_trimesh(path: Path) -> tuple[np.ndarray, np.ndarray]:
     try:
         scene = trimesh.load_scene(str(path), process=False)  # keep NaN vertices: load_mesh refuses them
-        parts = [g for g in scene.dump(concatenate=False)
-                 if isinstance(g, trimesh.Trimesh) and len(g.faces)]
+        parts = [g for g in scene.dump(concatenate=False) if isinstance(g, trimesh.Trimesh) and len(g.faces)]
     except Exception as exc:  # trimesh raises many types for corrupt files
-        raise MeshError(f"{path}: cannot be read as a mesh ({type(exc).__name__}: {exc}); "
-                        "re-export it from your DCC") from exc
+        raise MeshError(
+            f"{path}: cannot be read as a mesh ({type(exc).__name__}: {exc}); re-export it from your DCC"
+        ) from exc
     if not parts:
-        raise MeshError(f"{path}: contains no triangles (only points, lines or an empty "
-                        "scene); export the surface as a polygon mesh")
+        raise MeshError(
+            f"{path}: contains no triangles (only points, lines or an empty "
+            "scene); export the surface as a polygon mesh"
+        )
     merged = trimesh.util.concatenate(parts)
     return np.asarray(merged.vertices, float), np.asarray(merged.faces, np.int64)
 
@@ -110,42 +117,51 @@ def _load_blender(path: Path, part: str | None) -> tuple[np.ndarray, np.ndarray]
     """A .blend or .fbx file's rendered surfaces, or those of the object or collection named
     `part`, from Blender in its own process."""
     if not bpy_available():
-        raise MeshError(f"{path}: reading {path.suffix} files needs Blender as a Python module (bpy 4.5): "
-                        "run `bash setup.sh`, or export the asset as USD, glTF or OBJ")
+        raise MeshError(
+            f"{path}: reading {path.suffix} files needs Blender as a Python module (bpy 4.5): "
+            "run `bash setup.sh`, or export the asset as USD, glTF or OBJ"
+        )
     with tempfile.TemporaryDirectory(prefix="mpmfx-blender-") as tmp:
         out = Path(tmp) / "mesh.npz"
         cmd = child_command("mpmfx.geometry.blender_export", str(path.resolve()), str(out))
-        res = subprocess.run(cmd + ([part.lstrip("/")] if part else []), capture_output=True, text=True,
-                             env=child_env())
+        res = subprocess.run(
+            cmd + ([part.lstrip("/")] if part else []), capture_output=True, text=True, env=child_env()
+        )
         if res.returncode != 0 or not out.is_file():
             lines = (res.stdout + res.stderr).strip().splitlines()
             why = next((s.removeprefix(ERROR) for s in lines if s.startswith(ERROR)), " / ".join(lines[-3:]))
-            raise MeshError(f"{path}: Blender could not read it ({why}); open it in Blender to check it, "
-                            "or export the asset as USD, glTF or OBJ")
+            raise MeshError(
+                f"{path}: Blender could not read it ({why}); open it in Blender to check it, "
+                "or export the asset as USD, glTF or OBJ"
+            )
         with np.load(out) as data:
             return data["vertices"], data["faces"]
 
 
 def _validate(mesh: "trimesh.Trimesh", path: Path | str) -> None:
     if len(mesh.faces) == 0:
-        raise MeshError(f"{path}: no non-degenerate triangles; export the surface as a "
-                        "polygon mesh")
+        raise MeshError(f"{path}: no non-degenerate triangles; export the surface as a polygon mesh")
     extents = mesh.extents
     if not np.all(np.isfinite(mesh.vertices)):
         raise MeshError(f"{path}: vertices contain NaN or inf; clean up the asset in your DCC")
     if extents.max() <= 0 or extents.min() <= _FLAT_RATIO * extents.max():
-        raise MeshError(f"{path}: the mesh is flat (bounding box {np.round(extents, 6)} m); "
-                        "a simulated solid needs volume: give it thickness (e.g. solidify)")
+        raise MeshError(
+            f"{path}: the mesh is flat (bounding box {np.round(extents, 6)} m); "
+            "a simulated solid needs volume: give it thickness (e.g. solidify)"
+        )
     if mesh.is_watertight:
         if mesh.volume < 0:  # inverted normals: fix so inside tests see an outward surface
             trimesh.repair.fix_inversion(mesh)
         if abs(mesh.volume) <= _FLAT_RATIO * np.prod(extents):
-            raise MeshError(f"{path}: the closed mesh has zero volume; a simulated solid "
-                            "needs an interior (check for collapsed or doubled faces)")
+            raise MeshError(
+                f"{path}: the closed mesh has zero volume; a simulated solid "
+                "needs an interior (check for collapsed or doubled faces)"
+            )
 
 
-def transform_mesh(mesh: "trimesh.Trimesh", *, translate=(0.0, 0.0, 0.0),
-                   rotate_deg=(0.0, 0.0, 0.0), scale=1.0) -> "trimesh.Trimesh":
+def transform_mesh(
+    mesh: "trimesh.Trimesh", *, translate=(0.0, 0.0, 0.0), rotate_deg=(0.0, 0.0, 0.0), scale=1.0
+) -> "trimesh.Trimesh":
     """Return a scaled, then rotated, then translated copy of ``mesh``.
 
     translate: (3,) metres. rotate_deg: (3,) XYZ Euler angles in degrees (about the fixed
@@ -153,8 +169,7 @@ def transform_mesh(mesh: "trimesh.Trimesh", *, translate=(0.0, 0.0, 0.0),
     """
     s = np.broadcast_to(np.asarray(scale, float), (3,))
     if not np.all(np.isfinite(s)) or np.any(s <= 0):
-        raise MeshError(f"scale={scale!r}: scale factors must be positive; use rotate_deg "
-                        "to flip an asset")
+        raise MeshError(f"scale={scale!r}: scale factors must be positive; use rotate_deg to flip an asset")
     rot = Rotation.from_euler("xyz", np.asarray(rotate_deg, float), degrees=True).as_matrix()
     out = mesh.copy()
     out.vertices = (np.asarray(mesh.vertices, float) * s) @ rot.T + np.asarray(translate, float)
@@ -174,7 +189,8 @@ def check_in_domain(mesh: "trimesh.Trimesh", *, origin, size: float, name: str) 
         factor = size / extent.max()
         raise MeshError(
             f"{name}: mesh is {_fmt(extent)} m, larger than the domain (size {size:g} m); "
-            f"scale it by at most {factor:.3g} or set domain.size >= {extent.max():.4g}")
+            f"scale it by at most {factor:.3g} or set domain.size >= {extent.max():.4g}"
+        )
     below = np.clip(o - lo, 0, None)
     above = np.clip(hi - (o + size), 0, None)
     if np.any(below > 0) or np.any(above > 0):
@@ -182,7 +198,8 @@ def check_in_domain(mesh: "trimesh.Trimesh", *, origin, size: float, name: str) 
         raise MeshError(
             f"{name}: mesh bounds {_fmt(lo)}..{_fmt(hi)} m extend outside the domain "
             f"{_fmt(o)}..{_fmt(o + size)} m; translate it by {_fmt(shift)} m or move "
-            "domain.origin")
+            "domain.origin"
+        )
 
 
 def _fmt(v) -> str:

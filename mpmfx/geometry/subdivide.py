@@ -45,9 +45,15 @@ SHARP_INFINITE = 10.0
 """Sharpness from which an edge or corner is sharp at every level (OpenSubdiv's Crease::SHARPNESS_INFINITE)."""
 
 
-def catmull_clark(vertices: np.ndarray, counts: np.ndarray, indices: np.ndarray, *, creases: Creases | None = None,
-                  levels: int = LEVELS, max_faces: int = MAX_FACES
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def catmull_clark(
+    vertices: np.ndarray,
+    counts: np.ndarray,
+    indices: np.ndarray,
+    *,
+    creases: Creases | None = None,
+    levels: int = LEVELS,
+    max_faces: int = MAX_FACES,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(vertices (n', 3) float64, counts (p',) int64, indices, parent (p',) int64: the input
     face each output face came from) after up to `levels` levels of Catmull-Clark subdivision:
     fewer where a level would pass `max_faces` faces (a dense cage is already close to its
@@ -100,10 +106,12 @@ def _level(v: np.ndarray, counts: np.ndarray, indices: np.ndarray, creases: Crea
     # the halves of a creased edge (its vertex points to its edge point) carry its sharpness less one
     keep = (nfaces == 2) & (sharp > 1.0)
     half = np.flatnonzero(keep)
-    child = Creases(pairs=np.concatenate([np.stack([ea[half], nv + half], 1), np.stack([eb[half], nv + half], 1)]),
-                    sharpness=np.tile(_wear(sharp[half]), 2),
-                    corners=creases.corners[creases.corner_sharpness > 1.0],
-                    corner_sharpness=_wear(creases.corner_sharpness[creases.corner_sharpness > 1.0]))
+    child = Creases(
+        pairs=np.concatenate([np.stack([ea[half], nv + half], 1), np.stack([eb[half], nv + half], 1)]),
+        sharpness=np.tile(_wear(sharp[half]), 2),
+        corners=creases.corners[creases.corner_sharpness > 1.0],
+        corner_sharpness=_wear(creases.corner_sharpness[creases.corner_sharpness > 1.0]),
+    )
     return out_v, np.full(len(quads), 4, np.int64), quads.ravel(), child
 
 

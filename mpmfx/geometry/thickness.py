@@ -92,23 +92,30 @@ class ThicknessReport:
     def to_dict(self) -> dict:
         """JSON-safe dict (no numpy types); the per-vertex array is left out."""
         return {
-            "asset": self.asset, "grid_n": int(self.grid_n), "dx": float(self.dx),
-            "warn_cells": float(self.warn_cells), "fail_cells": float(self.fail_cells),
+            "asset": self.asset,
+            "grid_n": int(self.grid_n),
+            "dx": float(self.dx),
+            "warn_cells": float(self.warn_cells),
+            "fail_cells": float(self.fail_cells),
             "min_thickness_cells": float(self.min_thickness_cells),
             "fraction_under": float(self.fraction_under),
             "min_grid_n_to_pass": int(self.min_grid_n_to_pass),
             "verdict": self.verdict.value,
-            "regions": [{"bbox_min": [float(x) for x in r.bbox_min],
-                         "bbox_max": [float(x) for x in r.bbox_max],
-                         "volume": float(r.volume),
-                         "thickness_cells": float(r.thickness_cells)} for r in self.regions],
+            "regions": [
+                {
+                    "bbox_min": [float(x) for x in r.bbox_min],
+                    "bbox_max": [float(x) for x in r.bbox_max],
+                    "volume": float(r.volume),
+                    "thickness_cells": float(r.thickness_cells),
+                }
+                for r in self.regions
+            ],
         }
 
     def format_table(self) -> str:
         """Human-readable summary and one line per thin region."""
         lines = [
-            f"asset {self.asset or '-'}: grid_n {self.grid_n}, dx {self.dx:.4g} m -> "
-            f"{self.verdict.name}",
+            f"asset {self.asset or '-'}: grid_n {self.grid_n}, dx {self.dx:.4g} m -> {self.verdict.name}",
             f"  thinnest feature   {self.min_thickness_cells:.2f} cells "
             f"(warn < {self.warn_cells:g}, fail < {self.fail_cells:g})",
             f"  volume under fail  {self.fraction_under:.1%}",
@@ -119,13 +126,11 @@ class ThicknessReport:
             for i, r in enumerate(self.regions):
                 lo = ", ".join(f"{x:.3g}" for x in r.bbox_min)
                 hi = ", ".join(f"{x:.3g}" for x in r.bbox_max)
-                lines.append(f"  {i:>6}  {r.thickness_cells:6.2f}  {r.volume:11.3g}  "
-                             f"({lo}) .. ({hi})")
+                lines.append(f"  {i:>6}  {r.thickness_cells:6.2f}  {r.volume:11.3g}  ({lo}) .. ({hi})")
         return "\n".join(lines)
 
 
-def local_thickness(inside: np.ndarray, *, voxel: float, fine_up_to: float | None = None
-                    ) -> np.ndarray:
+def local_thickness(inside: np.ndarray, *, voxel: float, fine_up_to: float | None = None) -> np.ndarray:
     """Local thickness (same shape, float64, metres; 0 outside) of a boolean voxel solid.
 
     The diameter of the largest ball that contains the voxel and fits inside the solid
@@ -181,8 +186,9 @@ def _cover_coarse(depth, ridge, thick, r: float) -> None:
     shape = depth.shape
     pad = [(0, n % 2) for n in shape]
     blocks = [np.pad(a, pad) for a in (depth, ridge)]
-    sub_d, sub_r = (b.reshape(b.shape[0] // 2, 2, b.shape[1] // 2, 2, b.shape[2] // 2, 2)
-                    .max(axis=(1, 3, 5)) for b in blocks)
+    sub_d, sub_r = (
+        b.reshape(b.shape[0] // 2, 2, b.shape[1] // 2, 2, b.shape[2] // 2, 2).max(axis=(1, 3, 5)) for b in blocks
+    )
     dist, idx = ndimage.distance_transform_edt(sub_d < r, sampling=2.0, return_indices=True)
     c = tuple(idx)
     val = np.where(dist < sub_d[c] + 0.5 + 0.87, 2.0 * sub_r[c], 0.0)
@@ -228,8 +234,9 @@ def measuring_lattice(mesh, dx: float) -> Lattice:
     return Lattice(origin=origin, h=h, shape=shape)
 
 
-def check_thickness(mesh, *, grid_n: int, origin, size: float, warn_cells: float = 5.0,
-                    fail_cells: float = 3.0, name: str = "") -> ThicknessReport:
+def check_thickness(
+    mesh, *, grid_n: int, origin, size: float, warn_cells: float = 5.0, fail_cells: float = 3.0, name: str = ""
+) -> ThicknessReport:
     """Measure how many sim cells thick each part of ``mesh`` is.
 
     grid_n: cells per domain edge; origin (3,) m and size (m) define the domain, so
@@ -247,9 +254,11 @@ def check_thickness(mesh, *, grid_n: int, origin, size: float, warn_cells: float
     out), so that grid passes.
     """
     if grid_n < 1 or size <= 0 or not 0 < fail_cells <= warn_cells:
-        raise ValueError(f"grid_n={grid_n}, size={size}, fail_cells={fail_cells}, "
-                         f"warn_cells={warn_cells}: need grid_n >= 1, size > 0 and "
-                         "0 < fail_cells <= warn_cells")
+        raise ValueError(
+            f"grid_n={grid_n}, size={size}, fail_cells={fail_cells}, "
+            f"warn_cells={warn_cells}: need grid_n >= 1, size > 0 and "
+            "0 < fail_cells <= warn_cells"
+        )
     dx = float(size) / grid_n
     lat = measuring_lattice(mesh, dx)
     inside = inside_mask(mesh, lat)
@@ -311,15 +320,22 @@ def check_thickness(mesh, *, grid_n: int, origin, size: float, warn_cells: float
     # The 1e-4 margin: a part exactly warn_cells thick at some grid measures a hair under
     # it there (float32 distances), so that grid would still warn.
     need = int(math.ceil(warn_cells * size / t_pass * (1.0 + 1e-4)))
-    return ThicknessReport(asset=name, grid_n=int(grid_n), dx=dx,
-                           min_thickness_cells=t_min / dx, fraction_under=under,
-                           regions=regions, min_grid_n_to_pass=need, verdict=verdict,
-                           warn_cells=warn_cells, fail_cells=fail_cells,
-                           vertex_thickness_cells=vertex_cells)
+    return ThicknessReport(
+        asset=name,
+        grid_n=int(grid_n),
+        dx=dx,
+        min_thickness_cells=t_min / dx,
+        fraction_under=under,
+        regions=regions,
+        min_grid_n_to_pass=need,
+        verdict=verdict,
+        warn_cells=warn_cells,
+        fail_cells=fail_cells,
+        vertex_thickness_cells=vertex_cells,
+    )
 
 
-def _regions(labels, cored, thick, core, lat: Lattice, dx: float, min_core: int
-             ) -> list[ThinRegion]:
+def _regions(labels, cored, thick, core, lat: Lattice, dx: float, min_core: int) -> list[ThinRegion]:
     out = []
     slices = ndimage.find_objects(labels)
     for lab in cored:
@@ -336,12 +352,15 @@ def _regions(labels, cored, thick, core, lat: Lattice, dx: float, min_core: int
             reach = ndimage.distance_transform_edt(~mask) * lat.h <= t / 2 + lat.h
             idx = np.argwhere(sub & reach)
             lo, hi = offset + idx.min(0), offset + idx.max(0)
-            out.append(ThinRegion(bbox_min=lat.points(lo[None])[0] - lat.h / 2,
-                                  bbox_max=lat.points(hi[None])[0] + lat.h / 2,
-                                  volume=float(len(idx)) * lat.h ** 3,
-                                  thickness_cells=float(t) / dx,
-                                  lower_quartile_cells=float(
-                                      np.percentile(thick[sl][mask], 25)) / dx))
+            out.append(
+                ThinRegion(
+                    bbox_min=lat.points(lo[None])[0] - lat.h / 2,
+                    bbox_max=lat.points(hi[None])[0] + lat.h / 2,
+                    volume=float(len(idx)) * lat.h**3,
+                    thickness_cells=float(t) / dx,
+                    lower_quartile_cells=float(np.percentile(thick[sl][mask], 25)) / dx,
+                )
+            )
     return out
 
 
@@ -372,8 +391,7 @@ def _split_features(core, thick, *, dx: float, h: float, min_core: int, levels: 
             tk = float(np.median(thick[part]))
             extent = max(s.stop - s.start for s in sl) * h
             if extent >= max(2.0 * tk, dx):
-                sub = _split_features(part, thick, dx=dx, h=h, min_core=min_core,
-                                      levels=levels - 1)
+                sub = _split_features(part, thick, dx=dx, h=h, min_core=min_core, levels=levels - 1)
                 out += [(m, tm, False) for m, tm, _ in sub]
                 rest &= ~part
     if rest.sum() >= min_core or not out:
@@ -397,8 +415,7 @@ def _vertex_thickness(mesh, inside, shown, lat: Lattice):
     # The 3 x 3 x 3 block reaches at least 1.5 h: a cube corner can be sqrt(3)/2 h from
     # its nearest centre, so a resolved corner always has an inside centre in it.
     near = ndimage.binary_dilation(inside, structure=np.ones((3, 3, 3), bool))
-    cell = np.clip(np.rint((verts - lat.origin) / lat.h).astype(np.int64), 0,
-                   np.array(lat.shape) - 1)
+    cell = np.clip(np.rint((verts - lat.origin) / lat.h).astype(np.int64), 0, np.array(lat.shape) - 1)
     lost = ~near[tuple(cell.T)]
     return np.where(lost, 0.0, values), lost
 
@@ -424,8 +441,7 @@ def _lost_regions(mesh, lost: np.ndarray, *, min_extent: float) -> list[ThinRegi
         v = verts[(comp == c) & lost]
         if np.linalg.norm(v.max(0) - v.min(0)) < min_extent:
             continue
-        out.append(ThinRegion(bbox_min=v.min(0), bbox_max=v.max(0), volume=0.0,
-                              thickness_cells=0.0))
+        out.append(ThinRegion(bbox_min=v.min(0), bbox_max=v.max(0), volume=0.0, thickness_cells=0.0))
     return out
 
 

@@ -27,12 +27,13 @@ def load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray]
         raise MeshError(f"{path}: reading USD needs pxr; pip install usd-core") from exc
     stage = Usd.Stage.Open(str(path)) if _usd_readable(path) else None
     if stage is None:
-        raise MeshError(f"{path}: cannot be opened as a USD stage; check that the file is "
-                        "valid USD (usdcat can tell)")
+        raise MeshError(f"{path}: cannot be opened as a USD stage; check that the file is valid USD (usdcat can tell)")
     root = stage.GetPrimAtPath(prim_path) if prim_path else stage.GetPseudoRoot()
     if not root or not root.IsValid():
-        raise MeshError(f"{path}: prim '{prim_path}' not found; pass an existing prim path "
-                        "(e.g. /root/model) or none to load the whole stage")
+        raise MeshError(
+            f"{path}: prim '{prim_path}' not found; pass an existing prim path "
+            "(e.g. /root/model) or none to load the whole stage"
+        )
     meters = UsdGeom.GetStageMetersPerUnit(stage)
     # Y-up world: a Z-up stage (Blender's USD export) turns -90 degrees about x, (x, y, z) -> (x, z, -y),
     # a rotation, so the winding stands (left as it was, a 1 m post from Blender lay along z)
@@ -45,8 +46,14 @@ def load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray]
         indices = geom.GetFaceVertexIndicesAttr().Get(time)
         if points is None or counts is None or indices is None or len(points) == 0:
             continue
-        v, counts, indices = _drawn_faces(geom, np.asarray(points, float), np.asarray(counts, np.int64),
-                                          np.asarray(indices, np.int64), time, where=f"{path}: {geom.GetPath()}")
+        v, counts, indices = _drawn_faces(
+            geom,
+            np.asarray(points, float),
+            np.asarray(counts, np.int64),
+            np.asarray(indices, np.int64),
+            time,
+            where=f"{path}: {geom.GetPath()}",
+        )
         v = v @ m[:3, :3] + m[3, :3]
         tris = fan_triangulate(counts, indices)
         if geom.GetOrientationAttr().Get() == UsdGeom.Tokens.leftHanded:
@@ -58,8 +65,10 @@ def load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray]
         offset += len(v)
     if not all_f or sum(len(f) for f in all_f) == 0:
         where = f"under '{prim_path}'" if prim_path else "on the stage"
-        raise MeshError(f"{path}: no UsdGeom.Mesh with faces {where}; point prim_path at "
-                        "the mesh or export the asset with its geometry")
+        raise MeshError(
+            f"{path}: no UsdGeom.Mesh with faces {where}; point prim_path at "
+            "the mesh or export the asset with its geometry"
+        )
     return np.concatenate(all_v), np.concatenate(all_f)
 
 
@@ -70,7 +79,6 @@ def _drawn_faces(geom, v: np.ndarray, counts: np.ndarray, indices: np.ndarray, t
     (mpmfx.geometry.subdivide: a coarse cage can lie far outside what is drawn). where: the
     file and prim, for messages."""
     from pxr import UsdGeom  # backend: pxr
-
 
     ok = counts >= 3
     if not ok.all():  # points and lines are not faces
@@ -84,9 +92,13 @@ def _drawn_faces(geom, v: np.ndarray, counts: np.ndarray, indices: np.ndarray, t
     scheme = geom.GetSubdivisionSchemeAttr()
     if scheme.Get() in (UsdGeom.Tokens.catmullClark, UsdGeom.Tokens.loop) and len(counts):
         if not scheme.HasAuthoredValue():  # likely a polygon mesh whose exporter left USD's default
-            warnings.warn(f"{where}: no subdivisionScheme, so USD's default catmullClark holds and "
-                          "its limit surface is used, as renderers draw it; for a polygon mesh author "
-                          'subdivisionScheme = "none"', UserWarning, stacklevel=2)
+            warnings.warn(
+                f"{where}: no subdivisionScheme, so USD's default catmullClark holds and "
+                "its limit surface is used, as renderers draw it; for a polygon mesh author "
+                'subdivisionScheme = "none"',
+                UserWarning,
+                stacklevel=2,
+            )
         v, counts, indices, parent = catmull_clark(v, counts, indices, creases=_usd_creases(geom, time, where))
         keep = keep[parent]
     if not keep.all():
@@ -98,6 +110,7 @@ def _drawn_faces(geom, v: np.ndarray, counts: np.ndarray, indices: np.ndarray, t
 def _usd_creases(geom, time, where: str):
     """The mesh's authored creases (chains of vertices, a sharpness per chain or per edge) and
     sharp corners, as mpmfx.geometry.subdivide.Creases; where: the file and prim, for messages."""
+
     def get(attr, dtype):
         value = attr.Get(time)
         return np.zeros(0, dtype) if value is None else np.asarray(value, dtype)
@@ -106,18 +119,22 @@ def _usd_creases(geom, time, where: str):
     lengths = get(geom.GetCreaseLengthsAttr(), np.int64)
     sharp = get(geom.GetCreaseSharpnessesAttr(), float)
     starts = np.cumsum(lengths) - lengths
-    a = np.concatenate([chain[s: s + n - 1] for s, n in zip(starts, lengths)] or [np.zeros(0, np.int64)])
-    b = np.concatenate([chain[s + 1: s + n] for s, n in zip(starts, lengths)] or [np.zeros(0, np.int64)])
+    a = np.concatenate([chain[s : s + n - 1] for s, n in zip(starts, lengths)] or [np.zeros(0, np.int64)])
+    b = np.concatenate([chain[s + 1 : s + n] for s, n in zip(starts, lengths)] or [np.zeros(0, np.int64)])
     if len(sharp) == len(lengths):  # one sharpness a crease, else one an edge
         sharp = np.repeat(sharp, np.maximum(lengths - 1, 0))
     if len(sharp) != len(a):
-        raise MeshError(f"{where}: creaseSharpnesses holds {len(sharp)} values for {len(lengths)} creases of "
-                        f"{len(a)} edges; give one a crease or one an edge")
+        raise MeshError(
+            f"{where}: creaseSharpnesses holds {len(sharp)} values for {len(lengths)} creases of "
+            f"{len(a)} edges; give one a crease or one an edge"
+        )
     corners = get(geom.GetCornerIndicesAttr(), np.int64)
     corner_sharp = get(geom.GetCornerSharpnessesAttr(), float)
     if len(corner_sharp) != len(corners):
-        raise MeshError(f"{where}: {len(corners)} cornerIndices but {len(corner_sharp)} cornerSharpnesses; "
-                        "give one sharpness a corner")
+        raise MeshError(
+            f"{where}: {len(corners)} cornerIndices but {len(corner_sharp)} cornerSharpnesses; "
+            "give one sharpness a corner"
+        )
     return Creases(pairs=np.stack([a, b], 1), sharpness=sharp, corners=corners, corner_sharpness=corner_sharp)
 
 
@@ -134,8 +151,10 @@ def _usd_meshes(root, time, *, place=None):
     it = iter(Usd.PrimRange(root, Usd.TraverseInstanceProxies()))
     for prim in it:
         img = UsdGeom.Imageable(prim)
-        if img and (img.ComputeVisibility(time) == UsdGeom.Tokens.invisible
-                    or img.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy)):
+        if img and (
+            img.ComputeVisibility(time) == UsdGeom.Tokens.invisible
+            or img.ComputePurpose() in (UsdGeom.Tokens.guide, UsdGeom.Tokens.proxy)
+        ):
             it.PruneChildren()
             continue
         world = np.array(cache.GetLocalToWorldTransform(prim), dtype=float).reshape(4, 4)
@@ -162,8 +181,12 @@ def _instanced_meshes(instancer, world: np.ndarray, time):
     cache = UsdGeom.XformCache(time)
     # every instance's transform, in protoIndices' order (applying the mask would drop the hidden
     # ones from the list and shift the rest against protoIndices), then the mask by hand
-    inst = [np.array(m, dtype=float).reshape(4, 4) for m in instancer.ComputeInstanceTransformsAtTime(
-        time, time, UsdGeom.PointInstancer.IncludeProtoXform, UsdGeom.PointInstancer.IgnoreMask)]
+    inst = [
+        np.array(m, dtype=float).reshape(4, 4)
+        for m in instancer.ComputeInstanceTransformsAtTime(
+            time, time, UsdGeom.PointInstancer.IncludeProtoXform, UsdGeom.PointInstancer.IgnoreMask
+        )
+    ]
     shown = np.asarray(instancer.ComputeMaskAtTime(time), bool)  # empty: every instance is drawn
     index = np.asarray(index)
     drawn = shown if len(shown) == len(index) else np.ones(len(index), bool)

@@ -49,8 +49,7 @@ def node_lattice(mesh, *, origin, size: float, grid_n: int, pad: int = 2) -> Lat
     return Lattice(origin=o + lo * dx, h=dx, shape=tuple(int(x) for x in hi - lo + 1))
 
 
-def voxelise(mesh, *, origin, size: float, grid_n: int, ppc: int = 8, seed: int = 0,
-             name: str = "") -> Voxelised:
+def voxelise(mesh, *, origin, size: float, grid_n: int, ppc: int = 8, seed: int = 0, name: str = "") -> Voxelised:
     """Fill ``mesh`` with particles, ``ppc`` per grid cell.
 
     origin: (3,) metres, domain min corner. size: domain edge (m). grid_n: cells per axis.
@@ -60,9 +59,11 @@ def voxelise(mesh, *, origin, size: float, grid_n: int, ppc: int = 8, seed: int 
     inside the mesh. Open meshes warn (``UserWarning``) with their open fraction.
     """
     k = int(round(ppc ** (1.0 / 3.0)))
-    if ppc < 1 or k ** 3 != ppc:
-        raise ValueError(f"ppc={ppc}: particles per cell must be a perfect cube "
-                         "(1, 8, 27 or 64) so they form a k x k x k lattice in each cell")
+    if ppc < 1 or k**3 != ppc:
+        raise ValueError(
+            f"ppc={ppc}: particles per cell must be a perfect cube "
+            "(1, 8, 27 or 64) so they form a k x k x k lattice in each cell"
+        )
     if grid_n < 1 or size <= 0:
         raise ValueError(f"grid_n={grid_n}, size={size}: both must be positive")
     frac = open_edge_fraction(mesh)
@@ -72,13 +73,22 @@ def voxelise(mesh, *, origin, size: float, grid_n: int, ppc: int = 8, seed: int 
             f"{name or 'mesh'}: not watertight ({frac:.1%} of edges open); inside is "
             "decided by ray votes and the generalized winding number, so particles may leak "
             "through large holes: close the mesh in your DCC for a reliable fill",
-            UserWarning, stacklevel=2)
+            UserWarning,
+            stacklevel=2,
+        )
     lat = node_lattice(mesh, origin=origin, size=size, grid_n=grid_n)
     sdf = signed_distance(mesh, lat, inside_mask(mesh, lat))
     points = _sample_particles(mesh, lat, k, np.random.default_rng(seed))
-    volume = np.full(len(points), lat.h ** 3 / ppc)
-    return Voxelised(points=points, volume=volume, watertight=watertight, open_fraction=frac,
-                     sdf=sdf, sdf_origin=lat.origin, sdf_voxel=lat.h)
+    volume = np.full(len(points), lat.h**3 / ppc)
+    return Voxelised(
+        points=points,
+        volume=volume,
+        watertight=watertight,
+        open_fraction=frac,
+        sdf=sdf,
+        sdf_origin=lat.origin,
+        sdf_voxel=lat.h,
+    )
 
 
 def _sample_particles(mesh, lat: Lattice, k: int, rng) -> np.ndarray:
@@ -87,8 +97,7 @@ def _sample_particles(mesh, lat: Lattice, k: int, rng) -> np.ndarray:
     The fine lattice holds the k^3 sub-cell centres of every cell of ``lat``; testing those
     points exactly (rays, not an interpolated sdf) keeps corners and edges sharp.
     """
-    fine = Lattice(origin=lat.origin + 0.5 * lat.h / k, h=lat.h / k,
-                   shape=tuple((n - 1) * k for n in lat.shape))
+    fine = Lattice(origin=lat.origin + 0.5 * lat.h / k, h=lat.h / k, shape=tuple((n - 1) * k for n in lat.shape))
     idx = np.argwhere(inside_mask(mesh, fine))  # C order: deterministic draw order below
     jitter = _JITTER * (rng.random(idx.shape) - 0.5)
     return fine.origin + (idx + jitter) * fine.h

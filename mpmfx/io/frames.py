@@ -5,6 +5,7 @@ Stages read and write each other's outputs only through these records, never thr
 sibling stage. The output is byte-for-byte deterministic for the same arrays, which the cache
 tests rely on.
 """
+
 from __future__ import annotations
 
 import zipfile
@@ -20,8 +21,7 @@ from mpmfx.io.npz import write_npz
 FRAME_FORMAT = 1
 
 
-def write_arrays(path: str | Path, arrays: dict[str, np.ndarray], *,
-                 compress: bool | Collection[str] = False) -> Path:
+def write_arrays(path: str | Path, arrays: dict[str, np.ndarray], *, compress: bool | Collection[str] = False) -> Path:
     """Write `arrays` to `path` (.npz) so that the file is complete or absent.
 
     compress: True, False, or the names of the arrays worth deflating (a level set is mostly
@@ -31,12 +31,15 @@ def write_arrays(path: str | Path, arrays: dict[str, np.ndarray], *,
     """
     path = Path(path)
     squeeze = set(arrays) if compress is True else set(compress or ())
+
     def readable(tmp: Path) -> bool:  # the central directory is written last: a cut file has none
         with zipfile.ZipFile(tmp) as zf:
             return len(zf.namelist()) == len(arrays) + 1
 
-    entries = [(name, np.asanyarray(value), name in squeeze)
-               for name, value in {"_format": np.int32(FRAME_FORMAT), **arrays}.items()]
+    entries = [
+        (name, np.asanyarray(value), name in squeeze)
+        for name, value in {"_format": np.int32(FRAME_FORMAT), **arrays}.items()
+    ]
     with atomic_path(path, verify=readable) as tmp, open(tmp, "wb") as f:
         write_npz(f, entries)  # big entries deflated on several threads (mpmfx.io.npz)
     return path
@@ -47,8 +50,10 @@ def read_arrays(path: str | Path) -> dict[str, np.ndarray]:
         out = {k: data[k] for k in data.files if k != "_format"}
         fmt = int(data["_format"]) if "_format" in data.files else -1
     if fmt != FRAME_FORMAT:
-        raise ValueError(f"{path}: frame format {fmt}, this mpmfx reads {FRAME_FORMAT}: "
-                         f"re-run the stage (mpmfx run SHOT --force STAGE)")
+        raise ValueError(
+            f"{path}: frame format {fmt}, this mpmfx reads {FRAME_FORMAT}: "
+            f"re-run the stage (mpmfx run SHOT --force STAGE)"
+        )
     return out
 
 
@@ -146,12 +151,19 @@ class SurfaceFrame:
     def write(self, path: str | Path) -> Path:
         out: dict[str, np.ndarray] = {"groups": np.asarray(list(self.groups))}
         for g, s in self.groups.items():
-            out |= {f"{g}.{k}": (np.float64(a) if k in ("voxel_size", "background") else a)
-                    for k, a in vars(s).items() if a is not None}
+            out |= {
+                f"{g}.{k}": (np.float64(a) if k in ("voxel_size", "background") else a)
+                for k, a in vars(s).items()
+                if a is not None
+            }
         return write_arrays(path, out, compress=[f"{g}.{k}" for g in self.groups for k in self._DEFLATE])
 
     @classmethod
     def read(cls, path: str | Path) -> SurfaceFrame:
         data = read_arrays(path)
-        return cls({str(g): GroupSurface(**{k.split(".", 1)[1]: a for k, a in data.items() if k.startswith(f"{g}.")})
-                    for g in data["groups"]})
+        return cls(
+            {
+                str(g): GroupSurface(**{k.split(".", 1)[1]: a for k, a in data.items() if k.startswith(f"{g}.")})
+                for g in data["groups"]
+            }
+        )

@@ -10,6 +10,7 @@ The files are ordinary zips (np.load, zipfile and unzip read them), with zip64 r
 a size or an offset needs them. Each entry carries the fixed date 1980-01-01, so the same arrays
 give the same bytes whatever the number of threads.
 """
+
 from __future__ import annotations
 
 import io
@@ -58,8 +59,8 @@ def _npy_header(value: np.ndarray) -> bytes:
 def _pieces(header: bytes, data: memoryview) -> list:
     """The entry's bytes in CHUNK pieces (the first one holds the header)."""
     first = header + bytes(data[: max(CHUNK - len(header), 0)])
-    rest = data[len(first) - len(header):]
-    return [first] + [rest[i:i + CHUNK] for i in range(0, len(rest), CHUNK)]
+    rest = data[len(first) - len(header) :]
+    return [first] + [rest[i : i + CHUNK] for i in range(0, len(rest), CHUNK)]
 
 
 def _deflate(piece, last: bool) -> bytes:
@@ -78,14 +79,19 @@ def write_npz(f: BinaryIO, entries: list[tuple[str, np.ndarray, bool]], *, worke
     parts = [(name, *npy_parts(value), deflate) for name, value, deflate in entries]
     pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="mpmfx-deflate") if workers > 1 else None
     try:
+
         def run(fn, *args):
             return pool.submit(fn, *args) if pool else _Done(fn(*args))
 
         jobs = []  # per entry: (crc future, [deflated piece futures] or None)
-        for name, header, data, deflate in parts:
+        for _name, header, data, deflate in parts:
             pieces = _pieces(header, data) if deflate else None
-            jobs.append((run(_crc, header, data),
-                         [run(_deflate, p, i == len(pieces) - 1) for i, p in enumerate(pieces)] if deflate else None))
+            jobs.append(
+                (
+                    run(_crc, header, data),
+                    [run(_deflate, p, i == len(pieces) - 1) for i, p in enumerate(pieces)] if deflate else None,
+                )
+            )
         central, offset = [], 0
         for (name, header, data, deflate), (crc, deflated) in zip(parts, jobs):
             size = len(header) + len(data)
@@ -117,8 +123,24 @@ def _local_header(name: str, crc: int, packed: int, size: int, deflate: bool) ->
     raw = f"{name}.npy".encode()
     zip64 = packed >= ZIP64_LIMIT or size >= ZIP64_LIMIT
     extra = struct.pack("<HHQQ", 1, 16, size, packed) if zip64 else b""
-    return struct.pack("<IHHHHHIIIHH", 0x04034B50, 45 if zip64 else 20, 0, 8 if deflate else 0, _DOS_TIME, _DOS_DATE,
-                       crc, _U32 if zip64 else packed, _U32 if zip64 else size, len(raw), len(extra)) + raw + extra
+    return (
+        struct.pack(
+            "<IHHHHHIIIHH",
+            0x04034B50,
+            45 if zip64 else 20,
+            0,
+            8 if deflate else 0,
+            _DOS_TIME,
+            _DOS_DATE,
+            crc,
+            _U32 if zip64 else packed,
+            _U32 if zip64 else size,
+            len(raw),
+            len(extra),
+        )
+        + raw
+        + extra
+    )
 
 
 def _central_header(name: str, crc: int, packed: int, size: int, deflate: bool, offset: int) -> bytes:
@@ -127,9 +149,30 @@ def _central_header(name: str, crc: int, packed: int, size: int, deflate: bool, 
     fields = ([size, packed] if sizes64 else []) + ([offset] if offset64 else [])  # zip64 carries these, in this order
     extra = struct.pack(f"<HH{len(fields)}Q", 1, 8 * len(fields), *fields) if fields else b""
     version = 45 if fields else 20
-    return struct.pack("<IHHHHHHIIIHHHHHII", 0x02014B50, (3 << 8) | version, version, 0, 8 if deflate else 0,
-                       _DOS_TIME, _DOS_DATE, crc, _U32 if sizes64 else packed, _U32 if sizes64 else size, len(raw),
-                       len(extra), 0, 0, 0, 0, _U32 if offset64 else offset) + raw + extra
+    return (
+        struct.pack(
+            "<IHHHHHHIIIHHHHHII",
+            0x02014B50,
+            (3 << 8) | version,
+            version,
+            0,
+            8 if deflate else 0,
+            _DOS_TIME,
+            _DOS_DATE,
+            crc,
+            _U32 if sizes64 else packed,
+            _U32 if sizes64 else size,
+            len(raw),
+            len(extra),
+            0,
+            0,
+            0,
+            0,
+            _U32 if offset64 else offset,
+        )
+        + raw
+        + extra
+    )
 
 
 def _end(f: BinaryIO, central: list[bytes], start: int) -> None:

@@ -21,6 +21,7 @@ The root opens without touching any frame file: USD opens a clip only when one o
 is read, so the cost of opening grows with the clip list (a few bytes a frame), not the data.
 pxr (usd-core) is imported only inside the functions that need it.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -35,8 +36,10 @@ import numpy as np
 
 from mpmfx.cache import atomic_path
 
-INSTALL_HINT = ("pxr (usd-core) is not importable: run `bash setup.sh`, or "
-                "`pip install usd-core` in the environment that runs mpmfx")
+INSTALL_HINT = (
+    "pxr (usd-core) is not importable: run `bash setup.sh`, or "
+    "`pip install usd-core` in the environment that runs mpmfx"
+)
 
 RESERVED_NAMES = ("colliders", "camera")
 # Known VDB fields: fieldClass, fieldDataType, vectorDataRoleHint (None = not authored).
@@ -45,8 +48,18 @@ _FIELD_KINDS = {
     "density": ("fogVolume", "float", None),
     "vel": ("unknown", "float3", "Vector"),
 }
-_CAMERA_KEYS = ("position", "look_at", "up", "focal_length", "horizontal_aperture",
-                "vertical_aperture", "near", "far", "focus_distance", "f_stop")
+_CAMERA_KEYS = (
+    "position",
+    "look_at",
+    "up",
+    "focal_length",
+    "horizontal_aperture",
+    "vertical_aperture",
+    "near",
+    "far",
+    "focus_distance",
+    "f_stop",
+)
 
 
 def import_pxr() -> Any:
@@ -112,6 +125,7 @@ def _atomic_target(path: Path) -> Iterator[Path]:
     """`mpmfx.cache.atomic_path` (the layer is read back before the rename), then reload a
     layer this process already holds for `path`."""
     from pxr import Sdf  # backend: pxr
+
     with atomic_path(path, verify=lambda tmp: Sdf.Layer.OpenAsAnonymous(str(tmp)) is not None) as tmp:
         yield tmp
     _reload_if_open(path)
@@ -120,6 +134,7 @@ def _atomic_target(path: Path) -> Iterator[Path]:
 def _reload_if_open(path: Path) -> None:
     """A layer this process already opened from `path` would keep serving the old content."""
     from pxr import Sdf  # backend: pxr
+
     layer = Sdf.Layer.Find(str(path))
     if layer is not None:
         layer.Reload(True)
@@ -144,16 +159,20 @@ def _array(value: Any, where: str, *, shape: tuple[int | None, ...], dtype: type
 
 def _check_name(name: str, what: str) -> None:
     from pxr import Sdf, Tf  # backend: pxr
+
     if not isinstance(name, str) or not Sdf.Path.IsValidIdentifier(name):
-        raise ValueError(f"{what} name {name!r} is not a valid USD prim name: use letters, digits "
-                         f"and underscores, not starting with a digit (e.g. "
-                         f"{Tf.MakeValidIdentifier(str(name))!r})")
+        raise ValueError(
+            f"{what} name {name!r} is not a valid USD prim name: use letters, digits "
+            f"and underscores, not starting with a digit (e.g. "
+            f"{Tf.MakeValidIdentifier(str(name))!r})"
+        )
     if name in RESERVED_NAMES and what != "collider":
         raise ValueError(f"{what} name {name!r} is reserved in /World; rename the object")
 
 
 def _extent(points: np.ndarray, pad: float = 0.0) -> Any:
     from pxr import Vt  # backend: pxr
+
     if len(points) == 0:
         return Vt.Vec3fArray.FromNumpy(np.zeros((2, 3), np.float32))
     box = np.stack([points.min(axis=0) - pad, points.max(axis=0) + pad]).astype(np.float32)
@@ -163,6 +182,7 @@ def _extent(points: np.ndarray, pad: float = 0.0) -> Any:
 def _vt_array(arr: np.ndarray, where: str) -> tuple[Any, Any]:
     """(Sdf value type, Vt array) for a primvar array of shape (n,) or (n, 3)."""
     from pxr import Sdf, Vt  # backend: pxr
+
     kinds = {
         (1, "i4"): (Sdf.ValueTypeNames.IntArray, Vt.IntArray, np.int32),
         (1, "i8"): (Sdf.ValueTypeNames.Int64Array, Vt.Int64Array, np.int64),
@@ -173,14 +193,17 @@ def _vt_array(arr: np.ndarray, where: str) -> tuple[Any, Any]:
     }
     key = (arr.ndim, arr.dtype.str[1:]) if arr.dtype.kind in "if" else None
     if key not in kinds or (arr.ndim == 2 and arr.shape[1] != 3):
-        raise ValueError(f"{where}: dtype {arr.dtype} shape {arr.shape} is not supported; use "
-                         f"(n,) int32/int64/float32 or (n, 3) float32")
+        raise ValueError(
+            f"{where}: dtype {arr.dtype} shape {arr.shape} is not supported; use "
+            f"(n,) int32/int64/float32 or (n, 3) float32"
+        )
     type_name, vt_type, dtype = kinds[key]
     return type_name, vt_type.FromNumpy(np.ascontiguousarray(arr, dtype=dtype))
 
 
 def _write_points(stage: Any, path: str, sample: PointsSample, time: float, where: str) -> None:
     from pxr import UsdGeom, Vt  # backend: pxr
+
     pts = _array(sample.positions, f"{where}.positions", shape=(None, 3), dtype=np.float32)
     n = len(pts)
     prim = UsdGeom.Points.Define(stage, path)
@@ -208,8 +231,7 @@ def _write_points(stage: Any, path: str, sample: PointsSample, time: float, wher
         _check_name(name, f"{where} primvar")
         arr = np.asarray(values)
         if len(arr) != n:
-            raise ValueError(f"{where}.primvars[{name!r}]: length {len(arr)}, expected {n} "
-                             f"(one value per particle)")
+            raise ValueError(f"{where}.primvars[{name!r}]: length {len(arr)}, expected {n} (one value per particle)")
         type_name, vt = _vt_array(arr, f"{where}.primvars[{name!r}]")
         api.CreatePrimvar(name, type_name, UsdGeom.Tokens.vertex).Set(vt, time)
     prim.CreateExtentAttr().Set(_extent(pts, pad), time)
@@ -217,6 +239,7 @@ def _write_points(stage: Any, path: str, sample: PointsSample, time: float, wher
 
 def _write_mesh(stage: Any, path: str, sample: MeshSample, time: float, where: str) -> None:
     from pxr import UsdGeom, Vt  # backend: pxr
+
     pts = _array(sample.points, f"{where}.points", shape=(None, 3), dtype=np.float32)
     tris = _array(sample.face_vertex_indices, f"{where}.face_vertex_indices", shape=(None, 3), dtype=np.int32)
     if tris.size and (tris.min() < 0 or tris.max() >= len(pts)):
@@ -236,9 +259,11 @@ def _write_mesh(stage: Any, path: str, sample: MeshSample, time: float, where: s
     mesh.CreateExtentAttr().Set(_extent(pts), time)
 
 
-def _write_volume(stage: Any, path: str, fields: dict[str, str], time: float, *,
-                  root_dir: Path, layer_dir: Path, where: str) -> None:
+def _write_volume(
+    stage: Any, path: str, fields: dict[str, str], time: float, *, root_dir: Path, layer_dir: Path, where: str
+) -> None:
     from pxr import Sdf, UsdVol  # backend: pxr
+
     volume = UsdVol.Volume.Define(stage, path)
     for name, file_path in fields.items():
         _check_name(name, f"{where} field")
@@ -266,6 +291,7 @@ def _write_volume(stage: Any, path: str, fields: dict[str, str], time: float, *,
 
 def _write_collider(stage: Any, sample: ColliderSample, time: float) -> None:
     from pxr import Gf, UsdGeom, Vt  # backend: pxr
+
     _check_name(sample.name, "collider")
     where = f"collider {sample.name!r}"
     pts = _array(sample.points, f"{where}.points", shape=(None, 3), dtype=np.float32)
@@ -301,10 +327,13 @@ def _camera_matrix(position: np.ndarray, look_at: np.ndarray, up: np.ndarray) ->
 
 def _write_camera(stage: Any, camera: dict, meters_per_unit: float) -> None:
     from pxr import Gf, UsdGeom  # backend: pxr
+
     unknown = sorted(set(camera) - set(_CAMERA_KEYS))
     if unknown or "position" not in camera or "look_at" not in camera:
-        raise ValueError(f"camera: needs 'position' and 'look_at' (metres); unknown keys {unknown}; "
-                         f"allowed: {', '.join(_CAMERA_KEYS)}")
+        raise ValueError(
+            f"camera: needs 'position' and 'look_at' (metres); unknown keys {unknown}; "
+            f"allowed: {', '.join(_CAMERA_KEYS)}"
+        )
     pos = np.asarray(camera["position"], np.float64).reshape(3)
     target = np.asarray(camera["look_at"], np.float64).reshape(3)
     up = np.asarray(camera.get("up", (0.0, 1.0, 0.0)), np.float64).reshape(3)
@@ -335,8 +364,16 @@ class UsdShotWriter:
     values stay in metres and the composed world positions are in the stage's axis and unit.
     """
 
-    def __init__(self, root_path: str | Path, *, fps: float, start_frame: int, end_frame: int,
-                 up_axis: str = "Y", meters_per_unit: float = 1.0) -> None:
+    def __init__(
+        self,
+        root_path: str | Path,
+        *,
+        fps: float,
+        start_frame: int,
+        end_frame: int,
+        up_axis: str = "Y",
+        meters_per_unit: float = 1.0,
+    ) -> None:
         self.root_path = Path(root_path)
         if self.root_path.suffix not in (".usda", ".usd", ".usdc"):
             raise ValueError(f"{self.root_path}: the root stage must end in .usda, .usd or .usdc")
@@ -364,6 +401,7 @@ class UsdShotWriter:
 
     def _new_stage(self) -> Any:
         from pxr import Usd, UsdGeom  # backend: pxr
+
         stage = Usd.Stage.CreateInMemory()
         stage.SetTimeCodesPerSecond(self.fps)
         stage.SetFramesPerSecond(self.fps)
@@ -371,10 +409,15 @@ class UsdShotWriter:
         stage.SetDefaultPrim(stage.GetPrimAtPath("/World"))
         return stage
 
-    def write_frame(self, frame: int, *, points: dict[str, PointsSample] | None = None,
-                    meshes: dict[str, MeshSample] | None = None,
-                    volumes: dict[str, dict[str, str]] | None = None,
-                    colliders: Sequence[ColliderSample] = ()) -> Path:
+    def write_frame(
+        self,
+        frame: int,
+        *,
+        points: dict[str, PointsSample] | None = None,
+        meshes: dict[str, MeshSample] | None = None,
+        volumes: dict[str, dict[str, str]] | None = None,
+        colliders: Sequence[ColliderSample] = (),
+    ) -> Path:
         """Write frame `frame` to frames/NNNN.usdc (complete or absent) and return its path.
 
         points / meshes: object name -> sample; volumes: object name -> {field name
@@ -383,10 +426,10 @@ class UsdShotWriter:
         """
         import_pxr()
         from pxr import UsdGeom  # backend: pxr
+
         stage = self._new_stage()
         time = float(frame)
-        groups = {**dict.fromkeys(points or {}), **dict.fromkeys(meshes or {}),
-                  **dict.fromkeys(volumes or {})}
+        groups = {**dict.fromkeys(points or {}), **dict.fromkeys(meshes or {}), **dict.fromkeys(volumes or {})}
         for name in groups:
             _check_name(name, "object")
             UsdGeom.Xform.Define(stage, f"/World/{name}")
@@ -395,8 +438,15 @@ class UsdShotWriter:
         for name, sample in (meshes or {}).items():
             _write_mesh(stage, f"/World/{name}/mesh", sample, time, f"frame {frame} meshes[{name!r}]")
         for name, fields in (volumes or {}).items():
-            _write_volume(stage, f"/World/{name}/volume", fields, time, root_dir=self.root_path.parent,
-                          layer_dir=self.frames_dir, where=f"frame {frame} volumes[{name!r}]")
+            _write_volume(
+                stage,
+                f"/World/{name}/volume",
+                fields,
+                time,
+                root_dir=self.root_path.parent,
+                layer_dir=self.frames_dir,
+                where=f"frame {frame} volumes[{name!r}]",
+            )
         if colliders:
             UsdGeom.Scope.Define(stage, "/World/colliders")
         for sample in colliders:
@@ -415,18 +465,22 @@ class UsdShotWriter:
         """
         import_pxr()
         from pxr import Sdf, UsdUtils  # backend: pxr
+
         frames = sorted({int(f) for f in frames})
         if not frames:
             raise ValueError(f"{self.root_path}: no frames to stitch; write frames first")
         outside = [f for f in frames if not self.start_frame <= f <= self.end_frame]
         if outside:
-            raise ValueError(f"{self.root_path}: frames {outside[:5]} lie outside the shot range "
-                             f"[{self.start_frame}, {self.end_frame}]")
+            raise ValueError(
+                f"{self.root_path}: frames {outside[:5]} lie outside the shot range "
+                f"[{self.start_frame}, {self.end_frame}]"
+            )
         files = [self.frame_path(f) for f in frames]
         missing = [str(p) for p in files if not p.is_file()]
         if missing:
-            raise ValueError(f"{self.root_path}: frame layers missing: {missing[:5]}; run the export "
-                             f"for those frames again")
+            raise ValueError(
+                f"{self.root_path}: frame layers missing: {missing[:5]}; run the export for those frames again"
+            )
         clip_files = [str(p) for p in files]
         # The stitching functions save the layers they fill, so they get real (temp) files.
         with _atomic_target(self.topology_path()) as tmp_topology:
@@ -446,6 +500,7 @@ class UsdShotWriter:
     def _root_layer(self, frames: list[int], camera: dict | None) -> Any:
         """The root layer: stage metadata, clip metadata on /World, camera; topology sublayered."""
         from pxr import Gf, Sdf, Usd, UsdGeom  # backend: pxr
+
         layer = Sdf.Layer.CreateAnonymous(".usda")
         stage = Usd.Stage.Open(layer)
         stage.SetTimeCodesPerSecond(self.fps)
@@ -458,8 +513,9 @@ class UsdShotWriter:
         stage.SetDefaultPrim(world.GetPrim())
         clips = Usd.ClipsAPI(world.GetPrim())
         clips.SetClipPrimPath("/World")
-        clips.SetClipAssetPaths([f"./{p.relative_to(self.root_path.parent).as_posix()}"
-                                 for p in map(self.frame_path, frames)])
+        clips.SetClipAssetPaths(
+            [f"./{p.relative_to(self.root_path.parent).as_posix()}" for p in map(self.frame_path, frames)]
+        )
         clips.SetClipManifestAssetPath(f"./{self.manifest_path().name}")
         clips.SetClipActive([Gf.Vec2d(f, i) for i, f in enumerate(frames)])
         clips.SetClipTimes([Gf.Vec2d(f, f) for f in frames])
@@ -483,6 +539,7 @@ def validate_stage(path: str | Path, *, include_warnings: bool = False) -> list[
     errors (and warnings if asked). Empty means clean."""
     import_pxr()
     from pxr import Usd  # backend: pxr
+
     try:
         from pxr import UsdValidation  # backend: pxr
     except ImportError as exc:

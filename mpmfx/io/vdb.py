@@ -6,6 +6,7 @@ A DCC that loads the file places it correctly with no extra transform.
 
 pyopenvdb (Debian's python3-openvdb 10) is imported only inside the functions that need it.
 """
+
 from __future__ import annotations
 
 import enum
@@ -19,17 +20,19 @@ import numpy as np
 
 from mpmfx.cache import atomic_path
 
-INSTALL_HINT = ("pyopenvdb is not importable: run `bash setup.sh` (it installs Debian's "
-                "python3-openvdb and links it into the venv), or as root "
-                "`apt-get install python3-openvdb`")
+INSTALL_HINT = (
+    "pyopenvdb is not importable: run `bash setup.sh` (it installs Debian's "
+    "python3-openvdb and links it into the venv), or as root "
+    "`apt-get install python3-openvdb`"
+)
 
 
 class GridClass(str, enum.Enum):
     """What a grid's values mean; mirrors OpenVDB's GridClass (STAGGERED is not used here)."""
 
-    LEVEL_SET = "level_set"    # signed distance in metres, negative inside
+    LEVEL_SET = "level_set"  # signed distance in metres, negative inside
     FOG_VOLUME = "fog_volume"  # density in [0, 1], 0 outside
-    UNKNOWN = "unknown"        # anything else, e.g. velocity
+    UNKNOWN = "unknown"  # anything else, e.g. velocity
 
 
 @dataclass
@@ -61,8 +64,7 @@ class VdbGrid:
             self.grid_class = GridClass(self.grid_class)
         except ValueError:
             allowed = ", ".join(c.value for c in GridClass)
-            raise ValueError(f"VdbGrid {self.name!r}: grid_class {self.grid_class!r} is not one of "
-                             f"{allowed}") from None
+            raise ValueError(f"VdbGrid {self.name!r}: grid_class {self.grid_class!r} is not one of {allowed}") from None
 
 
 def import_pyopenvdb() -> Any:
@@ -82,11 +84,11 @@ def _check_grid(grid: VdbGrid, path: Path) -> np.ndarray:
     values = np.ascontiguousarray(grid.values, dtype=np.float32)
     is_vector = values.ndim == 4 and values.shape[3] == 3
     if values.ndim != 3 and not is_vector:
-        raise ValueError(f"{where}: values shape {values.shape}; expected (a, b, c) scalars or "
-                         f"(a, b, c, 3) vectors")
+        raise ValueError(f"{where}: values shape {values.shape}; expected (a, b, c) scalars or (a, b, c, 3) vectors")
     if not np.isfinite(values).all():
-        raise ValueError(f"{where}: values contain NaN or inf; fix the upstream field (e.g. "
-                         f"clamp the level set) before export")
+        raise ValueError(
+            f"{where}: values contain NaN or inf; fix the upstream field (e.g. clamp the level set) before export"
+        )
     if len(grid.ijk0) != 3:
         raise ValueError(f"{where}: ijk0 {grid.ijk0!r} must be three integers")
     if not (math.isfinite(grid.voxel_size) and grid.voxel_size > 0):
@@ -95,8 +97,10 @@ def _check_grid(grid: VdbGrid, path: Path) -> np.ndarray:
         if is_vector:
             raise ValueError(f"{where}: a level set must be scalar; use grid_class='unknown' for vectors")
         if not grid.background > 0:
-            raise ValueError(f"{where}: a level set needs background = narrow-band half width in "
-                             f"metres (> 0), got {grid.background!r}; 3 * voxel_size is usual")
+            raise ValueError(
+                f"{where}: a level set needs background = narrow-band half width in "
+                f"metres (> 0), got {grid.background!r}; 3 * voxel_size is usual"
+            )
     return values
 
 
@@ -150,8 +154,9 @@ def _check_metadata(metadata: dict[str, Any], path: Path) -> dict[str, Any]:
         elif isinstance(value, str):
             clean[key] = value
         else:
-            raise ValueError(f"{path}: metadata {key!r} has type {type(value).__name__}; "
-                             f"use str, int or float (e.g. json.dumps it)")
+            raise ValueError(
+                f"{path}: metadata {key!r} has type {type(value).__name__}; use str, int or float (e.g. json.dumps it)"
+            )
     return clean
 
 
@@ -175,6 +180,7 @@ def write_vdb(path: str | Path, grids: Sequence[VdbGrid], *, metadata: dict[str,
     file_metadata = _check_metadata(metadata, path)
     vdb = import_pyopenvdb()
     vdb_grids = [_build_grid(vdb, g, values) for g, values in checked]
+
     def readable(tmp: Path) -> bool:  # pyopenvdb reports no error when a write fails: read it back
         return sorted(g.name for g in vdb.readAllGridMetadata(str(tmp))) == sorted(names)
 
@@ -184,8 +190,7 @@ def write_vdb(path: str | Path, grids: Sequence[VdbGrid], *, metadata: dict[str,
 
 
 # pyopenvdb reports classes by their OpenVDB names.
-_CLASS_FROM_VDB = {"level set": GridClass.LEVEL_SET, "fog volume": GridClass.FOG_VOLUME,
-                   "unknown": GridClass.UNKNOWN}
+_CLASS_FROM_VDB = {"level set": GridClass.LEVEL_SET, "fog volume": GridClass.FOG_VOLUME, "unknown": GridClass.UNKNOWN}
 
 
 def _grid_info(vdb: Any, grid: Any, *, with_values: bool) -> dict[str, Any]:
@@ -224,7 +229,4 @@ def read_vdb(path: str | Path, *, with_values: bool = False) -> dict[str, Any]:
         raise FileNotFoundError(f"{path}: no such .vdb file")
     vdb = import_pyopenvdb()
     grids, metadata = vdb.readAll(str(path))
-    return {
-        "metadata": dict(metadata),
-        "grids": {g.name: _grid_info(vdb, g, with_values=with_values) for g in grids},
-    }
+    return {"metadata": dict(metadata), "grids": {g.name: _grid_info(vdb, g, with_values=with_values) for g in grids}}

@@ -13,13 +13,23 @@ input and output here is in domain units and seconds (docs/physics.md, "The meth
 Names load lazily (PEP 562): `mpmfx.mpm.config` and `mpmfx.mpm.materials` are plain Python,
 so the shot schema reads the solver's defaults from them without starting Warp.
 """
+
 import importlib
 
 _WHERE = {
-    "Collider": "colliders", "ColliderKind": "colliders",
-    "OutOfDomain": "config", "SolverConfig": "config", "WallType": "config",
-    "PRESETS": "materials", "Material": "materials", "Mode": "materials", "preset": "materials",
-    "Particles": "solver", "SimulationError": "solver", "Solver": "solver", "StepReport": "solver",
+    "Collider": "colliders",
+    "ColliderKind": "colliders",
+    "OutOfDomain": "config",
+    "SolverConfig": "config",
+    "WallType": "config",
+    "PRESETS": "materials",
+    "Material": "materials",
+    "Mode": "materials",
+    "preset": "materials",
+    "Particles": "solver",
+    "SimulationError": "solver",
+    "Solver": "solver",
+    "StepReport": "solver",
     "State": "state",
 }
 __all__ = list(_WHERE)

@@ -17,7 +17,7 @@ import warp as wp
 from .colliders import ColliderKeys, pack_colliders
 from .p2g_brick import BrickP2G, fits_brick_keys, sort_cadence, travel_cadence
 from .slots import Clock, Count, Status
-from .stepper import CHUNKS, StepperParams, make_clock_kernels, pose_colliders, wave_table, WaveParams
+from .stepper import CHUNKS, StepperParams, WaveParams, make_clock_kernels, pose_colliders, wave_table
 
 __all__ = ["DeviceAdvance"]
 
@@ -66,18 +66,45 @@ class DeviceAdvance:
         s, dev = self.s, self.s.device
         bufs = (state.cur, state.nxt)
         for i in range(k):
-            wp.launch(self.begin, dim=1, device=dev, inputs=[self.sp, self.waves, self.clk, s._sub, s._stats,
-                                                               s._stats_init, s._counts])
+            wp.launch(
+                self.begin,
+                dim=1,
+                device=dev,
+                inputs=[self.sp, self.waves, self.clk, s._sub, s._stats, s._stats_init, s._counts],
+            )
             if self.keys is not None:
                 k_ = self.keys
-                wp.launch(pose_colliders, dim=k_.n, device=dev, inputs=[
-                    self.sp, self.clk, k_.times, k_.translations, k_.rotations, k_.offsets, k_.counts,
-                    s._colliders_dev])
-            s._phases(state, bufs[i % 2], bufs[1 - i % 2], 0.0, device_clock=True,
-                      brick=self._brick if self.p2g == "brick" else None, chunk_start=i == 0,
-                      resort=i % every == 0)
-            wp.launch(self.end, dim=1, device=dev, inputs=[self.sp, self.waves, self.clk, s._sub, s._stats,
-                                                             s._counts, self.last_bad])
+                wp.launch(
+                    pose_colliders,
+                    dim=k_.n,
+                    device=dev,
+                    inputs=[
+                        self.sp,
+                        self.clk,
+                        k_.times,
+                        k_.translations,
+                        k_.rotations,
+                        k_.offsets,
+                        k_.counts,
+                        s._colliders_dev,
+                    ],
+                )
+            s._phases(
+                state,
+                bufs[i % 2],
+                bufs[1 - i % 2],
+                0.0,
+                device_clock=True,
+                brick=self._brick if self.p2g == "brick" else None,
+                chunk_start=i == 0,
+                resort=i % every == 0,
+            )
+            wp.launch(
+                self.end,
+                dim=1,
+                device=dev,
+                inputs=[self.sp, self.waves, self.clk, s._sub, s._stats, s._counts, self.last_bad],
+            )
 
     def _chunk(self, state, k: int, every: int) -> None:
         """k substeps starting from state.cur, the brick P2G re-sorting every `every` (and at
@@ -88,8 +115,17 @@ class DeviceAdvance:
         if self._graph_state is not state:
             self._graphs.clear()
             self._graph_state = state
-        key = (k, id(state.cur), id(state.mass), self.s._grid_v.ptr, state.n_fields, self.s._q_mass, self.p2g,
-               id(self._brick), every)
+        key = (
+            k,
+            id(state.cur),
+            id(state.mass),
+            self.s._grid_v.ptr,
+            state.n_fields,
+            self.s._q_mass,
+            self.p2g,
+            id(self._brick),
+            every,
+        )
         graph = self._graphs.get(key)
         if graph is None:
             with wp.ScopedCapture(device=self.s.device) as cap:
@@ -201,11 +237,22 @@ class DeviceAdvance:
             s._last_bad = self.last_bad.numpy() if c[Clock.HAS_BAD] else None
             s._raise_too_small(state, t, float(c[Clock.DT_CFL]))
         if int(c[Clock.STATUS]) == Status.TOO_MANY:
-            raise s._too_many(state, t, t1, int(c[Clock.N_SUB]), float(c[Clock.DT_CFL]),
-                              float(c[Clock.TOTAL] - c[Clock.DONE]))
+            raise s._too_many(
+                state, t, t1, int(c[Clock.N_SUB]), float(c[Clock.DT_CFL]), float(c[Clock.TOTAL] - c[Clock.DONE])
+            )
         n = int(c[Clock.N_SUB])
         dts = [float(c[Clock.DT_MIN]), float(c[Clock.DT_MAX])] if n else []
-        report = s._report(state, n, int(c[Clock.N_REJ]), dts, float(c[Clock.VMAX]), float(c[Clock.CFL_USED]),
-                           int(c[Clock.LOST]), float(c[Clock.J_MIN]), float(c[Clock.J_MAX]), wall0)
+        report = s._report(
+            state,
+            n,
+            int(c[Clock.N_REJ]),
+            dts,
+            float(c[Clock.VMAX]),
+            float(c[Clock.CFL_USED]),
+            int(c[Clock.LOST]),
+            float(c[Clock.J_MIN]),
+            float(c[Clock.J_MAX]),
+            wall0,
+        )
         report.inverted = int(c[Clock.INVERTED])
         return report

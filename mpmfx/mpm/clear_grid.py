@@ -13,15 +13,18 @@ import warp as wp
 from .p2g_brick import BRICK, marked_node
 
 
-def clear_grid(grid_m, grid_mv, grid_normal, grid_fixed, *, deterministic: bool, multi_field: bool,
-               marks=None) -> None:
+def clear_grid(grid_m, grid_mv, grid_normal, grid_fixed, *, deterministic: bool, multi_field: bool, marks=None) -> None:
     """Zero the accumulators P2G is about to write (float or fixed-point ones; the mass
     gradients too in multi-field mode). marks: per node brick (p2g_brick.node_brick order,
     int32), 1 where the last P2G wrote; given, only those bricks are zeroed."""
     if marks is not None:
         nn = grid_fixed.shape[0] if deterministic else grid_m.shape[0]
-        wp.launch(_clear_marked, dim=marks.shape[0] * BRICK**3, device=marks.device,
-                  inputs=[marks, -(-nn // BRICK), nn, int(deterministic), grid_m, grid_mv, grid_fixed])
+        wp.launch(
+            _clear_marked,
+            dim=marks.shape[0] * BRICK**3,
+            device=marks.device,
+            inputs=[marks, -(-nn // BRICK), nn, int(deterministic), grid_m, grid_mv, grid_fixed],
+        )
         return
     if deterministic:
         grid_fixed.zero_()
@@ -33,8 +36,15 @@ def clear_grid(grid_m, grid_mv, grid_normal, grid_fixed, *, deterministic: bool,
 
 
 @wp.func
-def zero_node(deterministic: int, grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
-              grid_fixed: wp.array4d(dtype=wp.int64), i: int, j: int, k: int):
+def zero_node(
+    deterministic: int,
+    grid_m: wp.array3d(dtype=float),
+    grid_mv: wp.array3d(dtype=wp.vec3),
+    grid_fixed: wp.array4d(dtype=wp.int64),
+    i: int,
+    j: int,
+    k: int,
+):
     """Zero node (i, j, k)'s accumulators: its fixed-point channels, or its mass and momentum.
     Also the brick path's grid update, which clears what it has read (grid_update.py)."""
     if deterministic != 0:
@@ -46,9 +56,15 @@ def zero_node(deterministic: int, grid_m: wp.array3d(dtype=float), grid_mv: wp.a
 
 
 @wp.kernel(enable_backward=False)
-def _clear_marked(marks: wp.array(dtype=wp.int32), nb: int, nodes: int, deterministic: int,
-                  grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
-                  grid_fixed: wp.array4d(dtype=wp.int64)):
+def _clear_marked(
+    marks: wp.array(dtype=wp.int32),
+    nb: int,
+    nodes: int,
+    deterministic: int,
+    grid_m: wp.array3d(dtype=float),
+    grid_mv: wp.array3d(dtype=wp.vec3),
+    grid_fixed: wp.array4d(dtype=wp.int64),
+):
     node = marked_node(marks, wp.tid(), nb, nodes)
     if node[0] >= 0:
         zero_node(deterministic, grid_m, grid_mv, grid_fixed, node[0], node[1], node[2])

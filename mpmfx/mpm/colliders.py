@@ -107,12 +107,15 @@ class Collider:
 def pose_matrix(times, translations, rotations, t: float) -> np.ndarray:
     """(4,4) rigid transform at shot time t (s) of keyframes as `Collider` takes them: the
     solver's own interpolation (linear translation, slerp rotation), for USD and renders."""
-    p, (x, y, z, w) = Collider(kind=ColliderKind.PLANE, times=times, translations=translations,
-                               rotations=rotations).pose(t)
+    p, (x, y, z, w) = Collider(
+        kind=ColliderKind.PLANE, times=times, translations=translations, rotations=rotations
+    ).pose(t)
     m = np.eye(4)
-    m[:3, :3] = [[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-                 [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-                 [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]]
+    m[:3, :3] = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
     m[:3, 3] = p
     return m
 
@@ -142,12 +145,14 @@ def collider_velocity(c: Collider, t0: float, t1: float, sim_dt: float):
     # relative rotation q1 * conj(q0) -> axis-angle / dt
     x0, y0, z0, w0 = -q0[0], -q0[1], -q0[2], q0[3]
     x1, y1, z1, w1 = q1
-    dq = np.array([
-        w1 * x0 + x1 * w0 + y1 * z0 - z1 * y0,
-        w1 * y0 - x1 * z0 + y1 * w0 + z1 * x0,
-        w1 * z0 + x1 * y0 - y1 * x0 + z1 * w0,
-        w1 * w0 - x1 * x0 - y1 * y0 - z1 * z0,
-    ])
+    dq = np.array(
+        [
+            w1 * x0 + x1 * w0 + y1 * z0 - z1 * y0,
+            w1 * y0 - x1 * z0 + y1 * w0 + z1 * x0,
+            w1 * z0 + x1 * y0 - y1 * x0 + z1 * w0,
+            w1 * w0 - x1 * x0 - y1 * y0 - z1 * z0,
+        ]
+    )
     if dq[3] < 0:
         dq = -dq
     s = np.linalg.norm(dq[:3])
@@ -235,8 +240,9 @@ def _key_index(times: wp.array(dtype=wp.float64), o: int, k: int, t: wp.float64)
 
 
 @wp.func
-def _key_pos(keys_t: wp.array(dtype=wp.float64), keys_p: wp.array(dtype=wp.vec3), o: int, k: int,
-             t: wp.float64) -> wp.vec3d:
+def _key_pos(
+    keys_t: wp.array(dtype=wp.float64), keys_p: wp.array(dtype=wp.vec3), o: int, k: int, t: wp.float64
+) -> wp.vec3d:
     """Collider.pose's translation: float32 lerp as numpy does it on float32 keys."""
     i = _key_index(keys_t, o, k, t)
     if i < 0:
@@ -248,8 +254,9 @@ def _key_pos(keys_t: wp.array(dtype=wp.float64), keys_p: wp.array(dtype=wp.vec3)
 
 
 @wp.func
-def _key_rot(keys_t: wp.array(dtype=wp.float64), keys_q: wp.array(dtype=wp.quat), o: int, k: int,
-             t: wp.float64) -> wp.quatd:
+def _key_rot(
+    keys_t: wp.array(dtype=wp.float64), keys_q: wp.array(dtype=wp.quat), o: int, k: int, t: wp.float64
+) -> wp.quatd:
     """Collider.pose's rotation: _slerp in float64."""
     i = _key_index(keys_t, o, k, t)
     if i < 0:
@@ -273,10 +280,18 @@ def _key_rot(keys_t: wp.array(dtype=wp.float64), keys_q: wp.array(dtype=wp.quat)
 
 
 @wp.func
-def pose_collider(c: int, keys_t: wp.array(dtype=wp.float64), keys_p: wp.array(dtype=wp.vec3),
-                  keys_q: wp.array(dtype=wp.quat), offsets: wp.array(dtype=wp.int32),
-                  counts: wp.array(dtype=wp.int32), t0: wp.float64, t1: wp.float64, sim_dt: wp.float64,
-                  out: wp.array(dtype=ColliderParams)):
+def pose_collider(
+    c: int,
+    keys_t: wp.array(dtype=wp.float64),
+    keys_p: wp.array(dtype=wp.vec3),
+    keys_q: wp.array(dtype=wp.quat),
+    offsets: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    t0: wp.float64,
+    t1: wp.float64,
+    sim_dt: wp.float64,
+    out: wp.array(dtype=ColliderParams),
+):
     """collider_velocity of collider c over the shot interval [t0, t1] spread over sim_dt
     (s), written into its ColliderParams (the static fields stay as packed)."""
     o = offsets[c]
@@ -290,10 +305,12 @@ def pose_collider(c: int, keys_t: wp.array(dtype=wp.float64), keys_p: wp.array(d
     y0 = -q0[1]
     z0 = -q0[2]
     w0 = q0[3]
-    dq = wp.quatd(q1[3] * x0 + q1[0] * w0 + q1[1] * z0 - q1[2] * y0,
-                  q1[3] * y0 - q1[0] * z0 + q1[1] * w0 + q1[2] * x0,
-                  q1[3] * z0 + q1[0] * y0 - q1[1] * x0 + q1[2] * w0,
-                  q1[3] * w0 - q1[0] * x0 - q1[1] * y0 - q1[2] * z0)
+    dq = wp.quatd(
+        q1[3] * x0 + q1[0] * w0 + q1[1] * z0 - q1[2] * y0,
+        q1[3] * y0 - q1[0] * z0 + q1[1] * w0 + q1[2] * x0,
+        q1[3] * z0 + q1[0] * y0 - q1[1] * x0 + q1[2] * w0,
+        q1[3] * w0 - q1[0] * x0 - q1[1] * y0 - q1[2] * z0,
+    )
     if dq[3] < wp.float64(0.0):
         dq = -dq
     axis = wp.vec3d(dq[0], dq[1], dq[2])

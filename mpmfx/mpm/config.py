@@ -107,20 +107,15 @@ class SolverConfig:
             set_("out_of_domain", OutOfDomain(self.out_of_domain))
         except ValueError:
             raise SolverConfigError(
-                "out_of_domain", f"{self.out_of_domain!r}: use "
-                f"{' or '.join(repr(o.value) for o in OutOfDomain)}"
+                "out_of_domain", f"{self.out_of_domain!r}: use {' or '.join(repr(o.value) for o in OutOfDomain)}"
             ) from None
         walls = tuple(self.walls)
         if len(walls) != 6:
-            raise SolverConfigError(
-                "walls", f"{len(walls)} entries; give 6 (-x, +x, -y, +y, -z, +z)"
-            )
+            raise SolverConfigError("walls", f"{len(walls)} entries; give 6 (-x, +x, -y, +y, -z, +z)")
         try:
             set_("walls", tuple(WallType(w) for w in walls))
         except ValueError as err:
-            raise SolverConfigError(
-                "walls", f"{err}; use {', '.join(w.value for w in WallType)}"
-            ) from None
+            raise SolverConfigError("walls", f"{err}; use {', '.join(w.value for w in WallType)}") from None
         gravity = tuple(float(g) for g in self.gravity)
         if len(gravity) != 3 or not all(math.isfinite(g) for g in gravity):
             raise SolverConfigError("gravity", f"{self.gravity!r}: give 3 finite numbers")
@@ -130,15 +125,18 @@ class SolverConfig:
                 raise SolverConfigError(name, f"{getattr(self, name)!r}: give a finite number")
         checks = [
             ("grid_n", 8 <= self.grid_n <= 4096, "must be in [8, 4096]"),
-            ("cfl", 0 < self.cfl <= 1.0, "must be in (0, 1]: above 1 a particle outruns the grid "
-             "and elastic energy grows without any non-finite value to catch; 0.3-0.5 is usual"),
+            (
+                "cfl",
+                0 < self.cfl <= 1.0,
+                "must be in (0, 1]: above 1 a particle outruns the grid "
+                "and elastic energy grows without any non-finite value to catch; 0.3-0.5 is usual",
+            ),
             ("damping", self.damping >= 0, "must be >= 0 (a rate, 1/s)"),
             ("drag", self.drag >= 0, "must be >= 0 (a rate, 1/s)"),
             ("time_scale", self.time_scale > 0, "must be > 0"),
             ("wall_friction", self.wall_friction >= 0, "must be >= 0"),
             ("contact_friction", self.contact_friction >= 0, "must be >= 0"),
-            ("boundary_cells", 2 <= self.boundary_cells < self.grid_n // 2,
-             "must be >= 2 and < grid_n / 2"),
+            ("boundary_cells", 2 <= self.boundary_cells < self.grid_n // 2, "must be >= 2 and < grid_n / 2"),
             ("dt_min", 0 < self.dt_min <= self.dt_max, f"must be > 0 and not above dt_max ({self.dt_max})"),
             ("max_substeps_per_frame", self.max_substeps_per_frame >= 1, "must be >= 1"),
         ]

@@ -70,10 +70,22 @@ def pack_material(m: Material) -> MaterialParams:
 def pack_f_jp(F: wp.mat33, jp: float) -> wp.mat44:
     """(F, Jp) -> mat44, because a wp.func returns one value here."""
     return wp.mat44(
-        F[0, 0], F[0, 1], F[0, 2], 0.0,
-        F[1, 0], F[1, 1], F[1, 2], 0.0,
-        F[2, 0], F[2, 1], F[2, 2], 0.0,
-        0.0, 0.0, 0.0, jp,
+        F[0, 0],
+        F[0, 1],
+        F[0, 2],
+        0.0,
+        F[1, 0],
+        F[1, 1],
+        F[1, 2],
+        0.0,
+        F[2, 0],
+        F[2, 1],
+        F[2, 2],
+        0.0,
+        0.0,
+        0.0,
+        0.0,
+        jp,
     )
 
 
@@ -100,9 +112,15 @@ def bspline_weights(fx: wp.vec3) -> wp.mat33:
 def bspline_gradients(fx: wp.vec3) -> wp.mat33:
     """d/dfx of bspline_weights, per cell (multiply by 1/dx for domain units); rows as there."""
     return wp.mat33(
-        fx[0] - 1.5, fx[1] - 1.5, fx[2] - 1.5,
-        -2.0 * (fx[0] - 1.0), -2.0 * (fx[1] - 1.0), -2.0 * (fx[2] - 1.0),
-        fx[0] - 0.5, fx[1] - 0.5, fx[2] - 0.5,
+        fx[0] - 1.5,
+        fx[1] - 1.5,
+        fx[2] - 1.5,
+        -2.0 * (fx[0] - 1.0),
+        -2.0 * (fx[1] - 1.0),
+        -2.0 * (fx[2] - 1.0),
+        fx[0] - 0.5,
+        fx[1] - 0.5,
+        fx[2] - 0.5,
     )
 
 
@@ -255,8 +273,18 @@ def snow_plastic(mat: MaterialParams, F: wp.mat33, jp: float):
         J_fast = wp.determinant(F)
         tau_fast = (2.0 * mat.mu0 * h_fast) * (F - R) * wp.transpose(F)
         k = mat.lambda0 * h_fast * (J_fast - 1.0) * J_fast
-        return F, jp, vec6(tau_fast[0, 0] + k, tau_fast[1, 1] + k, tau_fast[2, 2] + k,
-                           tau_fast[0, 1], tau_fast[0, 2], tau_fast[1, 2])
+        return (
+            F,
+            jp,
+            vec6(
+                tau_fast[0, 0] + k,
+                tau_fast[1, 1] + k,
+                tau_fast[2, 2] + k,
+                tau_fast[0, 1],
+                tau_fast[0, 2],
+                tau_fast[1, 2],
+            ),
+        )
     U, sig, V = wp.svd3(F)
     Fe = F
     jp_new = jp
@@ -355,7 +383,9 @@ def solid_energy_density(mat: MaterialParams, F: wp.mat33, jp: float) -> float:
         j_fast = wp.determinant(F)
         if j_fast > 0.0 and singular_values_within(F, POLAR_LO, POLAR_HI):
             D = F - polar_rotation(F)
-            return hardening_factor(mat, jp) * (mat.mu0 * wp.ddot(D, D) + 0.5 * mat.lambda0 * (j_fast - 1.0) * (j_fast - 1.0))
+            return hardening_factor(mat, jp) * (
+                mat.mu0 * wp.ddot(D, D) + 0.5 * mat.lambda0 * (j_fast - 1.0) * (j_fast - 1.0)
+            )
     U, sig, V = wp.svd3(F)
     if mat.mode == MODE_SAND:
         eps = log_strain(sig)

@@ -18,14 +18,7 @@ import functools
 
 import warp as wp
 
-from .constitutive import (
-    MODE_SAND,
-    MODE_SNOW,
-    MODE_WATER,
-    MaterialParams,
-    solid_energy_density,
-    tait_energy_density,
-)
+from .constitutive import MODE_SAND, MODE_SNOW, MODE_WATER, MaterialParams, solid_energy_density, tait_energy_density
 from .state import SceneFlags, load_m33
 from .stepper import chunk_particle
 
@@ -44,9 +37,15 @@ def make_report(flags: SceneFlags):
     def report_partials(
         materials: wp.array(dtype=MaterialParams),
         material: wp.array(dtype=wp.int32),
-        mass: wp.array(dtype=float), volume: wp.array(dtype=float), v: wp.array(dtype=wp.vec3),
-        F: wp.array2d(dtype=wp.vec3), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
-        alive: wp.array(dtype=wp.int32), n: int, coalesced: int,
+        mass: wp.array(dtype=float),
+        volume: wp.array(dtype=float),
+        v: wp.array(dtype=wp.vec3),
+        F: wp.array2d(dtype=wp.vec3),
+        J: wp.array(dtype=float),
+        Jp: wp.array(dtype=float),
+        alive: wp.array(dtype=wp.int32),
+        n: int,
+        coalesced: int,
         partial: wp.array2d(dtype=wp.float64),
     ):
         b = wp.tid()

@@ -107,15 +107,28 @@ def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float, field_o
                     s2 += wg
                 elif k == 2:
                     s2 += 2.0 * wg
-    B = wp.mat33(s0[0] - v[0] * fx[0], s1[0] - v[0] * fx[1], s2[0] - v[0] * fx[2],
-                 s0[1] - v[1] * fx[0], s1[1] - v[1] * fx[1], s2[1] - v[1] * fx[2],
-                 s0[2] - v[2] * fx[0], s1[2] - v[2] * fx[1], s2[2] - v[2] * fx[2])
+    B = wp.mat33(
+        s0[0] - v[0] * fx[0],
+        s1[0] - v[0] * fx[1],
+        s2[0] - v[0] * fx[2],
+        s0[1] - v[1] * fx[0],
+        s1[1] - v[1] * fx[1],
+        s2[1] - v[1] * fx[2],
+        s0[2] - v[2] * fx[0],
+        s1[2] - v[2] * fx[1],
+        s2[2] - v[2] * fx[2],
+    )
     return v, (4.0 * inv_dx) * B
 
 
 @wp.func
-def grid_density(gp: G2PParams, grid_m: wp.array3d(dtype=float), grid_fixed: wp.array4d(dtype=wp.int64),
-                 x: wp.vec3, field_offset: int):
+def grid_density(
+    gp: G2PParams,
+    grid_m: wp.array3d(dtype=float),
+    grid_fixed: wp.array4d(dtype=wp.int64),
+    x: wp.vec3,
+    field_offset: int,
+):
     """Grid density at the particle, mass/domain^3: sum w_i m_i / dx^3 over its 27 nodes
     (exactly the rest density inside a uniformly sampled body at J = 1), and the smallest
     node density among them (low near a free surface). Returns (density, smallest)."""
@@ -172,8 +185,15 @@ def keep_in_domain(gp: G2PParams, x: wp.vec3, counts: wp.array(dtype=wp.int32)):
 
 
 @wp.func
-def recover_volume(gp: G2PParams, mat: MaterialParams, grid_m: wp.array3d(dtype=float),
-                   grid_fixed: wp.array4d(dtype=wp.int64), x: wp.vec3, field_offset: int, J: float) -> float:
+def recover_volume(
+    gp: G2PParams,
+    mat: MaterialParams,
+    grid_m: wp.array3d(dtype=float),
+    grid_fixed: wp.array4d(dtype=wp.int64),
+    x: wp.vec3,
+    field_offset: int,
+    J: float,
+) -> float:
     """Water grid volume recovery (materials.Material.volume_recovery): relax J toward the
     volume ratio the grid measures, capped at 1. Only where every node of the stencil is at
     least half full: near a free surface the grid reads missing neighbours as expansion, and
@@ -218,20 +238,36 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
         materials: wp.array(dtype=MaterialParams),
         material: wp.array(dtype=wp.int32),
         field_id: wp.array(dtype=wp.int32),
-        x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array2d(dtype=wp.vec3),
-        F: wp.array2d(dtype=wp.vec3), J: wp.array(dtype=float), Jp: wp.array(dtype=float),
-        alive: wp.array(dtype=wp.int32), tau: wp.array(dtype=vec6),
-        x_out: wp.array(dtype=wp.vec3), v_out: wp.array(dtype=wp.vec3), C_out: wp.array2d(dtype=wp.vec3),
-        F_out: wp.array2d(dtype=wp.vec3), J_out: wp.array(dtype=float), Jp_out: wp.array(dtype=float),
-        alive_out: wp.array(dtype=wp.int32), tau_out: wp.array(dtype=vec6),
+        x: wp.array(dtype=wp.vec3),
+        v: wp.array(dtype=wp.vec3),
+        C: wp.array2d(dtype=wp.vec3),
+        F: wp.array2d(dtype=wp.vec3),
+        J: wp.array(dtype=float),
+        Jp: wp.array(dtype=float),
+        alive: wp.array(dtype=wp.int32),
+        tau: wp.array(dtype=vec6),
+        x_out: wp.array(dtype=wp.vec3),
+        v_out: wp.array(dtype=wp.vec3),
+        C_out: wp.array2d(dtype=wp.vec3),
+        F_out: wp.array2d(dtype=wp.vec3),
+        J_out: wp.array(dtype=float),
+        Jp_out: wp.array(dtype=float),
+        alive_out: wp.array(dtype=wp.int32),
+        tau_out: wp.array(dtype=vec6),
         stats: wp.array(dtype=float),
         counts: wp.array(dtype=wp.int32),
         sub: wp.array(dtype=SubstepDev),
         order: wp.array(dtype=wp.int32),
-        mass: wp.array(dtype=float), volume: wp.array(dtype=float), body: wp.array(dtype=wp.int32),
-        pid: wp.array(dtype=wp.int32), mass_out: wp.array(dtype=float), volume_out: wp.array(dtype=float),
-        material_out: wp.array(dtype=wp.int32), body_out: wp.array(dtype=wp.int32),
-        field_id_out: wp.array(dtype=wp.int32), pid_out: wp.array(dtype=wp.int32),
+        mass: wp.array(dtype=float),
+        volume: wp.array(dtype=float),
+        body: wp.array(dtype=wp.int32),
+        pid: wp.array(dtype=wp.int32),
+        mass_out: wp.array(dtype=float),
+        volume_out: wp.array(dtype=float),
+        material_out: wp.array(dtype=wp.int32),
+        body_out: wp.array(dtype=wp.int32),
+        field_id_out: wp.array(dtype=wp.int32),
+        pid_out: wp.array(dtype=wp.int32),
     ):
         slot = wp.tid()
         if wp.static(device_clock):
@@ -342,8 +378,13 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
 
 
 @wp.kernel(enable_backward=False)
-def solid_stress(materials: wp.array(dtype=MaterialParams), material: wp.array(dtype=wp.int32),
-                 F: wp.array2d(dtype=wp.vec3), Jp: wp.array(dtype=float), tau: wp.array(dtype=vec6)):
+def solid_stress(
+    materials: wp.array(dtype=MaterialParams),
+    material: wp.array(dtype=wp.int32),
+    F: wp.array2d(dtype=wp.vec3),
+    Jp: wp.array(dtype=float),
+    tau: wp.array(dtype=vec6),
+):
     """tau (n,) of every snow and sand particle from its F and Jp (solid_tau), for a state
     that has no stored stress yet (a new one, or a checkpoint written before G2P stored it)."""
     p = wp.tid()

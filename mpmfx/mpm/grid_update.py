@@ -24,7 +24,6 @@ from .slots import Count, WallCode
 from .stepper import SubstepDev
 
 
-
 @wp.struct
 class GridParams:
     """Per-substep grid-update parameters.
@@ -87,16 +86,24 @@ def apply_walls(v: wp.vec3, node: wp.vec3i, gp: GridParams) -> wp.vec3:
 
 
 @wp.func
-def node_velocity(gp: GridParams, grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
-                  grid_fixed: wp.array4d(dtype=wp.int64), i: int, j: int, k: int):
+def node_velocity(
+    gp: GridParams,
+    grid_m: wp.array3d(dtype=float),
+    grid_mv: wp.array3d(dtype=wp.vec3),
+    grid_fixed: wp.array4d(dtype=wp.int64),
+    i: int,
+    j: int,
+    k: int,
+):
     """(mass, velocity after gravity and damping) of one node of one field; v = 0 if empty."""
     m = float(0.0)
     mv = wp.vec3(0.0)
     if gp.deterministic != 0:
         m = float(grid_fixed[i, j, k, 0]) * gp.q_mass
-        mv = wp.vec3(
-            float(grid_fixed[i, j, k, 1]), float(grid_fixed[i, j, k, 2]), float(grid_fixed[i, j, k, 3])
-        ) * gp.q_mom
+        mv = (
+            wp.vec3(float(grid_fixed[i, j, k, 1]), float(grid_fixed[i, j, k, 2]), float(grid_fixed[i, j, k, 3]))
+            * gp.q_mom
+        )
     else:
         m = grid_m[i, j, k]
         mv = grid_mv[i, j, k]
@@ -108,8 +115,14 @@ def node_velocity(gp: GridParams, grid_m: wp.array3d(dtype=float), grid_mv: wp.a
 
 
 @wp.func
-def mass_gradient(gp: GridParams, grid_normal: wp.array3d(dtype=wp.vec3), grid_fixed: wp.array4d(dtype=wp.int64),
-                  i: int, j: int, k: int) -> wp.vec3:
+def mass_gradient(
+    gp: GridParams,
+    grid_normal: wp.array3d(dtype=wp.vec3),
+    grid_fixed: wp.array4d(dtype=wp.int64),
+    i: int,
+    j: int,
+    k: int,
+) -> wp.vec3:
     """Mass gradient of one field at a node (any consistent scale; only its direction is used)."""
     if gp.deterministic != 0:
         return wp.vec3(float(grid_fixed[i, j, k, 4]), float(grid_fixed[i, j, k, 5]), float(grid_fixed[i, j, k, 6]))
@@ -135,8 +148,16 @@ def field_contact(v: wp.vec3, v_cm: wp.vec3, normal_in: wp.vec3, mu: float) -> w
 
 
 @wp.func
-def boundaries(gp: GridParams, colliders: wp.array(dtype=ColliderParams), sdf: wp.array(dtype=float),
-               counts: wp.array(dtype=wp.int32), v: wp.vec3, i: int, j: int, k: int) -> wp.vec3:
+def boundaries(
+    gp: GridParams,
+    colliders: wp.array(dtype=ColliderParams),
+    sdf: wp.array(dtype=float),
+    counts: wp.array(dtype=wp.int32),
+    v: wp.vec3,
+    i: int,
+    j: int,
+    k: int,
+) -> wp.vec3:
     """A node's velocity after the colliders and the walls (zero, and counted, if not finite)."""
     xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
     for c in range(gp.num_colliders):
@@ -149,10 +170,20 @@ def boundaries(gp: GridParams, colliders: wp.array(dtype=ColliderParams), sdf: w
 
 
 @wp.func
-def update_node(gp: GridParams, grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
-                grid_normal: wp.array3d(dtype=wp.vec3), grid_fixed: wp.array4d(dtype=wp.int64),
-                colliders: wp.array(dtype=ColliderParams), sdf: wp.array(dtype=float),
-                grid_v: wp.array3d(dtype=wp.vec3), counts: wp.array(dtype=wp.int32), i: int, j: int, k: int):
+def update_node(
+    gp: GridParams,
+    grid_m: wp.array3d(dtype=float),
+    grid_mv: wp.array3d(dtype=wp.vec3),
+    grid_normal: wp.array3d(dtype=wp.vec3),
+    grid_fixed: wp.array4d(dtype=wp.int64),
+    colliders: wp.array(dtype=ColliderParams),
+    sdf: wp.array(dtype=float),
+    grid_v: wp.array3d(dtype=wp.vec3),
+    counts: wp.array(dtype=wp.int32),
+    i: int,
+    j: int,
+    k: int,
+):
     """Node (i, j, k) of every field: velocity from momentum, gravity, damping, field contact,
     colliders, walls."""
     m_tot = float(0.0)
@@ -186,8 +217,11 @@ def make_grid_update(*, device_clock: bool = False, sparse: bool = False, clears
     mass and momentum are zeroed once read, which is the next substep's clear (the same marked
     bricks), so that substep launches none; only where G2P reads no node mass (water volume
     recovery does)."""
-    module = ("mpmfx_mpm_grid_dev" if device_clock else __name__) + ("_sparse" if sparse else "") + (
-        "_clears" if clears else "")
+    module = (
+        ("mpmfx_mpm_grid_dev" if device_clock else __name__)
+        + ("_sparse" if sparse else "")
+        + ("_clears" if clears else "")
+    )
 
     @wp.kernel(enable_backward=False, module=module)
     def grid_update(

@@ -112,8 +112,7 @@ class Material:
             object.__setattr__(self, "mode", Mode(self.mode))
         except ValueError:
             raise ValueError(
-                f"Material.mode: {self.mode!r} is not a mode; use one of "
-                f"{', '.join(m.name for m in Mode)}"
+                f"Material.mode: {self.mode!r} is not a mode; use one of {', '.join(m.name for m in Mode)}"
             ) from None
         for f in dataclasses.fields(self):
             value = getattr(self, f.name)
@@ -136,8 +135,10 @@ class Material:
         if self.friction_fit not in FRICTION_FITS:
             raise ValueError(f"Material.friction_fit = {self.friction_fit!r}: use one of {', '.join(FRICTION_FITS)}")
         if self.friction_fit == "repose" and not self.friction_angle < 45.0:
-            raise ValueError(f"Material.friction_angle = {self.friction_angle!r} with friction_fit = \"repose\": "
-                             "an angle of repose must be < 45 degrees (tan(phi) is the friction coefficient)")
+            raise ValueError(
+                f'Material.friction_angle = {self.friction_angle!r} with friction_fit = "repose": '
+                "an angle of repose must be < 45 degrees (tan(phi) is the friction coefficient)"
+            )
         for name, ok, what in checks:
             value = getattr(self, name)
             if not (ok and math.isfinite(float(value))):
@@ -204,13 +205,10 @@ PRESETS: dict[str, Material] = {
     "Wet": Material(Mode.SNOW, youngs_modulus=150.0, hardening=0.7),
     "Slush": Material(Mode.SNOW, youngs_modulus=90.0, hardening=0.5),
     "Elastic": Material(
-        Mode.SNOW, youngs_modulus=1200.0, hardening=0.0,
-        theta_c=_ELASTIC_YIELD, theta_s=_ELASTIC_YIELD,
+        Mode.SNOW, youngs_modulus=1200.0, hardening=0.0, theta_c=_ELASTIC_YIELD, theta_s=_ELASTIC_YIELD
     ),
     "Granular": Material(Mode.SAND, youngs_modulus=400.0, hardening=0.0, friction_angle=38.0),
-    "CohesiveGranular": Material(
-        Mode.SAND, youngs_modulus=400.0, hardening=0.0, friction_angle=38.0, cohesion=0.0006
-    ),
+    "CohesiveGranular": Material(Mode.SAND, youngs_modulus=400.0, hardening=0.0, friction_angle=38.0, cohesion=0.0006),
     "Water": Material(Mode.WATER, bulk_modulus=100.0),
     "Tracer": Material(Mode.TRACER),
 }
@@ -224,9 +222,7 @@ def preset(name: str, **overrides) -> Material:
     lookup = {k.lower(): k for k in PRESETS}
     key = lookup.get(str(name).lower())
     if key is None:
-        raise ValueError(
-            f"unknown material preset {name!r}; valid presets: {', '.join(PRESETS)}"
-        )
+        raise ValueError(f"unknown material preset {name!r}; valid presets: {', '.join(PRESETS)}")
     fields = [f.name for f in dataclasses.fields(Material)]
     unknown = sorted(set(overrides) - set(fields))
     if unknown:

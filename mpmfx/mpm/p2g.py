@@ -75,8 +75,16 @@ def make_particle_affine(flags: SceneFlags):
     has_water = flags.water
 
     @wp.func
-    def particle_affine(pp: P2GParams, mat: MaterialParams, stress: wp.array(dtype=vec6), J: wp.array(dtype=float),
-                        C: wp.array2d(dtype=wp.vec3), volume: wp.array(dtype=float), p: int, m: float) -> wp.mat33:
+    def particle_affine(
+        pp: P2GParams,
+        mat: MaterialParams,
+        stress: wp.array(dtype=vec6),
+        J: wp.array(dtype=float),
+        C: wp.array2d(dtype=wp.vec3),
+        volume: wp.array(dtype=float),
+        p: int,
+        m: float,
+    ) -> wp.mat33:
         tau = wp.mat33(0.0)
         if wp.static(has_solid):
             if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
@@ -106,8 +114,11 @@ def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
     @wp.kernel(enable_backward=False, module=flags.key + ("_dev" if device_clock else ""))
     def p2g(
         pp: P2GParams,
-        x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array2d(dtype=wp.vec3),
-        tau: wp.array(dtype=vec6), J: wp.array(dtype=float),
+        x: wp.array(dtype=wp.vec3),
+        v: wp.array(dtype=wp.vec3),
+        C: wp.array2d(dtype=wp.vec3),
+        tau: wp.array(dtype=vec6),
+        J: wp.array(dtype=float),
         alive: wp.array(dtype=wp.int32),
         mass: wp.array(dtype=float),
         volume: wp.array(dtype=float),
@@ -153,8 +164,9 @@ def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
                     gm = wp.vec3(0.0)
                     if wp.static(multi):
                         # mass gradient w.r.t. the node position (d/dx_node = -d/dfx), per cell
-                        gm = -m * wp.vec3(dW[i, 0] * W[j, 1] * W[k, 2], W[i, 0] * dW[j, 1] * W[k, 2],
-                                          W[i, 0] * W[j, 1] * dW[k, 2])
+                        gm = -m * wp.vec3(
+                            dW[i, 0] * W[j, 1] * W[k, 2], W[i, 0] * dW[j, 1] * W[k, 2], W[i, 0] * W[j, 1] * dW[k, 2]
+                        )
                     if pp.deterministic != 0:
                         wp.atomic_add(grid_fixed, bi + i, bj + j, bk + k, 0, to_fixed(w * m, pp.q_mass_inv))
                         for c in range(3):

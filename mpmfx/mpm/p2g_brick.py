@@ -265,8 +265,11 @@ def marked_node(marks: wp.array(dtype=wp.int32), t: int, nb: int, nodes: int) ->
     if marks[b] == 0:
         return wp.vec3i(-1)
     q = t % (BRICK * BRICK * BRICK)
-    node = wp.vec3i((b // (nb * nb)) * BRICK + q // (BRICK * BRICK), ((b // nb) % nb) * BRICK + (q // BRICK) % BRICK,
-                    (b % nb) * BRICK + q % BRICK)
+    node = wp.vec3i(
+        (b // (nb * nb)) * BRICK + q // (BRICK * BRICK),
+        ((b // nb) % nb) * BRICK + (q // BRICK) % BRICK,
+        (b % nb) * BRICK + q % BRICK,
+    )
     if wp.max(node) >= nodes:
         return wp.vec3i(-1)
     return node
@@ -282,9 +285,15 @@ def mark_window(marks: wp.array(dtype=wp.int32), brick: int, nb: int, q: int):
 
 
 @wp.kernel(enable_backward=False)
-def _brick_keys(pp: P2GParams, x: wp.array(dtype=wp.vec3), alive: wp.array(dtype=wp.int32),
-                mass: wp.array(dtype=float), idx: wp.array(dtype=wp.int32), keys: wp.array(dtype=wp.int32),
-                sub: wp.array(dtype=SubstepDev)):
+def _brick_keys(
+    pp: P2GParams,
+    x: wp.array(dtype=wp.vec3),
+    alive: wp.array(dtype=wp.int32),
+    mass: wp.array(dtype=float),
+    idx: wp.array(dtype=wp.int32),
+    keys: wp.array(dtype=wp.int32),
+    sub: wp.array(dtype=SubstepDev),
+):
     p = wp.tid()
     if sub[0].active == 0:
         return
@@ -313,9 +322,15 @@ def _seg_flags(keys: wp.array(dtype=wp.int32), flag: wp.array(dtype=wp.int32), s
 
 
 @wp.kernel(enable_backward=False)
-def _seg_starts(keys: wp.array(dtype=wp.int32), flag: wp.array(dtype=wp.int32), pos: wp.array(dtype=wp.int32),
-                n: int, start: wp.array(dtype=wp.int32), n_seg: wp.array(dtype=wp.int32),
-                sub: wp.array(dtype=SubstepDev)):
+def _seg_starts(
+    keys: wp.array(dtype=wp.int32),
+    flag: wp.array(dtype=wp.int32),
+    pos: wp.array(dtype=wp.int32),
+    n: int,
+    start: wp.array(dtype=wp.int32),
+    n_seg: wp.array(dtype=wp.int32),
+    sub: wp.array(dtype=SubstepDev),
+):
     """start[i]: the first slot of segment i; start[n_seg]: one past the last sorted particle
     (the dead ones sort last, NO_KEY)."""
     s = wp.tid()
@@ -358,9 +373,18 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
         window(3, 0, wp.int64(0))
 
     @wp.func
-    def add_to_grid(pp: P2GParams, m: float, mv: wp.vec3, aff: wp.mat33, fx: wp.vec3, b: wp.vec3i,
-                    grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
-                    grid_fixed: wp.array4d(dtype=wp.int64), marks: wp.array(dtype=wp.int32)):
+    def add_to_grid(
+        pp: P2GParams,
+        m: float,
+        mv: wp.vec3,
+        aff: wp.mat33,
+        fx: wp.vec3,
+        b: wp.vec3i,
+        grid_m: wp.array3d(dtype=float),
+        grid_mv: wp.array3d(dtype=wp.vec3),
+        grid_fixed: wp.array4d(dtype=wp.int64),
+        marks: wp.array(dtype=wp.int32),
+    ):
         """A particle outside its window: its 27 x 4 contributions straight to the grid, as the
         reference adds them (p2g.py), marking the node bricks of its stencil's corners."""
         dx = 1.0 / pp.inv_dx
@@ -377,8 +401,9 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                     if wp.static(det):
                         wp.atomic_add(grid_fixed, b[0] + i, b[1] + j, b[2] + k, 0, to_fixed(w * m, pp.q_mass_inv))
                         for c in range(3):
-                            wp.atomic_add(grid_fixed, b[0] + i, b[1] + j, b[2] + k, 1 + c,
-                                          to_fixed(mom[c], pp.q_mom_inv))
+                            wp.atomic_add(
+                                grid_fixed, b[0] + i, b[1] + j, b[2] + k, 1 + c, to_fixed(mom[c], pp.q_mom_inv)
+                            )
                     else:
                         wp.atomic_add(grid_m, b[0] + i, b[1] + j, b[2] + k, w * m)
                         wp.atomic_add(grid_mv, b[0] + i, b[1] + j, b[2] + k, mom)
@@ -401,15 +426,19 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
             if int(park(5, u, 0.0)) != code:
                 break
             m = park(2, u, 0.0)
-            fx = wp.vec3(park(2, 13 * BLOCK_CUDA + u, 0.0), park(2, 14 * BLOCK_CUDA + u, 0.0),
-                         park(2, 15 * BLOCK_CUDA + u, 0.0))
+            fx = wp.vec3(
+                park(2, 13 * BLOCK_CUDA + u, 0.0), park(2, 14 * BLOCK_CUDA + u, 0.0), park(2, 15 * BLOCK_CUDA + u, 0.0)
+            )
             # the momentum at node (i, j, k) is q + A (i, j, k) (see the park): row (i, j)'s part once,
             # then k steps of column 2
             base = wp.vec3(0.0)
             col2 = wp.vec3(0.0)
             for c in range(3):
-                base[c] = (park(2, (1 + c) * BLOCK_CUDA + u, 0.0) + park(2, (4 + 3 * c) * BLOCK_CUDA + u, 0.0) * fi
-                           + park(2, (5 + 3 * c) * BLOCK_CUDA + u, 0.0) * fj)
+                base[c] = (
+                    park(2, (1 + c) * BLOCK_CUDA + u, 0.0)
+                    + park(2, (4 + 3 * c) * BLOCK_CUDA + u, 0.0) * fi
+                    + park(2, (5 + 3 * c) * BLOCK_CUDA + u, 0.0) * fj
+                )
                 col2[c] = park(2, (6 + 3 * c) * BLOCK_CUDA + u, 0.0)
             W = bspline_weights(fx)
             wij = row_weight(W, i, 0) * row_weight(W, j, 1)
@@ -430,8 +459,15 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
             window(1, (1 + c) * WIN_NODES + e + 2, to_fixed(mv2[c], pp.q_mom_inv))
 
     @wp.func
-    def flush(pp: P2GParams, e: int, origin: wp.vec3i, nn: int, grid_m: wp.array3d(dtype=float),
-              grid_mv: wp.array3d(dtype=wp.vec3), grid_fixed: wp.array4d(dtype=wp.int64)):
+    def flush(
+        pp: P2GParams,
+        e: int,
+        origin: wp.vec3i,
+        nn: int,
+        grid_m: wp.array3d(dtype=float),
+        grid_mv: wp.array3d(dtype=wp.vec3),
+        grid_fixed: wp.array4d(dtype=wp.int64),
+    ):
         """Window node e to the grid, one atomic a channel, if anything landed there."""
         gi = origin[0] + e // (WIN * WIN)
         gj = origin[1] + (e // WIN) % WIN
@@ -446,21 +482,51 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
                 qm = window(2, e, wp.int64(0))
                 if qm != wp.int64(0):  # the quanta are powers of two: these divisions are exact
                     wp.atomic_add(grid_m, gi, gj, gk, float(qm) / pp.q_mass_inv)
-                    wp.atomic_add(grid_mv, gi, gj, gk, wp.vec3(
-                        float(window(2, WIN_NODES + e, wp.int64(0))), float(window(2, 2 * WIN_NODES + e, wp.int64(0))),
-                        float(window(2, 3 * WIN_NODES + e, wp.int64(0)))) / pp.q_mom_inv)
+                    wp.atomic_add(
+                        grid_mv,
+                        gi,
+                        gj,
+                        gk,
+                        wp.vec3(
+                            float(window(2, WIN_NODES + e, wp.int64(0))),
+                            float(window(2, 2 * WIN_NODES + e, wp.int64(0))),
+                            float(window(2, 3 * WIN_NODES + e, wp.int64(0))),
+                        )
+                        / pp.q_mom_inv,
+                    )
 
-    @wp.kernel(enable_backward=False, grid_stride=False, module=flags.key + ("_brick_det" if det else "_brick"),
-               cuda_max_registers=MAX_REGISTERS)
-    def scatter(pp: P2GParams, keys: wp.array(dtype=wp.int32), start: wp.array(dtype=wp.int32),
-                n_seg: wp.array(dtype=wp.int32), block: int, n_blocks: int, idx: wp.array(dtype=wp.int32),
-                x: wp.array(dtype=wp.vec3), v: wp.array(dtype=wp.vec3), C: wp.array2d(dtype=wp.vec3),
-                tau: wp.array(dtype=vec6), J: wp.array(dtype=float),
-                alive: wp.array(dtype=wp.int32), mass: wp.array(dtype=float), volume: wp.array(dtype=float),
-                material: wp.array(dtype=wp.int32), materials: wp.array(dtype=MaterialParams),
-                grid_m: wp.array3d(dtype=float), grid_mv: wp.array3d(dtype=wp.vec3),
-                grid_fixed: wp.array4d(dtype=wp.int64), marks: wp.array(dtype=wp.int32),
-                sub: wp.array(dtype=SubstepDev), fresh: int, frag: wp.array(dtype=wp.int64)):
+    @wp.kernel(
+        enable_backward=False,
+        grid_stride=False,
+        module=flags.key + ("_brick_det" if det else "_brick"),
+        cuda_max_registers=MAX_REGISTERS,
+    )
+    def scatter(
+        pp: P2GParams,
+        keys: wp.array(dtype=wp.int32),
+        start: wp.array(dtype=wp.int32),
+        n_seg: wp.array(dtype=wp.int32),
+        block: int,
+        n_blocks: int,
+        idx: wp.array(dtype=wp.int32),
+        x: wp.array(dtype=wp.vec3),
+        v: wp.array(dtype=wp.vec3),
+        C: wp.array2d(dtype=wp.vec3),
+        tau: wp.array(dtype=vec6),
+        J: wp.array(dtype=float),
+        alive: wp.array(dtype=wp.int32),
+        mass: wp.array(dtype=float),
+        volume: wp.array(dtype=float),
+        material: wp.array(dtype=wp.int32),
+        materials: wp.array(dtype=MaterialParams),
+        grid_m: wp.array3d(dtype=float),
+        grid_mv: wp.array3d(dtype=wp.vec3),
+        grid_fixed: wp.array4d(dtype=wp.int64),
+        marks: wp.array(dtype=wp.int32),
+        sub: wp.array(dtype=SubstepDev),
+        fresh: int,
+        frag: wp.array(dtype=wp.int64),
+    ):
         # fresh: 1 right after a sort, when the particles are still stored in their old order
         # and slot s holds particle idx[s]; the G2P of that substep stores them in slot order
         t = wp.tid()
@@ -481,8 +547,9 @@ def make_brick_scatter(flags: SceneFlags, deterministic: bool):
             s0 = start[seg]
             n_here = start[seg + 1] - s0
             brick = keys[s0] // 64
-            origin = wp.vec3i((brick // (nb * nb)) * BRICK - 1, ((brick // nb) % nb) * BRICK - 1,
-                              (brick % nb) * BRICK - 1)
+            origin = wp.vec3i(
+                (brick // (nb * nb)) * BRICK - 1, ((brick // nb) % nb) * BRICK - 1, (brick % nb) * BRICK - 1
+            )
             for r0 in range(0, n_here, n_park):
                 # park: one particle a thread, consecutive slots
                 code = -2
@@ -577,12 +644,40 @@ class BrickP2G:
         fresh = int(sort or not self.sorted)
         if fresh:
             self.sort(pp, state, cur, sub)
-        blocks = max(1, min(n, self.nb ** 3, MAX_BLOCKS))
+        blocks = max(1, min(n, self.nb**3, MAX_BLOCKS))
         scatter = make_brick_scatter(self.flags, bool(pp.deterministic))
-        wp.launch(scatter, dim=blocks * self.block, block_dim=self.block, device=dev, inputs=[
-            pp, self.keys, self.start, self.n_seg, self.block, blocks, self.idx, cur.x, cur.v, cur.C, cur.tau, cur.J,
-            cur.alive, state.mass, state.volume, state.material, materials, grid_m, grid_mv, grid_fixed,
-            self.marks, sub, fresh, self.frag])
+        wp.launch(
+            scatter,
+            dim=blocks * self.block,
+            block_dim=self.block,
+            device=dev,
+            inputs=[
+                pp,
+                self.keys,
+                self.start,
+                self.n_seg,
+                self.block,
+                blocks,
+                self.idx,
+                cur.x,
+                cur.v,
+                cur.C,
+                cur.tau,
+                cur.J,
+                cur.alive,
+                state.mass,
+                state.volume,
+                state.material,
+                materials,
+                grid_m,
+                grid_mv,
+                grid_fixed,
+                self.marks,
+                sub,
+                fresh,
+                self.frag,
+            ],
+        )
         return bool(fresh)
 
     def sort(self, pp: P2GParams, state, cur, sub) -> None:
@@ -592,8 +687,9 @@ class BrickP2G:
         wp.utils.radix_sort_pairs(self.keys, self.idx, n)
         wp.launch(_seg_flags, dim=n, device=dev, inputs=[self.keys, self.flag, sub])
         wp.utils.array_scan(self.flag, self.pos, inclusive=False)
-        wp.launch(_seg_starts, dim=n, device=dev, inputs=[self.keys, self.flag, self.pos, n, self.start, self.n_seg,
-                                                           sub])
+        wp.launch(
+            _seg_starts, dim=n, device=dev, inputs=[self.keys, self.flag, self.pos, n, self.start, self.n_seg, sub]
+        )
         self.sorted = True
 
     def nbytes(self) -> int:

@@ -23,8 +23,7 @@ class Stat(enum.IntEnum):
     @classmethod
     def initial(cls) -> list[float]:
         """Value of each slot before a substep: the identity of its reduction."""
-        start = {cls.MAX_SPEED: 0.0, cls.MAX_HARDENING: 0.0, cls.WATER_J_MIN: 1e30,
-                 cls.J_MIN: 1e30, cls.J_MAX: -1e30}
+        start = {cls.MAX_SPEED: 0.0, cls.MAX_HARDENING: 0.0, cls.WATER_J_MIN: 1e30, cls.J_MIN: 1e30, cls.J_MAX: -1e30}
         return [start[s] for s in cls]
 
 

@@ -20,6 +20,7 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
+from .chunked import DeviceAdvance
 from .clear_grid import clear_grid
 from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
@@ -28,13 +29,12 @@ from .energy import ENERGY_CHUNK, SUMS, make_report
 from .g2p import G2PParams, g2p_launch_shape, make_g2p, solid_stress
 from .grid_update import GridParams, make_grid_update
 from .materials import Material, Mode
+from .order import in_particle_order, to_slots
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
 from .p2g_brick import BRICK
-from .chunked import DeviceAdvance
-from .stepper import SubstepDev, sum_partials
 from .slots import REJECTING, Count, Stat
-from .order import in_particle_order, to_slots
 from .state import ParticleBuffers, SceneFlags, State, StepperClock, load_m33, m33_assign, m33_to_host
+from .stepper import SubstepDev, sum_partials
 
 __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
 
@@ -107,9 +107,15 @@ def _pow2_at_least(x: float) -> float:
 
 
 @wp.kernel(enable_backward=False)
-def _volume_ratio(materials: wp.array(dtype=MaterialParams), material: wp.array(dtype=wp.int32),
-                  F: wp.array2d(dtype=wp.vec3), J: wp.array(dtype=float), solid: int, water: int,
-                  out: wp.array(dtype=float)):
+def _volume_ratio(
+    materials: wp.array(dtype=MaterialParams),
+    material: wp.array(dtype=wp.int32),
+    F: wp.array2d(dtype=wp.vec3),
+    J: wp.array(dtype=float),
+    solid: int,
+    water: int,
+    out: wp.array(dtype=float),
+):
     """out[p] = det F (snow, sand), J (water) or 1 (tracers)."""
     p = wp.tid()
     mode = materials[material[p]].mode
@@ -131,8 +137,15 @@ class Solver:
     statistics back after every substep; both give the same substeps and results.
     """
 
-    def __init__(self, materials: Sequence[Material], config: SolverConfig, *,
-                 colliders: Sequence[Collider] = (), device: str | None = None, stepper: str = "device"):
+    def __init__(
+        self,
+        materials: Sequence[Material],
+        config: SolverConfig,
+        *,
+        colliders: Sequence[Collider] = (),
+        device: str | None = None,
+        stepper: str = "device",
+    ):
         self.materials = tuple(materials)
         if not self.materials:
             raise ValueError("Solver: materials is empty; give at least one Material")
@@ -146,8 +159,14 @@ class Solver:
         # specialised kernels for this scene: all three land in one Warp module per flags,
         # built before the first launch so the module compiles once
         # [device_clock]: the reference kernels, and the device stepper's (stepper.py)
-        self._kernels = {dc: (make_p2g(self.flags, device_clock=dc), make_g2p(self.flags, device_clock=dc),
-                              make_grid_update(device_clock=dc)) for dc in (False, True)}
+        self._kernels = {
+            dc: (
+                make_p2g(self.flags, device_clock=dc),
+                make_g2p(self.flags, device_clock=dc),
+                make_grid_update(device_clock=dc),
+            )
+            for dc in (False, True)
+        }
         if stepper not in ("device", "host"):
             raise ValueError(f"Solver: stepper={stepper!r}; use 'device' (default) or 'host' (the reference loop)")
         self.stepper = stepper
@@ -197,7 +216,8 @@ class Solver:
             raise ValueError(
                 f"Particles.body: {len(bodies)} distinct bodies, but multi-field contact keeps at most "
                 f"{MAX_FIELDS} velocity fields; give bodies that never touch the same id, or set "
-                "SolverConfig.multi_field=False")
+                "SolverConfig.multi_field=False"
+            )
         return ids.astype(np.int32), len(bodies)
 
     def _check_particles(self, p: Particles) -> int:
@@ -234,13 +254,16 @@ class Solver:
         volume = np.asarray(particles.volume, dtype=np.float32)
         mass = np.where(tracer[mat_idx], 0.0, volume * density[mat_idx]).astype(np.float32)
         data = {
-            "x": np.asarray(particles.x, np.float32), "v": np.asarray(particles.v, np.float32),
+            "x": np.asarray(particles.x, np.float32),
+            "v": np.asarray(particles.v, np.float32),
             "C": np.zeros((n, 3, 3), np.float32),
             "F": np.tile(np.eye(3, dtype=np.float32), (n if self.flags.solid else 1, 1, 1)),
             "J": np.ones(n if self.flags.water else 1, np.float32),
             "Jp": np.where(np.array([m.mode == Mode.SAND for m in self.materials])[mat_idx], 0.0, 1.0),
             "alive": np.ones(n, np.int32),
-            "mass": mass, "volume": volume, "material": mat_idx,
+            "mass": mass,
+            "volume": volume,
+            "material": mat_idx,
             "body": np.asarray(particles.body, np.int32),
         }
         clock = StepperClock(max_speed=float(np.linalg.norm(data["v"], axis=1).max()))
@@ -266,20 +289,25 @@ class Solver:
                     scalar = np.int32 if name == "alive" else np.float32
                     arr.assign(np.ascontiguousarray(data[name], dtype=scalar))
             state = State(
-                n=n, cur=cur, nxt=nxt,
+                n=n,
+                cur=cur,
+                nxt=nxt,
                 mass=wp.array(np.asarray(data["mass"], np.float32), dtype=float),
                 volume=wp.array(np.asarray(data["volume"], np.float32), dtype=float),
                 material=wp.array(np.asarray(data["material"], np.int32), dtype=wp.int32),
                 body=wp.array(np.asarray(data["body"], np.int32), dtype=wp.int32),
-                field_id=wp.array(field_id, dtype=wp.int32), pid=wp.array(pid, dtype=wp.int32),
-                n_fields=n_fields, clock=clock, permuted=permuted,
+                field_id=wp.array(field_id, dtype=wp.int32),
+                pid=wp.array(pid, dtype=wp.int32),
+                n_fields=n_fields,
+                clock=clock,
+                permuted=permuted,
             )
         if "tau" not in data:  # a new state, or a version 1 checkpoint
             self.update_stress(state)
         m = np.asarray(data["mass"], np.float64)
         m_ref = float(m[m > 0].mean()) if np.any(m > 0) else 1.0
         # fixed-point quanta: powers of two (see p2g module docstring)
-        self._q_mass = _pow2_at_least(m_ref) * 2.0 ** -FIXED_POINT_BITS
+        self._q_mass = _pow2_at_least(m_ref) * 2.0**-FIXED_POINT_BITS
         self._q_mom = self._q_mass
         return state
 
@@ -287,8 +315,12 @@ class Solver:
         """Recompute the stored stress (state.cur.tau) of every solid from its F and Jp. G2P
         keeps it current; call this after writing F or Jp of `state.cur` directly."""
         if self.flags.solid:
-            wp.launch(solid_stress, dim=state.n, device=self.device, inputs=[
-                self._materials_dev, state.material, state.cur.F, state.cur.Jp, state.cur.tau])
+            wp.launch(
+                solid_stress,
+                dim=state.n,
+                device=self.device,
+                inputs=[self._materials_dev, state.material, state.cur.F, state.cur.Jp, state.cur.tau],
+            )
 
     # ------------------------------------------------------------------ one substep
     def step(self, state: State, dt: float, *, t: float = 0.0) -> None:
@@ -307,9 +339,19 @@ class Solver:
             self._colliders_dev.assign(pack_colliders(self.colliders, t0, t1, dt))
         self._phases(state, state.cur, state.nxt, dt, device_clock=False)
 
-    def _phases(self, state: State, cur: ParticleBuffers, nxt: ParticleBuffers, dt: float, *,
-                device_clock: bool, brick=None, resort: bool = False, chunk_start: bool = True,
-                keep_grid: bool = False) -> None:
+    def _phases(
+        self,
+        state: State,
+        cur: ParticleBuffers,
+        nxt: ParticleBuffers,
+        dt: float,
+        *,
+        device_clock: bool,
+        brick=None,
+        resort: bool = False,
+        chunk_start: bool = True,
+        keep_grid: bool = False,
+    ) -> None:
         """Launch the four phases reading `cur`, writing `nxt`. device_clock: the kernels take
         dt (and the dt-dependent factors) from self._sub instead of `dt` (stepper.py);
         brick: a p2g_brick.BrickP2G to scatter with (device clock only), else the reference P2G;
@@ -325,9 +367,15 @@ class Solver:
         # chunk starts (or another P2G wrote last): then all of it, once every ~32 substeps
         sparse = brick is not None and not chunk_start and self._grid_writer is brick
         if not (sparse and self._grid_cleared):  # else the last grid update zeroed what it read
-            clear_grid(self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
-                       deterministic=cfg.deterministic, multi_field=self.flags.multi_field,
-                       marks=brick.marks if sparse else None)
+            clear_grid(
+                self._grid_m,
+                self._grid_mv,
+                self._grid_normal,
+                self._grid_fixed,
+                deterministic=cfg.deterministic,
+                multi_field=self.flags.multi_field,
+                marks=brick.marks if sparse else None,
+            )
         if brick is not None:
             brick.marks.zero_()  # the scatter below marks what it writes
         self._grid_writer = brick
@@ -338,13 +386,42 @@ class Solver:
         pp.q_mass_inv, pp.q_mom_inv = 1.0 / self._q_mass, 1.0 / self._q_mom
         permute = False
         if brick is not None:
-            permute = brick.launch(pp, state, cur, self._materials_dev, self._grid_m, self._grid_mv, self._grid_fixed,
-                                   self._sub, sort=resort)
+            permute = brick.launch(
+                pp,
+                state,
+                cur,
+                self._materials_dev,
+                self._grid_m,
+                self._grid_mv,
+                self._grid_fixed,
+                self._sub,
+                sort=resort,
+            )
         else:
-            wp.launch(p2g, dim=state.n, device=self.device, inputs=[
-                pp, cur.x, cur.v, cur.C, cur.tau, cur.J, cur.alive, state.mass, state.volume,
-                state.material, state.field_id, self._materials_dev,
-                self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed, self._sub])
+            wp.launch(
+                p2g,
+                dim=state.n,
+                device=self.device,
+                inputs=[
+                    pp,
+                    cur.x,
+                    cur.v,
+                    cur.C,
+                    cur.tau,
+                    cur.J,
+                    cur.alive,
+                    state.mass,
+                    state.volume,
+                    state.material,
+                    state.field_id,
+                    self._materials_dev,
+                    self._grid_m,
+                    self._grid_mv,
+                    self._grid_normal,
+                    self._grid_fixed,
+                    self._sub,
+                ],
+            )
         # 3 · grid update (with the brick P2G: only the node bricks it marked)
         dim = (nn, nn, nn)
         # with the brick P2G the update zeroes what it read, the next substep's sparse clear,
@@ -358,10 +435,25 @@ class Solver:
             # is ~69k short-lived blocks at grid 256, most of whose bricks are unmarked; 8 blocks a
             # multiprocessor is as fast as more, and faster than fewer
             max_blocks = 8 * self.device.sm_count if self.device.is_cuda else 0
-        wp.launch(grid, dim=dim, device=self.device, max_blocks=max_blocks, inputs=[
-            self._grid_params(dt, state.n_fields), self._grid_m, self._grid_mv, self._grid_normal, self._grid_fixed,
-            self._colliders_dev, self._sdf, self._grid_v, self._counts,
-            brick.marks if brick is not None else self._counts, self._sub])
+        wp.launch(
+            grid,
+            dim=dim,
+            device=self.device,
+            max_blocks=max_blocks,
+            inputs=[
+                self._grid_params(dt, state.n_fields),
+                self._grid_m,
+                self._grid_mv,
+                self._grid_normal,
+                self._grid_fixed,
+                self._colliders_dev,
+                self._sdf,
+                self._grid_v,
+                self._counts,
+                brick.marks if brick is not None else self._counts,
+                self._sub,
+            ],
+        )
         # 4 · G2P
         gp = G2PParams()
         gp.dt, gp.inv_dx = float(dt), inv_dx
@@ -376,10 +468,32 @@ class Solver:
         if permute:
             g2p = make_g2p(self.flags, device_clock=device_clock, sorting=True)
             order, outs = brick.idx, state.spare_consts()
-        wp.launch(g2p, dim=state.n, block_dim=g2p_launch_shape()[1], device=self.device, inputs=[
-            gp, self._grid_v, self._grid_m, self._grid_fixed, self._materials_dev, state.material, state.field_id,
-            *cur.arrays(), *nxt.arrays(), self._stats, self._counts, self._sub,
-            order, state.mass, state.volume, state.body, state.pid, *outs])
+        wp.launch(
+            g2p,
+            dim=state.n,
+            block_dim=g2p_launch_shape()[1],
+            device=self.device,
+            inputs=[
+                gp,
+                self._grid_v,
+                self._grid_m,
+                self._grid_fixed,
+                self._materials_dev,
+                state.material,
+                state.field_id,
+                *cur.arrays(),
+                *nxt.arrays(),
+                self._stats,
+                self._counts,
+                self._sub,
+                order,
+                state.mass,
+                state.volume,
+                state.body,
+                state.pid,
+                *outs,
+            ],
+        )
         if permute:
             state.swap_consts()
             state.permuted = True
@@ -406,8 +520,12 @@ class Solver:
     # ------------------------------------------------------------------ stepper
     def wave_speed(self, clock: StepperClock) -> float:
         """c_max, domain/s, over the scene's materials at the current hardening / J."""
-        return max(m.wave_speed(hardening_factor=max(1.0, clock.max_hardening) if m.mode == Mode.SNOW else 1.0,
-                                j_min=clock.water_j_min) for m in self.materials)
+        return max(
+            m.wave_speed(
+                hardening_factor=max(1.0, clock.max_hardening) if m.mode == Mode.SNOW else 1.0, j_min=clock.water_j_min
+            )
+            for m in self.materials
+        )
 
     def _cfl_dt(self, clock: StepperClock) -> float:
         cfg = self.config
@@ -425,14 +543,17 @@ class Solver:
             return self._device_advance.run(state, t0, t1)
         return self._advance_host(state, t0, t1)
 
-    def _too_many(self, state: State, t: float, t1: float, substeps: int, dt_cfl: float,
-                  remaining: float) -> SimulationError:
+    def _too_many(
+        self, state: State, t: float, t1: float, substeps: int, dt_cfl: float, remaining: float
+    ) -> SimulationError:
         """`remaining`: simulated seconds still to go (sets `needed`, the substeps that would do)."""
         return SimulationError(
             f"t={t:.4f}s: {substeps} substeps did not reach t1={t1:.4f}s "
             f"(dt ~ {dt_cfl:.3g}s, c_max {self.wave_speed(state.clock):.3g} domain/s). Raise "
             f"SolverConfig.max_substeps_per_frame, or lower youngs_modulus / bulk_modulus / grid_n",
-            field="max_substeps_per_frame", needed=substeps + math.ceil(remaining / dt_cfl))
+            field="max_substeps_per_frame",
+            needed=substeps + math.ceil(remaining / dt_cfl),
+        )
 
     def _advance_host(self, state: State, t0: float, t1: float) -> StepReport:
         """The reference stepper: statistics read back after every substep."""
@@ -488,19 +609,25 @@ class Solver:
 
     def _raise_too_small(self, state: State, t: float, dt: float) -> None:
         bad = getattr(self, "_last_bad", None)
-        per_mat = [] if bad is None else bad[Count.PER_MATERIAL:]
+        per_mat = [] if bad is None else bad[Count.PER_MATERIAL :]
         names = [self._describe_material(i) for i, k in enumerate(per_mat) if k > 0] or [
-            self._describe_material(i) for i in range(len(self.materials))]
+            self._describe_material(i) for i in range(len(self.materials))
+        ]
         n_bad = 0 if bad is None else int(bad[Count.NONFINITE] + bad[Count.TOO_FAR])
-        what = (f"the last rejected substep had {n_bad} particle(s) non-finite or moving more than "
-                f"one cell" if bad is not None else "no substep was rejected; the CFL step is this small")
+        what = (
+            f"the last rejected substep had {n_bad} particle(s) non-finite or moving more than one cell"
+            if bad is not None
+            else "no substep was rejected; the CFL step is this small"
+        )
         raise SimulationError(
             f"t={t:.4f}s: the substep fell to dt={dt:.3g}s < dt_min={self.config.dt_min:g}s "
             f"({state.n} particles, max speed {state.clock.max_speed:.3g} domain/s, c_max "
             f"{self.wave_speed(state.clock):.3g} domain/s); {what}, in {', '.join(names)} "
             f"('{_SYMPTOM}'). Lower youngs_modulus / bulk_modulus or raise damping; "
             f"or lower SolverConfig.dt_min if this dt is intended (a lower cfl only shrinks dt further)",
-            field="dt_min", needed=dt)
+            field="dt_min",
+            needed=dt,
+        )
 
     def _describe_material(self, i: int) -> str:
         m = self.materials[i]
@@ -511,13 +638,21 @@ class Solver:
     def _report(self, state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0) -> StepReport:
         sums = self.report_sums(state)
         return StepReport(
-            substeps=substeps, rejected_substeps=rejected,
-            dt_min=min(dts) if dts else 0.0, dt_max=max(dts) if dts else 0.0,
-            max_speed=vmax, cfl_used=cfl_used, particles_lost=lost, mass=float(sums[0]),
-            momentum=sums[1:4].copy(), kinetic_energy=float(0.5 * sums[4]),
+            substeps=substeps,
+            rejected_substeps=rejected,
+            dt_min=min(dts) if dts else 0.0,
+            dt_max=max(dts) if dts else 0.0,
+            max_speed=vmax,
+            cfl_used=cfl_used,
+            particles_lost=lost,
+            mass=float(sums[0]),
+            momentum=sums[1:4].copy(),
+            kinetic_energy=float(0.5 * sums[4]),
             elastic_energy=float(sums[5]),
-            j_min=jmin if dts else 1.0, j_max=jmax if dts else 1.0,
-            wall_time_s=time.perf_counter() - wall0)
+            j_min=jmin if dts else 1.0,
+            j_max=jmax if dts else 1.0,
+            wall_time_s=time.perf_counter() - wall0,
+        )
 
     def report_sums(self, state: State) -> np.ndarray:
         """(6,) float64 over the live particles, summed on the device in a fixed order (replays
@@ -525,9 +660,25 @@ class Solver:
         mass * |v|^2 (twice the kinetic energy) and the elastic energy (`elastic_energy`)."""
         cur = state.cur
         part = wp.empty(((state.n + ENERGY_CHUNK - 1) // ENERGY_CHUNK, SUMS), dtype=wp.float64, device=self.device)
-        wp.launch(self._report_partials, dim=part.shape[0], device=self.device, inputs=[
-            self._materials_dev, state.material, state.mass, state.volume, cur.v, cur.F, cur.J, cur.Jp, cur.alive,
-            state.n, int(self.device.is_cuda), part])
+        wp.launch(
+            self._report_partials,
+            dim=part.shape[0],
+            device=self.device,
+            inputs=[
+                self._materials_dev,
+                state.material,
+                state.mass,
+                state.volume,
+                cur.v,
+                cur.F,
+                cur.J,
+                cur.Jp,
+                cur.alive,
+                state.n,
+                int(self.device.is_cuda),
+                part,
+            ],
+        )
         return sum_partials(part, self.device)
 
     def elastic_energy(self, state: State) -> float:
@@ -550,8 +701,17 @@ class Solver:
         volume ratio, if any water; other particles' entries unused). `volume_ratios` gives every
         particle's J."""
         cur = state.cur
-        arrays = {"x": cur.x, "v": cur.v, "C": cur.C, "Jp": cur.Jp, "alive": cur.alive, "mass": state.mass,
-                  "volume": state.volume, "material": state.material, "body": state.body}
+        arrays = {
+            "x": cur.x,
+            "v": cur.v,
+            "C": cur.C,
+            "Jp": cur.Jp,
+            "alive": cur.alive,
+            "mass": state.mass,
+            "volume": state.volume,
+            "material": state.material,
+            "body": state.body,
+        }
         if self.flags.solid:
             arrays["F"] = cur.F
         if self.flags.water:
@@ -570,16 +730,35 @@ class Solver:
         computed on the device (a frame takes 4 bytes a particle off the device instead of F's
         36, and the host neither transposes F nor takes its determinant)."""
         out = wp.empty(state.n, dtype=float, device=self.device)
-        wp.launch(_volume_ratio, dim=state.n, device=self.device, inputs=[
-            self._materials_dev, state.material, state.cur.F, state.cur.J, int(self.flags.solid),
-            int(self.flags.water), out])
+        wp.launch(
+            _volume_ratio,
+            dim=state.n,
+            device=self.device,
+            inputs=[
+                self._materials_dev,
+                state.material,
+                state.cur.F,
+                state.cur.J,
+                int(self.flags.solid),
+                int(self.flags.water),
+                out,
+            ],
+        )
         return self._to_host(state, {"J": out})["J"]
 
     def checkpoint(self, state: State, t: float) -> dict[str, np.ndarray]:
         """Full state + stepper clock, as numpy arrays in particle order, and `pid`: the particle
         each storage slot held (State), which `restore` puts back, so it resumes bit-identically."""
-        data = self._to_host(state, {**dict(zip(ParticleBuffers.NAMES, state.cur.arrays())), "mass": state.mass,
-                                     "volume": state.volume, "material": state.material, "body": state.body})
+        data = self._to_host(
+            state,
+            {
+                **dict(zip(ParticleBuffers.NAMES, state.cur.arrays())),
+                "mass": state.mass,
+                "volume": state.volume,
+                "material": state.material,
+                "body": state.body,
+            },
+        )
         data["pid"] = state.pid.numpy()
         data["clock"] = state.clock.to_array()
         data["t"] = np.array([t], np.float64)
@@ -591,12 +770,15 @@ class Solver:
         required = {*ParticleBuffers.NAMES, "mass", "volume", "material", "body", "clock", "t", "meta"} - {"tau"}
         missing = sorted(required - set(data))
         if missing:
-            raise ValueError(f"checkpoint: missing arrays {', '.join(missing)}; it was not written by "
-                             "Solver.checkpoint (or is truncated); re-simulate from the start")
+            raise ValueError(
+                f"checkpoint: missing arrays {', '.join(missing)}; it was not written by "
+                "Solver.checkpoint (or is truncated); re-simulate from the start"
+            )
         meta = np.asarray(data["meta"])
         if int(meta[0]) not in (1, 2, CHECKPOINT_VERSION) or int(meta[1]) != self.config.grid_n:
             raise ValueError(
                 f"checkpoint: version/grid_n {meta[:2].tolist()} do not match this solver "
-                f"({CHECKPOINT_VERSION}, {self.config.grid_n}); re-simulate from the start")
+                f"({CHECKPOINT_VERSION}, {self.config.grid_n}); re-simulate from the start"
+            )
         state = self._build_state(data, StepperClock.from_array(data["clock"]))
         return state, float(data["t"][0])

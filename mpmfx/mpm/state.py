@@ -10,8 +10,16 @@ import warp as wp
 from .constitutive import vec6
 from .materials import Mode
 
-__all__ = ["SceneFlags", "ParticleBuffers", "StepperClock", "State", "load_m33", "store_m33", "m33_to_host",
-           "m33_assign"]
+__all__ = [
+    "SceneFlags",
+    "ParticleBuffers",
+    "StepperClock",
+    "State",
+    "load_m33",
+    "store_m33",
+    "m33_to_host",
+    "m33_assign",
+]
 
 
 @dataclass(frozen=True)
@@ -34,8 +42,14 @@ class SceneFlags:
     def of(cls, materials, *, multi_field: bool = False) -> "SceneFlags":
         modes = {m.mode for m in materials}
         recovery = any(m.mode == Mode.WATER and m.volume_recovery for m in materials)
-        return cls(Mode.SNOW in modes, Mode.SAND in modes, Mode.WATER in modes, bool(multi_field), recovery,
-                   len(materials) == 1)
+        return cls(
+            Mode.SNOW in modes,
+            Mode.SAND in modes,
+            Mode.WATER in modes,
+            bool(multi_field),
+            recovery,
+            len(materials) == 1,
+        )
 
     @property
     def solid(self) -> bool:
@@ -45,8 +59,14 @@ class SceneFlags:
     @property
     def key(self) -> str:
         """Prefix of the Warp modules holding this scene's specialised P2G and G2P kernels."""
-        flags = (("s", self.snow), ("g", self.sand), ("w", self.water), ("m", self.multi_field),
-                 ("r", self.volume_recovery), ("1", self.one_material))
+        flags = (
+            ("s", self.snow),
+            ("g", self.sand),
+            ("w", self.water),
+            ("m", self.multi_field),
+            ("r", self.volume_recovery),
+            ("1", self.one_material),
+        )
         tag = "".join(c for c, on in flags if on)
         return f"mpmfx_mpm_scene_{tag or 'tracer'}"
 
@@ -112,10 +132,13 @@ class ParticleBuffers:
             return wp.zeros(count, dtype=dtype, device=device)
 
         return cls(
-            x=arr(wp.vec3), v=arr(wp.vec3), C=arr(wp.vec3, (3, n)),
+            x=arr(wp.vec3),
+            v=arr(wp.vec3),
+            C=arr(wp.vec3, (3, n)),
             F=arr(wp.vec3, (3, n if flags.solid else 1)),
             J=arr(wp.float32, n if flags.water else 1),
-            Jp=arr(wp.float32), alive=arr(wp.int32),
+            Jp=arr(wp.float32),
+            alive=arr(wp.int32),
             tau=arr(vec6, n if flags.solid else 1),
         )
 

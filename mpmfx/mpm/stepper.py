@@ -30,8 +30,15 @@ from .colliders import ColliderParams, pose_collider
 from .materials import Mode
 from .slots import REJECTING, Clock, Count, Stat, Status
 
-__all__ = ["SubstepDev", "StepperParams", "WaveParams", "make_clock_kernels", "pose_colliders", "CHUNKS",
-           "sum_partials"]
+__all__ = [
+    "SubstepDev",
+    "StepperParams",
+    "WaveParams",
+    "make_clock_kernels",
+    "pose_colliders",
+    "CHUNKS",
+    "sum_partials",
+]
 
 CHUNKS = (1, 2, 4, 8, 16, 32)  # substeps per chunk: each length is one captured graph
 REJECT_MASK = wp.constant(sum(1 << int(c) for c in REJECTING))  # counters that reject a substep
@@ -120,9 +127,15 @@ def make_clock_kernels(snow: bool, water: bool):
     """(begin, end) kernels of one substep; snow / water: which clock fields the scene updates."""
 
     @wp.kernel(enable_backward=False, module=f"mpmfx_mpm_clock_{int(snow)}{int(water)}")
-    def begin(sp: StepperParams, waves: wp.array(dtype=WaveParams), clk: wp.array(dtype=wp.float64),
-              sub: wp.array(dtype=SubstepDev), stats: wp.array(dtype=float), stats_init: wp.array(dtype=float),
-              counts: wp.array(dtype=wp.int32)):
+    def begin(
+        sp: StepperParams,
+        waves: wp.array(dtype=WaveParams),
+        clk: wp.array(dtype=wp.float64),
+        sub: wp.array(dtype=SubstepDev),
+        stats: wp.array(dtype=float),
+        stats_init: wp.array(dtype=float),
+        counts: wp.array(dtype=wp.int32),
+    ):
         if int(clk[Clock.STATUS]) != Status.RUNNING:
             stop(clk, sub, int(clk[Clock.STATUS]))
             return
@@ -161,9 +174,15 @@ def make_clock_kernels(snow: bool, water: bool):
             counts[i] = 0
 
     @wp.kernel(enable_backward=False, module=f"mpmfx_mpm_clock_{int(snow)}{int(water)}")
-    def end(sp: StepperParams, waves: wp.array(dtype=WaveParams), clk: wp.array(dtype=wp.float64),
-            sub: wp.array(dtype=SubstepDev), stats: wp.array(dtype=float), counts: wp.array(dtype=wp.int32),
-            last_bad: wp.array(dtype=wp.int32)):
+    def end(
+        sp: StepperParams,
+        waves: wp.array(dtype=WaveParams),
+        clk: wp.array(dtype=wp.float64),
+        sub: wp.array(dtype=SubstepDev),
+        stats: wp.array(dtype=float),
+        counts: wp.array(dtype=wp.int32),
+        last_bad: wp.array(dtype=wp.int32),
+    ):
         if sub[0].active == 0:
             return
         bad = int(0)
@@ -209,10 +228,16 @@ def make_clock_kernels(snow: bool, water: bool):
 
 
 @wp.kernel(enable_backward=False)
-def pose_colliders(sp: StepperParams, clk: wp.array(dtype=wp.float64), keys_t: wp.array(dtype=wp.float64),
-                   keys_p: wp.array(dtype=wp.vec3), keys_q: wp.array(dtype=wp.quat),
-                   offsets: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32),
-                   out: wp.array(dtype=ColliderParams)):
+def pose_colliders(
+    sp: StepperParams,
+    clk: wp.array(dtype=wp.float64),
+    keys_t: wp.array(dtype=wp.float64),
+    keys_p: wp.array(dtype=wp.vec3),
+    keys_q: wp.array(dtype=wp.quat),
+    offsets: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    out: wp.array(dtype=ColliderParams),
+):
     """Pose every collider for the substep `begin` set up, on the shot clock as the host loop
     does: [T0 + DONE / time_scale, T0 + (DONE + DT) / time_scale], or T1 on the last one."""
     if int(clk[Clock.STATUS]) != Status.RUNNING:

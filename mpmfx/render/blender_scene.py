@@ -5,6 +5,7 @@ Coordinates: the USD stage is metres, Y up; Blender's importer turns it Z up by 
 root. Everything here that comes from the shot (floor height, camera, bounds) is given in the
 stage's frame and converted with `to_blender`, so the two can never drift apart.
 """
+
 from __future__ import annotations
 
 import math
@@ -118,8 +119,12 @@ def add_basin(lo, hi, *, height: float, thickness: float, look: str = "ground") 
     x0, y0, z0 = lo
     x1, _, z1 = hi
     t = thickness
-    for a, b in (((x0 - t, z0 - t), (x1 + t, z0)), ((x0 - t, z1), (x1 + t, z1 + t)),
-                 ((x0 - t, z0), (x0, z1)), ((x1, z0), (x1 + t, z1))):
+    for a, b in (
+        ((x0 - t, z0 - t), (x1 + t, z0)),
+        ((x0 - t, z1), (x1 + t, z1 + t)),
+        ((x0 - t, z0), (x0, z1)),
+        ((x1, z0), (x1 + t, z1)),
+    ):
         centre = to_blender(((a[0] + b[0]) / 2, y0 + height / 2, (a[1] + b[1]) / 2))
         size = Vector((b[0] - a[0], b[1] - a[1], height))  # Blender axes: x, y (= -stage z), z up
         geom = bmesh.ops.create_cube(bm, size=1.0)["verts"]
@@ -134,8 +139,7 @@ def add_basin(lo, hi, *, height: float, thickness: float, look: str = "ground") 
     return obj
 
 
-def add_sky(*, sun_elevation: float, sun_rotation: float, strength: float = 0.25,
-            sun_strength: float = 3.5) -> None:
+def add_sky(*, sun_elevation: float, sun_rotation: float, strength: float = 0.25, sun_strength: float = 3.5) -> None:
     """Blender's Nishita sky for the background and fill light, plus a sun lamp along the sky's
     sun direction (a lamp converges in a few samples; the sky's own sun disc would be noise)."""
     scene = bpy.context.scene

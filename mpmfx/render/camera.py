@@ -1,4 +1,5 @@
 """The shot camera and the ground: the config's camera, or a 3/4 view; the solver's floor."""
+
 from __future__ import annotations
 
 import numpy as np

@@ -3,6 +3,7 @@
 Never imports bpy (nor pxr): Blender runs as `python -m mpmfx.render.cycles_job JOB.json`
 in its own process (both bundle USD libraries), and reports each finished frame on stdout.
 """
+
 from __future__ import annotations
 
 import json
@@ -13,9 +14,11 @@ from pathlib import Path
 
 from mpmfx.blender import FRAME_LINE, bpy_available, child_command, child_env
 
-INSTALL_HINT = ("render.engine = \"cycles\" needs Blender as a Python module (bpy 4.5, Python 3.11; "
-                "pinned in pyproject.toml): run `bash setup.sh`, or `pip install -e '.[render]'`, or render "
-                "the fast preview with --set render.engine=preview")
+INSTALL_HINT = (
+    'render.engine = "cycles" needs Blender as a Python module (bpy 4.5, Python 3.11; '
+    "pinned in pyproject.toml): run `bash setup.sh`, or `pip install -e '.[render]'`, or render "
+    "the fast preview with --set render.engine=preview"
+)
 
 
 class CyclesError(RuntimeError):
@@ -30,23 +33,62 @@ def blender_version() -> str | None:
         return None
 
 
-def write_job(path: Path, *, usd: Path, frames: list[int], outputs: list[Path], blend: Path | None,
-              width: int, height: int, samples: int, denoise: bool, shutter: float, fps: float,
-              mode: str, looks: dict[str, str], floor_y: float, domain_origin, domain_size: float,
-              camera: dict | None, view_direction, sun_elevation: float, sun_rotation: float,
-              walls: tuple | None = None, basin: float | None = None, label: str = "") -> Path:
+def write_job(
+    path: Path,
+    *,
+    usd: Path,
+    frames: list[int],
+    outputs: list[Path],
+    blend: Path | None,
+    width: int,
+    height: int,
+    samples: int,
+    denoise: bool,
+    shutter: float,
+    fps: float,
+    mode: str,
+    looks: dict[str, str],
+    floor_y: float,
+    domain_origin,
+    domain_size: float,
+    camera: dict | None,
+    view_direction,
+    sun_elevation: float,
+    sun_rotation: float,
+    walls: tuple | None = None,
+    basin: float | None = None,
+    label: str = "",
+) -> Path:
     """Write the JSON job the child reads. Units: metres and degrees, in the USD stage's frame
     (Y up). looks: USD prim name (surface group or object) -> `mpmfx.render.looks.LOOKS` key;
     camera: {"position", "look_at"} or None to frame the simulated bounds, seen along
     -view_direction; outputs: one PNG path per frame; blend: where the lit scene is saved;
     walls: (lo, hi) of the box the solver's walls hold, basin: height of the basin drawn there;
     label: text burned into every frame (empty: none)."""
-    job = {"usd": str(usd), "frames": [int(f) for f in frames], "outputs": [str(p) for p in outputs],
-           "blend": str(blend) if blend else None, "width": width, "height": height, "samples": samples,
-           "denoise": denoise, "shutter": shutter, "fps": fps, "mode": mode, "looks": looks,
-           "floor_y": floor_y, "domain_origin": list(domain_origin), "domain_size": domain_size,
-           "camera": camera, "view_direction": list(view_direction), "sun_elevation": sun_elevation,
-           "sun_rotation": sun_rotation, "walls": walls, "basin": basin, "label": label}
+    job = {
+        "usd": str(usd),
+        "frames": [int(f) for f in frames],
+        "outputs": [str(p) for p in outputs],
+        "blend": str(blend) if blend else None,
+        "width": width,
+        "height": height,
+        "samples": samples,
+        "denoise": denoise,
+        "shutter": shutter,
+        "fps": fps,
+        "mode": mode,
+        "looks": looks,
+        "floor_y": floor_y,
+        "domain_origin": list(domain_origin),
+        "domain_size": domain_size,
+        "camera": camera,
+        "view_direction": list(view_direction),
+        "sun_elevation": sun_elevation,
+        "sun_rotation": sun_rotation,
+        "walls": walls,
+        "basin": basin,
+        "label": label,
+    }
     path.write_text(json.dumps(job, indent=1))
     return path
 

@@ -12,6 +12,7 @@ render also proves that the USD works in a DCC. Per frame, stdout gets one line
 `MPMFX_FRAME <frame> <wall s> <cpu s, all threads>` after the PNG is in place (the parent turns those into a
 progress bar); anything else on stdout/stderr is Blender's own chatter.
 """
+
 from __future__ import annotations
 
 import json
@@ -33,9 +34,15 @@ def import_stage(usd: str) -> dict[str, list]:
     """Import the USD stage and sort what came in: {"meshes", "points", "volumes", "colliders",
     "cameras"} -> [(prim name, object)]. The prim name is the object / surface group name
     (the parent prim's name: /World/<name>/mesh) or the collider's own name."""
-    res = bpy.ops.wm.usd_import(filepath=usd, set_frame_range=True, merge_parent_xform=False,
-                                import_lights=False, import_materials=False, relative_path=False,
-                                create_world_material=False)
+    res = bpy.ops.wm.usd_import(
+        filepath=usd,
+        set_frame_range=True,
+        merge_parent_xform=False,
+        import_lights=False,
+        import_materials=False,
+        relative_path=False,
+        create_world_material=False,
+    )
     if res != {"FINISHED"}:
         raise RuntimeError(f"{usd}: Blender's USD importer did not finish ({res})")
     out: dict[str, list] = {k: [] for k in ("meshes", "points", "volumes", "colliders", "cameras")}
@@ -145,16 +152,18 @@ def build_scene(job: dict) -> None:
     if job.get("basin") and job.get("walls"):
         look = job["looks"].get("basin", "ground")
         # glass as thin as an aquarium's (thick glass would bend the view of the water)
-        bs.add_basin(*job["walls"], height=job["basin"], thickness=(0.012 if look == "glass" else 0.04) * dom_size,
-                     look=look)
+        bs.add_basin(
+            *job["walls"], height=job["basin"], thickness=(0.012 if look == "glass" else 0.04) * dom_size, look=look
+        )
     bs.add_sky(sun_elevation=job["sun_elevation"], sun_rotation=job["sun_rotation"])
     cam = job.get("camera")
     if cam is None:
         shown = [o for _, o in imported["points" if job["mode"] == "particles" else "meshes"]]
         # the stage's whole frame range, not the frames asked for: a resumed or partial render
         # keeps the camera of the full one
-        bounds = scene_bounds(shown + [o for _, o in imported["colliders"]],
-                              list(range(scene.frame_start, scene.frame_end + 1)))
+        bounds = scene_bounds(
+            shown + [o for _, o in imported["colliders"]], list(range(scene.frame_start, scene.frame_end + 1))
+        )
         if bounds is None:  # nothing visible anywhere: frame the domain
             bounds = (dom_lo, [o + dom_size for o in dom_lo])
         lo, hi = bounds

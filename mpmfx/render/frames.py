@@ -1,4 +1,5 @@
 """Offscreen PyVista renders of surfaces (the look) and particles (the debug look for tuning motion)."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -9,9 +10,18 @@ import numpy as np
 from mpmfx.render import import_pyvista
 
 # Colour per material family, keyed by preset name (unknown names fall back to grey).
-COLOURS = {"Soft": "#f4f7fb", "Mushy": "#eef2f7", "Goopy": "#e3e9f0", "Wet": "#d5e2ec", "Slush": "#c9dbe8",
-           "Elastic": "#e8577a", "Granular": "#d8b47c", "CohesiveGranular": "#c79f6a", "Water": "#3d8fd6",
-           "Tracer": "#ffd23f"}
+COLOURS = {
+    "Soft": "#f4f7fb",
+    "Mushy": "#eef2f7",
+    "Goopy": "#e3e9f0",
+    "Wet": "#d5e2ec",
+    "Slush": "#c9dbe8",
+    "Elastic": "#e8577a",
+    "Granular": "#d8b47c",
+    "CohesiveGranular": "#c79f6a",
+    "Water": "#3d8fd6",
+    "Tracer": "#ffd23f",
+}
 PALETTE = ["#e8577a", "#3d8fd6", "#d8b47c", "#7ac74f", "#f4f7fb", "#b07cc6"]
 
 
@@ -30,8 +40,9 @@ class FrameRenderer:
         self.plotter.set_background("#20242c", top="#5d6d82")
         origin, L = np.asarray(domain[0], float), float(domain[1])
         # The ground where the material rests (no domain box: its edges drew as scratches).
-        ground = pv.Plane(center=(origin[0] + L / 2, floor, origin[2] + L / 2), direction=(0, 1, 0),
-                          i_size=L * 1.6, j_size=L * 1.6)
+        ground = pv.Plane(
+            center=(origin[0] + L / 2, floor, origin[2] + L / 2), direction=(0, 1, 0), i_size=L * 1.6, j_size=L * 1.6
+        )
         self.plotter.add_mesh(ground, color="#8a8f98", ambient=0.25, diffuse=0.7, specular=0.0, name="floor")
         self.plotter.camera_position = [camera[0], camera[1], (0, 1, 0)]
         self.plotter.camera.view_angle = 35.0
@@ -52,8 +63,15 @@ class FrameRenderer:
             faces = np.hstack([np.full((len(f), 1), 3), f]).astype(np.int64).ravel()
             mesh = self.pv.PolyData(np.asarray(v, np.float64), faces).compute_normals(auto_orient_normals=False)
             water = colour == COLOURS["Water"]
-            self.plotter.add_mesh(mesh, color=colour, smooth_shading=True, specular=0.6 if water else 0.2,
-                                  specular_power=40, opacity=0.85 if water else 1.0, name=name)
+            self.plotter.add_mesh(
+                mesh,
+                color=colour,
+                smooth_shading=True,
+                specular=0.6 if water else 0.2,
+                specular_power=40,
+                opacity=0.85 if water else 1.0,
+                name=name,
+            )
             self._names.append(name)
         return self._shoot(path, label)
 
@@ -64,8 +82,13 @@ class FrameRenderer:
         for name, (x, colour) in points.items():
             if len(x) == 0:
                 continue
-            self.plotter.add_points(np.asarray(x, np.float64), color=colour, point_size=max(2.0, radius),
-                                    render_points_as_spheres=True, name=name)
+            self.plotter.add_points(
+                np.asarray(x, np.float64),
+                color=colour,
+                point_size=max(2.0, radius),
+                render_points_as_spheres=True,
+                name=name,
+            )
             self._names.append(name)
         return self._shoot(path, label)
 
@@ -100,7 +123,7 @@ def contact_sheet(frames: list[Path], path: Path, *, count: int = 4, scale: int 
     images = [np.asarray(imageio.imread(p))[::scale, ::scale, :3] for p in picks]
     if len(images) % 2:
         images.append(np.zeros_like(images[0]))
-    rows = [np.concatenate(images[i:i + 2], axis=1) for i in range(0, len(images), 2)]
+    rows = [np.concatenate(images[i : i + 2], axis=1) for i in range(0, len(images), 2)]
     tmp = path.with_name(f".{path.stem}.tmp.png")
     imageio.imwrite(tmp, np.concatenate(rows, axis=0))
     tmp.replace(path)

@@ -1,4 +1,5 @@
 """What every stage module provides, and the context a stage runs in."""
+
 from __future__ import annotations
 
 import sys
@@ -29,7 +30,7 @@ class Context:
     quiet: bool = False
     notes: list[str] = field(default_factory=list)
     executor: Frames | None = None  # where independent frames run (None: here, one by one)
-    state: str = "ran"              # "ran" (a new entry) or "resumed" (complete frames were there)
+    state: str = "ran"  # "ran" (a new entry) or "resumed" (complete frames were there)
 
     def job(self) -> FrameJob:
         return FrameJob.of(self.shot, self.entry, self.upstream, self.device)
@@ -39,15 +40,23 @@ class Context:
         auto=False: tasks only when workers or a scheduler were asked for; serial: how they run
         here then, see Frames.map)."""
         job = self.job()
-        return (self.executor or Frames(workers=1)).map(fn, [(job, f) for f in frames], auto=auto, serial=serial,
-                                                        desc=desc or self.entry.stage, quiet=self.quiet)
+        return (self.executor or Frames(workers=1)).map(
+            fn, [(job, f) for f in frames], auto=auto, serial=serial, desc=desc or self.entry.stage, quiet=self.quiet
+        )
 
     def progress(self, iterable, *, total: int | None = None, desc: str = "", unit: str = "frame"):
         """A progress bar over frames on stderr (silent when quiet or not a terminal in tests)."""
         if self.quiet:
             return iterable
-        return tqdm(iterable, total=total, desc=f"{desc or self.entry.stage:>9}", unit=unit,
-                    file=sys.stderr, leave=False, dynamic_ncols=True)
+        return tqdm(
+            iterable,
+            total=total,
+            desc=f"{desc or self.entry.stage:>9}",
+            unit=unit,
+            file=sys.stderr,
+            leave=False,
+            dynamic_ncols=True,
+        )
 
     def warn(self, message: str) -> None:
         self.notes.append(message)
@@ -57,14 +66,13 @@ class Context:
 class Stage(Protocol):
     NAME: str
     VERSION: int
-    PER_FRAME: bool          # output is one file per frame (else one result for the shot)
+    PER_FRAME: bool  # output is one file per frame (else one result for the shot)
     FRAME_EXT: str
-    CODE: tuple[str, ...]    # the modules its output depends on: the key hashes exactly these
+    CODE: tuple[str, ...]  # the modules its output depends on: the key hashes exactly these
 
-    def params(self, shot: Shot) -> dict: ...               # the stage's own parameters (key inputs)
-    def inputs(self, shot: Shot) -> dict[str, str]: ...     # input files: name -> sha256
-    def run(self, ctx: Context) -> dict: ...                # writes into ctx.entry; returns manifest extras
-
+    def params(self, shot: Shot) -> dict: ...  # the stage's own parameters (key inputs)
+    def inputs(self, shot: Shot) -> dict[str, str]: ...  # input files: name -> sha256
+    def run(self, ctx: Context) -> dict: ...  # writes into ctx.entry; returns manifest extras
 
 
 def quiet_warp(device: str | None = None) -> None:
@@ -73,5 +81,7 @@ def quiet_warp(device: str | None = None) -> None:
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # Warp 1.19 prints module loads at INFO
     if device and device.startswith("cuda") and not wp.is_cuda_available():
-        raise StageError("--device cuda: Warp finds no CUDA device or driver on this machine; "
-                         "run with --device cpu (the same kernels, slower) or on a GPU machine")
+        raise StageError(
+            "--device cuda: Warp finds no CUDA device or driver on this machine; "
+            "run with --device cpu (the same kernels, slower) or on a GPU machine"
+        )

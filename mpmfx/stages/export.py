@@ -4,6 +4,7 @@ Output: `shot.usda` (root stage), `frames/NNNN.usdc` (per-frame layers) and
 `vdb/<group>/NNNN.vdb` (level set `surface` + velocity `vel` per surface group, and the fog
 volume `density` when surface.density is on).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -21,14 +22,25 @@ from mpmfx.stages.parallel import FrameJob
 from mpmfx.surface.params import SparseLevelSet
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "export", 1, True, "usdc"
-CODE = ("mpmfx.stages.export", "mpmfx.io", "mpmfx.surface.params", "mpmfx.render.camera",
-        "mpmfx.stages.colliders", "mpmfx.geometry.colliders", "mpmfx.geometry.mesh", "mpmfx.mpm.colliders")
+CODE = (
+    "mpmfx.stages.export",
+    "mpmfx.io",
+    "mpmfx.surface.params",
+    "mpmfx.render.camera",
+    "mpmfx.stages.colliders",
+    "mpmfx.geometry.colliders",
+    "mpmfx.geometry.mesh",
+    "mpmfx.mpm.colliders",
+)
 
 
 def params(shot: Shot) -> dict:
-    return {"export": shot.export.model_dump(mode="json"), "fps": shot.shot.fps,
-            "frames": [shot.shot.frame_start, shot.shot.frame_end],
-            "objects": [o.name for o in shot.objects]}
+    return {
+        "export": shot.export.model_dump(mode="json"),
+        "fps": shot.shot.fps,
+        "frames": [shot.shot.frame_start, shot.shot.frame_end],
+        "objects": [o.name for o in shot.objects],
+    }
 
 
 def inputs(shot: Shot) -> dict[str, str]:
@@ -51,8 +63,9 @@ def frame(job: FrameJob, f: int) -> None:
     points = {}
     if shot.export.points:
         points = _points(shot, ParticleFrame.read(job.upstream["simulate"].frame_path(f, ParticleFrame.EXT)))
-    _writer(shot, entry).write_frame(f, points=points, meshes=_meshes(groups), volumes=volumes,
-                                     colliders=_colliders(shot, f))
+    _writer(shot, entry).write_frame(
+        f, points=points, meshes=_meshes(groups), volumes=volumes, colliders=_colliders(shot, f)
+    )
 
 
 def finish(ctx: Context, results: list) -> dict:
@@ -62,8 +75,14 @@ def finish(ctx: Context, results: list) -> dict:
 
 
 def _writer(shot: Shot, entry):
-    return UsdShotWriter(entry.root / "shot.usda", fps=shot.shot.fps, start_frame=shot.shot.frame_start,
-                         end_frame=shot.shot.frame_end, up_axis="Y", meters_per_unit=1.0)
+    return UsdShotWriter(
+        entry.root / "shot.usda",
+        fps=shot.shot.fps,
+        start_frame=shot.shot.frame_start,
+        end_frame=shot.shot.frame_end,
+        up_axis="Y",
+        meters_per_unit=1.0,
+    )
 
 
 def _points(shot: Shot, p: ParticleFrame) -> dict:
@@ -74,14 +93,20 @@ def _points(shot: Shot, p: ParticleFrame) -> dict:
         if p.Jp is not None:
             primvars["Jp"] = p.Jp[sel]
         out[obj.name] = PointsSample(
-            positions=p.x[sel], velocities=p.v[sel], widths=float(shot.particle_spacing),
-            ids=p.id[sel].astype(np.int64), primvars=primvars)
+            positions=p.x[sel],
+            velocities=p.v[sel],
+            widths=float(shot.particle_spacing),
+            ids=p.id[sel].astype(np.int64),
+            primvars=primvars,
+        )
     return out
 
 
 def _meshes(groups: dict) -> dict:
-    return {g: MeshSample(points=d.vertices, face_vertex_indices=d.faces, normals=d.normals,
-                          velocities=d.velocities) for g, d in groups.items()}
+    return {
+        g: MeshSample(points=d.vertices, face_vertex_indices=d.faces, normals=d.normals, velocities=d.velocities)
+        for g, d in groups.items()
+    }
 
 
 def _colliders(shot: Shot, frame: int) -> list:
@@ -91,8 +116,14 @@ def _colliders(shot: Shot, frame: int) -> list:
     for col in shot.colliders:
         geom = collider_geometry(col)
         m = collider_mesh(geom, resolve=shot.resolve, plane_size=2 * shot.domain.size)
-        out.append(ColliderSample(name=col.name, points=np.asarray(m.vertices, np.float32),
-                                  faces=np.asarray(m.faces, np.int32), xform=pose_matrix(*keyframes(geom), t)))
+        out.append(
+            ColliderSample(
+                name=col.name,
+                points=np.asarray(m.vertices, np.float32),
+                faces=np.asarray(m.faces, np.int32),
+                xform=pose_matrix(*keyframes(geom), t),
+            )
+        )
     return out
 
 
@@ -113,8 +144,7 @@ def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
         if density is not None:  # 0 outside the stored leaves: the writer leaves those voxels inactive
             grids.append(VdbGrid("density", density, ijk0, ls.voxel_size, "fog_volume", 0.0, half=True))
         rel = f"vdb/{g}/{frame:04d}.vdb"
-        write_vdb(entry.root / rel, grids, metadata={"shot": shot.shot.name, "frame": frame, "units": "m",
-                                                     "group": g})
+        write_vdb(entry.root / rel, grids, metadata={"shot": shot.shot.name, "frame": frame, "units": "m", "group": g})
         volumes[g] = {grid.name: rel for grid in grids}
     return volumes
 
@@ -122,8 +152,15 @@ def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
 def level_set(d: GroupSurface) -> SparseLevelSet:
     """A stored group's leaves as `mpmfx.surface.SparseLevelSet` (to_dense / velocity_dense /
     density_dense)."""
-    return SparseLevelSet(block_ijk=d.block_ijk, values=d.blocks, velocity=d.vel_blocks, inside_ijk=d.inside_ijk,
-                          voxel_size=float(d.voxel_size), background=float(d.background), density=d.density_blocks)
+    return SparseLevelSet(
+        block_ijk=d.block_ijk,
+        values=d.blocks,
+        velocity=d.vel_blocks,
+        inside_ijk=d.inside_ijk,
+        voxel_size=float(d.voxel_size),
+        background=float(d.background),
+        density=d.density_blocks,
+    )
 
 
 def _camera(shot: Shot) -> dict:

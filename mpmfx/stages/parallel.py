@@ -20,6 +20,7 @@ The cache contract with many writers:
 Paths in a task are absolute: a farm worker's working directory is not the client's (the cache
 root must then be a folder every host mounts at the same path).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -39,8 +40,8 @@ from mpmfx.threads import THREADS_ENV, cpu_threads, usable_cores
 if TYPE_CHECKING:
     from mpmfx.config import Shot
 
-SCHEDULER_ENV = "MPMFX_SCHEDULER"   # a farm scheduler's address, e.g. tcp://farm-head:8786
-WORKERS_ENV = "MPMFX_WORKERS"       # worker processes of the LocalCluster; 1 = serial
+SCHEDULER_ENV = "MPMFX_SCHEDULER"  # a farm scheduler's address, e.g. tcp://farm-head:8786
+WORKERS_ENV = "MPMFX_WORKERS"  # worker processes of the LocalCluster; 1 = serial
 # Below this many frames to make, `workers=None` (auto) stays serial: a two-worker LocalCluster
 # costs ~20 CPU seconds (start, Warp kernels loaded in each worker; docs/scale-out.md).
 AUTO_MIN_TASKS = 10
@@ -100,8 +101,10 @@ class Frames:
             try:
                 workers = int(os.environ[WORKERS_ENV])
             except ValueError:
-                raise ShotError(f"${WORKERS_ENV} = {os.environ[WORKERS_ENV]!r}: give a whole number of worker "
-                                f"processes (1 = serial), or unset it") from None
+                raise ShotError(
+                    f"${WORKERS_ENV} = {os.environ[WORKERS_ENV]!r}: give a whole number of worker "
+                    f"processes (1 = serial), or unset it"
+                ) from None
         if workers is not None and workers < 1:
             raise ShotError(f"--workers / ${WORKERS_ENV} = {workers}: give at least 1 (1 = serial)")
         # the surfacer's thread setting, checked before any stage runs
@@ -136,17 +139,26 @@ class Frames:
         """The Dask client: connected to the scheduler, or to a LocalCluster started now."""
         if self._client is None:
             from distributed import Client, LocalCluster  # backend: distributed
+
             if self.scheduler:
                 try:
                     self._client = Client(self.scheduler, timeout="20s")
                 except (OSError, TimeoutError) as exc:
-                    raise ShotError(f"--scheduler / ${SCHEDULER_ENV} = {self.scheduler!r}: no Dask scheduler "
-                                    f"answers there ({exc}); start one (dask scheduler) or check the address, "
-                                    f"or run without it") from None
+                    raise ShotError(
+                        f"--scheduler / ${SCHEDULER_ENV} = {self.scheduler!r}: no Dask scheduler "
+                        f"answers there ({exc}); start one (dask scheduler) or check the address, "
+                        f"or run without it"
+                    ) from None
             else:
                 n = self.size
-                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, env=_worker_env(n),
-                                             dashboard_address=":0", silence_logs=logging.ERROR)
+                self._cluster = LocalCluster(
+                    n_workers=n,
+                    threads_per_worker=1,
+                    processes=True,
+                    env=_worker_env(n),
+                    dashboard_address=":0",
+                    silence_logs=logging.ERROR,
+                )
                 self._client = Client(self._cluster)
         return self._client
 
@@ -159,14 +171,23 @@ class Frames:
             if self._cluster is not None:
                 self._cluster.close(timeout=30)
         except (TimeoutError, OSError) as exc:
-            print(f"note: the Dask cluster did not stop cleanly ({type(exc).__name__}); its workers "
-                  f"were killed", file=sys.stderr)
+            print(
+                f"note: the Dask cluster did not stop cleanly ({type(exc).__name__}); its workers were killed",
+                file=sys.stderr,
+            )
         finally:
             self._client = self._cluster = None
 
-    def map(self, fn: Callable[[FrameJob, int], Any], calls: list[tuple[FrameJob, int]], *,
-            desc: str = "", quiet: bool = False, auto: bool = True,
-            serial: Callable[[list[tuple[FrameJob, int]], Any], list[Any]] | None = None) -> list[Any]:
+    def map(
+        self,
+        fn: Callable[[FrameJob, int], Any],
+        calls: list[tuple[FrameJob, int]],
+        *,
+        desc: str = "",
+        quiet: bool = False,
+        auto: bool = True,
+        serial: Callable[[list[tuple[FrameJob, int]], Any], list[Any]] | None = None,
+    ) -> list[Any]:
         """fn(job, frame) for each call; results in call order. The first failure is raised
         (the other tasks are cancelled; frames already written stay, a re-run resumes).
         auto=False: stay serial unless workers or a scheduler were asked for (work that a GPU
@@ -194,9 +215,9 @@ class Frames:
                 return here(calls)
             done: list[Any] = []
             if self.workers is None and self._client is None and not self.scheduler:  # auto: probe first
-                done = here(calls[:PROBE_CALLS - 1])  # the first call loads (or compiles) the kernels: not timed
+                done = here(calls[: PROBE_CALLS - 1])  # the first call loads (or compiles) the kernels: not timed
                 t0, c0 = time.perf_counter(), time.process_time()
-                done += here(calls[PROBE_CALLS - 1:PROBE_CALLS])
+                done += here(calls[PROBE_CALLS - 1 : PROBE_CALLS])
                 wall, cpu = time.perf_counter() - t0, time.process_time() - c0
                 calls = calls[PROBE_CALLS:]
                 if not worth_a_cluster(len(calls), wall, cpu, self.size):
@@ -211,8 +232,9 @@ class Frames:
         """One call, e.g. one shot's whole simulation: a single task, or run here when serial."""
         return self.calls(fn, [args], keys=[key], desc=desc, quiet=quiet)[0]
 
-    def calls(self, fn: Callable[..., Any], args: list[tuple], *, keys: list[str], desc: str = "",
-              quiet: bool = False) -> list[Any]:
+    def calls(
+        self, fn: Callable[..., Any], args: list[tuple], *, keys: list[str], desc: str = "", quiet: bool = False
+    ) -> list[Any]:
         """fn(*a) for each a in `args` (e.g. a wedge's simulations): tasks, or here when serial."""
         if not args:
             return []
@@ -242,6 +264,7 @@ def _worker_env(workers: int) -> dict[str, str]:
 
 def _gather(client, futures: list, bar) -> list[Any]:
     from distributed import as_completed  # backend: distributed
+
     try:
         for fut in as_completed(futures):
             fut.result()  # raises the task's exception here, in the client

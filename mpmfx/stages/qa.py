@@ -1,13 +1,14 @@
 """`mpmfx status SHOT --qa`: the simulation's per-frame observables, with suspicious frames flagged."""
+
 from __future__ import annotations
 
 import math
 import sys
 
-MASS_TOL = 1e-4          # relative change of total mass that counts as "mass changed"
-ENERGY_JUMP = 1.5        # kinetic + elastic energy growing by more than this factor in one frame ...
-SPEED_SLACK = 2.0        # ... while the top speed grew faster than SPEED_SLACK x gravity alone allows
-CFL_CAP = 1.0            # SolverConfig's upper bound on cfl: past it a particle outran a cell in a substep
+MASS_TOL = 1e-4  # relative change of total mass that counts as "mass changed"
+ENERGY_JUMP = 1.5  # kinetic + elastic energy growing by more than this factor in one frame ...
+SPEED_SLACK = 2.0  # ... while the top speed grew faster than SPEED_SLACK x gravity alone allows
+CFL_CAP = 1.0  # SolverConfig's upper bound on cfl: past it a particle outran a cell in a substep
 
 
 def flags(qa: dict[int, dict], *, gravity: float = 9.81, frame_dt: float = 1 / 24) -> dict[int, list[str]]:
@@ -26,8 +27,12 @@ def flags(qa: dict[int, dict], *, gravity: float = 9.81, frame_dt: float = 1 / 2
             why.append(f"mass changed {100 * (q['mass'] - m0) / m0:+.3f} %")
         ke = (q.get("kinetic_energy") or 0.0) + (q.get("elastic_energy") or 0.0)
         speed = q.get("max_speed") or 0.0
-        if prev is not None and prev[0] > 1e-12 and ke > ENERGY_JUMP * prev[0] \
-                and speed > prev[1] + SPEED_SLACK * gravity * frame_dt:
+        if (
+            prev is not None
+            and prev[0] > 1e-12
+            and ke > ENERGY_JUMP * prev[0]
+            and speed > prev[1] + SPEED_SLACK * gravity * frame_dt
+        ):
             why.append(f"energy x{ke / prev[0]:.1f} beyond what gravity explains")
         if q.get("j_min") is not None and q["j_min"] <= 0:
             why.append(f"inverted particles (J min {q['j_min']:.3g})")
@@ -48,16 +53,22 @@ def flags(qa: dict[int, dict], *, gravity: float = 9.81, frame_dt: float = 1 / 2
 def shot_flags(shot, qa: dict) -> dict[int, list[str]]:
     """`flags` of a simulate manifest's QA (frame keys may be strings), with the shot's gravity."""
     qa = {int(k): v for k, v in qa.items()}
-    return flags(qa, gravity=float(sum(g * g for g in shot.solver.gravity) ** 0.5),
-                 frame_dt=shot.solver.time_scale / shot.shot.fps)
+    return flags(
+        qa,
+        gravity=float(sum(g * g for g in shot.solver.gravity) ** 0.5),
+        frame_dt=shot.solver.time_scale / shot.shot.fps,
+    )
 
 
 def warn_flags(bad: dict[int, list[str]], shot_path: str = "SHOT") -> None:
     """Say flagged frames on stderr at run time (they are easy to miss in `status --qa`)."""
     if not bad:
         return
-    print(f"[simulate] warning: QA flags {len(bad)} frame(s); the result may not be physical "
-          f"(`mpmfx status {shot_path} --qa` has the table):", file=sys.stderr)
+    print(
+        f"[simulate] warning: QA flags {len(bad)} frame(s); the result may not be physical "
+        f"(`mpmfx status {shot_path} --qa` has the table):",
+        file=sys.stderr,
+    )
     for f, why in sorted(bad.items())[:10]:
         print(f"  frame {f}: {'; '.join(why)}", file=sys.stderr)
     if len(bad) > 10:
@@ -77,15 +88,29 @@ def print_qa(run) -> int:
     print("       " + "  ".join(f"{u:>{w}}" for u, w in zip(QA_COLUMNS.values(), widths)))
     for f in sorted(qa):
         vals = [qa[f].get(c) for c in QA_COLUMNS]
-        cells = [f"{v:{w}.4g}" if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
-                 else f"{'-' if v is None else str(v):>{w}}" for v, w in zip(vals, widths)]
+        cells = [
+            f"{v:{w}.4g}"
+            if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+            else f"{'-' if v is None else str(v):>{w}}"
+            for v, w in zip(vals, widths)
+        ]
         print(f"{f:5d}  " + "  ".join(cells) + "  " + "; ".join(bad.get(f, [])))
-    print(f"frame {min(qa)} is the initial state (no step). Mass and energies are in the solver's domain units "
-          f"(the presets' units: density x domain^3, x domain^2/s^2), comparable frame to frame.")
+    print(
+        f"frame {min(qa)} is the initial state (no step). Mass and energies are in the solver's domain units "
+        f"(the presets' units: density x domain^3, x domain^2/s^2), comparable frame to frame."
+    )
     return 0
 
 
 # what `status --qa` prints, with units: "domain" = the solver's normalised domain (docs/physics.md)
-QA_COLUMNS = {"mass": "domain", "kinetic_energy": "domain", "elastic_energy": "domain", "j_min": "1",
-              "j_max": "1", "max_speed": "m/s", "substeps": "count", "rejected_substeps": "count",
-              "cfl_used": "1 (cap 1)"}
+QA_COLUMNS = {
+    "mass": "domain",
+    "kinetic_energy": "domain",
+    "elastic_energy": "domain",
+    "j_min": "1",
+    "j_max": "1",
+    "max_speed": "m/s",
+    "substeps": "count",
+    "rejected_substeps": "count",
+    "cfl_used": "1 (cap 1)",
+}

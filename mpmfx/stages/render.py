@@ -7,6 +7,7 @@ Output in the cache entry: `frames/NNNN.png`, `<shot>.mp4`, `contact.png` (and `
 the runner then publishes them to `renders/<shot>/`, the folder artists look in (`mpmfx.publish`),
 after every run, cached or not. Each frame's label names the --set overrides of its variant.
 """
+
 from __future__ import annotations
 
 import os
@@ -27,15 +28,27 @@ from mpmfx.stages.colliders import collider_geometry
 from mpmfx.stages.parallel import FrameJob
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "render", 2, True, "png"
-CODE = ("mpmfx.stages.render", "mpmfx.render", "mpmfx.io.frames", "mpmfx.stages.colliders",
-        "mpmfx.geometry.colliders", "mpmfx.geometry.mesh", "mpmfx.mpm.colliders")
+CODE = (
+    "mpmfx.stages.render",
+    "mpmfx.render",
+    "mpmfx.io.frames",
+    "mpmfx.stages.colliders",
+    "mpmfx.geometry.colliders",
+    "mpmfx.geometry.mesh",
+    "mpmfx.mpm.colliders",
+)
 
 
 def params(shot: Shot) -> dict:
-    out = {"render": shot.render.model_dump(mode="json"), "camera": default_camera(shot),
-           "domain": shot.domain.model_dump(mode="json"), "materials": [o.material for o in shot.objects],
-           "colliders": [c.model_dump(mode="json") for c in shot.colliders], "floor": solver_floor(shot),
-           "title": title(shot)}
+    out = {
+        "render": shot.render.model_dump(mode="json"),
+        "camera": default_camera(shot),
+        "domain": shot.domain.model_dump(mode="json"),
+        "materials": [o.material for o in shot.objects],
+        "colliders": [c.model_dump(mode="json") for c in shot.colliders],
+        "floor": solver_floor(shot),
+        "title": title(shot),
+    }
     if shot.render.engine is RenderEngine.CYCLES:
         out["blender"] = blender_version()  # another Blender may shade differently
     return out
@@ -93,8 +106,10 @@ def finish(ctx: Context, results: list[dict]) -> dict:
     if shown:
         extras.append(contact_sheet(shown, entry.root / "contact.png", scale=2 if shot.render.width > 640 else 1))
     seconds = {f: t for r in results for f, t in r.get("cycles_seconds", {}).items()}
-    return {"outputs": [str(p) for p in extras if p is not None and p.exists()],
-            **({"cycles_seconds": seconds} if seconds else {})}
+    return {
+        "outputs": [str(p) for p in extras if p is not None and p.exists()],
+        **({"cycles_seconds": seconds} if seconds else {}),
+    }
 
 
 def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -> dict:
@@ -112,14 +127,31 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
         pos, look = default_camera(shot)
         cam = {"position": pos, "look_at": look}
     name = f"cycles_{frames[0]:04d}" if len(frames) == 1 else "cycles"  # a wedge's tasks: one job each
-    spec = write_job(entry.root / f"{name}_job.json", usd=job.upstream["export"].root / "shot.usda",
-                     frames=frames, blend=entry.root / f"{shot.shot.name}.blend",
-                     outputs=[entry.frame_path(f, FRAME_EXT) for f in frames], width=r.width, height=r.height,
-                     samples=r.samples, denoise=r.denoise, shutter=r.shutter, fps=shot.shot.fps,
-                     mode=r.mode, looks=looks, floor_y=solver_floor(shot), domain_origin=shot.domain.origin,
-                     domain_size=shot.domain.size, camera=cam, view_direction=VIEW_DIRECTION,
-                     sun_elevation=r.sun_elevation, sun_rotation=r.sun_rotation, walls=solver_box(shot),
-                     basin=r.basin, label=title(shot) if shot.overrides else "")
+    spec = write_job(
+        entry.root / f"{name}_job.json",
+        usd=job.upstream["export"].root / "shot.usda",
+        frames=frames,
+        blend=entry.root / f"{shot.shot.name}.blend",
+        outputs=[entry.frame_path(f, FRAME_EXT) for f in frames],
+        width=r.width,
+        height=r.height,
+        samples=r.samples,
+        denoise=r.denoise,
+        shutter=r.shutter,
+        fps=shot.shot.fps,
+        mode=r.mode,
+        looks=looks,
+        floor_y=solver_floor(shot),
+        domain_origin=shot.domain.origin,
+        domain_size=shot.domain.size,
+        camera=cam,
+        view_direction=VIEW_DIRECTION,
+        sun_elevation=r.sun_elevation,
+        sun_rotation=r.sun_rotation,
+        walls=solver_box(shot),
+        basin=r.basin,
+        label=title(shot) if shot.overrides else "",
+    )
     entry.frames_dir.mkdir(parents=True, exist_ok=True)
     times = {}
     try:
@@ -139,8 +171,13 @@ _RENDERER: dict[str, object] = {}
 def _preview(job: FrameJob, f: int) -> None:
     """PyVista viewport capture (the fast look) of frame f's surfaces or particles."""
     shot, r = job.shot, job.shot.render
-    setup = dict(size=(r.width, r.height), camera=default_camera(shot), floor=solver_floor(shot),
-                 domain=(shot.domain.origin, shot.domain.size), title=title(shot))
+    setup = dict(
+        size=(r.width, r.height),
+        camera=default_camera(shot),
+        floor=solver_floor(shot),
+        domain=(shot.domain.origin, shot.domain.size),
+        title=title(shot),
+    )
     if repr(setup) not in _RENDERER:
         close()
         _RENDERER[repr(setup)] = FrameRenderer(**setup)
@@ -157,8 +194,10 @@ def _preview(job: FrameJob, f: int) -> None:
         else:
             material_of = {g: o.material for g, o in zip(shot.surface_groups(), shot.objects)}
             groups = SurfaceFrame.read(job.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
-            meshes = {g: (d.vertices, d.faces, colour_for(material_of.get(g, g), i))
-                      for i, (g, d) in enumerate(groups.items())}
+            meshes = {
+                g: (d.vertices, d.faces, colour_for(material_of.get(g, g), i))
+                for i, (g, d) in enumerate(groups.items())
+            }
             meshes |= _collider_meshes(shot, f)
             renderer.surfaces(meshes, out, label=label)
 
@@ -190,4 +229,3 @@ def _collider_meshes(shot: Shot, frame: int) -> dict:
         xf = pose_matrix(*keyframes(geom), t)
         out[f"collider_{col.name}"] = (m.vertices @ xf[:3, :3].T + xf[:3, 3], m.faces, "#9aa0a8")
     return out
-

@@ -3,6 +3,7 @@
 `ShotRun` is the Python API behind `mpmfx run/status/clean`:
     mpmfx.load_shot("pipeline/shots/jelly_splash.toml").run(until="surface")
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -31,17 +32,17 @@ def stage_module(name: str) -> Stage:
 @dataclass
 class StageResult:
     stage: str
-    state: str          # "cached" | "ran" | "resumed"
+    state: str  # "cached" | "ran" | "resumed"
     seconds: float
     frames: int
     entry: Path
-    flagged: int = 0    # frames the QA flags (simulate only)
+    flagged: int = 0  # frames the QA flags (simulate only)
 
 
 @dataclass
 class StageStatus:
     stage: str
-    state: str          # "cached" | "stale" | "partial" | "missing"
+    state: str  # "cached" | "stale" | "partial" | "missing"
     why: str
     entry: Path
 
@@ -49,9 +50,19 @@ class StageStatus:
 class ShotRun:
     """One shot file bound to a cache root. Nothing runs until `run()`."""
 
-    def __init__(self, shot: Shot, *, cache_root: str | Path | None = None, device: str | None = None,
-                 quiet: bool = False, workers: int | None = None, scheduler: str | None = None,
-                 executor: Frames | None = None, publish: bool = True, locked: bool = False):
+    def __init__(
+        self,
+        shot: Shot,
+        *,
+        cache_root: str | Path | None = None,
+        device: str | None = None,
+        quiet: bool = False,
+        workers: int | None = None,
+        scheduler: str | None = None,
+        executor: Frames | None = None,
+        publish: bool = True,
+        locked: bool = False,
+    ):
         self.shot = shot
         self.cache = Cache(cache_root or default_root(), shot.shot.name)
         self.device = device
@@ -108,8 +119,9 @@ class ShotRun:
         return out
 
     # -- run -------------------------------------------------------------------------------
-    def run(self, *, until: str = "render", force: tuple[str, ...] | list[str] = (),
-            frames: list[int] | None = None) -> list[StageResult]:
+    def run(
+        self, *, until: str = "render", force: tuple[str, ...] | list[str] = (), frames: list[int] | None = None
+    ) -> list[StageResult]:
         """Run stages up to `until` (inclusive). `force`: stages re-run from scratch. Independent
         frames run on `self.executor` (a Dask cluster started when first worth it, closed here
         unless it was handed in). Holds the shot's lock throughout."""
@@ -138,8 +150,10 @@ class ShotRun:
         if frames:
             bad = sorted(set(frames) - set(self.shot.frames))
             if bad:
-                raise ShotError(f"--frames: {bad[0]} is outside the shot's frames "
-                                f"{self.shot.shot.frame_start}..{self.shot.shot.frame_end}")
+                raise ShotError(
+                    f"--frames: {bad[0]} is outside the shot's frames "
+                    f"{self.shot.shot.frame_start}..{self.shot.shot.frame_end}"
+                )
 
     def _publish(self, results: list[StageResult]) -> dict[str, Path]:
         """Every run that reaches export / render publishes them at stable paths (`mpmfx.publish`)."""
@@ -179,8 +193,16 @@ class ShotRun:
                 entry.frame_path(int(Path(rel).stem), mod.FRAME_EXT).unlink(missing_ok=True)
         state = "resumed" if entry.root.exists() else "ran"
         up = {s: entries[s] for s in STAGES[: STAGES.index(name)]}
-        ctx = Context(self.shot, entry, up, wanted if wanted is not None else [], self.device, self.quiet,
-                      executor=self.executor, state=state)
+        ctx = Context(
+            self.shot,
+            entry,
+            up,
+            wanted if wanted is not None else [],
+            self.device,
+            self.quiet,
+            executor=self.executor,
+            state=state,
+        )
         entry.root.mkdir(parents=True, exist_ok=True)
         return ctx
 
@@ -208,12 +230,18 @@ class ShotRun:
         done = entry.done_frames(mod.FRAME_EXT) if mod.PER_FRAME else []
         missing = sorted(set(ctx.frames) - set(done)) if mod.PER_FRAME else []
         if missing:
-            raise StageError(f"{entry.stage}: frames {_ranges(missing)} are missing after the run (deleted by "
-                             f"someone else?); no manifest written, run again to redo them")
+            raise StageError(
+                f"{entry.stage}: frames {_ranges(missing)} are missing after the run (deleted by "
+                f"someone else?); no manifest written, run again to redo them"
+            )
         old = entry.manifest() or {}
         timings = {**old.get("timings", {}), "last_run_s": round(seconds, 3)}
-        entry.write_manifest(frames=done, timings=timings, qa=extra.pop("qa", None),
-                             extra={**extra, "notes": ctx.notes, "host": socket.gethostname()})
+        entry.write_manifest(
+            frames=done,
+            timings=timings,
+            qa=extra.pop("qa", None),
+            extra={**extra, "notes": ctx.notes, "host": socket.gethostname()},
+        )
         n = len(ctx.frames) if mod.PER_FRAME else 1
         return StageResult(entry.stage, ctx.state, seconds, n, entry.root)
 
@@ -245,10 +273,23 @@ def _why_stale(entry: Entry, other: Path) -> str:
     return "changed: " + ", ".join(changed[:6]) if changed else "parameters or inputs changed"
 
 
-def load_shot(path: str | Path, *, overrides: list[str] = (), cache_root: str | Path | None = None,
-              device: str | None = None, quiet: bool = False, workers: int | None = None,
-              scheduler: str | None = None) -> ShotRun:
+def load_shot(
+    path: str | Path,
+    *,
+    overrides: list[str] = (),
+    cache_root: str | Path | None = None,
+    device: str | None = None,
+    quiet: bool = False,
+    workers: int | None = None,
+    scheduler: str | None = None,
+) -> ShotRun:
     """Load and validate a shot file; returns a ShotRun (see module docstring). workers /
     scheduler: where independent frames run (`mpmfx.stages.parallel.Frames`)."""
-    return ShotRun(load_shot_config(path, list(overrides)), cache_root=cache_root, device=device, quiet=quiet,
-                   workers=workers, scheduler=scheduler)
+    return ShotRun(
+        load_shot_config(path, list(overrides)),
+        cache_root=cache_root,
+        device=device,
+        quiet=quiet,
+        workers=workers,
+        scheduler=scheduler,
+    )

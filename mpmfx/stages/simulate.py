@@ -10,6 +10,7 @@ exactly from its last complete frame. The files are written on a background thre
 next frame simulates (`FrameWriter`).
 Frame files are `mpmfx.io.frames.ParticleFrame` records.
 """
+
 from __future__ import annotations
 
 import json
@@ -30,8 +31,16 @@ from mpmfx.stages.colliders import collider_geometry
 from mpmfx.stages.writer import FrameWriter
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "simulate", 1, True, ParticleFrame.EXT
-CODE = ("mpmfx.stages.simulate", "mpmfx.mpm", "mpmfx.stages.colliders", "mpmfx.geometry.colliders",
-        *MESH_LOADING, "mpmfx.geometry.voxelise", "mpmfx.geometry.inside", "mpmfx.io.frames")
+CODE = (
+    "mpmfx.stages.simulate",
+    "mpmfx.mpm",
+    "mpmfx.stages.colliders",
+    "mpmfx.geometry.colliders",
+    *MESH_LOADING,
+    "mpmfx.geometry.voxelise",
+    "mpmfx.geometry.inside",
+    "mpmfx.io.frames",
+)
 KEEP_CHECKPOINTS = 2
 
 
@@ -39,18 +48,26 @@ def params(shot: Shot) -> dict:
     # frame_end is left out on purpose: a longer shot continues from the cached frames.
     # The solver's resolved config, not the [solver] section: a changed default re-runs simulate.
     mats, object_material = materials(shot)
-    cfg = {k: [w.value for w in v] if k == "walls" else getattr(v, "value", v)
-           for k, v in vars(shot.solver_config()).items()}
-    return {"domain": shot.domain.model_dump(mode="json"), "solver": cfg,
-            "materials": [m.__dict__ | {"mode": int(m.mode)} for m in mats],
-            "object_material": object_material,
-            "colliders": [c.model_dump(mode="json") for c in shot.colliders],
-            "time": {"fps": shot.shot.fps, "frame_start": shot.shot.frame_start}}
+    cfg = {
+        k: [w.value for w in v] if k == "walls" else getattr(v, "value", v)
+        for k, v in vars(shot.solver_config()).items()
+    }
+    return {
+        "domain": shot.domain.model_dump(mode="json"),
+        "solver": cfg,
+        "materials": [m.__dict__ | {"mode": int(m.mode)} for m in mats],
+        "object_material": object_material,
+        "colliders": [c.model_dump(mode="json") for c in shot.colliders],
+        "time": {"fps": shot.shot.fps, "frame_start": shot.shot.frame_start},
+    }
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {f"collider:{c.name}": file_hash(shot.resolve(c.mesh)) for c in shot.colliders
-            if c.shape is ColliderShape.MESH and c.mesh is not None}
+    return {
+        f"collider:{c.name}": file_hash(shot.resolve(c.mesh))
+        for c in shot.colliders
+        if c.shape is ColliderShape.MESH and c.mesh is not None
+    }
 
 
 def materials(shot: Shot) -> tuple[list, list[int]]:
@@ -60,7 +77,9 @@ def materials(shot: Shot) -> tuple[list, list[int]]:
         try:
             mat = preset(obj.material, **obj.overrides)
         except (ValueError, TypeError) as exc:
-            raise ShotError(f"{shot.source or shot.base_dir}: objects[{i}] ({obj.name}) material / overrides: {exc}") from None
+            raise ShotError(
+                f"{shot.source or shot.base_dir}: objects[{i}] ({obj.name}) material / overrides: {exc}"
+            ) from None
         if mat not in mats:
             mats.append(mat)
         index.append(mats.index(mat))
@@ -75,8 +94,12 @@ def colliders(shot: Shot) -> list:
     for col in shot.colliders:
         geom = collider_geometry(col)
         t, tr, rot = keyframes(geom)
-        common = dict(friction=col.friction, times=t, translations=((tr - origin) / L).astype(np.float32),
-                      rotations=rot.astype(np.float32))
+        common = dict(
+            friction=col.friction,
+            times=t,
+            translations=((tr - origin) / L).astype(np.float32),
+            rotations=rot.astype(np.float32),
+        )
         if col.shape is ColliderShape.PLANE:
             out.append(Collider(kind=ColliderKind.PLANE, normal=tuple(col.normal), **common))
         elif col.shape is ColliderShape.BOX:
@@ -86,8 +109,15 @@ def colliders(shot: Shot) -> list:
         else:
             mesh = collider_mesh(geom, resolve=shot.resolve, plane_size=2 * L)
             sdf, sdf_origin, voxel = mesh_sdf(mesh, dx=L / shot.domain.grid_n)
-            out.append(Collider(kind=ColliderKind.SDF, sdf=(sdf / L).astype(np.float32),
-                                sdf_origin=tuple(sdf_origin / L), sdf_voxel=voxel / L, **common))
+            out.append(
+                Collider(
+                    kind=ColliderKind.SDF,
+                    sdf=(sdf / L).astype(np.float32),
+                    sdf_origin=tuple(sdf_origin / L),
+                    sdf_voxel=voxel / L,
+                    **common,
+                )
+            )
     return out
 
 
@@ -104,9 +134,13 @@ def run(ctx: Context) -> dict:
         if ckpt is None:
             p = SeedParticles.read(ctx.upstream["voxelise"].root)
             body = p.body.astype(np.int32)
-            parts = Particles(x=((p.x - origin) / size).astype(np.float32), v=(p.v / size).astype(np.float32),
-                              volume=(p.volume / size**3).astype(np.float32),
-                              material=np.asarray(obj_mat, np.int32)[body], body=body)
+            parts = Particles(
+                x=((p.x - origin) / size).astype(np.float32),
+                v=(p.v / size).astype(np.float32),
+                volume=(p.volume / size**3).astype(np.float32),
+                material=np.asarray(obj_mat, np.int32)[body],
+                body=body,
+            )
             state, frame = solver.init_state(parts), start
             qa0 = _qa(solver.advance(state, 0.0, 0.0), size)  # a zero-length advance: the initial observables
             qa0["max_speed"] = float(np.linalg.norm(p.v, axis=1).max())  # m/s; no substep measured it
@@ -138,8 +172,13 @@ def run(ctx: Context) -> dict:
         t0 = time.perf_counter()
     split["writer_wait"] += time.perf_counter() - t0  # the last frame's files
     qa = {int(p.stem): json.loads(p.read_text()) for p in sorted((entry.root / "qa").glob("*.json"))}
-    return {"qa": qa, "particles": int(state.n), "device": str(solver.device),
-            "materials": [m.mode.name for m in mats], "seconds_split": {k: round(v, 3) for k, v in split.items()}}
+    return {
+        "qa": qa,
+        "particles": int(state.n),
+        "device": str(solver.device),
+        "materials": [m.mode.name for m in mats],
+        "seconds_split": {k: round(v, 3) for k, v in split.items()},
+    }
 
 
 def _advice(shot: Shot, exc) -> str:
@@ -149,13 +188,17 @@ def _advice(shot: Shot, exc) -> str:
     stiff = " or ".join(f"objects[{i}].overrides.youngs_modulus" for i in range(len(shot.objects)))
     if exc.field == "dt_min":
         dt = float(f"{exc.needed / 10:.0e}")  # a decade of room: the step keeps shrinking as things speed up
-        return (f"{what}. If this material is meant to be this stiff, --set solver.dt_min={dt:g} (not a "
-                f"smaller solver.cfl: it would only shrink the step further); else soften it ({stiff}) or raise "
-                f"solver.damping")
+        return (
+            f"{what}. If this material is meant to be this stiff, --set solver.dt_min={dt:g} (not a "
+            f"smaller solver.cfl: it would only shrink the step further); else soften it ({stiff}) or raise "
+            f"solver.damping"
+        )
     if exc.field == "max_substeps_per_frame":
         n = 2 * int(exc.needed)
-        return (f"{what}. --set solver.max_substeps_per_frame={n} (about {int(exc.needed)} are needed), "
-                f"or soften the stiffest material ({stiff}) or lower domain.grid_n")
+        return (
+            f"{what}. --set solver.max_substeps_per_frame={n} (about {int(exc.needed)} are needed), "
+            f"or soften the stiffest material ({stiff}) or lower domain.grid_n"
+        )
     return str(exc)
 
 
@@ -188,19 +231,23 @@ def _particles(s: dict, frame: int, origin, size: float) -> ParticleFrame:
     """The frame's particle record (world units) of the live particles of a host copy (_host)."""
     alive = s["alive"] != 0
     live = slice(None) if alive.all() else alive  # a slice views; a mask copies (~0.3 s at 2.6M)
-    out = ParticleFrame(x=(s["x"][live] * size + origin).astype(np.float32),
-                        v=(s["v"][live] * size).astype(np.float32), id=np.flatnonzero(alive).astype(np.int32),
-                        material=s["material"][live].astype(np.int32, copy=False),
-                        body=s["body"][live].astype(np.int32, copy=False),
-                        **{k: s[k][live].astype(np.float32, copy=False) for k in ("Jp", "J") if k in s})
+    out = ParticleFrame(
+        x=(s["x"][live] * size + origin).astype(np.float32),
+        v=(s["v"][live] * size).astype(np.float32),
+        id=np.flatnonzero(alive).astype(np.int32),
+        material=s["material"][live].astype(np.int32, copy=False),
+        body=s["body"][live].astype(np.int32, copy=False),
+        **{k: s[k][live].astype(np.float32, copy=False) for k in ("Jp", "J") if k in s},
+    )
     if not all(np.isfinite(a).all() for a in out.arrays().values()):
-        raise StageError(f"frame {frame}: the solver returned non-finite values; nothing was cached. "
-                         f"Lower solver.cfl or the stiffest material's youngs_modulus / bulk_modulus")
+        raise StageError(
+            f"frame {frame}: the solver returned non-finite values; nothing was cached. "
+            f"Lower solver.cfl or the stiffest material's youngs_modulus / bulk_modulus"
+        )
     return out
 
 
-def _write_frame(entry, frame: int, qa: dict | None, checkpoint: dict | None, state: dict, origin,
-                 size: float) -> None:
+def _write_frame(entry, frame: int, qa: dict | None, checkpoint: dict | None, state: dict, origin, size: float) -> None:
     """One frame's files from its host copies, in the order resuming relies on: QA and
     checkpoint before the frame file (a complete frame always has its resume point), and
     none of them if the particles are not finite."""
@@ -235,4 +282,3 @@ def _latest_checkpoint(folder: Path, done: list[int], start: int) -> int | None:
         f += 1  # start..f: the unbroken run of frames from the first
     ok = [c for c in sorted(int(p.stem) for p in folder.glob("[0-9]*.npz")) if start < c <= f + 1]
     return ok[-1] if ok else None
-

@@ -5,6 +5,7 @@ surface group (a material, an object, or "all": `surface.group`): the mesh with 
 and velocities, and the sparse level set as 8^3 leaves (its size follows the surface area, not
 the domain), with velocity leaves and, with `surface.density` on, fog density leaves.
 """
+
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
@@ -28,8 +29,10 @@ GPU_WRITE_THREADS = 4  # frames deflated and written at once while the GPU surfa
 def params(shot: Shot) -> dict:
     # The resolved surfacer parameters of each group, not the config section: a changed default
     # re-runs surface.
-    resolved = {g: {k: getattr(v, "value", v) for k, v in vars(surface_params(shot, g)).items()}
-                for g in sorted(set(shot.surface_groups()))}
+    resolved = {
+        g: {k: getattr(v, "value", v) for k, v in vars(surface_params(shot, g)).items()}
+        for g in sorted(set(shot.surface_groups()))
+    }
     return {"surface": resolved, "groups": shot.surface_groups()}
 
 
@@ -43,11 +46,19 @@ def surface_params(shot: Shot, group: str):
     h = shot.particle_spacing
     # Default voxel: half the particle spacing, fine enough for a smooth render and ~10x cheaper
     # than the surfacer's own default (a quarter of the radius).
-    return SurfaceParams(particle_radius=PARTICLE_RADIUS_PER_SPACING * h, radius_scale=s.radius_scale,
-                         voxel_size=s.voxel_size or 0.5 * h, dense_output=False, smooth_iters=s.smooth_iters, dilate=s.dilate,
-                         min_feature_particles=s.min_feature_particles, density=s.density,
-                         anisotropic=s.anisotropic, close_voids=s.close_voids,
-                         sharp_edges=shot.sharp_edges_for(group))
+    return SurfaceParams(
+        particle_radius=PARTICLE_RADIUS_PER_SPACING * h,
+        radius_scale=s.radius_scale,
+        voxel_size=s.voxel_size or 0.5 * h,
+        dense_output=False,
+        smooth_iters=s.smooth_iters,
+        dilate=s.dilate,
+        min_feature_particles=s.min_feature_particles,
+        density=s.density,
+        anisotropic=s.anisotropic,
+        close_voids=s.close_voids,
+        sharp_edges=shot.sharp_edges_for(group),
+    )
 
 
 def todo(ctx: Context) -> list[int]:
@@ -82,8 +93,10 @@ def _pipelined(calls: list[tuple[FrameJob, int]], bar, *, write_threads: int) ->
     a thread meanwhile and each frame's file written on `write_threads` threads
     (`mpmfx.stages.writer.FrameWriter`: frames surfaced before an error are still written)."""
     out = []
-    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="mpmfx-read") as reader, \
-            FrameWriter(write_threads) as writer:
+    with (
+        ThreadPoolExecutor(max_workers=1, thread_name_prefix="mpmfx-read") as reader,
+        FrameWriter(write_threads) as writer,
+    ):
         ahead = reader.submit(_read, *calls[0])
         for i, (job, f) in enumerate(calls):
             particles = ahead.result()
@@ -115,17 +128,26 @@ def _surfaces(job: FrameJob, p: ParticleFrame, f: int) -> tuple[SurfaceFrame, di
         try:
             res = surface_particles(p.x[sel], p.v[sel], surface_params(shot, g), device=job.device)
         except GridTooLarge as exc:  # the surfacer names its own parameter; the shot has a key for voxel_size
-            raise StageError(f"{shot.source or shot.shot.name}: surface.voxel_size, frame {f}, group {g!r}: "
-                             f"{exc.detail} (--set surface.voxel_size=...)") from None
+            raise StageError(
+                f"{shot.source or shot.shot.name}: surface.voxel_size, frame {f}, group {g!r}: "
+                f"{exc.detail} (--set surface.voxel_size=...)"
+            ) from None
         m, ls = res.mesh, res.sparse
         out[g] = GroupSurface(
-            vertices=m.vertices, faces=m.faces, normals=m.normals, velocities=m.velocities,
-            block_ijk=ls.block_ijk, blocks=ls.values, inside_ijk=ls.inside_ijk, voxel_size=ls.voxel_size,
+            vertices=m.vertices,
+            faces=m.faces,
+            normals=m.normals,
+            velocities=m.velocities,
+            block_ijk=ls.block_ijk,
+            blocks=ls.values,
+            inside_ijk=ls.inside_ijk,
+            voxel_size=ls.voxel_size,
             background=ls.background,
             # motion-blur vectors: half precision is plenty, and half the bytes
             vel_blocks=None if ls.velocity is None else ls.velocity.astype(np.float16),
             # 0..1 for a fog shader: float16's 5e-4 steps are invisible
-            density_blocks=None if ls.density is None else ls.density.astype(np.float16))
+            density_blocks=None if ls.density is None else ls.density.astype(np.float16),
+        )
         stats["vertices"] += len(m.vertices)
         stats["faces"] += len(m.faces)
     return SurfaceFrame(out), stats

@@ -3,6 +3,7 @@
 Output (world units): `particles.npz`, an `mpmfx.io.frames.SeedParticles` record; `thickness.json`, one heatmap PNG and one
 `sdf_<object>.npz` per object.
 """
+
 from __future__ import annotations
 
 import warnings
@@ -20,17 +21,32 @@ from mpmfx.render.thickness import render_thickness_heatmap
 from mpmfx.stages.base import Context, StageError
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "voxelise", 1, False, "npz"
-CODE = ("mpmfx.stages.voxelise", *MESH_LOADING, "mpmfx.geometry.inside", "mpmfx.geometry.voxelise",
-        "mpmfx.geometry.thickness", "mpmfx.render.thickness", "mpmfx.mpm.materials", "mpmfx.io.frames")
+CODE = (
+    "mpmfx.stages.voxelise",
+    *MESH_LOADING,
+    "mpmfx.geometry.inside",
+    "mpmfx.geometry.voxelise",
+    "mpmfx.geometry.thickness",
+    "mpmfx.render.thickness",
+    "mpmfx.mpm.materials",
+    "mpmfx.io.frames",
+)
 
 
 def params(shot: Shot) -> dict:
-    objects = [o.model_dump(mode="json", include={"name", "prim_path", "translate", "rotate", "scale",
-                                                  "velocity", "angular_velocity"}) for o in shot.objects]
+    objects = [
+        o.model_dump(
+            mode="json", include={"name", "prim_path", "translate", "rotate", "scale", "velocity", "angular_velocity"}
+        )
+        for o in shot.objects
+    ]
     for o, fluid in zip(objects, shot.fluid_objects()):
         o["fluid"] = fluid
-    return {"domain": shot.domain.model_dump(mode="json"), "objects": objects,
-            "voxelise": shot.voxelise.model_dump(mode="json")}
+    return {
+        "domain": shot.domain.model_dump(mode="json"),
+        "objects": objects,
+        "voxelise": shot.voxelise.model_dump(mode="json"),
+    }
 
 
 def inputs(shot: Shot) -> dict[str, str]:
@@ -44,8 +60,12 @@ def run(ctx: Context) -> dict:
     for body, obj in enumerate(ctx.progress(shot.objects, total=len(shot.objects), desc="voxelise", unit="object")):
         path = shot.resolve(obj.mesh)
         try:
-            mesh = transform_mesh(load_mesh(path, prim_path=obj.prim_path), translate=obj.translate,
-                                  rotate_deg=obj.rotate, scale=obj.scale)
+            mesh = transform_mesh(
+                load_mesh(path, prim_path=obj.prim_path),
+                translate=obj.translate,
+                rotate_deg=obj.rotate,
+                scale=obj.scale,
+            )
             check_in_domain(mesh, origin=dom.origin, size=dom.size, name=f"objects.{obj.name} ({path})")
         except MeshError as exc:  # the asset or its placement: bad input, exit 2 like the README says
             raise ShotError(f"objects.{obj.name}: {exc}") from None
@@ -55,22 +75,33 @@ def run(ctx: Context) -> dict:
             reports[obj.name] = _thickness(ctx, obj, mesh, check_thickness, Verdict).to_dict()
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            vox = voxelise(mesh, origin=dom.origin, size=dom.size, grid_n=dom.grid_n,
-                           ppc=shot.voxelise.ppc, seed=shot.voxelise.seed + body)
+            vox = voxelise(
+                mesh,
+                origin=dom.origin,
+                size=dom.size,
+                grid_n=dom.grid_n,
+                ppc=shot.voxelise.ppc,
+                seed=shot.voxelise.seed + body,
+            )
         for w in caught:
             ctx.warn(f"objects.{obj.name}: {w.message}")
         if len(vox.points) == 0:
-            raise StageError(f"objects.{obj.name}: {path} produced no particles at domain.grid_n = {dom.grid_n}: "
-                             f"the mesh is thinner than a cell; raise domain.grid_n or the object's scale")
+            raise StageError(
+                f"objects.{obj.name}: {path} produced no particles at domain.grid_n = {dom.grid_n}: "
+                f"the mesh is thinner than a cell; raise domain.grid_n or the object's scale"
+            )
         centroid = vox.points.mean(axis=0)
         v = np.asarray(obj.velocity) + np.cross(np.asarray(obj.angular_velocity), vox.points - centroid)
         xs.append(vox.points), vs.append(v), vols.append(vox.volume)
         bodies.append(np.full(len(vox.points), body, np.int32))
-        write_arrays(ctx.entry.root / f"sdf_{obj.name}.npz",
-                     {"sdf": vox.sdf, "origin": np.asarray(vox.sdf_origin), "voxel": np.float64(vox.sdf_voxel)})
+        write_arrays(
+            ctx.entry.root / f"sdf_{obj.name}.npz",
+            {"sdf": vox.sdf, "origin": np.asarray(vox.sdf_origin), "voxel": np.float64(vox.sdf_voxel)},
+        )
     write_json(ctx.entry.root / "thickness.json", reports)
-    SeedParticles(x=np.concatenate(xs), v=np.concatenate(vs), volume=np.concatenate(vols),
-                  body=np.concatenate(bodies)).write(ctx.entry.root)
+    SeedParticles(
+        x=np.concatenate(xs), v=np.concatenate(vs), volume=np.concatenate(vols), body=np.concatenate(bodies)
+    ).write(ctx.entry.root)
     n = sum(len(x) for x in xs)
     return {"particles": n, "thickness": {k: r.get("verdict", "skipped") for k, r in reports.items()}}
 
@@ -86,13 +117,13 @@ def _thickness(ctx, obj, mesh, check_thickness, Verdict):
         except ImportError as exc:  # the report still stands; only the picture is missing
             ctx.notes.append(f"objects.{obj.name}: no thickness heatmap ({exc})")
     if report.verdict is not Verdict.PASS and mode is not Thickness.IGNORE:
-        msg = (f"objects.{obj.name}: thinnest feature {report.min_thickness_cells:.1f} cells at grid_n "
-               f"{dom.grid_n} ({len(report.regions)} thin regions; under ~5 cells a feature cannot hold its "
-               f"shape). Thicken the mesh, raise its scale, or set domain.grid_n >= "
-               f"{report.min_grid_n_to_pass}; see `mpmfx check {obj.mesh}`")
+        msg = (
+            f"objects.{obj.name}: thinnest feature {report.min_thickness_cells:.1f} cells at grid_n "
+            f"{dom.grid_n} ({len(report.regions)} thin regions; under ~5 cells a feature cannot hold its "
+            f"shape). Thicken the mesh, raise its scale, or set domain.grid_n >= "
+            f"{report.min_grid_n_to_pass}; see `mpmfx check {obj.mesh}`"
+        )
         if mode is Thickness.ERROR and report.verdict is Verdict.FAIL:
-            raise StageError(msg + " (or set voxelise.thickness = \"warn\")")
+            raise StageError(msg + ' (or set voxelise.thickness = "warn")')
         ctx.warn(msg)
     return report
-
-

@@ -1,5 +1,6 @@
 """Frames' files written on background threads while the stage makes the next frame: on a GPU
 the host's compression and disk writes take longer than the device's work on a frame."""
+
 from __future__ import annotations
 
 from collections import deque

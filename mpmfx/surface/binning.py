@@ -88,8 +88,12 @@ def sorted_copy(src: wp.array(dtype=wp.vec3), order: wp.array(dtype=wp.int32), d
 
 
 @wp.kernel
-def counting_sort(keys: wp.array(dtype=wp.int32), starts: wp.array(dtype=wp.int32), cursor: wp.array(dtype=wp.int32),
-                  order: wp.array(dtype=wp.int32)):
+def counting_sort(
+    keys: wp.array(dtype=wp.int32),
+    starts: wp.array(dtype=wp.int32),
+    cursor: wp.array(dtype=wp.int32),
+    order: wp.array(dtype=wp.int32),
+):
     """order = the particles sorted by cell key, ties in particle order: what
     wp.utils.radix_sort_pairs (a stable sort) gives for (keys, order = 0 .. n - 1), from the
     cells' first slots `starts` (the exclusive scan of their counts). keys: (n,) cell key of

@@ -73,8 +73,13 @@ def spread(s: vec8u, r: vec8u):
             w = r[x]
             more = int(1)
             while more != 0:
-                v = w | ((w & ez) << wp.uint64(1)) | ((w >> wp.uint64(1)) & ez) | ((w & ey) << wp.uint64(8)) | (
-                    (w >> wp.uint64(8)) & ey)
+                v = (
+                    w
+                    | ((w & ez) << wp.uint64(1))
+                    | ((w >> wp.uint64(1)) & ez)
+                    | ((w & ey) << wp.uint64(8))
+                    | ((w >> wp.uint64(8)) & ey)
+                )
                 more = wp.where(v != w, 1, 0)
                 w = v
             r[x] = w

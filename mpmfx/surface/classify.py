@@ -167,8 +167,12 @@ def void_shells(labels: wp.array3d(dtype=wp.int32), state: wp.array3d(dtype=wp.i
 
 
 @wp.kernel
-def void_openness(labels: wp.array3d(dtype=wp.int32), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
-                  open_: wp.array(dtype=wp.int32)):
+def void_openness(
+    labels: wp.array3d(dtype=wp.int32),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    open_: wp.array(dtype=wp.int32),
+):
     """open_[a void's label] = 1 where a voxel of its shell is outside after the topology's
     bubble fill: the void joins the outside through gaps in its surface. A sealed void's shell
     is all inside then (filled as a bubble)."""
@@ -186,7 +190,9 @@ def void_openness(labels: wp.array3d(dtype=wp.int32), bmap: wp.array3d(dtype=wp.
 
 
 @wp.kernel
-def open_void_cores(labels: wp.array3d(dtype=wp.int32), open_: wp.array(dtype=wp.int32), bmap: wp.array3d(dtype=wp.int32)):
+def open_void_cores(
+    labels: wp.array3d(dtype=wp.int32), open_: wp.array(dtype=wp.int32), bmap: wp.array3d(dtype=wp.int32)
+):
     """A void's core (INSIDE tiles) becomes OUTSIDE where the void is open (void_openness)."""
     i, j, k = wp.tid()
     lab = labels[i, j, k]
@@ -217,6 +223,7 @@ def compact_blocks(
 def active_flags(state: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32)):
     i, j, k = wp.tid()
     flags[(i * state.shape[1] + j) * state.shape[2] + k] = wp.where(state[i, j, k] == TILE_ACTIVE, 1, 0)
+
 
 MARGIN = wp.constant(1.0e-4)  # x r^2: how far from the reach a bound must be to decide without the particles
 
@@ -329,7 +336,10 @@ def mark_near_tested(
                             inside = int(1)  # mark_near_blocks' candidate range of this particle
                             d2 = float(0.0)
                             for a in range(3):
-                                if int(wp.floor((gp[a] - reach) / 8.0)) > b[a] or int(wp.floor((gp[a] + reach) / 8.0)) < b[a]:
+                                if (
+                                    int(wp.floor((gp[a] - reach) / 8.0)) > b[a]
+                                    or int(wp.floor((gp[a] + reach) / 8.0)) < b[a]
+                                ):
                                     inside = 0
                                 e = wp.max(wp.max(float(b[a] * BS) - gp[a], gp[a] - float(b[a] * BS + BS - 1)), 0.0)
                                 d2 += e * e

@@ -21,7 +21,10 @@ wp.set_module_options({"enable_backward": False})
 
 @wp.kernel
 def init_inside_labels(
-    bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), labels: wp.array(dtype=wp.int32),
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    labels: wp.array(dtype=wp.int32),
     base: int,
 ):
     """Inside voxels: own label t + 1, or 0 when touching an INSIDE tile (a big body); else -1."""
@@ -39,8 +42,14 @@ def init_inside_labels(
 
 
 @wp.func
-def sweep_min_line(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), labels: wp.array(dtype=wp.int32),
-                   axis: int, b: int, l: int):
+def sweep_min_line(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    labels: wp.array(dtype=wp.int32),
+    axis: int,
+    b: int,
+    l: int,
+):
     """Carry the smallest label through labelled voxels along line l of block b, both ways;
     returns how many labels it lowered."""
     corner = bcoord[b] * BS
@@ -88,7 +97,10 @@ def sweep_min_labels(
 
 @wp.kernel
 def count_component_particles(
-    g: wp.array(dtype=wp.vec3), bmap: wp.array3d(dtype=wp.int32), labels: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32)
+    g: wp.array(dtype=wp.vec3),
+    bmap: wp.array3d(dtype=wp.int32),
+    labels: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
 ):
     p = wp.tid()
     gp = g[p]
@@ -101,7 +113,11 @@ def count_component_particles(
 
 @wp.kernel
 def remove_small_components(
-    labels: wp.array(dtype=wp.int32), counts: wp.array(dtype=wp.int32), min_count: int, outside_value: float, phi: wp.array(dtype=float),
+    labels: wp.array(dtype=wp.int32),
+    counts: wp.array(dtype=wp.int32),
+    min_count: int,
+    outside_value: float,
+    phi: wp.array(dtype=float),
     base: int,
 ):
     t = wp.tid() + base
@@ -111,8 +127,9 @@ def remove_small_components(
 
 
 @wp.kernel
-def small_blocks(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), pending: wp.array(dtype=wp.int32),
-                 base: int):
+def small_blocks(
+    sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), pending: wp.array(dtype=wp.int32), base: int
+):
     """pending[b] = 1 where block b holds an inside voxel the fill from the bodies (seeds 2) did
     not reach (a voxel of a small component: labels_from_bits labels it), else 0 (thread = block)."""
     b = wp.tid() + base
@@ -123,8 +140,9 @@ def small_blocks(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uin
 
 
 @wp.kernel
-def labels_from_bits(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), labels: wp.array(dtype=wp.int32),
-                     base: int):
+def labels_from_bits(
+    sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), labels: wp.array(dtype=wp.int32), base: int
+):
     """Labels of init_inside_labels after a fill from the bodies (seeds 2) for
     the 64 voxels of word w: outside -1, reached inside 0 (a component that is not small:
     seed_bits' bodies), the other inside voxels their own t + 1 (the blocks holding those:
@@ -143,8 +161,13 @@ def labels_from_bits(sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp
 
 
 @wp.kernel
-def seed_large_labels(phi: wp.array(dtype=float), mark: wp.array(dtype=wp.int32), min_count: int,
-                      labels: wp.array(dtype=wp.int32), base: int):
+def seed_large_labels(
+    phi: wp.array(dtype=float),
+    mark: wp.array(dtype=wp.int32),
+    min_count: int,
+    labels: wp.array(dtype=wp.int32),
+    base: int,
+):
     """The voxel path's counterpart of seed_bits' large pieces (thread = block; its int32 marks
     and init_inside_labels' labels): label 0 for the inside voxels of a block
     whose inside voxels are one piece holding at least min_count particles' voxels, so the
@@ -256,8 +279,13 @@ def labels_by_block(bcoord, bmap, phi, mark, min_count: int):
     launch_split(wp, labels_from_bits, sign.shape[0], [sign, reached, labels], device=phi.device)
 
     def sweep(active, changed, moved):  # a block per thread: the blocks left out cost ~nothing
-        launch_split(wp, sweep_min_labels_blocks, bcoord.shape[0], [bcoord, bmap, labels, active, changed, moved],
-                     device=phi.device)
+        launch_split(
+            wp,
+            sweep_min_labels_blocks,
+            bcoord.shape[0],
+            [bcoord, bmap, labels, active, changed, moved],
+            device=phi.device,
+        )
 
     active_rounds(bcoord, bmap, pending, sweep)
     return labels

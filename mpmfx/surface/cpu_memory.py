@@ -35,8 +35,11 @@ def keep_freed_memory() -> bool:
         return False
     _done = True
     env = os.environ
-    if env.get("MPMFX_SURFACE_KEEP_MEMORY", "1") == "0" or "GLIBC_TUNABLES" in env or any(
-            k.startswith("MALLOC_") for k in env):
+    if (
+        env.get("MPMFX_SURFACE_KEEP_MEMORY", "1") == "0"
+        or "GLIBC_TUNABLES" in env
+        or any(k.startswith("MALLOC_") for k in env)
+    ):
         return False
     if platform.system() != "Linux" or platform.libc_ver()[0] != "glibc":
         return False

@@ -50,23 +50,54 @@ def tangent_hessian(bmap: wp.array3d(dtype=wp.int32), f: wp.array(dtype=float), 
     gl = wp.length(g)
     if gl < 1.0e-20:
         return wp.vec3(0.0), wp.mat33(0.0), 0.0
-    hxy = (tap(bmap, f, t, c, 2, 2, 0) - tap(bmap, f, t, c, 2, -2, 0)
-           - tap(bmap, f, t, c, -2, 2, 0) + tap(bmap, f, t, c, -2, -2, 0)) / 16.0
-    hxz = (tap(bmap, f, t, c, 2, 0, 2) - tap(bmap, f, t, c, 2, 0, -2)
-           - tap(bmap, f, t, c, -2, 0, 2) + tap(bmap, f, t, c, -2, 0, -2)) / 16.0
-    hyz = (tap(bmap, f, t, c, 0, 2, 2) - tap(bmap, f, t, c, 0, 2, -2)
-           - tap(bmap, f, t, c, 0, -2, 2) + tap(bmap, f, t, c, 0, -2, -2)) / 16.0
-    h = wp.mat33(0.25 * (xp - 2.0 * f0 + xm), hxy, hxz, hxy, 0.25 * (yp - 2.0 * f0 + ym), hyz,
-                 hxz, hyz, 0.25 * (zp - 2.0 * f0 + zm))
+    hxy = (
+        tap(bmap, f, t, c, 2, 2, 0)
+        - tap(bmap, f, t, c, 2, -2, 0)
+        - tap(bmap, f, t, c, -2, 2, 0)
+        + tap(bmap, f, t, c, -2, -2, 0)
+    ) / 16.0
+    hxz = (
+        tap(bmap, f, t, c, 2, 0, 2)
+        - tap(bmap, f, t, c, 2, 0, -2)
+        - tap(bmap, f, t, c, -2, 0, 2)
+        + tap(bmap, f, t, c, -2, 0, -2)
+    ) / 16.0
+    hyz = (
+        tap(bmap, f, t, c, 0, 2, 2)
+        - tap(bmap, f, t, c, 0, 2, -2)
+        - tap(bmap, f, t, c, 0, -2, 2)
+        + tap(bmap, f, t, c, 0, -2, -2)
+    ) / 16.0
+    h = wp.mat33(
+        0.25 * (xp - 2.0 * f0 + xm),
+        hxy,
+        hxz,
+        hxy,
+        0.25 * (yp - 2.0 * f0 + ym),
+        hyz,
+        hxz,
+        hyz,
+        0.25 * (zp - 2.0 * f0 + zm),
+    )
     n = g / gl
     p = wp.identity(n=3, dtype=float) - wp.outer(n, n)
     return n, p * h * p / gl, gl
 
 
 @wp.kernel
-def edge_gate(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), wide: wp.array(dtype=float),
-              offset: wp.array(dtype=wp.vec3), phi: wp.array(dtype=float), band: float, k0: float, k1: float,
-              gate: wp.array(dtype=float), sample: wp.array(dtype=float), base: int):
+def edge_gate(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    wide: wp.array(dtype=float),
+    offset: wp.array(dtype=wp.vec3),
+    phi: wp.array(dtype=float),
+    band: float,
+    k0: float,
+    k1: float,
+    gate: wp.array(dtype=float),
+    sample: wp.array(dtype=float),
+    base: int,
+):
     """Per cell of 2^3 voxels (thread u: its first voxel, the even one, in block u // 64; gate and
     sample hold 64 cells a block, voxels.gate_cell maps a voxel to its cell), where that
     voxel lies within `band` of the raw field's zero level (phi): gate = how much of an edge it
@@ -131,8 +162,14 @@ def block_samples(sample: wp.array(dtype=float), sums: wp.array(dtype=wp.vec2), 
 
 
 @wp.kernel
-def block_noise(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), sums: wp.array(dtype=wp.vec2),
-                scale: float, noise: wp.array(dtype=float), base: int):
+def block_noise(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    sums: wp.array(dtype=wp.vec2),
+    scale: float,
+    noise: wp.array(dtype=float),
+    base: int,
+):
     """noise[b] = the samples' standard deviation over block b and its 26 neighbours (voxels;
     mean |offset . e| x sqrt(pi / 2), as for a normal distribution), or -1 where none holds a
     sample. 24^3 voxels hold a few dozen independent samples (the field's noise is correlated

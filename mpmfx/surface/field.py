@@ -16,7 +16,9 @@ from mpmfx.surface.lines import block_faces, line_neighbours, line_sides, row_st
 from mpmfx.surface.params import SurfaceParams
 from mpmfx.surface.voxels import BS, BV, TILE_INSIDE, block_tile, line_start, voxel_of, weight_at
 
-BLUR_MIN_SPLIT = 1024  # blocks below which the weight blur's passes run on one CPU thread (a pass's barrier costs ~20-50 us)
+BLUR_MIN_SPLIT = (
+    1024  # blocks below which the weight blur's passes run on one CPU thread (a pass's barrier costs ~20-50 us)
+)
 ANISO_NORMAL_ITERS = 4  # inverse-power iterations that turn the normal towards the neighbours' thinnest axis
 ANISO_COV_EPS = 0.01  # x kernel radius^2: regularises the covariance of a flat (lattice) sheet
 ANISO_MAX_RATIO = 4.0  # Yu & Turk's k_r: an ellipsoid's axes differ by at most this factor
@@ -28,8 +30,13 @@ wp.set_module_options({"enable_backward": False})
 
 @wp.kernel
 def blur_weight_axis(
-    bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float), axis: int,
-    step: int, dst: wp.array(dtype=float), base: int,
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    src: wp.array(dtype=float),
+    axis: int,
+    step: int,
+    dst: wp.array(dtype=float),
+    base: int,
 ):
     """dst = [1 2 1]/4 blur of the kernel weight sum along `axis` with taps `step` (< BS) voxels
     apart (variance 0.5 step^2 voxel^2; tiles as in weight_at), on the 8 voxels of one line
@@ -107,10 +114,11 @@ def project_on_wide_normal(
         o = wp.vec3i(0)
         o[a] = 1
         g[a] = weight_at(bmap, wide, t, c[0] + o[0], c[1] + o[1], c[2] + o[2]) - weight_at(
-            bmap, wide, t, c[0] - o[0], c[1] - o[1], c[2] - o[2])
+            bmap, wide, t, c[0] - o[0], c[1] - o[1], c[2] - o[2]
+        )
     if aniso != 0:
         ci = wp.inverse(cov[t] + cov_eps * wp.identity(n=3, dtype=float))
-        for it in range(cov_iters):
+        for it in range(cov_iters):  # noqa: B007 - a fixed-count loop
             g = ci * g
             g = g / wp.max(wp.length(g), 1.0e-20)
     d = offset[t]
@@ -247,11 +255,40 @@ def field(variant, bcoord, bmap, cells, starts, order, gs, v, grid: SparseGrid, 
         split(wp, sorted_copy, n, [v, order, vs])
     if aniso:
         gmat, thin = wp.empty(n, dtype=wp.mat33), wp.empty(n, dtype=float)
-        wp.launch(A.particle_shape, n, inputs=[gs, cells, starts, grid.kernel_vox, ANISO_MAX_RATIO,
-                                               ANISO_MAX_STRETCH, ANISO_MIN_NEIGHBOURS, gmat, thin])
-        wp.launch(A.gather_zhu_bridson_aniso, nvox,
-                  inputs=[bcoord, cells, starts, gs, gmat, thin, vs, int(with_v), grid.gather_vox, grid.kernel_vox,
-                          grid.r_vox, grid.far_vox], outputs=[phi, w, offset, vel, cov, radius])
+        wp.launch(
+            A.particle_shape,
+            n,
+            inputs=[
+                gs,
+                cells,
+                starts,
+                grid.kernel_vox,
+                ANISO_MAX_RATIO,
+                ANISO_MAX_STRETCH,
+                ANISO_MIN_NEIGHBOURS,
+                gmat,
+                thin,
+            ],
+        )
+        wp.launch(
+            A.gather_zhu_bridson_aniso,
+            nvox,
+            inputs=[
+                bcoord,
+                cells,
+                starts,
+                gs,
+                gmat,
+                thin,
+                vs,
+                int(with_v),
+                grid.gather_vox,
+                grid.kernel_vox,
+                grid.r_vox,
+                grid.far_vox,
+            ],
+            outputs=[phi, w, offset, vel, cov, radius],
+        )
     else:
         variant.gather(bcoord, cells, starts, gs, vs, int(with_v), grid, phi, w, offset, vel)
     wide = w
@@ -266,8 +303,26 @@ def field(variant, bcoord, bmap, cells, starts, order, gs, v, grid: SparseGrid, 
 def project_by_voxel(bcoord, bmap, wide, w, offset, grid: SparseGrid, aniso: bool, cov, radius, phi) -> None:
     """phi from the kernel centroid's offset projected on the wide normal (the blurred weights'
     gradient), a voxel per thread."""
-    split(wp, project_on_wide_normal, phi.shape[0], [bcoord, bmap, wide, w, offset, grid.r_vox, grid.far_vox, int(aniso),
-                                                    cov, ANISO_NORMAL_ITERS, ANISO_COV_EPS * grid.kernel_vox**2, radius, phi])
+    split(
+        wp,
+        project_on_wide_normal,
+        phi.shape[0],
+        [
+            bcoord,
+            bmap,
+            wide,
+            w,
+            offset,
+            grid.r_vox,
+            grid.far_vox,
+            int(aniso),
+            cov,
+            ANISO_NORMAL_ITERS,
+            ANISO_COV_EPS * grid.kernel_vox**2,
+            radius,
+            phi,
+        ],
+    )
 
 
 def project_by_block(bcoord, bmap, wide, w, offset, grid: SparseGrid, aniso: bool, cov, radius, phi) -> None:
@@ -277,15 +332,18 @@ def project_by_block(bcoord, bmap, wide, w, offset, grid: SparseGrid, aniso: boo
 
 def blur_by_voxel(bcoord, bmap, w, passes: int):
     """The kernel weight sums blurred `passes` times along each axis (a new array), a line per thread."""
-    return _blur(bcoord, bmap, w, passes, lambda a, axis, b: (blur_weight_axis, [bcoord, bmap, a, axis, NORMAL_STEP, b]),
-                 BS * BS)
+    return _blur(
+        bcoord, bmap, w, passes, lambda a, axis, b: (blur_weight_axis, [bcoord, bmap, a, axis, NORMAL_STEP, b]), BS * BS
+    )
 
 
 def blur_by_block(bcoord, bmap, w, passes: int):
     """blur_by_voxel, a block per thread (written out for NORMAL_STEP 2)."""
     if NORMAL_STEP != 2:
         return blur_by_voxel(bcoord, bmap, w, passes)
-    return _blur(bcoord, bmap, w, passes, lambda a, axis, b: (blur_weight_lines, [bcoord, bmap, rows(a), axis, rows(b)]), 1)
+    return _blur(
+        bcoord, bmap, w, passes, lambda a, axis, b: (blur_weight_lines, [bcoord, bmap, rows(a), axis, rows(b)]), 1
+    )
 
 
 def _blur(bcoord, bmap, w, passes: int, step, per_block: int):

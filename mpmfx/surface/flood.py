@@ -21,7 +21,18 @@ import warp as wp
 from mpmfx.surface.bitwords import ALL, BYTE, by_tile, face_mask, large_piece, spread, take_face, tile_face, vec8u
 from mpmfx.surface.launch import launch_blocks, launch_split, split
 from mpmfx.surface.lines import rows, side_code, vec8
-from mpmfx.surface.voxels import BS, BV, TILE_INSIDE, TILE_OUTSIDE, in_block, interior, line_start, line_voxel, slot, voxel_of
+from mpmfx.surface.voxels import (
+    BS,
+    BV,
+    TILE_INSIDE,
+    TILE_OUTSIDE,
+    in_block,
+    interior,
+    line_start,
+    line_voxel,
+    slot,
+    voxel_of,
+)
 
 log = logging.getLogger(__name__)
 
@@ -33,8 +44,9 @@ wp.set_module_options({"enable_backward": False})
 
 
 @wp.kernel
-def mark_particle_voxels(g: wp.array(dtype=wp.vec3), bmap: wp.array3d(dtype=wp.int32), mark: wp.array(dtype=wp.int32),
-                         base: int):
+def mark_particle_voxels(
+    g: wp.array(dtype=wp.vec3), bmap: wp.array3d(dtype=wp.int32), mark: wp.array(dtype=wp.int32), base: int
+):
     """mark = 1 at the voxel nearest to each particle (seeds of genuine inside components)."""
     p = wp.tid() + base
     gp = g[p]
@@ -162,7 +174,9 @@ def active_blocks(
 
 
 @wp.kernel
-def flip_unreached(phi: wp.array(dtype=float), reached: wp.array(dtype=wp.int32), inside_value: float, outside_value: float):
+def flip_unreached(
+    phi: wp.array(dtype=float), reached: wp.array(dtype=wp.int32), inside_value: float, outside_value: float
+):
     """Outside voxels the boundary does not reach are bubbles (-> inside); inside voxels no
     particle reaches are specks of a noisy field (-> outside)."""
     t = wp.tid()
@@ -364,8 +378,9 @@ def flood_bits(
 
 
 @wp.kernel
-def flip_unreached_bits(reached: wp.array(dtype=wp.uint64), inside_value: float, outside_value: float,
-                        phi: wp.array(dtype=float), base: int):
+def flip_unreached_bits(
+    reached: wp.array(dtype=wp.uint64), inside_value: float, outside_value: float, phi: wp.array(dtype=float), base: int
+):
     """flip_unreached for the 64 voxels of word w (thread = block * 8 + x)."""
     w = wp.tid() + base
     r = reached[w]
@@ -451,8 +466,9 @@ def flood_by_block(bcoord, bmap, phi, mark, tiles, seed_depth: float, *, specks:
     """flood_by_voxel on bit words, a block per thread filled to its fixpoint each round."""
     _, reached, rounds = fill_bits(bcoord, bmap, phi, mark, seed_depth, "specks" if specks else "bubbles")
     # flip_unreached from the bit words: unreached outside voxels -> tiles[1] (inside), unreached inside ones -> tiles[0]
-    launch_split(wp, flip_unreached_bits, reached.shape[0], [reached, tiles[1], tiles[0], phi], device=phi.device,
-                 light=BS)  # a word per block line
+    launch_split(
+        wp, flip_unreached_bits, reached.shape[0], [reached, tiles[1], tiles[0], phi], device=phi.device, light=BS
+    )  # a word per block line
     return rounds
 
 
@@ -464,8 +480,13 @@ def fill_bits(bcoord, bmap, phi, mark, seed_depth: float, seeds: str, min_count:
     sign, reached = wp.empty(nact * BS, dtype=wp.uint64), wp.empty(nact * BS, dtype=wp.uint64)
     pending = wp.empty(nact, dtype=wp.int32)
     blocks = {"device": phi.device, "min_split": 1}  # a block per thread: few threads, much work each
-    launch_split(wp, seed_bits, nact, [bcoord, bmap, rows(phi), mark, seed_depth, SEEDS[seeds], min_count, sign, reached, pending],
-                 **blocks)
+    launch_split(
+        wp,
+        seed_bits,
+        nact,
+        [bcoord, bmap, rows(phi), mark, seed_depth, SEEDS[seeds], min_count, sign, reached, pending],
+        **blocks,
+    )
 
     def sweep(active, changed, moved):  # a round visits only the blocks near the last round's changes: light
         launch_split(wp, flood_bits, nact, [bcoord, bmap, sign, reached, active, changed, moved], **blocks, light=1)

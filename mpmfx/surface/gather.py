@@ -30,8 +30,16 @@ def cell_range(x: wp.vec3, reach: float, shape: wp.vec3i):
 
 
 @wp.func
-def column_slots(x: wp.vec3, r2: float, bi: int, bj: int, lo: int, hi: int, cells: wp.array3d(dtype=wp.int32),
-                 starts: wp.array(dtype=wp.int32)):
+def column_slots(
+    x: wp.vec3,
+    r2: float,
+    bi: int,
+    bj: int,
+    lo: int,
+    hi: int,
+    cells: wp.array3d(dtype=wp.int32),
+    starts: wp.array(dtype=wp.int32),
+):
     """(first, end) sorted slots of the particles in gather cells (bi, bj, lo..hi) that may lie
     within sqrt(r2) voxels of x: the cells along z that the ball around x reaches in the column,
     which hold consecutive slots (particles sorted by cell, starts their exclusive scan), so
@@ -56,9 +64,20 @@ def column_slots(x: wp.vec3, r2: float, bi: int, bj: int, lo: int, hi: int, cell
 
 
 @wp.func
-def write_field(t: int, w: float, dw: wp.vec3, gw: wp.vec3, vw: wp.vec3, radius: float, with_v: int,
-                far_vox: float, phi: wp.array(dtype=float), w_out: wp.array(dtype=float),
-                offset: wp.array(dtype=wp.vec3), vel: wp.array(dtype=wp.vec3)):
+def write_field(
+    t: int,
+    w: float,
+    dw: wp.vec3,
+    gw: wp.vec3,
+    vw: wp.vec3,
+    radius: float,
+    with_v: int,
+    far_vox: float,
+    phi: wp.array(dtype=float),
+    w_out: wp.array(dtype=float),
+    offset: wp.array(dtype=wp.vec3),
+    vel: wp.array(dtype=wp.vec3),
+):
     """Voxel t's Zhu-Bridson phi from its gathered sums (w, dw = sum w (x_p - x), gw the
     weight gradient, vw = sum w v_p): -(x - xbar) . n - radius, n = -gw / |gw|; far_vox
     where no particle reaches. Also w, the offset x - xbar and the mean velocity."""
@@ -133,8 +152,15 @@ def gather_zhu_bridson(
 
 
 @wp.func
-def write_sums_line(t: int, acc: wp.array2d(dtype=vec8), l: int, with_v: int, w_out: wp.array(dtype=float),
-                    offset: wp.array(dtype=wp.vec3), vel: wp.array(dtype=wp.vec3)):
+def write_sums_line(
+    t: int,
+    acc: wp.array2d(dtype=vec8),
+    l: int,
+    with_v: int,
+    w_out: wp.array(dtype=float),
+    offset: wp.array(dtype=wp.vec3),
+    vel: wp.array(dtype=wp.vec3),
+):
     """write_field without phi for the 8 voxels t .. t + 7 of line l's sums (acc[l, 0]: w, 1-3:
     the offset's, 7-9: the velocity's): w, the offset x - xbar = -dw / w and the mean velocity
     vw / w, 0 where w <= 0. The divisions run as vec8 operations, each lane the voxel kernel's
@@ -330,23 +356,58 @@ def gather_zhu_bridson_blocks(
         vw = wp.vec3(0.0)
         if with_v != 0:
             vw = wp.vec3(acc[la, 7][z], acc[la, 8][z], acc[la, 9][z])
-        write_field(t0 + q, acc[la, 0][z], wp.vec3(acc[la, 1][z], acc[la, 2][z], acc[la, 3][z]),
-                    wp.vec3(acc[la, 4][z], acc[la, 5][z], acc[la, 6][z]), vw, radius_vox, with_v, far_vox, phi, w_out, offset, vel)
+        write_field(
+            t0 + q,
+            acc[la, 0][z],
+            wp.vec3(acc[la, 1][z], acc[la, 2][z], acc[la, 3][z]),
+            wp.vec3(acc[la, 4][z], acc[la, 5][z], acc[la, 6][z]),
+            vw,
+            radius_vox,
+            with_v,
+            far_vox,
+            phi,
+            w_out,
+            offset,
+            vel,
+        )
 
 
 def gather_by_voxel(bcoord, cells, starts, gs, vs, with_v: int, grid, phi, w, offset, vel) -> None:
     """The isotropic field at the active voxels, a voxel per thread: phi, w (kernel weight sums),
     offset and vel (with_v) filled. gs, vs: the particles' grid positions and velocities in the
     gather cells' order."""
-    wp.launch(gather_zhu_bridson, phi.shape[0],
-              inputs=[bcoord, cells, starts, gs, vs, with_v, grid.kernel_vox, grid.r_vox, grid.far_vox],
-              outputs=[phi, w, offset, vel])
+    wp.launch(
+        gather_zhu_bridson,
+        phi.shape[0],
+        inputs=[bcoord, cells, starts, gs, vs, with_v, grid.kernel_vox, grid.r_vox, grid.far_vox],
+        outputs=[phi, w, offset, vel],
+    )
 
 
 def gather_by_block(bcoord, cells, starts, gs, vs, with_v: int, grid, phi, w, offset, vel) -> None:
     """gather_by_voxel' field, a block per thread: each candidate particle fetched once per block."""
     nacc = 10 if with_v else 7  # vec8 sums per line: w, offset, weight gradient (, velocity)
-    launch_split_scratch(wp, gather_zhu_bridson_blocks, bcoord.shape[0],
-                         [bcoord, cells, starts, gs, vs, int(with_v), grid.kernel_vox, grid.r_vox, grid.far_vox, phi, w,
-                          offset, vel, nacc, int(grid.normal_passes == 0)],  # else phi comes from the wide normal
-                         lambda: wp.empty((BS * BS, nacc), dtype=vec8), device=phi.device)
+    launch_split_scratch(
+        wp,
+        gather_zhu_bridson_blocks,
+        bcoord.shape[0],
+        [
+            bcoord,
+            cells,
+            starts,
+            gs,
+            vs,
+            int(with_v),
+            grid.kernel_vox,
+            grid.r_vox,
+            grid.far_vox,
+            phi,
+            w,
+            offset,
+            vel,
+            nacc,
+            int(grid.normal_passes == 0),
+        ],  # else phi comes from the wide normal
+        lambda: wp.empty((BS * BS, nacc), dtype=vec8),
+        device=phi.device,
+    )

@@ -91,6 +91,7 @@ def row_steps(axis: int):
     or 1: a block's row (x, y) is its 8 voxels along z, row x * 8 + y."""
     return wp.where(axis == 0, BS, 1), wp.where(axis == 0, 1, BS)
 
+
 vec27i = wp.types.vector(length=27, dtype=wp.int32)
 
 

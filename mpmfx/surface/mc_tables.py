@@ -143,6 +143,8 @@ def device_tables(wp, device) -> tuple:
     as int32 Warp arrays on `device`, made once per device."""
     key = str(device)
     if key not in _cache:
-        _cache[key] = tuple(wp.array(t, dtype=wp.int32, device=device)
-                            for t in (MC_CASE_TO_TRI_RANGE, MC_TRI_LOCAL_INDICES, _MC_EDGE_OFFSETS))
+        _cache[key] = tuple(
+            wp.array(t, dtype=wp.int32, device=device)
+            for t in (MC_CASE_TO_TRI_RANGE, MC_TRI_LOCAL_INDICES, _MC_EDGE_OFFSETS)
+        )
     return _cache[key]

@@ -28,8 +28,13 @@ wp.set_module_options({"enable_backward": False})
 
 
 @wp.kernel
-def match_tiles(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), eps: float,
-                base: int):
+def match_tiles(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    eps: float,
+    base: int,
+):
     """Give voxels next to a constant tile that tile's sign, so no zero crossing touches a tile
     (marching cubes runs only on cells whose lower corner is active).
 
@@ -62,8 +67,13 @@ def match_tiles(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int3
 
 
 @wp.kernel
-def match_tiles_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
-                      eps: float, base: int):
+def match_tiles_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    eps: float,
+    base: int,
+):
     """match_tiles on one block (thread = block): the codes of its 26 neighbour
     blocks are looked up once, and a block with no tile among them has nothing to do. The 27
     neighbours of a voxel are visited in match_tiles' order (a voxel next to both kinds of
@@ -271,6 +281,7 @@ def sample_vertices(
     velocities[t] = wp.where(vw > 0.0, vv / wp.max(vw, 1.0e-20), wp.vec3(0.0))
     world[t] = origin + g * voxel
 
+
 vec9 = wp.types.vector(length=9, dtype=wp.float32)
 
 vec8i = wp.types.vector(length=8, dtype=wp.int32)
@@ -466,7 +477,13 @@ def mc_faces_lines(
         for z in range(BS):
             lowz = ((m0 >> z) & 1) | (((m1 >> z) & 1) << 1) | (((m2 >> z) & 1) << 2) | (((m3 >> z) & 1) << 3)
             z1 = z + 1
-            code = lowz | (((m0 >> z1) & 1) << 4) | (((m1 >> z1) & 1) << 5) | (((m2 >> z1) & 1) << 6) | (((m3 >> z1) & 1) << 7)
+            code = (
+                lowz
+                | (((m0 >> z1) & 1) << 4)
+                | (((m1 >> z1) & 1) << 5)
+                | (((m2 >> z1) & 1) << 6)
+                | (((m3 >> z1) & 1) << 7)
+            )
             start = tri_range[code]
             ntri = (tri_range[code + 1] - start) // 3
             if count_only == 0:
@@ -485,7 +502,10 @@ def mc_faces_lines(
                         code = codes[ox * 4 + oy * 2 + oz]
                         idx = int(-1)
                         if code >= 0:
-                            idx = edge_vert[(code * BV + ((lx - ox * BS) * BS + (ly - oy * BS)) * BS + (lz - oz * BS)) * 3 + edge_offset[le, 3]]
+                            idx = edge_vert[
+                                (code * BV + ((lx - ox * BS) * BS + (ly - oy * BS)) * BS + (lz - oz * BS)) * 3
+                                + edge_offset[le, 3]
+                            ]
                         faces[3 * (first + total + m) + s] = idx
                     m += 1
             total += ntri
@@ -531,8 +551,18 @@ def mesh_by_block(bcoord, bmap, values, tiles, vel, w, grid: SparseGrid) -> tupl
     def run(kernel, dim, inputs):
         launch_blocks(wp, kernel, inputs)
 
-    return _march(bcoord, bmap, values, tiles, vel, w, grid, (mc_vertices_lines, nvox // BS, vin),
-                  (mc_faces_lines, nvox // BS, fin), run)
+    return _march(
+        bcoord,
+        bmap,
+        values,
+        tiles,
+        vel,
+        w,
+        grid,
+        (mc_vertices_lines, nvox // BS, vin),
+        (mc_faces_lines, nvox // BS, fin),
+        run,
+    )
 
 
 def _march(bcoord, bmap, values, tiles, vel, w, grid: SparseGrid, vertices: tuple, cells: tuple, run) -> tuple | None:
@@ -558,6 +588,10 @@ def _march(bcoord, bmap, values, tiles, vel, w, grid: SparseGrid, vertices: tupl
     world, normals, velocities = (wp.empty(m, dtype=wp.vec3) for _ in range(3))
     vel_arg = vel if vel is not None else wp.zeros(1, dtype=wp.vec3)
     origin = wp.vec3(*grid.origin.astype(np.float32))
-    split(wp, sample_vertices, m, [bmap, values, *tiles, vel_arg, w, int(vel is not None), verts, origin, grid.voxel,
-                                  world, normals, velocities])
+    split(
+        wp,
+        sample_vertices,
+        m,
+        [bmap, values, *tiles, vel_arg, w, int(vel is not None), verts, origin, grid.voxel, world, normals, velocities],
+    )
     return world, normals, velocities, faces

@@ -43,10 +43,7 @@ def classify_output_blocks(values: wp.array(dtype=float), background: float, kin
 
 @wp.kernel
 def densify(
-    bcoord: wp.array(dtype=wp.vec3i),
-    data: wp.array(dtype=float),
-    lo: wp.vec3i,
-    dense: wp.array3d(dtype=float),
+    bcoord: wp.array(dtype=wp.vec3i), data: wp.array(dtype=float), lo: wp.vec3i, dense: wp.array3d(dtype=float)
 ):
     """Copy active voxels into a dense array whose [0, 0, 0] is voxel `lo` (pre-filled with tiles)."""
     t = wp.tid()
@@ -55,14 +52,18 @@ def densify(
 
 
 @wp.kernel
-def densify_vec(bcoord: wp.array(dtype=wp.vec3i), data: wp.array(dtype=wp.vec3), lo: wp.vec3i, dense: wp.array3d(dtype=wp.vec3)):
+def densify_vec(
+    bcoord: wp.array(dtype=wp.vec3i), data: wp.array(dtype=wp.vec3), lo: wp.vec3i, dense: wp.array3d(dtype=wp.vec3)
+):
     t = wp.tid()
     c = voxel_of(t, bcoord) - lo
     dense[c[0], c[1], c[2]] = data[t]
 
 
 @wp.kernel
-def fill_tiles(bmap: wp.array3d(dtype=wp.int32), blo: wp.vec3i, out_v: float, in_v: float, dense: wp.array3d(dtype=float)):
+def fill_tiles(
+    bmap: wp.array3d(dtype=wp.int32), blo: wp.vec3i, out_v: float, in_v: float, dense: wp.array3d(dtype=float)
+):
     """Constant-tile value of every voxel of the dense array (active voxels are overwritten)."""
     i, j, k = wp.tid()
     s = bmap[blo[0] + i // BS, blo[1] + j // BS, blo[2] + k // BS]
@@ -112,8 +113,12 @@ def inside_tiles(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int3
 
 
 @wp.kernel
-def compact_inside_tiles(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32),
-                         offsets: wp.array(dtype=wp.int32), out: wp.array(dtype=wp.vec3i)):
+def compact_inside_tiles(
+    bmap: wp.array3d(dtype=wp.int32),
+    flags: wp.array(dtype=wp.int32),
+    offsets: wp.array(dtype=wp.int32),
+    out: wp.array(dtype=wp.vec3i),
+):
     """out[offsets[b]] = the block coordinates of INSIDE tile b (exclusive scan of flags)."""
     i, j, k = wp.tid()
     b = (i * bmap.shape[1] + j) * bmap.shape[2] + k
@@ -122,7 +127,9 @@ def compact_inside_tiles(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype
 
 
 @wp.kernel
-def scan_totals(flags: wp.array(dtype=wp.int32), offsets: wp.array(dtype=wp.int32), slot: int, out: wp.array(dtype=wp.int32)):
+def scan_totals(
+    flags: wp.array(dtype=wp.int32), offsets: wp.array(dtype=wp.int32), slot: int, out: wp.array(dtype=wp.int32)
+):
     """out[slot] = the sum of flags, from its exclusive scan (one thread)."""
     n = flags.shape[0]
     out[slot] = offsets[n - 1] + flags[n - 1]
@@ -169,8 +176,9 @@ def _download_mesh(mesh: tuple | None, *, with_v: bool, pinned: bool, on_host: b
         bad = wp.zeros(1, dtype=wp.int32, device=faces.device)
         launch_nonempty(wp, count_negative, faces.shape[0], [faces, bad])
     # without particle velocities the vertex velocities are zeros: made here, not copied
-    world, normals, velocities, faces, bad = to_host(wp, [world, normals, velocities if with_v else None, faces, bad],
-                                                     pinned=pinned)
+    world, normals, velocities, faces, bad = to_host(
+        wp, [world, normals, velocities if with_v else None, faces, bad], pinned=pinned
+    )
     if velocities is None:
         velocities = np.zeros(world.shape, np.float32)  # untouched pages: zeros_like would write every page
     f = faces.reshape(-1, 3)
@@ -211,10 +219,18 @@ def leaves_by_voxel(d, params: SurfaceParams, *, pinned: bool) -> SparseLevelSet
         launch_nonempty(wp, scale_clamp01, size, [fog, 1.0 / bulk_weight(d, params)])
     inside = wp.empty(max(ninside, 1), dtype=wp.vec3i)
     wp.launch(compact_inside_tiles, d.bmap.shape, inputs=[d.bmap, flags, ioffsets, inside])
-    values, velocity, density, kinds, bcoord, inside = to_host(wp, [out, vout, fog, d.kind, d.bcoord, inside], pinned=pinned)
-    return _leaves(grid, kinds[:nact], bcoord[:nact], inside[:ninside], values[:size].reshape(m, BS, BS, BS),
-                   None if velocity is None else velocity[:size].reshape(m, BS, BS, BS, 3),
-                   None if density is None else density[:size].reshape(m, BS, BS, BS))
+    values, velocity, density, kinds, bcoord, inside = to_host(
+        wp, [out, vout, fog, d.kind, d.bcoord, inside], pinned=pinned
+    )
+    return _leaves(
+        grid,
+        kinds[:nact],
+        bcoord[:nact],
+        inside[:ninside],
+        values[:size].reshape(m, BS, BS, BS),
+        None if velocity is None else velocity[:size].reshape(m, BS, BS, BS, 3),
+        None if density is None else density[:size].reshape(m, BS, BS, BS),
+    )
 
 
 def leaves_by_block(d, params: SurfaceParams, *, pinned: bool) -> SparseLevelSet:
@@ -233,12 +249,20 @@ def leaves_by_block(d, params: SurfaceParams, *, pinned: bool) -> SparseLevelSet
     density = None
     if params.density:
         density = kept(d.w)
-        launch_nonempty(wp, scale_clamp01, m * BS**3, [wp.array(density.reshape(-1), dtype=float, device=d.w.device, copy=False),
-                                                1.0 / bulk_weight(d, params)])
-    return _leaves(grid, kinds, d.bcoord.numpy()[:nact], np.argwhere(d.bmap.numpy() == -2), kept(d.values), velocity, density)
+        launch_nonempty(
+            wp,
+            scale_clamp01,
+            m * BS**3,
+            [wp.array(density.reshape(-1), dtype=float, device=d.w.device, copy=False), 1.0 / bulk_weight(d, params)],
+        )
+    return _leaves(
+        grid, kinds, d.bcoord.numpy()[:nact], np.argwhere(d.bmap.numpy() == -2), kept(d.values), velocity, density
+    )
 
 
-def _leaves(grid, kinds: np.ndarray, bcoord: np.ndarray, inside_tiles: np.ndarray, values, velocity, density) -> SparseLevelSet:
+def _leaves(
+    grid, kinds: np.ndarray, bcoord: np.ndarray, inside_tiles: np.ndarray, values, velocity, density
+) -> SparseLevelSet:
     """The level set of the kept blocks' voxels (values, velocity, density: (m, BS, BS, BS[, 3])),
     kinds / bcoord: the active blocks' kinds and block coordinates, inside_tiles: (k, 3) the
     block coordinates of the INSIDE tiles of the block grid (C order)."""

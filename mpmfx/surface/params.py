@@ -7,7 +7,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-
 PARTICLE_RADIUS_PER_SPACING = 0.6
 """Particle radius r of the surfacer in units of the particle spacing h, as the surface stage,
 the benchmark and the peers use it (one place). 0.6 h rather than half the spacing: with
@@ -123,7 +122,9 @@ class SurfaceParams:
         if not math.isfinite(self.dilate):
             raise bad("dilate", f"got {self.dilate!r}; give a finite length")
         if not (math.isfinite(self.close_voids) and self.close_voids >= 0.0):
-            raise bad("close_voids", f"got {self.close_voids!r}; give 0 (off) or a radius in metres, ~ the particle spacing")
+            raise bad(
+                "close_voids", f"got {self.close_voids!r}; give 0 (off) or a radius in metres, ~ the particle spacing"
+            )
         if self.min_feature_particles < 0:
             raise bad("min_feature_particles", f"got {self.min_feature_particles}; give 0 (off) or more")
         if self.band_voxels < 1:
@@ -135,8 +136,11 @@ class SurfaceParams:
         if not isinstance(self.sharp_edges, bool):
             raise bad("sharp_edges", f"got {self.sharp_edges!r}; give True or False")
         if self.sharp_edges and self.smooth_iters == 0:
-            raise bad("sharp_edges", "needs smooth_iters > 0 (the edges are found while smoothing); "
-                                     "give smooth_iters or turn sharp_edges off")
+            raise bad(
+                "sharp_edges",
+                "needs smooth_iters > 0 (the edges are found while smoothing); "
+                "give smooth_iters or turn sharp_edges off",
+            )
         if not isinstance(self.density, bool):
             raise bad("density", f"got {self.density!r}; give True or False")
 
@@ -212,7 +216,9 @@ class SparseLevelSet:
         the bounding box of the stored blocks."""
         if ijk0 is None or shape is None:
             if len(self.block_ijk) == 0:
-                return LevelSet(np.zeros((0, 0, 0), np.float32), np.zeros(3, np.int64), self.voxel_size, self.background)
+                return LevelSet(
+                    np.zeros((0, 0, 0), np.float32), np.zeros(3, np.int64), self.voxel_size, self.background
+                )
             ijk0 = self.block_ijk.min(axis=0)
             shape = tuple(int(s) for s in self.block_ijk.max(axis=0) - ijk0 + 8)
         ijk0 = np.asarray(ijk0, np.int64)

@@ -79,6 +79,7 @@ def pinned_limit() -> int:
         ram = 8 << 30
     return min(4 << 30, ram // 8)
 
+
 PINNED = PinnedPool(limit=pinned_limit())
 
 """The downloads' page-locked buffers (a 10M-particle frame's mesh and leaves are ~120 MB, with

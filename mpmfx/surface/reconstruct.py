@@ -54,10 +54,15 @@ def check_inputs(x: np.ndarray, v: np.ndarray | None) -> tuple[np.ndarray, np.nd
 
 def check_device_inputs(wp, x, v):
     if x.dtype != wp.vec3 or x.ndim != 1:
-        raise ValueError(f"surface_particles: a device x must be a 1-D wp.array of wp.vec3, got {x.dtype} ndim {x.ndim}")
-    if v is not None and (not isinstance(v, wp.array) or v.dtype != wp.vec3 or v.shape != x.shape
-                          or v.device != x.device):
-        raise ValueError("surface_particles: with a device x, v must be a wp.array of wp.vec3 of the same length and device")
+        raise ValueError(
+            f"surface_particles: a device x must be a 1-D wp.array of wp.vec3, got {x.dtype} ndim {x.ndim}"
+        )
+    if v is not None and (
+        not isinstance(v, wp.array) or v.dtype != wp.vec3 or v.shape != x.shape or v.device != x.device
+    ):
+        raise ValueError(
+            "surface_particles: with a device x, v must be a wp.array of wp.vec3 of the same length and device"
+        )
     return x, v
 
 
@@ -68,6 +73,13 @@ def empty_result(params: SurfaceParams, *, with_v: bool) -> SurfaceResult:
     level_set = LevelSet(np.zeros((0, 0, 0), np.float32), np.zeros(3, np.int64), voxel, background)
     velocity = np.zeros((0, 0, 0, 3), np.float32) if with_v else None
     blocks = np.zeros((0, 8, 8, 8), np.float32)
-    sparse = SparseLevelSet(np.zeros((0, 3), np.int64), blocks, np.zeros((0, 8, 8, 8, 3), np.float32) if with_v else None,
-                            np.zeros((0, 3), np.int64), voxel, background, blocks.copy() if params.density else None)
+    sparse = SparseLevelSet(
+        np.zeros((0, 3), np.int64),
+        blocks,
+        np.zeros((0, 8, 8, 8, 3), np.float32) if with_v else None,
+        np.zeros((0, 3), np.int64),
+        voxel,
+        background,
+        blocks.copy() if params.density else None,
+    )
     return SurfaceResult(level_set, SurfaceMesh.empty(), velocity, np.zeros((0, 0, 0), np.float32), sparse)

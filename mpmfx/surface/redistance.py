@@ -18,7 +18,18 @@ import math
 import warp as wp
 
 from mpmfx.surface.launch import launch_blocks, launch_nonempty, split
-from mpmfx.surface.lines import block_faces, fmax, fmin, line_neighbours, line_sides, neighbour_rows, rows, vec8, vmax, vmin
+from mpmfx.surface.lines import (
+    block_faces,
+    fmax,
+    fmin,
+    line_neighbours,
+    line_sides,
+    neighbour_rows,
+    rows,
+    vec8,
+    vmax,
+    vmin,
+)
 from mpmfx.surface.renormalise import renormalise_by_block, renormalise_by_voxel
 from mpmfx.surface.voxels import BS, BV, line_value, line_z, side_line, step_get, voxel_of
 
@@ -155,9 +166,13 @@ def eikonal_sweep(
         if frozen[t] != 0:
             dst[t] = v
             continue
-        a = wp.vec3(wp.min(wp.abs(line_value(src, xm, k, out_v, in_v)), wp.abs(line_value(src, xp, k, out_v, in_v))),
-                    wp.min(wp.abs(line_value(src, ym, k, out_v, in_v)), wp.abs(line_value(src, yp, k, out_v, in_v))),
-                    wp.min(wp.abs(line_z(src, t0, zm, zp, k - 1, out_v, in_v)), wp.abs(line_z(src, t0, zm, zp, k + 1, out_v, in_v))))
+        a = wp.vec3(
+            wp.min(wp.abs(line_value(src, xm, k, out_v, in_v)), wp.abs(line_value(src, xp, k, out_v, in_v))),
+            wp.min(wp.abs(line_value(src, ym, k, out_v, in_v)), wp.abs(line_value(src, yp, k, out_v, in_v))),
+            wp.min(
+                wp.abs(line_z(src, t0, zm, zp, k - 1, out_v, in_v)), wp.abs(line_z(src, t0, zm, zp, k + 1, out_v, in_v))
+            ),
+        )
         dst[t] = eikonal_update(a, v, clip)
 
 
@@ -177,6 +192,7 @@ def eikonal_update(a: wp.vec3, v: float, clip: float):
             u = (s + wp.sqrt(wp.max(s * s - 3.0 * (a0 * a0 + a1 * a1 + a2 * a2 - 1.0), 0.0))) / 3.0
     u = wp.min(wp.min(u, wp.abs(v)), clip)
     return wp.where(v > 0.0, u, -u)
+
 
 vec64i = wp.types.vector(length=64, dtype=wp.int32)
 
@@ -317,7 +333,9 @@ def eikonal_row(xm: vec8, xp: vec8, ym: vec8, yp: vec8, lo: vec8, hi: vec8, v: v
     d = a0 - a1
     q2 = vmax(vec8(2.0) - wp.cw_mul(d, d), vec8(0.0))
     s = a0 + a1 + a2
-    q3 = vmax(wp.cw_mul(s, s) - 3.0 * (wp.cw_mul(a0, a0) + wp.cw_mul(a1, a1) + wp.cw_mul(a2, a2) - vec8(1.0)), vec8(0.0))
+    q3 = vmax(
+        wp.cw_mul(s, s) - 3.0 * (wp.cw_mul(a0, a0) + wp.cw_mul(a1, a1) + wp.cw_mul(a2, a2) - vec8(1.0)), vec8(0.0)
+    )
     av = wp.abs(v)
     out = vec8(0.0)
     for z in range(BS):
@@ -381,7 +399,13 @@ def eikonal_lines(
     frz = vec8u(wp.uint64(0))
     for x in range(BS):
         mine = was[w0 + x]
-        n = mine | ((mine << wp.uint64(1)) & Z_HIGH) | ((mine >> wp.uint64(1)) & Z_LOW) | (mine << wp.uint64(8)) | (mine >> wp.uint64(8))
+        n = (
+            mine
+            | ((mine << wp.uint64(1)) & Z_HIGH)
+            | ((mine >> wp.uint64(1)) & Z_LOW)
+            | (mine << wp.uint64(8))
+            | (mine >> wp.uint64(8))
+        )
         if x > 0:
             n = n | was[w0 + x - 1]
         else:
@@ -391,7 +415,11 @@ def eikonal_lines(
         else:
             n = n | word_or_tile(was, faces[1], 0)
         n = n | (word_or_tile(was, faces[2], x) >> wp.uint64(56)) | (word_or_tile(was, faces[3], x) << wp.uint64(56))
-        n = n | ((word_or_tile(was, faces[4], x) >> wp.uint64(7)) & Z_FIRST) | ((word_or_tile(was, faces[5], x) & Z_FIRST) << wp.uint64(7))
+        n = (
+            n
+            | ((word_or_tile(was, faces[4], x) >> wp.uint64(7)) & Z_FIRST)
+            | ((word_or_tile(was, faces[5], x) & Z_FIRST) << wp.uint64(7))
+        )
         f = fbits[w0 + x]
         frz[x] = f
         need[x] = n & (~f)

@@ -41,7 +41,9 @@ def renormalise(
     gz = step_get(bmap, phi, t, c, 2, 1, out_v, in_v) - step_get(bmap, phi, t, c, 2, -1, out_v, in_v)
     grad = 0.5 * wp.length(wp.vec3(gx, gy, gz))
     v = phi[t]
-    out[t] = wp.where(wp.abs(v) >= far, wp.where(v > 0.0, clip, -clip), wp.clamp(v / wp.max(grad, 0.05) * scale, -clip, clip))
+    out[t] = wp.where(
+        wp.abs(v) >= far, wp.where(v > 0.0, clip, -clip), wp.clamp(v / wp.max(grad, 0.05) * scale, -clip, clip)
+    )
 
 
 @wp.kernel
@@ -74,7 +76,9 @@ def renormalise_lines(
         for z in range(BS):
             grad = 0.5 * wp.length(wp.vec3(dx[z], dy[z], dz[z]))
             v = own[z]
-            res[z] = wp.where(wp.abs(v) >= far, wp.where(v > 0.0, clip, -clip), wp.clamp(v / wp.max(grad, 0.05) * scale, -clip, clip))
+            res[z] = wp.where(
+                wp.abs(v) >= far, wp.where(v > 0.0, clip, -clip), wp.clamp(v / wp.max(grad, 0.05) * scale, -clip, clip)
+            )
         out[r] = res
 
 

@@ -43,7 +43,8 @@ from mpmfx.surface.voxels import BS, BV, gate_cell, get, slot
 SHARP = {  # sharpen()'s settings; lengths in particle spacings h unless said
     "band": 3.0,  # voxels: cells whose centre lies this near the zero level
     "thin": 2.5,  # and where the body is thicker than this (a sheet is its faces back to back)
-    "near": 2.5, "far": 5.5,  # a direction's two points: near out from the cell, then on along the surface to far
+    "near": 2.5,
+    "far": 5.5,  # a direction's two points: near out from the cell, then on along the surface to far
     "width": 1.5,  # the points to each side whose normals must agree too
     "cos_flat": math.cos(math.radians(12.0)),  # normals that agree
     "plane_tol": 0.5,  # each point this near the other's tangent plane
@@ -125,8 +126,17 @@ def unit_normal(bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), q:
 
 
 @wp.func
-def flat_beside(bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float), q: wp.vec3, n: wp.vec3, d: wp.vec3,
-                width: float, cos_flat: float, out_v: float, in_v: float):
+def flat_beside(
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    q: wp.vec3,
+    n: wp.vec3,
+    d: wp.vec3,
+    width: float,
+    cos_flat: float,
+    out_v: float,
+    in_v: float,
+):
     """The sum of the unit normals `width` to each side of q (across direction d) where they agree
     with n and with each other (a curve across d turns them apart by 2 width / its radius), else
     zero."""
@@ -191,8 +201,15 @@ def gate_at(bmap: wp.array3d(dtype=wp.int32), gate: wp.array(dtype=float), x: wp
 
 
 @wp.func
-def plane_cell(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32), slots: wp.array(dtype=wp.int32),
-               e: wp.vec3i, di: int, dj: int, dk: int):
+def plane_cell(
+    bmap: wp.array3d(dtype=wp.int32),
+    flags: wp.array(dtype=wp.int32),
+    slots: wp.array(dtype=wp.int32),
+    e: wp.vec3i,
+    di: int,
+    dj: int,
+    dk: int,
+):
     """Slot of the cell (di, dj, dk) cells from the one at even voxel e where that cell is
     flagged, else -1."""
     v = cell_at(bmap, e[0] + 2 * di, e[1] + 2 * dj, e[2] + 2 * dk)
@@ -202,8 +219,17 @@ def plane_cell(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32)
 
 
 @wp.func
-def merge_planes(v: int, s: int, pn: wp.array(dtype=wp.vec3), pp: wp.array(dtype=wp.vec3), pw: wp.array(dtype=float),
-                 qn: wp.array(dtype=wp.vec3), qp: wp.array(dtype=wp.vec3), qw: wp.array(dtype=float), cos_same: float):
+def merge_planes(
+    v: int,
+    s: int,
+    pn: wp.array(dtype=wp.vec3),
+    pp: wp.array(dtype=wp.vec3),
+    pw: wp.array(dtype=float),
+    qn: wp.array(dtype=wp.vec3),
+    qp: wp.array(dtype=wp.vec3),
+    qw: wp.array(dtype=float),
+    cos_same: float,
+):
     """The planes cell slot v found merged into thread s's (the first it matches within
     cos_same, else the first free one; none where all NEAR_PLANES are taken)."""
     for m in range(CELL_PLANES):
@@ -221,9 +247,18 @@ def merge_planes(v: int, s: int, pn: wp.array(dtype=wp.vec3), pp: wp.array(dtype
 
 
 @wp.kernel
-def flag_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
-               out_v: float, in_v: float, gate: wp.array(dtype=float), band: float, thin: float,
-               flags: wp.array(dtype=wp.int32), base: int):
+def flag_cells(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    gate: wp.array(dtype=float),
+    band: float,
+    thin: float,
+    flags: wp.array(dtype=wp.int32),
+    base: int,
+):
     """flags[u] = 1 where cell u's gate is open, its centre (the mean of its 8 voxels) lies
     within `band` of the zero level, and the body is thicker than `thin` there (the point that
     far under the surface along the normal is inside). A sheet's rim is its faces back to back,
@@ -250,12 +285,27 @@ def flag_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32
 
 
 @wp.kernel
-def cell_planes(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
-                out_v: float, in_v: float, sample: wp.array(dtype=float), flags: wp.array(dtype=wp.int32),
-                slots: wp.array(dtype=wp.int32), near: float, far: float, width: float, cos_flat: float,
-                plane_tol: float, cos_same: float,
-                cells: wp.array(dtype=wp.int32), pn: wp.array(dtype=wp.vec3), pp: wp.array(dtype=wp.vec3),
-                pw: wp.array(dtype=float), base: int):
+def cell_planes(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    sample: wp.array(dtype=float),
+    flags: wp.array(dtype=wp.int32),
+    slots: wp.array(dtype=wp.int32),
+    near: float,
+    far: float,
+    width: float,
+    cos_flat: float,
+    plane_tol: float,
+    cos_same: float,
+    cells: wp.array(dtype=wp.int32),
+    pn: wp.array(dtype=wp.vec3),
+    pp: wp.array(dtype=wp.vec3),
+    pw: wp.array(dtype=float),
+    base: int,
+):
     """For each flagged cell u (its slot s = slots[u]; cells[s] = u) whose cell coordinates are
     all even (one cell in 8: faces change over spacings, not from cell to cell) or that
     edge_gate saw as a corner (sample < 0; twice the directions there, its faces being narrower
@@ -331,9 +381,19 @@ def cell_planes(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int3
 
 
 @wp.func
-def edge_both_sides(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32), slots: wp.array(dtype=wp.int32),
-                    e: wp.vec3i, pn: wp.array(dtype=wp.vec3), pw: wp.array(dtype=float), qn: wp.array(dtype=wp.vec3),
-                    qw: wp.array(dtype=float), s: int, votes: float, cos_same: float):
+def edge_both_sides(
+    bmap: wp.array3d(dtype=wp.int32),
+    flags: wp.array(dtype=wp.int32),
+    slots: wp.array(dtype=wp.int32),
+    e: wp.vec3i,
+    pn: wp.array(dtype=wp.vec3),
+    pw: wp.array(dtype=float),
+    qn: wp.array(dtype=wp.vec3),
+    qw: wp.array(dtype=float),
+    s: int,
+    votes: float,
+    cos_same: float,
+):
     """Whether cells that saw the two kept planes (qn, qw of thread s) lie on both sides of the
     cell at even voxel e along their edge (a voxel or more each way): past the end of an edge,
     where no cell saw the third face, they lie on one side and level with it only."""
@@ -374,13 +434,27 @@ def edge_both_sides(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.i
 
 
 @wp.kernel
-def decide_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32),
-                 sample: wp.array(dtype=float), flags: wp.array(dtype=wp.int32),
-                 slots: wp.array(dtype=wp.int32), cells: wp.array(dtype=wp.int32), pn: wp.array(dtype=wp.vec3),
-                 pp: wp.array(dtype=wp.vec3), pw: wp.array(dtype=float), cos_same: float, votes: float,
-                 support: float, cos_apart: float, cos_open: float,
-                 qn: wp.array(dtype=wp.vec3), qp: wp.array(dtype=wp.vec3), qw: wp.array(dtype=float),
-                 state: wp.array(dtype=wp.int32), base: int):
+def decide_cells(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    sample: wp.array(dtype=float),
+    flags: wp.array(dtype=wp.int32),
+    slots: wp.array(dtype=wp.int32),
+    cells: wp.array(dtype=wp.int32),
+    pn: wp.array(dtype=wp.vec3),
+    pp: wp.array(dtype=wp.vec3),
+    pw: wp.array(dtype=float),
+    cos_same: float,
+    votes: float,
+    support: float,
+    cos_apart: float,
+    cos_open: float,
+    qn: wp.array(dtype=wp.vec3),
+    qp: wp.array(dtype=wp.vec3),
+    qw: wp.array(dtype=float),
+    state: wp.array(dtype=wp.int32),
+    base: int,
+):
     """Flagged cell cells[s]: the planes found by the cells within REACH cells merged into at
     most NEAR_PLANES (qn, qp, qw: the cell's, kept for sharpen_cells), those found `votes` times
     or more kept, and state[s] the cell's decision. SHARPEN where at least two are kept (three
@@ -435,7 +509,9 @@ def decide_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int
     if kept < 2 or not apart:
         return
     if kept < 3 and sample[u] < 0.0:
-        state[s] = EDGE_END  # a corner (edge_gate's sample < 0) needs its three faces: two would run its edge on past it
+        state[s] = (
+            EDGE_END  # a corner (edge_gate's sample < 0) needs its three faces: two would run its edge on past it
+        )
         return
     if kept == 2 and not edge_both_sides(bmap, flags, slots, e, pn, pw, qn, qw, s, votes, cos_same):
         state[s] = EDGE_END  # the end of an edge, where no cell saw the third face: two planes would run it on
@@ -444,8 +520,14 @@ def decide_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int
 
 
 @wp.func
-def sharpen_weight(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.int32), slots: wp.array(dtype=wp.int32),
-                   state: wp.array(dtype=wp.int32), e: wp.vec3i, spread: int):
+def sharpen_weight(
+    bmap: wp.array3d(dtype=wp.int32),
+    flags: wp.array(dtype=wp.int32),
+    slots: wp.array(dtype=wp.int32),
+    state: wp.array(dtype=wp.int32),
+    e: wp.vec3i,
+    spread: int,
+):
     """How fully the cell at even voxel e sharpens: 2 x the share of SHARPEN among the decided
     cells within `spread` cells on each axis (EDGE_END ones left out), less 1, in 0 .. 1 (1 at
     spread 0)."""
@@ -464,11 +546,24 @@ def sharpen_weight(bmap: wp.array3d(dtype=wp.int32), flags: wp.array(dtype=wp.in
 
 
 @wp.kernel
-def sharpen_cells(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), phi: wp.array(dtype=float),
-                  gate: wp.array(dtype=float), flags: wp.array(dtype=wp.int32), slots: wp.array(dtype=wp.int32),
-                  cells: wp.array(dtype=wp.int32), state: wp.array(dtype=wp.int32), votes: float, limit: float,
-                  rounding: float, spread: int, qn: wp.array(dtype=wp.vec3), qp: wp.array(dtype=wp.vec3),
-                  qw: wp.array(dtype=float), base: int):
+def sharpen_cells(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    phi: wp.array(dtype=float),
+    gate: wp.array(dtype=float),
+    flags: wp.array(dtype=wp.int32),
+    slots: wp.array(dtype=wp.int32),
+    cells: wp.array(dtype=wp.int32),
+    state: wp.array(dtype=wp.int32),
+    votes: float,
+    limit: float,
+    rounding: float,
+    spread: int,
+    qn: wp.array(dtype=wp.vec3),
+    qp: wp.array(dtype=wp.vec3),
+    qw: wp.array(dtype=float),
+    base: int,
+):
     """Each cell that decide_cells passed (SHARPEN; its kept planes in qn, qp, qw): each of its
     voxels takes the planes' intersection's signed distance (the largest of theirs, rounded
     within `rounding` of the crest: marching cubes cuts a crest sharper than a voxel or two
@@ -524,14 +619,81 @@ def sharpen(bcoord, bmap, phi, tiles, gate, sample, h: float) -> None:
     cells = wp.empty(count, dtype=wp.int32)
     pn, pp = wp.empty(count * CELL_PLANES, dtype=wp.vec3), wp.empty(count * CELL_PLANES, dtype=wp.vec3)
     pw = wp.empty(count * CELL_PLANES, dtype=float)
-    split(wp, cell_planes, ncell, [bcoord, bmap, phi, *tiles, sample, flags, slots, c["near"] * h, c["far"] * h,
-                                      c["width"] * h, c["cos_flat"], c["plane_tol"] * h, c["cos_same"], cells, pn, pp, pw])
+    split(
+        wp,
+        cell_planes,
+        ncell,
+        [
+            bcoord,
+            bmap,
+            phi,
+            *tiles,
+            sample,
+            flags,
+            slots,
+            c["near"] * h,
+            c["far"] * h,
+            c["width"] * h,
+            c["cos_flat"],
+            c["plane_tol"] * h,
+            c["cos_same"],
+            cells,
+            pn,
+            pp,
+            pw,
+        ],
+    )
     qn, qp = wp.empty(count * NEAR_PLANES, dtype=wp.vec3), wp.empty(count * NEAR_PLANES, dtype=wp.vec3)
     qw = wp.empty(count * NEAR_PLANES, dtype=float)
     state = wp.empty(count, dtype=wp.int32)
-    launch_split(wp, decide_cells, count, [bcoord, bmap, sample, flags, slots, cells, pn, pp, pw, c["cos_same"],
-                                             c["votes"], c["support"], c["cos_apart"], c["cos_open"], qn, qp, qw, state],
-                 device=phi.device, min_split=256)  # a few hundred cells already: each thread does much
-    launch_split(wp, sharpen_cells, count, [bcoord, bmap, phi, gate, flags, slots, cells, state, c["votes"],
-                                              c["limit"] * h, c["rounding"], c["spread"], qn, qp, qw],
-                 device=phi.device, min_split=256)  # a few hundred cells already: each thread does much
+    launch_split(
+        wp,
+        decide_cells,
+        count,
+        [
+            bcoord,
+            bmap,
+            sample,
+            flags,
+            slots,
+            cells,
+            pn,
+            pp,
+            pw,
+            c["cos_same"],
+            c["votes"],
+            c["support"],
+            c["cos_apart"],
+            c["cos_open"],
+            qn,
+            qp,
+            qw,
+            state,
+        ],
+        device=phi.device,
+        min_split=256,
+    )  # a few hundred cells already: each thread does much
+    launch_split(
+        wp,
+        sharpen_cells,
+        count,
+        [
+            bcoord,
+            bmap,
+            phi,
+            gate,
+            flags,
+            slots,
+            cells,
+            state,
+            c["votes"],
+            c["limit"] * h,
+            c["rounding"],
+            c["spread"],
+            qn,
+            qp,
+            qw,
+        ],
+        device=phi.device,
+        min_split=256,
+    )  # a few hundred cells already: each thread does much

@@ -30,8 +30,14 @@ def edge_limit(full: float, gate: float, noise: float):
 
 
 @wp.kernel
-def limit_inward(a: wp.array(dtype=float), ref: wp.array(dtype=float), full: float, gate: wp.array(dtype=float),
-                 noise: wp.array(dtype=float), base: int):
+def limit_inward(
+    a: wp.array(dtype=float),
+    ref: wp.array(dtype=float),
+    full: float,
+    gate: wp.array(dtype=float),
+    noise: wp.array(dtype=float),
+    base: int,
+):
     """a = min(a, ref + edge_limit): the level set a (signed distance, negative inside) lies at
     most that far inside ref's; gate is per 2^3-voxel cell, noise per active block."""
     t = wp.tid() + base
@@ -42,8 +48,20 @@ def limit_inward(a: wp.array(dtype=float), ref: wp.array(dtype=float), full: flo
 
 
 @wp.func
-def flow_step(p0: float, xm: float, xp: float, ym: float, yp: float, zm: float, zp: float, fxy: float, fxz: float,
-              fyz: float, dt: float, taper: float):
+def flow_step(
+    p0: float,
+    xm: float,
+    xp: float,
+    ym: float,
+    yp: float,
+    zm: float,
+    zp: float,
+    fxy: float,
+    fxz: float,
+    fyz: float,
+    dt: float,
+    taper: float,
+):
     """p0 after one step of curvature_flow, from its six axis neighbours and the mixed second
     differences (voxels)."""
     gx = 0.5 * (xp - xm)
@@ -55,13 +73,29 @@ def flow_step(p0: float, xm: float, xp: float, ym: float, yp: float, zm: float, 
     g2 = gx * gx + gy * gy + gz * gz
     nhn = float(0.0)
     if g2 > 1.0e-8:
-        nhn = (gx * gx * fxx + gy * gy * fyy + gz * gz * fzz + 2.0 * (gx * gy * fxy + gx * gz * fxz + gy * gz * fyz)) / g2
+        nhn = (
+            gx * gx * fxx + gy * gy * fyy + gz * gz * fzz + 2.0 * (gx * gy * fxy + gx * gz * fxz + gy * gz * fyz)
+        ) / g2
     return p0 + taper * dt * (fxx + fyy + fzz - nhn)
 
 
 @wp.func
-def edge_flow_step(p0: float, xm: float, xp: float, ym: float, yp: float, zm: float, zp: float, fxy: float,
-                   fxz: float, fyz: float, dt: float, taper: float, gate: float, pit: float):
+def edge_flow_step(
+    p0: float,
+    xm: float,
+    xp: float,
+    ym: float,
+    yp: float,
+    zm: float,
+    zp: float,
+    fxy: float,
+    fxz: float,
+    fyz: float,
+    dt: float,
+    taper: float,
+    gate: float,
+    pit: float,
+):
     """flow_step where the edge gate is open (gate > 0, edges.edge_gate): the speed from the
     level set's two principal curvatures, lo (the smaller: along an edge) and hi (across it),
     |grad| (lo + hi) being flow_step's Laplacian less its part along the normal. Where the edge
@@ -82,7 +116,9 @@ def edge_flow_step(p0: float, xm: float, xp: float, ym: float, yp: float, zm: fl
     n = wp.vec3(gx, gy, gz) / gl
     # the curvature matrix P H P / |grad| (P = I - n n^T) through its trace and that of its
     # square, tr(P H P P H P) = tr(H^2) - 2 |H n|^2 + (n^T H n)^2, without forming it
-    hn = wp.vec3(fxx * n[0] + fxy * n[1] + fxz * n[2], fxy * n[0] + fyy * n[1] + fyz * n[2], fxz * n[0] + fyz * n[1] + fzz * n[2])
+    hn = wp.vec3(
+        fxx * n[0] + fxy * n[1] + fxz * n[2], fxy * n[0] + fyy * n[1] + fyz * n[2], fxz * n[0] + fyz * n[1] + fzz * n[2]
+    )
     a = wp.dot(n, hn)
     h2 = fxx * fxx + fyy * fyy + fzz * fzz + 2.0 * (fxy * fxy + fxz * fxz + fyz * fyz)
     tr = (fxx + fyy + fzz - a) / gl
@@ -104,8 +140,17 @@ def flow_taper(p0: float, band: float):
 
 
 @wp.kernel
-def curvature_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
-                   out_v: float, in_v: float, dt: float, band: float, dst: wp.array(dtype=float), base: int):
+def curvature_flow(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    src: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    dt: float,
+    band: float,
+    dst: wp.array(dtype=float),
+    base: int,
+):
     """One explicit step of the level set's mean-curvature flow, phi += dt (Laplacian phi -
     n^T H n) (voxels; n = grad phi / |grad phi|, H the Hessian): the blur's Laplacian without
     its part along the normal, so a flat sheet stays where it is (at a thin part's midplane,
@@ -157,12 +202,24 @@ def curvature_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.i
         if taper == 0.0:
             dst[t] = p0
             continue
-        fxy = 0.25 * (line_value(src, pp, k, out_v, in_v) - line_value(src, pm, k, out_v, in_v)
-                      - line_value(src, mp, k, out_v, in_v) + line_value(src, mm, k, out_v, in_v))
-        fxz = 0.25 * (line_z(src, xp, xp_lo, xp_hi, k + 1, out_v, in_v) - line_z(src, xp, xp_lo, xp_hi, k - 1, out_v, in_v)
-                      - line_z(src, xm, xm_lo, xm_hi, k + 1, out_v, in_v) + line_z(src, xm, xm_lo, xm_hi, k - 1, out_v, in_v))
-        fyz = 0.25 * (line_z(src, yp, yp_lo, yp_hi, k + 1, out_v, in_v) - line_z(src, yp, yp_lo, yp_hi, k - 1, out_v, in_v)
-                      - line_z(src, ym, ym_lo, ym_hi, k + 1, out_v, in_v) + line_z(src, ym, ym_lo, ym_hi, k - 1, out_v, in_v))
+        fxy = 0.25 * (
+            line_value(src, pp, k, out_v, in_v)
+            - line_value(src, pm, k, out_v, in_v)
+            - line_value(src, mp, k, out_v, in_v)
+            + line_value(src, mm, k, out_v, in_v)
+        )
+        fxz = 0.25 * (
+            line_z(src, xp, xp_lo, xp_hi, k + 1, out_v, in_v)
+            - line_z(src, xp, xp_lo, xp_hi, k - 1, out_v, in_v)
+            - line_z(src, xm, xm_lo, xm_hi, k + 1, out_v, in_v)
+            + line_z(src, xm, xm_lo, xm_hi, k - 1, out_v, in_v)
+        )
+        fyz = 0.25 * (
+            line_z(src, yp, yp_lo, yp_hi, k + 1, out_v, in_v)
+            - line_z(src, yp, yp_lo, yp_hi, k - 1, out_v, in_v)
+            - line_z(src, ym, ym_lo, ym_hi, k + 1, out_v, in_v)
+            + line_z(src, ym, ym_lo, ym_hi, k - 1, out_v, in_v)
+        )
         vxm = line_value(src, xm, k, out_v, in_v)
         vxp = line_value(src, xp, k, out_v, in_v)
         vym = line_value(src, ym, k, out_v, in_v)
@@ -173,8 +230,17 @@ def curvature_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.i
 
 
 @wp.func
-def near(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), t: int, c: wp.vec3i, dx: int, dy: int, dz: int,
-         out_v: float, in_v: float):
+def near(
+    bmap: wp.array3d(dtype=wp.int32),
+    data: wp.array(dtype=float),
+    t: int,
+    c: wp.vec3i,
+    dx: int,
+    dy: int,
+    dz: int,
+    out_v: float,
+    in_v: float,
+):
     """`get` of voxel c + (dx, dy, dz) (each -1..1), c being active voxel t: read directly when it
     lies in c's block."""
     if in_block(c, wp.vec3i(dx, dy, dz)):
@@ -183,9 +249,19 @@ def near(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), t: int, 
 
 
 @wp.kernel
-def edge_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=float),
-              out_v: float, in_v: float, dt: float, band: float, gate: wp.array(dtype=float), pit: float,
-              dst: wp.array(dtype=float), base: int):
+def edge_flow(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    src: wp.array(dtype=float),
+    out_v: float,
+    in_v: float,
+    dt: float,
+    band: float,
+    gate: wp.array(dtype=float),
+    pit: float,
+    dst: wp.array(dtype=float),
+    base: int,
+):
     """After curvature_flow (thread = 2^3-voxel cell, edges.edge_gate's): the 8 voxels of a
     cell whose edge gate is open take edge_flow_step instead, from the same neighbour values
     (`get`; the CPU: edge_flow_lines).
@@ -203,16 +279,40 @@ def edge_flow(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32)
         taper = flow_taper(p0, band)
         if taper > 0.0:
             c = voxel_of(t, bcoord)
-            fxy = 0.25 * (near(bmap, src, t, c, 1, 1, 0, out_v, in_v) - near(bmap, src, t, c, 1, -1, 0, out_v, in_v)
-                          - near(bmap, src, t, c, -1, 1, 0, out_v, in_v) + near(bmap, src, t, c, -1, -1, 0, out_v, in_v))
-            fxz = 0.25 * (near(bmap, src, t, c, 1, 0, 1, out_v, in_v) - near(bmap, src, t, c, 1, 0, -1, out_v, in_v)
-                          - near(bmap, src, t, c, -1, 0, 1, out_v, in_v) + near(bmap, src, t, c, -1, 0, -1, out_v, in_v))
-            fyz = 0.25 * (near(bmap, src, t, c, 0, 1, 1, out_v, in_v) - near(bmap, src, t, c, 0, 1, -1, out_v, in_v)
-                          - near(bmap, src, t, c, 0, -1, 1, out_v, in_v) + near(bmap, src, t, c, 0, -1, -1, out_v, in_v))
-            dst[t] = edge_flow_step(p0, near(bmap, src, t, c, -1, 0, 0, out_v, in_v), near(bmap, src, t, c, 1, 0, 0, out_v, in_v),
-                                    near(bmap, src, t, c, 0, -1, 0, out_v, in_v), near(bmap, src, t, c, 0, 1, 0, out_v, in_v),
-                                    near(bmap, src, t, c, 0, 0, -1, out_v, in_v), near(bmap, src, t, c, 0, 0, 1, out_v, in_v),
-                                    fxy, fxz, fyz, dt, taper, g8, pit)
+            fxy = 0.25 * (
+                near(bmap, src, t, c, 1, 1, 0, out_v, in_v)
+                - near(bmap, src, t, c, 1, -1, 0, out_v, in_v)
+                - near(bmap, src, t, c, -1, 1, 0, out_v, in_v)
+                + near(bmap, src, t, c, -1, -1, 0, out_v, in_v)
+            )
+            fxz = 0.25 * (
+                near(bmap, src, t, c, 1, 0, 1, out_v, in_v)
+                - near(bmap, src, t, c, 1, 0, -1, out_v, in_v)
+                - near(bmap, src, t, c, -1, 0, 1, out_v, in_v)
+                + near(bmap, src, t, c, -1, 0, -1, out_v, in_v)
+            )
+            fyz = 0.25 * (
+                near(bmap, src, t, c, 0, 1, 1, out_v, in_v)
+                - near(bmap, src, t, c, 0, 1, -1, out_v, in_v)
+                - near(bmap, src, t, c, 0, -1, 1, out_v, in_v)
+                + near(bmap, src, t, c, 0, -1, -1, out_v, in_v)
+            )
+            dst[t] = edge_flow_step(
+                p0,
+                near(bmap, src, t, c, -1, 0, 0, out_v, in_v),
+                near(bmap, src, t, c, 1, 0, 0, out_v, in_v),
+                near(bmap, src, t, c, 0, -1, 0, out_v, in_v),
+                near(bmap, src, t, c, 0, 1, 0, out_v, in_v),
+                near(bmap, src, t, c, 0, 0, -1, out_v, in_v),
+                near(bmap, src, t, c, 0, 0, 1, out_v, in_v),
+                fxy,
+                fxz,
+                fyz,
+                dt,
+                taper,
+                g8,
+                pit,
+            )
         q += 1
 
 
@@ -239,8 +339,12 @@ def flow_rows(src: wp.array(dtype=vec8), codes: vec27i, r0: int, r: int, c: vec8
         xp = ext_row(src, codes, x + 1, y, 0, out_v, in_v)
         ym = ext_row(src, codes, x, y - 1, 0, out_v, in_v)
         yp = ext_row(src, codes, x, y + 1, 0, out_v, in_v)
-        fxy = 0.25 * (ext_row(src, codes, x + 1, y + 1, 0, out_v, in_v) - ext_row(src, codes, x + 1, y - 1, 0, out_v, in_v)
-                      - ext_row(src, codes, x - 1, y + 1, 0, out_v, in_v) + ext_row(src, codes, x - 1, y - 1, 0, out_v, in_v))
+        fxy = 0.25 * (
+            ext_row(src, codes, x + 1, y + 1, 0, out_v, in_v)
+            - ext_row(src, codes, x + 1, y - 1, 0, out_v, in_v)
+            - ext_row(src, codes, x - 1, y + 1, 0, out_v, in_v)
+            + ext_row(src, codes, x - 1, y - 1, 0, out_v, in_v)
+        )
     zm, zp = z_pair(src, codes, x, y, c, out_v, in_v)
     xm_down, xm_up = z_pair(src, codes, x - 1, y, xm, out_v, in_v)
     xp_down, xp_up = z_pair(src, codes, x + 1, y, xp, out_v, in_v)
@@ -252,8 +356,17 @@ def flow_rows(src: wp.array(dtype=vec8), codes: vec27i, r0: int, r: int, c: vec8
 
 
 @wp.kernel
-def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=vec8),
-                         out_v: float, in_v: float, dt: float, band: float, dst: wp.array(dtype=vec8), base: int):
+def curvature_flow_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    src: wp.array(dtype=vec8),
+    out_v: float,
+    in_v: float,
+    dt: float,
+    band: float,
+    dst: wp.array(dtype=vec8),
+    base: int,
+):
     """curvature_flow on one block (thread = block), a row of 8 voxels along z at
     a time: the 26 neighbour blocks are looked up once, a row's neighbour rows read once, and
     flow_step's arithmetic runs 8 voxels at a time, the same operations in the
@@ -294,8 +407,17 @@ def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtyp
         gyy = wp.cw_mul(gy, gy)
         gzz = wp.cw_mul(gz, gz)
         g2 = gxx + gyy + gzz
-        num = (wp.cw_mul(gxx, fxx) + wp.cw_mul(gyy, fyy) + wp.cw_mul(gzz, fzz)
-               + 2.0 * (wp.cw_mul(wp.cw_mul(gx, gy), fxy) + wp.cw_mul(wp.cw_mul(gx, gz), fxz) + wp.cw_mul(wp.cw_mul(gy, gz), fyz)))
+        num = (
+            wp.cw_mul(gxx, fxx)
+            + wp.cw_mul(gyy, fyy)
+            + wp.cw_mul(gzz, fzz)
+            + 2.0
+            * (
+                wp.cw_mul(wp.cw_mul(gx, gy), fxy)
+                + wp.cw_mul(wp.cw_mul(gx, gz), fxz)
+                + wp.cw_mul(wp.cw_mul(gy, gz), fyz)
+            )
+        )
         lap = fxx + fyy + fzz
         out = vec8()
         for k in range(BS):
@@ -308,9 +430,19 @@ def curvature_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtyp
 
 
 @wp.kernel
-def edge_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.int32), src: wp.array(dtype=vec8),
-                    out_v: float, in_v: float, dt: float, band: float, gate: wp.array(dtype=float), pit: float,
-                    dst: wp.array(dtype=vec8), base: int):
+def edge_flow_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    bmap: wp.array3d(dtype=wp.int32),
+    src: wp.array(dtype=vec8),
+    out_v: float,
+    in_v: float,
+    dt: float,
+    band: float,
+    gate: wp.array(dtype=float),
+    pit: float,
+    dst: wp.array(dtype=vec8),
+    base: int,
+):
     """edge_flow after curvature_flow_lines (thread = block): the rows that cross
     an open gate cell read their neighbour rows as curvature_flow_lines does (flow_rows), and
     their voxels in an open cell take edge_flow_step, the same values in the
@@ -345,14 +477,23 @@ def edge_flow_lines(bcoord: wp.array(dtype=wp.vec3i), bmap: wp.array3d(dtype=wp.
                 g8 = gate[g0 + k // 2]
                 taper = flow_taper(c[k], band)
                 if g8 > 0.0 and taper > 0.0:
-                    out[k] = edge_flow_step(c[k], xm[k], xp[k], ym[k], yp[k], zm[k], zp[k], fxy[k], fxz[k], fyz[k], dt, taper, g8, pit)
+                    out[k] = edge_flow_step(
+                        c[k], xm[k], xp[k], ym[k], yp[k], zm[k], zp[k], fxy[k], fxz[k], fyz[k], dt, taper, g8, pit
+                    )
                 k += 1
             dst[r0 + r] = out
 
 
 @wp.kernel
-def limit_inward_lines(bcoord: wp.array(dtype=wp.vec3i), a: wp.array(dtype=vec8), ref: wp.array(dtype=vec8), full: float,
-                       gate: wp.array(dtype=float), noise: wp.array(dtype=float), base: int):
+def limit_inward_lines(
+    bcoord: wp.array(dtype=wp.vec3i),
+    a: wp.array(dtype=vec8),
+    ref: wp.array(dtype=vec8),
+    full: float,
+    gate: wp.array(dtype=float),
+    noise: wp.array(dtype=float),
+    base: int,
+):
     """limit_inward for the 64 rows of active block b (thread = block; bcoord
     gives the launch its size), vec8 rows (rows): a = min(a, ref + edge_limit) per voxel, as
     limit_inward (a thread per voxel cost ~2 ns each, 4.4 ms at 2.1 M voxels, one thread)."""
@@ -397,7 +538,9 @@ def smooth_by_block(bcoord, bmap, dist, iters: int, tiles, *, limit: float, edge
 
     def step(phi, tmp):
         launch_blocks(wp, curvature_flow_lines, [bcoord, bmap, rows(phi), *tiles, FLOW_DT, FLOW_BAND, rows(tmp)])
-        launch_blocks(wp, edge_flow_lines, [bcoord, bmap, rows(phi), *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, rows(tmp)])
+        launch_blocks(
+            wp, edge_flow_lines, [bcoord, bmap, rows(phi), *tiles, FLOW_DT, FLOW_BAND, gate, EDGE_PIT, rows(tmp)]
+        )
 
     def bound(phi):
         launch_blocks(wp, limit_inward_lines, [bcoord, rows(phi), rows(dist), limit, gate, noise])
@@ -408,7 +551,10 @@ def smooth_by_block(bcoord, bmap, dist, iters: int, tiles, *, limit: float, edge
 def _flow(dist, iters: int, step, bound):
     if iters == 0 or dist.shape[0] == 0:  # no active voxel: no edges measured either
         return dist
-    phi, tmp = dist, wp.empty_like(dist)  # the first step reads dist itself (kept: no copy), then two buffers take turns
+    phi, tmp = (
+        dist,
+        wp.empty_like(dist),
+    )  # the first step reads dist itself (kept: no copy), then two buffers take turns
     for _ in range(iters):
         step(phi, tmp)
         phi, tmp = tmp, (wp.empty_like(dist) if phi is dist else phi)

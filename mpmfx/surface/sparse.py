@@ -56,7 +56,9 @@ from mpmfx.surface.variants import Variant, variant
 log = logging.getLogger(__name__)
 
 PINNED_DOWNLOAD = True  # DeviceSurface.download's default: page-locked buffers kept between calls (pinned.PINNED)
-MAX_ACTIVE_BLOCKS = ((1 << 31) - 1) // (3 * 512)  # the marching cubes' arrays hold 3 edges a voxel, indexed by int32 (Warp's array limit)
+MAX_ACTIVE_BLOCKS = ((1 << 31) - 1) // (
+    3 * 512
+)  # the marching cubes' arrays hold 3 edges a voxel, indexed by int32 (Warp's array limit)
 SEED_DEPTH = 0.5  # x particle radius: how deep a particle's voxel must be to seed a genuine inside component
 SEED_DEPTH_SMOOTHED = 0.25  # voxels, the same after smoothing (a lone particle's blob is ~1 voxel deep then)
 SMOOTH_LIMIT = 0.5  # x particle radius: how far smoothing may move the level set inward (smooth.smooth_by_voxel)
@@ -101,7 +103,9 @@ class DeviceSurface:
         t2 = time.perf_counter()
         result = dense_output(self, params)
         t3 = time.perf_counter()
-        stats.update(download_mesh=round(t1 - t0, 4), download_leaves=round(t2 - t1, 4), download_dense=round(t3 - t2, 4))
+        stats.update(
+            download_mesh=round(t1 - t0, 4), download_leaves=round(t2 - t1, 4), download_dense=round(t3 - t2, 4)
+        )
         result.mesh, result.sparse, result.stats = mesh, sparse, stats
         return result
 
@@ -144,7 +148,8 @@ def surface_on_device(x, v, params: SurfaceParams) -> DeviceSurface:
         raise GridTooLarge(
             f"these {n} particles need {nact} active blocks of 8^3 voxels, more "
             f"than one surfacing call can index ({MAX_ACTIVE_BLOCKS}); raise voxel_size (now {grid.voxel:g} m) "
-            f"or surface the particles in parts")
+            f"or surface the particles in parts"
+        )
     timings["blocks"] = _lap(t0)
     phi, w, vel, edges = field(passes, bcoord, bmap, cells, starts, order, gs, v, grid, params)
     timings["field"] = _lap(t0)
@@ -165,10 +170,9 @@ def surface_on_device(x, v, params: SurfaceParams) -> DeviceSurface:
     return DeviceSurface(grid, n, bcoord, bmap, counts, values, w, vel if with_v else None, kind, mesh, stats)
 
 
-
-
-def _level_set(passes: Variant, bcoord, bmap, phi, mark, gs, edges, grid: SparseGrid, params: SurfaceParams,
-               steps: int) -> tuple:
+def _level_set(
+    passes: Variant, bcoord, bmap, phi, mark, gs, edges, grid: SparseGrid, params: SurfaceParams, steps: int
+) -> tuple:
     """From the raw field phi (voxels, topology fixed) to the world-unit level set: dilated,
     redistanced, closed, smoothed, sharpened, tile signs matched, topology fixed again, small
     components removed and renormalised. (values, the flood-fill rounds so far)."""
@@ -185,7 +189,9 @@ def _level_set(passes: Variant, bcoord, bmap, phi, mark, gs, edges, grid: Sparse
     # face, its stencil reaches a tile's first rows, which lie about that deep (-wide would pull
     # flat faces outward)
     flow_tiles = (tiles[0], -min(grid.inside_depth, grid.wide))
-    phi = passes.smooth(bcoord, bmap, dist, params.smooth_iters, flow_tiles, limit=SMOOTH_LIMIT * grid.r_vox, edges=edges)
+    phi = passes.smooth(
+        bcoord, bmap, dist, params.smooth_iters, flow_tiles, limit=SMOOTH_LIMIT * grid.r_vox, edges=edges
+    )
     if params.sharp_edges and edges is not None:  # the faces' planes back at convex edges and corners
         spacing = params.particle_radius / PARTICLE_RADIUS_PER_SPACING / grid.voxel
         sharpen(bcoord, bmap, phi, flow_tiles, edges[0], edges[2], spacing)
@@ -204,7 +210,9 @@ def _level_set(passes: Variant, bcoord, bmap, phi, mark, gs, edges, grid: Sparse
     # face they converge only what is read: redistance.sweep_count) it steps up to +-wide, and
     # phi / |grad phi| across that step would read as near. An INSIDE tile reads as deep as the
     # smoothing read it (flow_tiles), not -wide, which next to a voxel 3 deep would read as steep too
-    passes.renormalise(bcoord, bmap, phi, flow_tiles, grid.voxel, grid.background, values, far=float(params.band_voxels))
+    passes.renormalise(
+        bcoord, bmap, phi, flow_tiles, grid.voxel, grid.background, values, far=float(params.band_voxels)
+    )
     return values, steps
 
 

@@ -18,7 +18,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Callable
 
-from mpmfx.surface import binning, classify, components, field, flood, gather, mesh, output, redistance, renormalise, smooth
+from mpmfx.surface import (
+    binning,
+    classify,
+    components,
+    field,
+    flood,
+    gather,
+    mesh,
+    output,
+    redistance,
+    renormalise,
+    smooth,
+)
 
 LINE_KERNELS_ON_CPU = True  # False: the CPU runs the GPU's variant (the tests compare the two there)
 
@@ -47,18 +59,44 @@ class Variant:
 
 
 BY_VOXEL = Variant(
-    "by_voxel", binning.bin_particles_by_voxel, classify.near_blocks_by_voxel, gather.gather_by_voxel,
-    field.blur_by_voxel, field.project_by_voxel, flood.mark_particles_by_voxel, flood.flood_by_voxel,
-    components.labels_by_voxel, renormalise.renormalise_by_voxel, redistance.distance_by_voxel,
-    redistance.redistance_by_voxel, smooth.smooth_by_voxel, mesh.match_tiles_by_voxel, mesh.mesh_by_voxel,
-    output.mesh_by_voxel, output.leaves_by_voxel)
+    "by_voxel",
+    binning.bin_particles_by_voxel,
+    classify.near_blocks_by_voxel,
+    gather.gather_by_voxel,
+    field.blur_by_voxel,
+    field.project_by_voxel,
+    flood.mark_particles_by_voxel,
+    flood.flood_by_voxel,
+    components.labels_by_voxel,
+    renormalise.renormalise_by_voxel,
+    redistance.distance_by_voxel,
+    redistance.redistance_by_voxel,
+    smooth.smooth_by_voxel,
+    mesh.match_tiles_by_voxel,
+    mesh.mesh_by_voxel,
+    output.mesh_by_voxel,
+    output.leaves_by_voxel,
+)
 
 BY_BLOCK = Variant(
-    "by_block", binning.bin_particles_by_block, classify.near_blocks_by_block, gather.gather_by_block,
-    field.blur_by_block, field.project_by_block, flood.mark_particles_by_block, flood.flood_by_block,
-    components.labels_by_block, renormalise.renormalise_by_block, redistance.distance_by_block,
-    redistance.redistance_by_block, smooth.smooth_by_block, mesh.match_tiles_by_block, mesh.mesh_by_block,
-    output.mesh_by_block, output.leaves_by_block)
+    "by_block",
+    binning.bin_particles_by_block,
+    classify.near_blocks_by_block,
+    gather.gather_by_block,
+    field.blur_by_block,
+    field.project_by_block,
+    flood.mark_particles_by_block,
+    flood.flood_by_block,
+    components.labels_by_block,
+    renormalise.renormalise_by_block,
+    redistance.distance_by_block,
+    redistance.redistance_by_block,
+    smooth.smooth_by_block,
+    mesh.match_tiles_by_block,
+    mesh.mesh_by_block,
+    output.mesh_by_block,
+    output.leaves_by_block,
+)
 
 
 def variant(device) -> Variant:

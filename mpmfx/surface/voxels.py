@@ -55,7 +55,9 @@ def slot(bmap: wp.array3d(dtype=wp.int32), i: int, j: int, k: int):
 
 
 @wp.func
-def get(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), i: int, j: int, k: int, out_v: float, in_v: float):
+def get(
+    bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), i: int, j: int, k: int, out_v: float, in_v: float
+):
     s = slot(bmap, i, j, k)
     if s >= 0:
         return data[s]
@@ -71,8 +73,16 @@ def stride(axis: int):
 
 
 @wp.func
-def step_get(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), t: int, c: wp.vec3i, axis: int, sgn: int,
-             out_v: float, in_v: float):
+def step_get(
+    bmap: wp.array3d(dtype=wp.int32),
+    data: wp.array(dtype=float),
+    t: int,
+    c: wp.vec3i,
+    axis: int,
+    sgn: int,
+    out_v: float,
+    in_v: float,
+):
     """`get` of the voxel c + sgn along `axis` (sgn = +-1), c being active voxel t: most
     neighbours lie in the same block, read directly (no block-map lookup)."""
     l = c[axis] % BS  # voxel indices are >= 0
@@ -86,7 +96,14 @@ def step_get(bmap: wp.array3d(dtype=wp.int32), data: wp.array(dtype=float), t: i
 @wp.func
 def block_tile(bmap: wp.array3d(dtype=wp.int32), bc: wp.vec3i):
     """Active index of block bc, or its tile code (TILE_OUTSIDE beyond the grid), as `slot`."""
-    if bc[0] < 0 or bc[1] < 0 or bc[2] < 0 or bc[0] >= bmap.shape[0] or bc[1] >= bmap.shape[1] or bc[2] >= bmap.shape[2]:
+    if (
+        bc[0] < 0
+        or bc[1] < 0
+        or bc[2] < 0
+        or bc[0] >= bmap.shape[0]
+        or bc[1] >= bmap.shape[1]
+        or bc[2] >= bmap.shape[2]
+    ):
         return TILE_OUTSIDE
     return bmap[bc[0], bc[1], bc[2]]
 

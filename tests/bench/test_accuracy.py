@@ -1,4 +1,5 @@
 """Quick accuracy checks against the references of docs/physics.md, "Validation" (tiny sizes, CPU)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -36,8 +37,10 @@ def test_snow_return_map_matches_table():
 
 def test_plot_and_tables_are_written(tmp_path):
     rows = [cases.free_fall(grid_n=16).row(), cases.standing_wave(grid_n=16).row()]
-    from mpmfx.bench.plot import speed_error_plot
     import imageio.v3 as iio
+
+    from mpmfx.bench.plot import speed_error_plot
+
     png = speed_error_plot(rows, tmp_path)
     img = iio.imread(png)
     assert img.shape[:2] == (700, 1000) and np.ptp(img) > 0  # not a blank image
@@ -45,7 +48,9 @@ def test_plot_and_tables_are_written(tmp_path):
 
 def test_experiments_section_runs_and_reads_its_sources(tmp_path):
     """The quick experiments section: every row finite, the data files' laws match the code's."""
-    from mpmfx.bench import experiments as ex, lab
+    from mpmfx.bench import experiments as ex
+    from mpmfx.bench import lab
+
     laws = {r["source"]: r for r in lab.read_csv("granular_collapse_laws.csv")}
     for name, law in ex.GRANULAR_LAWS.items():
         for k in ("l1", "l2", "a0", "h_a0", "h2"):

@@ -1,4 +1,5 @@
 """An order far from 2 in `bench accuracy` comes with the reason."""
+
 from types import SimpleNamespace as NS
 
 from mpmfx.bench.accuracy import _order_rows

@@ -1,15 +1,32 @@
 """`mpmfx bench surface-times` and `mpmfx bench shots`: small runs report real rows."""
+
 import json
 
 from mpmfx.cli import main
 
 
 def test_surface_times_reports_every_case_and_setting(tmp_path):
-    assert main(["bench", "surface-times", "--device", "cpu", "--quick", "--counts", "2000", "--peers",
-                 "--out", str(tmp_path)]) == 0
+    assert (
+        main(
+            [
+                "bench",
+                "surface-times",
+                "--device",
+                "cpu",
+                "--quick",
+                "--counts",
+                "2000",
+                "--peers",
+                "--out",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     rows = json.loads((tmp_path / "surface_times.json").read_text())
     assert {(r["shape"], r["sampling"]) for r in rows} == {
-        (s, m) for s in ("sphere", "torus", "box") for m in ("lattice", "random")}
+        (s, m) for s in ("sphere", "torus", "box") for m in ("lattice", "random")
+    }
     assert {r["method"] for r in rows} == {"mpmfx fast", "mpmfx fine", "mpmfx round"}
     for r in rows:
         assert 0 < r["ms_device"] <= r["ms_end_to_end"] * 1.01
@@ -27,4 +44,6 @@ def test_shots_times_every_stage_of_the_hero_shots(tmp_path):
     assert [s["shot"] for s in report["shots"]] == ["hero_dam", "hero_castle"]
     for s in report["shots"]:
         assert s["grid_n"] == 32 and s["particles"] > 0 and s["substeps_total"] > 0
-        assert {k: v["state"] for k, v in s["stages"].items()} == {k: "ran" for k in ("voxelise", "simulate", "surface")}
+        assert {k: v["state"] for k, v in s["stages"].items()} == {
+            k: "ran" for k in ("voxelise", "simulate", "surface")
+        }

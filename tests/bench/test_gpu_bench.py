@@ -1,4 +1,5 @@
 """`mpmfx bench gpu --quick` runs on the CPU and prints its table (speed itself is not tested)."""
+
 from mpmfx.bench import gpu
 
 

@@ -5,6 +5,7 @@ Tolerance: the fronts agree within 1 % of the front distance; measured on a
 2-core CPU the water fronts agree to ~1e-6 and the sand runout to < 0.1 %: they differ only
 by float32 against float64 round-off.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -36,6 +37,7 @@ def test_sand_collapse_runout_agrees():
 
 def test_snow_clamp_keeps_volume_history():
     from mpmfx.mpm import preset
+
     mat = preset("Soft")
     F = np.tile(np.diag([1.0, 1.0, 0.9]), (1, 1, 1))
     Fe, jp = snow_clamp(mat, F, np.ones(1))
@@ -46,5 +48,6 @@ def test_snow_clamp_keeps_volume_history():
 
 def test_reference_refuses_what_it_does_not_model():
     from mpmfx.mpm import SolverConfig, preset
+
     with pytest.raises(ValueError, match="TRACER"):
         ReferenceSolver([preset("Tracer")], SolverConfig(grid_n=16))

@@ -12,7 +12,9 @@ def test_fine_is_the_surface_stage_setting_at_the_shipped_radius():
     from mpmfx.config import load_shot_config
     from mpmfx.stages.surface import surface_params
 
-    shot = load_shot_config(Path(__file__).parents[2] / "pipeline" / "shots" / "snow_smash.toml")  # no [surface] section: the defaults
+    shot = load_shot_config(
+        Path(__file__).parents[2] / "pipeline" / "shots" / "snow_smash.toml"
+    )  # no [surface] section: the defaults
     h = shot.particle_spacing
     stage = surface_params(shot, shot.surface_groups()[0])
     fine = OURS["fine"]

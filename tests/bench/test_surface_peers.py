@@ -61,8 +61,21 @@ def test_newton_anisotropic_on_warp_cpu_is_one_shell():
 def test_bench_surface_writes_a_splashsurf_row_per_case(tmp_path):
     from mpmfx.cli import main
 
-    code = main(["bench", "surface", "--quick", "--device", "cpu", "--counts", "3000", "--peers", "splashsurf",
-                 "--out", str(tmp_path)])
+    code = main(
+        [
+            "bench",
+            "surface",
+            "--quick",
+            "--device",
+            "cpu",
+            "--counts",
+            "3000",
+            "--peers",
+            "splashsurf",
+            "--out",
+            str(tmp_path),
+        ]
+    )
     assert code == 0
     with open(tmp_path / "surface.csv") as f:
         rows = list(csv.DictReader(f))

@@ -1,4 +1,5 @@
 """`mpmfx bench voxelise`: the rows it reports are real voxelisations."""
+
 import json
 import math
 

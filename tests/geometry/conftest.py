@@ -48,14 +48,14 @@ def cube_asset(cube: float, *, kind: str) -> trimesh.Trimesh:
     concatenated, tower and wall sunk into the base (internal faces, buried vertices), as
     artists' kit-bashed assets are. Same solid either way; its thinnest part is the wall.
     """
+
     def box(lo, hi):
         lo, hi = np.asarray(lo, float) * cube, np.asarray(hi, float) * cube
         b = trimesh.creation.box(extents=hi - lo)
         b.apply_translation((lo + hi) / 2)
         return b
 
-    parts = [box((0, 0, 0), (6, 4, 2)), box((0, 0, 1.5), (2, 2, 6)),
-             box((4, 0, 1.7), (5, 3, 5))]
+    parts = [box((0, 0, 0), (6, 4, 2)), box((0, 0, 1.5), (2, 2, 6)), box((4, 0, 1.7), (5, 3, 5))]
     if kind == "union":
         return trimesh.boolean.union(parts, engine="manifold")
     return trimesh.util.concatenate(parts)

@@ -38,8 +38,9 @@ def test_check_json_and_pass(tmp_path, capsys):
 def test_check_explicit_domain(tmp_path, capsys):
     path = tmp_path / "slab.ply"
     slab(0.1).export(path)
-    assert run_check(str(path), grid_n=40, origin=(-0.5, -0.5, -0.5), size=1.0,
-                     out_dir=tmp_path / "o") == 0  # 4 cells: WARN exits 0
+    assert (
+        run_check(str(path), grid_n=40, origin=(-0.5, -0.5, -0.5), size=1.0, out_dir=tmp_path / "o") == 0
+    )  # 4 cells: WARN exits 0
     assert "WARN" in capsys.readouterr().out
 
 
@@ -55,6 +56,7 @@ def test_check_says_open_and_non_manifold_in_the_table_and_the_json(tmp_path, ca
     import trimesh
 
     from mpmfx.check import run_check
+
     box = trimesh.creation.box(extents=[1.0, 1.0, 1.0])
     open_box = trimesh.Trimesh(box.vertices, box.faces[:-2], process=False)  # one side missing
     open_box.export(tmp_path / "open.obj")

@@ -19,8 +19,7 @@ def test_trimesh_formats_round_trip(tmp_path, suffix):
     np.testing.assert_allclose(mesh.extents, (0.2, 0.4, 0.6), rtol=1e-6)
 
 
-def _write_usda(path: Path, mesh, *, meters_per_unit=1.0, translate=(0, 0, 0), quads=False, up_axis="Y",
-                scheme="none"):
+def _write_usda(path: Path, mesh, *, meters_per_unit=1.0, translate=(0, 0, 0), quads=False, up_axis="Y", scheme="none"):
     from pxr import Gf, Usd, UsdGeom
 
     stage = Usd.Stage.CreateNew(str(path))
@@ -88,15 +87,17 @@ def test_warp_bunny_loads_from_usd():
     assert 0 < mesh.extents.min() < mesh.extents.max()
 
 
-@pytest.mark.parametrize("make, match", [
-    (lambda d: d / "missing.obj", "no such file"),
-    (lambda d: _text(d / "junk.usda", "this is not usd"), "cannot be opened as a USD stage"),
-    (lambda d: _text(d / "junk.glb", "garbage"), "cannot be read as a mesh"),
-    (lambda d: _text(d / "points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n"), "no triangles"),
-    (lambda d: _text(d / "flat.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n"),
-     "flat"),
-    (lambda d: _text(d / "mesh.xyz", "1 2 3"), "unsupported format"),
-])
+@pytest.mark.parametrize(
+    "make, match",
+    [
+        (lambda d: d / "missing.obj", "no such file"),
+        (lambda d: _text(d / "junk.usda", "this is not usd"), "cannot be opened as a USD stage"),
+        (lambda d: _text(d / "junk.glb", "garbage"), "cannot be read as a mesh"),
+        (lambda d: _text(d / "points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n"), "no triangles"),
+        (lambda d: _text(d / "flat.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n"), "flat"),
+        (lambda d: _text(d / "mesh.xyz", "1 2 3"), "unsupported format"),
+    ],
+)
 def test_bad_files_raise_mesh_error_naming_file(tmp_path, make, match):
     path = make(tmp_path)
     with pytest.raises(MeshError, match=match) as info:
@@ -279,15 +280,18 @@ def blender_files(tmp_path_factory):
         pytest.fail("bpy (Blender as a module) is part of the test set-up: bash setup.sh test installs it")
     folder = tmp_path_factory.mktemp("blend")
     blend, fbx, glb = folder / "scene.blend", folder / "scene.fbx", folder / "draco.glb"
-    res = subprocess.run([sys.executable, "-c", BLEND_SCENE, str(blend), str(fbx), str(glb)], capture_output=True,
-                         text=True, timeout=300)
+    res = subprocess.run(
+        [sys.executable, "-c", BLEND_SCENE, str(blend), str(fbx), str(glb)], capture_output=True, text=True, timeout=300
+    )
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     return blend, fbx, glb
 
 
 def _parts(mesh):
-    return sorted(((tuple(np.round(p.bounds.mean(0), 3)), round(float(p.volume), 3))
-                   for p in mesh.split(only_watertight=False)), key=lambda r: r[0])
+    return sorted(
+        ((tuple(np.round(p.bounds.mean(0), 3)), round(float(p.volume), 3)) for p in mesh.split(only_watertight=False)),
+        key=lambda r: r[0],
+    )
 
 
 def test_a_blend_file_loads_as_cycles_renders_it(blender_files):

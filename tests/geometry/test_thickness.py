@@ -9,8 +9,7 @@ from mpmfx.geometry.thickness import Verdict, check_thickness, local_thickness
 from .conftest import cube_asset, cube_block, l_bracket, rod, slab, sphere_with_fin
 
 # (shape, true thickness in metres): thin part of each.
-SHAPES = {"slab": (slab, 0.1), "rod": (rod, 0.12), "L": (l_bracket, 0.08),
-          "fin": (sphere_with_fin, 0.05)}
+SHAPES = {"slab": (slab, 0.1), "rod": (rod, 0.12), "L": (l_bracket, 0.08), "fin": (sphere_with_fin, 0.05)}
 
 
 def _expected(cells: float) -> Verdict:
@@ -28,8 +27,7 @@ def test_thin_part_measured_within_one_cell(domain, name, grid_n):
         assert report.verdict is _expected(truth)
 
 
-@pytest.mark.parametrize("grid_n, verdict", [(20, Verdict.FAIL), (36, Verdict.WARN),
-                                             (56, Verdict.PASS)])
+@pytest.mark.parametrize("grid_n, verdict", [(20, Verdict.FAIL), (36, Verdict.WARN), (56, Verdict.PASS)])
 def test_verdict_flips_with_grid_n(domain, grid_n, verdict):
     # 0.1 m slab: 2, 3.6 and 5.6 cells thick.
     report = check_thickness(slab(0.1), grid_n=grid_n, **domain)
@@ -41,8 +39,10 @@ def test_verdict_flips_with_grid_n(domain, grid_n, verdict):
 
 
 def test_thick_shapes_pass_and_edges_are_not_thin(domain):
-    for mesh, t in [(trimesh.creation.box(extents=(0.4,) * 3), 0.4),
-                    (trimesh.creation.icosphere(subdivisions=3, radius=0.3), 0.6)]:
+    for mesh, t in [
+        (trimesh.creation.box(extents=(0.4,) * 3), 0.4),
+        (trimesh.creation.icosphere(subdivisions=3, radius=0.3), 0.6),
+    ]:
         report = check_thickness(mesh, grid_n=24, **domain)
         assert report.verdict is Verdict.PASS and not report.regions
         assert report.min_thickness_cells == pytest.approx(t * 24, rel=0.25)
@@ -62,9 +62,9 @@ def test_fin_region_is_located_on_the_fin(domain):
 
 
 def test_feature_thinner_than_raster_is_caught(domain):
-    mesh = trimesh.util.concatenate([trimesh.creation.box(extents=(0.3,) * 3),
-                                     _moved(trimesh.creation.box(extents=(0.2, 0.2, 0.002)),
-                                            (0.3, 0, 0))])
+    mesh = trimesh.util.concatenate(
+        [trimesh.creation.box(extents=(0.3,) * 3), _moved(trimesh.creation.box(extents=(0.2, 0.2, 0.002)), (0.3, 0, 0))]
+    )
     report = check_thickness(mesh, grid_n=16, **domain)
     assert report.verdict is Verdict.FAIL
     assert report.regions[0].thickness_cells == 0.0
@@ -83,7 +83,7 @@ def test_local_thickness_of_a_voxel_slab_and_ball():
     assert np.all(t[~inside] == 0)
     assert np.median(t[inside]) == pytest.approx(3.5)
     g = np.indices((41, 41, 41)) - 20
-    ball = (g ** 2).sum(0) <= 15 ** 2
+    ball = (g**2).sum(0) <= 15**2
     tb = local_thickness(ball, voxel=1.0)
     assert np.median(tb[ball]) == pytest.approx(31, abs=2.0)  # raster: +-1 voxel a side
 
@@ -125,8 +125,7 @@ def test_thick_part_reads_within_ten_percent(domain):
     assert report.min_grid_n_to_pass == 13  # 0.4 m is 5 cells at grid 12.5
 
 
-@pytest.mark.parametrize("mesh", [trimesh.creation.box(extents=(0.3,) * 3), rod(0.12)],
-                         ids=["box", "rod"])
+@pytest.mark.parametrize("mesh", [trimesh.creation.box(extents=(0.3,) * 3), rod(0.12)], ids=["box", "rod"])
 def test_min_grid_n_to_pass_passes_and_is_near_the_smallest_passing_grid(domain, mesh):
     # It allows for the raster reading faces up to half a voxel out (6 % of these parts
     # at grid 16), so it passes; 10 % below it does not.
@@ -148,7 +147,7 @@ def _max_inscribed_diameter(mesh, lo, hi, rng, n=20000):
     p = p[winding_number(tris, p) > 0.5]
     d = np.full(len(p), np.inf)
     for f in range(len(tris)):
-        q = closest_point(np.repeat(tris[f:f + 1], len(p), 0), p)
+        q = closest_point(np.repeat(tris[f : f + 1], len(p), 0), p)
         d = np.minimum(d, np.linalg.norm(q - p, axis=1))
     return 2.0 * d.max()
 
@@ -159,8 +158,7 @@ def test_pyvista_ant_leg_thickness_matches_the_mesh():
     ant = examples.load_ant().triangulate()
     mesh = trimesh.Trimesh(np.asarray(ant.points, float), ant.faces.reshape(-1, 4)[:, 1:])
     size = float(mesh.extents.max()) * 1.1
-    report = check_thickness(mesh, grid_n=32, origin=mesh.bounds.mean(0) - size / 2,
-                             size=size, name="ant")
+    report = check_thickness(mesh, grid_n=32, origin=mesh.bounds.mean(0) - size / 2, size=size, name="ant")
     dx = report.dx
     # No region for the pinched joints and leg tips (vertices meeting at a point).
     assert all(r.thickness_cells > 0 for r in report.regions)

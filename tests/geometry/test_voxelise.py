@@ -1,5 +1,3 @@
-import warnings
-
 import numpy as np
 import pytest
 import trimesh
@@ -8,16 +6,20 @@ from mpmfx.geometry.mesh import transform_mesh
 from mpmfx.geometry.voxelise import voxelise
 
 
-@pytest.mark.parametrize("mesh", [trimesh.creation.icosphere(subdivisions=4, radius=0.3),
-                                  # turned, so faces do not line up with the particle lattice
-                                  transform_mesh(trimesh.creation.box(extents=(0.5, 0.3, 0.4)),
-                                                 rotate_deg=(20, 0, 30))],
-                         ids=["sphere", "turned-box"])
+@pytest.mark.parametrize(
+    "mesh",
+    [
+        trimesh.creation.icosphere(subdivisions=4, radius=0.3),
+        # turned, so faces do not line up with the particle lattice
+        transform_mesh(trimesh.creation.box(extents=(0.5, 0.3, 0.4)), rotate_deg=(20, 0, 30)),
+    ],
+    ids=["sphere", "turned-box"],
+)
 @pytest.mark.parametrize("grid_n, ppc", [(32, 8), (24, 27)])
 def test_particle_count_matches_volume(domain, mesh, grid_n, ppc):
     vox = voxelise(mesh, grid_n=grid_n, ppc=ppc, **domain)
     dx = domain["size"] / grid_n
-    expected = mesh.volume / dx ** 3 * ppc
+    expected = mesh.volume / dx**3 * ppc
     assert len(vox.points) == pytest.approx(expected, rel=0.03)
     assert vox.volume.sum() == pytest.approx(mesh.volume, rel=0.03)
     # Jitter may carry a particle at most a quarter sub-cell past the surface.

@@ -1,6 +1,7 @@
 """Hard cases: one test per kind of case that breaks explicit MPM solvers. The guarantee under test: the solver stays
 finite with bounded energy, or adapts its step (rejected substeps counted), or raises
 SimulationError naming a knob: never NaN in the returned state. Run with -s for verdicts."""
+
 from __future__ import annotations
 
 import math
@@ -9,8 +10,7 @@ import numpy as np
 import pytest
 
 from mpmfx.bench.cases import fc_energy, lattice
-from mpmfx.mpm import (Collider, ColliderKind, OutOfDomain, Particles, SimulationError, Solver,
-                       SolverConfig, preset)
+from mpmfx.mpm import Collider, ColliderKind, OutOfDomain, Particles, SimulationError, Solver, SolverConfig, preset
 from mpmfx.mpm.state import m33_assign
 
 pytestmark = pytest.mark.hard
@@ -28,8 +28,13 @@ def make(materials, blocks, *, grid_n=16, gravity=(0.0, 0.0, 0.0), **cfg):
     x = np.concatenate(xs)
     n = len(x)
     vol = np.full(n, (0.5 / grid_n) ** 3, np.float32)
-    parts = Particles(x=x, v=np.concatenate(vs).astype(np.float32), volume=vol,
-                      material=np.concatenate(ms), body=np.zeros(n, np.int32))
+    parts = Particles(
+        x=x,
+        v=np.concatenate(vs).astype(np.float32),
+        volume=vol,
+        material=np.concatenate(ms),
+        body=np.zeros(n, np.int32),
+    )
     return solver, solver.init_state(parts)
 
 
@@ -107,8 +112,15 @@ def test_stiff_material_1000x_at_fixed_dx():
     assert max(r.dt_max for r in reps) <= 0.4 * solver.config.dx / c * 1.001  # dt from the stiffness
     assert energy(solver, s) <= 1.05 * e0
     capped = Solver([elastic(1.2e6)], SolverConfig(grid_n=16, gravity=(0, 0, 0), max_substeps_per_frame=50))
-    st = capped.init_state(Particles(x=x, v=np.zeros_like(x), volume=np.full(len(x), 1e-5, np.float32),
-                                     material=np.zeros(len(x), np.int32), body=np.zeros(len(x), np.int32)))
+    st = capped.init_state(
+        Particles(
+            x=x,
+            v=np.zeros_like(x),
+            volume=np.full(len(x), 1e-5, np.float32),
+            material=np.zeros(len(x), np.int32),
+            body=np.zeros(len(x), np.int32),
+        )
+    )
     with pytest.raises(SimulationError, match="max_substeps_per_frame"):
         capped.advance(st, 0.0, 0.02)
     print(f"HARD stiff_1000x: {verdict}; capped substeps -> SimulationError naming max_substeps_per_frame")
@@ -127,7 +139,9 @@ def test_extreme_compression_and_inversion(kind):
     e0 = energy(solver, solver.state_to_numpy(state))
     verdict, reps, s = run(solver, state, 0.05)
     e1 = energy(solver, s)
-    print(f"HARD compression {kind}: {verdict}, E/E0={e1 / e0:.3f}, J range after {s['J'].min():.3f}..{s['J'].max():.3f}")
+    print(
+        f"HARD compression {kind}: {verdict}, E/E0={e1 / e0:.3f}, J range after {s['J'].min():.3f}..{s['J'].max():.3f}"
+    )
     if not verdict.startswith("SimulationError"):
         assert e1 <= 1.05 * e0
 
@@ -140,9 +154,13 @@ def test_high_speed_impact(target):
     if target == "collider":
         colliders = (Collider(ColliderKind.SPHERE, radius=0.12, translations=[[0.5, 0.35, 0.5]]),)
     solver = Solver([elastic(1200.0)], SolverConfig(grid_n=16, gravity=(0, 0, 0)), colliders=colliders)
-    parts = Particles(x=x, v=np.tile([0.0, -speed, 0.0], (len(x), 1)).astype(np.float32),
-                      volume=np.full(len(x), (0.5 / 16) ** 3, np.float32), material=np.zeros(len(x), np.int32),
-                      body=np.zeros(len(x), np.int32))
+    parts = Particles(
+        x=x,
+        v=np.tile([0.0, -speed, 0.0], (len(x), 1)).astype(np.float32),
+        volume=np.full(len(x), (0.5 / 16) ** 3, np.float32),
+        material=np.zeros(len(x), np.int32),
+        body=np.zeros(len(x), np.int32),
+    )
     state = solver.init_state(parts)
     e0 = energy(solver, solver.state_to_numpy(state))
     verdict, reps, s = run(solver, state, 0.04)
@@ -177,8 +195,7 @@ def test_thin_plate(cells):
 @pytest.mark.parametrize("mode", [OutOfDomain.CLAMP, OutOfDomain.REMOVE])
 def test_fast_toward_domain_edge(mode):
     x = cube([0.6, 0.4, 0.4], [0.75, 0.55, 0.55])
-    solver, state = make([elastic(300.0)], [(x, (50.0, 0.0, 0.0), 0)], out_of_domain=mode,
-                         walls=("separate",) * 6)
+    solver, state = make([elastic(300.0)], [(x, (50.0, 0.0, 0.0), 0)], out_of_domain=mode, walls=("separate",) * 6)
     verdict, reps, s = run(solver, state, 0.05)
     lost = sum(r.particles_lost for r in reps)
     print(f"HARD fast toward edge ({mode.value}): {verdict}, lost={lost}, x_max={s['x'][:, 0].max():.4f}")
@@ -194,7 +211,9 @@ def test_spray_near_empty_nodes():
     solver, state = make([preset("Water")], [(x, v, 0)], gravity=(0, -4.9, 0))
     verdict, reps, s = run(solver, state, 0.1)
     vmax = float(np.linalg.norm(s["v"], axis=1).max())
-    print(f"HARD spray (300 isolated water particles): {verdict}, |v|max={vmax:.2f} (start {np.linalg.norm(v, axis=1).max():.2f})")
+    print(
+        f"HARD spray (300 isolated water particles): {verdict}, |v|max={vmax:.2f} (start {np.linalg.norm(v, axis=1).max():.2f})"
+    )
     assert vmax <= np.linalg.norm(v, axis=1).max() + 4.9 * 0.1 + 0.5  # no momentum from nothing
 
 
@@ -228,7 +247,9 @@ def test_expanding_sand():
     solver, state = make([mat], [(x, v, 0)])
     verdict, reps, s = run(solver, state, 0.05)
     J = np.linalg.det(s["F"].astype(np.float64))
-    print(f"HARD expanding sand: {verdict}, det F max {J.max():.5f} (apex {math.exp(mat.cohesion):.5f}), "
-          f"volume correction max {s['Jp'].max():.4f}")
+    print(
+        f"HARD expanding sand: {verdict}, det F max {J.max():.5f} (apex {math.exp(mat.cohesion):.5f}), "
+        f"volume correction max {s['Jp'].max():.4f}"
+    )
     assert J.max() <= math.exp(mat.cohesion) * (1 + 1e-3)  # projected to the cone tip
     assert s["Jp"].min() >= 0.0 and s["Jp"].max() > 0.0  # the discarded expansion is remembered

@@ -12,10 +12,15 @@ from mpmfx.io.frames import read_arrays, write_arrays
 
 def arrays():
     rng = np.random.default_rng(3)
-    return {"x": rng.normal(size=(40_000, 3)).astype(np.float32),  # several pieces at the test's CHUNK
-            "blocks": np.full((300, 8, 8, 8), 0.25, np.float32), "scalar": np.float64(2.5),
-            "fortran": np.asfortranarray(rng.normal(size=(30, 7))), "strided": rng.integers(0, 9, (20, 3))[:, 1],
-            "empty": np.zeros((0, 3), np.int32), "name": np.asarray(["all", "jelly"])}
+    return {
+        "x": rng.normal(size=(40_000, 3)).astype(np.float32),  # several pieces at the test's CHUNK
+        "blocks": np.full((300, 8, 8, 8), 0.25, np.float32),
+        "scalar": np.float64(2.5),
+        "fortran": np.asfortranarray(rng.normal(size=(30, 7))),
+        "strided": rng.integers(0, 9, (20, 3))[:, 1],
+        "empty": np.zeros((0, 3), np.int32),
+        "name": np.asarray(["all", "jelly"]),
+    }
 
 
 def check(path, expected):

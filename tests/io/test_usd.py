@@ -1,4 +1,5 @@
 """USD export: what a DCC opening the shot stage sees."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -23,16 +24,19 @@ def _points(frame: int) -> PointsSample:
         velocities=rng.standard_normal((n, 3)).astype(np.float32),
         widths=rng.uniform(0.01, 0.03, n).astype(np.float32),
         ids=np.arange(n, dtype=np.int64) * 3,
-        primvars={"material": (np.arange(n) % 2).astype(np.int32),
-                  "Jp": rng.random(n, dtype=np.float32)},
+        primvars={"material": (np.arange(n) % 2).astype(np.int32), "Jp": rng.random(n, dtype=np.float32)},
     )
 
 
 def _mesh(frame: int) -> MeshSample:
     pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], np.float32) * (1 + 0.1 * frame)
     tris = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]], np.int32)
-    return MeshSample(pts, tris, normals=pts / np.maximum(np.linalg.norm(pts, axis=1, keepdims=True), 1e-6),
-                      velocities=np.full((4, 3), 0.1, np.float32))
+    return MeshSample(
+        pts,
+        tris,
+        normals=pts / np.maximum(np.linalg.norm(pts, axis=1, keepdims=True), 1e-6),
+        velocities=np.full((4, 3), 0.1, np.float32),
+    )
 
 
 def _collider(frame: int) -> ColliderSample:
@@ -43,7 +47,7 @@ def _collider(frame: int) -> ColliderSample:
 
 
 def _vdb(path) -> None:
-    phi = np.linspace(-0.2, 0.2, 8 ** 3, dtype=np.float32).reshape(8, 8, 8)
+    phi = np.linspace(-0.2, 0.2, 8**3, dtype=np.float32).reshape(8, 8, 8)
     write_vdb(path, [VdbGrid("surface", phi, (0, 0, 0), 0.05, background=0.15)], metadata={})
 
 
@@ -53,10 +57,14 @@ def shot(tmp_path_factory):
     writer = UsdShotWriter(root, fps=FPS, start_frame=FRAMES[0], end_frame=FRAMES[-1])
     for f in FRAMES:
         _vdb(root.parent / "vdb" / f"{f:04d}.vdb")
-        writer.write_frame(f, points={"jelly": _points(f)}, meshes={"jelly": _mesh(f)},
-                           volumes={"jelly": {"surface": f"vdb/{f:04d}.vdb"}}, colliders=[_collider(f)])
-    writer.finalize(FRAMES, camera={"position": (0.0, 1.0, 5.0), "look_at": (0.0, 0.5, 0.0),
-                                    "focal_length": 50.0})
+        writer.write_frame(
+            f,
+            points={"jelly": _points(f)},
+            meshes={"jelly": _mesh(f)},
+            volumes={"jelly": {"surface": f"vdb/{f:04d}.vdb"}},
+            colliders=[_collider(f)],
+        )
+    writer.finalize(FRAMES, camera={"position": (0.0, 1.0, 5.0), "look_at": (0.0, 0.5, 0.0), "focal_length": 50.0})
     return root, writer
 
 
@@ -93,8 +101,9 @@ def test_points_mesh_and_primvars_equal_at_every_time_code(shot):
         np.testing.assert_array_equal(np.array(material.Get(f)), want.primvars["material"])
         np.testing.assert_array_equal(np.array(points.GetWidthsAttr().Get(f)), want.widths)
         np.testing.assert_array_equal(np.array(mesh.GetPointsAttr().Get(f)), want_mesh.points)
-        np.testing.assert_array_equal(np.array(mesh.GetFaceVertexIndicesAttr().Get(f)),
-                                      want_mesh.face_vertex_indices.reshape(-1))
+        np.testing.assert_array_equal(
+            np.array(mesh.GetFaceVertexIndicesAttr().Get(f)), want_mesh.face_vertex_indices.reshape(-1)
+        )
         extent = np.array(points.GetExtentAttr().Get(f))
         # The extent bounds the spheres, not just their centres (renderers cull with it).
         r = want.widths.max() / 2
@@ -169,8 +178,7 @@ def test_validators_report_a_missing_vdb(shot, tmp_path):
 
 
 def test_unit_and_axis_conversion_happen_once_at_world(tmp_path):
-    writer = UsdShotWriter(tmp_path / "cm.usda", fps=FPS, start_frame=1, end_frame=1,
-                           up_axis="Z", meters_per_unit=0.01)
+    writer = UsdShotWriter(tmp_path / "cm.usda", fps=FPS, start_frame=1, end_frame=1, up_axis="Z", meters_per_unit=0.01)
     writer.write_frame(1, points={"p": PointsSample(np.array([[0.0, 1.0, 0.0]], np.float32))})
     stage = Usd.Stage.Open(str(writer.finalize([1])))
     assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
@@ -199,14 +207,19 @@ def test_failed_frame_write_keeps_the_old_frame_and_leaves_no_temp(shot, monkeyp
     assert not [p for p in root.parent.rglob("*") if ".tmp" in p.name]
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    ({"points": {"my-jelly": PointsSample(np.zeros((1, 3), np.float32))}}, "valid USD prim name.*my_jelly"),
-    ({"points": {"camera": PointsSample(np.zeros((1, 3), np.float32))}}, "reserved"),
-    ({"points": {"j": PointsSample(np.zeros((4, 2), np.float32))}}, r"positions: shape \(4, 2\)"),
-    ({"meshes": {"j": MeshSample(np.zeros((3, 3), np.float32), np.array([[0, 1, 3]]))}},
-     r"indices must lie in \[0, 3\)"),
-    ({"volumes": {"j": {"surface": "vdb/x.nvdb"}}}, "not a .vdb"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        ({"points": {"my-jelly": PointsSample(np.zeros((1, 3), np.float32))}}, "valid USD prim name.*my_jelly"),
+        ({"points": {"camera": PointsSample(np.zeros((1, 3), np.float32))}}, "reserved"),
+        ({"points": {"j": PointsSample(np.zeros((4, 2), np.float32))}}, r"positions: shape \(4, 2\)"),
+        (
+            {"meshes": {"j": MeshSample(np.zeros((3, 3), np.float32), np.array([[0, 1, 3]]))}},
+            r"indices must lie in \[0, 3\)",
+        ),
+        ({"volumes": {"j": {"surface": "vdb/x.nvdb"}}}, "not a .vdb"),
+    ],
+)
 def test_bad_frame_input_is_rejected_with_the_field_named(tmp_path, kwargs, message):
     writer = UsdShotWriter(tmp_path / "s.usda", fps=FPS, start_frame=1, end_frame=1)
     with pytest.raises(ValueError, match=message):
@@ -225,6 +238,7 @@ def test_finalize_names_missing_frames(tmp_path):
 def test_importing_the_module_loads_no_pxr_and_a_missing_pxr_says_how_to_install(tmp_path, monkeypatch):
     import subprocess
     import sys
+
     code = "import sys, mpmfx.io.usd, mpmfx.io.vdb; print('pxr' in sys.modules, 'pyopenvdb' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.split() == ["False", "False"]

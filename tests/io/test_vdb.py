@@ -1,4 +1,5 @@
 """OpenVDB export: what a DCC or renderer reading the file gets back."""
+
 from __future__ import annotations
 
 import shutil
@@ -10,9 +11,9 @@ import pytest
 from mpmfx.io import vdb as vdbio
 from mpmfx.io.vdb import GridClass, VdbGrid, read_vdb, write_vdb
 
-VOXEL = 0.05          # metres
-RADIUS = 0.4          # metres
-BAND = 3 * VOXEL      # narrow-band half width, metres
+VOXEL = 0.05  # metres
+RADIUS = 0.4  # metres
+BAND = 3 * VOXEL  # narrow-band half width, metres
 IJK0 = (-12, -10, -11)
 SHAPE = (24, 22, 23)
 CENTRE = np.array([0.02, 0.03, -0.01])
@@ -122,6 +123,7 @@ def test_failed_write_leaves_no_file_and_keeps_the_old_one(tmp_path, monkeypatch
         raise OSError("disk full")
 
     import mpmfx.cache
+
     monkeypatch.setattr(mpmfx.cache.os, "replace", crash)
     with pytest.raises(OSError, match="disk full"):
         write_vdb(path, _sphere_grids(), metadata={})
@@ -130,15 +132,24 @@ def test_failed_write_leaves_no_file_and_keeps_the_old_one(tmp_path, monkeypatch
     assert sorted(p.name for p in tmp_path.iterdir()) == ["0001.vdb"]
 
 
-@pytest.mark.parametrize("change, message", [
-    ({"background": 0.0}, "narrow-band"),
-    ({"voxel_size": -1.0}, "voxel_size"),
-    ({"values": np.zeros((4, 4), np.float32)}, "shape"),
-    ({"grid_class": "smoke"}, "grid_class"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"background": 0.0}, "narrow-band"),
+        ({"voxel_size": -1.0}, "voxel_size"),
+        ({"values": np.zeros((4, 4), np.float32)}, "shape"),
+        ({"grid_class": "smoke"}, "grid_class"),
+    ],
+)
 def test_bad_grids_are_rejected_with_the_field_named(tmp_path, change, message):
-    fields = dict(name="surface", values=np.ones((4, 4, 4), np.float32), ijk0=(0, 0, 0),
-                  voxel_size=0.1, grid_class="level_set", background=0.3)
+    fields = dict(
+        name="surface",
+        values=np.ones((4, 4, 4), np.float32),
+        ijk0=(0, 0, 0),
+        voxel_size=0.1,
+        grid_class="level_set",
+        background=0.3,
+    )
     fields.update(change)
     with pytest.raises(ValueError, match=message):
         write_vdb(tmp_path / "x.vdb", [VdbGrid(**fields)], metadata={})
@@ -152,6 +163,7 @@ def test_metadata_of_unsupported_type_is_rejected(tmp_path):
 
 def test_missing_pyopenvdb_says_how_to_install(tmp_path, monkeypatch):
     import sys
+
     monkeypatch.setitem(sys.modules, "pyopenvdb", None)
     with pytest.raises(ImportError, match="apt-get install python3-openvdb"):
         write_vdb(tmp_path / "x.vdb", _sphere_grids()[:1], metadata={})
@@ -162,14 +174,17 @@ def test_half_float_grids_are_smaller_and_close(tmp_path):
     import numpy as np
 
     from mpmfx.io.vdb import VdbGrid, read_vdb, write_vdb
+
     rng = np.random.default_rng(0)
     x = np.linspace(-1, 1, 40, dtype=np.float32)
     phi = (np.sqrt(x[:, None, None] ** 2 + x[None, :, None] ** 2 + x[None, None, :] ** 2) - 0.6).astype(np.float32)
     vel = rng.normal(size=phi.shape + (3,)).astype(np.float32)
     sizes = {}
     for half in (False, True):
-        grids = [VdbGrid("surface", phi, (0, 0, 0), 0.05, "level_set", 0.15, half=half),
-                 VdbGrid("vel", vel, (0, 0, 0), 0.05, "unknown", 0.0, half=half)]
+        grids = [
+            VdbGrid("surface", phi, (0, 0, 0), 0.05, "level_set", 0.15, half=half),
+            VdbGrid("vel", vel, (0, 0, 0), 0.05, "unknown", 0.0, half=half),
+        ]
         path = write_vdb(tmp_path / f"h{int(half)}.vdb", grids, metadata={"frame": 1})
         sizes[half] = path.stat().st_size
         got = read_vdb(path, with_values=True)["grids"]["vel"]["values"]

@@ -47,8 +47,9 @@ def eval_return_map(
 
 
 @wp.kernel
-def eval_plastic_stress(mat: MaterialParams, F: wp.array(dtype=wp.mat33), jp: wp.array(dtype=float),
-                        tau: wp.array(dtype=wp.mat33)):
+def eval_plastic_stress(
+    mat: MaterialParams, F: wp.array(dtype=wp.mat33), jp: wp.array(dtype=float), tau: wp.array(dtype=wp.mat33)
+):
     """The Kirchhoff stress a return map hands the next P2G (snow_plastic's or sand_plastic's)."""
     i = wp.tid()
     if mat.mode == 0:

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 import warp as wp
 
-from tests.mpm.mpm_wp_kernels import eval_plastic_stress, eval_return_map, eval_weights
 from mpmfx.mpm import Material, Mode, preset
 from mpmfx.mpm.constitutive import pack_material
+from tests.mpm.mpm_wp_kernels import eval_plastic_stress, eval_return_map, eval_weights
 
 
 def _weights(fx):
@@ -33,10 +33,15 @@ def test_bspline_partition_of_unity_and_reproduction():
 
 def _return_map(mat: Material, F, jp):
     n = len(F)
-    arrs = [wp.array(np.asarray(F, np.float32), dtype=wp.mat33, device="cpu"),
-            wp.array(np.asarray(jp, np.float32), dtype=float, device="cpu")]
-    outs = [wp.zeros(n, dtype=wp.mat33, device="cpu"), wp.zeros(n, dtype=float, device="cpu"),
-            wp.zeros(n, dtype=wp.mat33, device="cpu")]
+    arrs = [
+        wp.array(np.asarray(F, np.float32), dtype=wp.mat33, device="cpu"),
+        wp.array(np.asarray(jp, np.float32), dtype=float, device="cpu"),
+    ]
+    outs = [
+        wp.zeros(n, dtype=wp.mat33, device="cpu"),
+        wp.zeros(n, dtype=float, device="cpu"),
+        wp.zeros(n, dtype=wp.mat33, device="cpu"),
+    ]
     wp.launch(eval_return_map, dim=n, inputs=[pack_material(mat), *arrs, *outs], device="cpu")
     return [o.numpy() for o in outs]
 
@@ -110,9 +115,17 @@ def test_cohesion_lets_sand_carry_tension():
 
 def _stored_stress(mat: Material, F, jp):
     out = wp.zeros(len(F), dtype=wp.mat33, device="cpu")
-    wp.launch(eval_plastic_stress, dim=len(F), device="cpu", inputs=[
-        pack_material(mat), wp.array(np.asarray(F, np.float32), dtype=wp.mat33, device="cpu"),
-        wp.array(np.asarray(jp, np.float32), dtype=float, device="cpu"), out])
+    wp.launch(
+        eval_plastic_stress,
+        dim=len(F),
+        device="cpu",
+        inputs=[
+            pack_material(mat),
+            wp.array(np.asarray(F, np.float32), dtype=wp.mat33, device="cpu"),
+            wp.array(np.asarray(jp, np.float32), dtype=float, device="cpu"),
+            out,
+        ],
+    )
     return out.numpy()
 
 
@@ -139,8 +152,9 @@ def test_snow_stress_for_p2g_matches_float64_inside_and_outside_the_polar_range(
     U, sig, Vt = np.linalg.svd(Fe.astype(np.float64))
     R = U @ Vt
     J = np.linalg.det(Fe.astype(np.float64))
-    exact = h * (2 * mat.mu0 * (Fe - R) @ np.swapaxes(Fe, 1, 2)
-                 + (mat.lambda0 * (J - 1) * J)[:, None, None] * np.eye(3))
+    exact = h * (
+        2 * mat.mu0 * (Fe - R) @ np.swapaxes(Fe, 1, 2) + (mat.lambda0 * (J - 1) * J)[:, None, None] * np.eye(3)
+    )
     scale = np.abs(exact).max()
     polar = np.all((s > max(1 - mat.theta_c, 0.8)) & (s < min(1 + mat.theta_s, 1.25)), axis=1)
     assert 0.2 < polar.mean() < 0.8  # both branches are exercised

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from tests.mpm.mpm_helpers import block, free_bar
-from mpmfx.mpm import PRESETS, Material, Mode, Solver, SolverConfig, preset
+from mpmfx.mpm import PRESETS, Mode, Solver, SolverConfig, preset
 from mpmfx.mpm.state import m33_assign
+from tests.mpm.mpm_helpers import block, free_bar
 
 ZERO_G = (0.0, 0.0, 0.0)
 ALL = list(PRESETS)  # one scene with every mode: the same compiled module as the preset drop test
@@ -66,7 +66,7 @@ def test_tait_energy_is_the_potential_of_the_pressure():
         for jj in (j - dJ, j + dJ):
             state.cur.J.assign(np.full(state.n, jj, np.float32))
             e.append(solver.elastic_energy(state) / p.volume.sum())
-        assert -(e[1] - e[0]) / (2 * dJ) == pytest.approx(m.bulk_modulus * (j ** -m.eos_gamma - 1), rel=1e-2)
+        assert -(e[1] - e[0]) / (2 * dJ) == pytest.approx(m.bulk_modulus * (j**-m.eos_gamma - 1), rel=1e-2)
 
 
 def test_report_energy_is_exchanged_and_conserved_in_a_free_bar():

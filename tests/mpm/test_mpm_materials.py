@@ -8,9 +8,14 @@ from mpmfx.mpm import PRESETS, Material, Mode, SolverConfig, WallType, preset
 
 # the material table of the tutorial "Material Point Method: Step by Step": name -> (mode, E, hardening)
 GUIDE_TABLE = {
-    "Soft": (Mode.SNOW, 1500, 4), "Mushy": (Mode.SNOW, 600, 2), "Goopy": (Mode.SNOW, 250, 1),
-    "Wet": (Mode.SNOW, 150, 0.7), "Slush": (Mode.SNOW, 90, 0.5), "Elastic": (Mode.SNOW, 1200, 0),
-    "Granular": (Mode.SAND, 400, 0), "CohesiveGranular": (Mode.SAND, 400, 0),
+    "Soft": (Mode.SNOW, 1500, 4),
+    "Mushy": (Mode.SNOW, 600, 2),
+    "Goopy": (Mode.SNOW, 250, 1),
+    "Wet": (Mode.SNOW, 150, 0.7),
+    "Slush": (Mode.SNOW, 90, 0.5),
+    "Elastic": (Mode.SNOW, 1200, 0),
+    "Granular": (Mode.SAND, 400, 0),
+    "CohesiveGranular": (Mode.SAND, 400, 0),
 }
 
 

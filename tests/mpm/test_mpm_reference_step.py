@@ -1,23 +1,29 @@
 """The numpy reference step's return maps (mpmfx.bench.reference_step) against the solver's
 own wp.funcs, particle by particle: the two must be the same formulas."""
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 import warp as wp
 
-from tests.mpm.mpm_wp_kernels import eval_return_map
 from mpmfx.bench.reference_step import sand_project, snow_clamp
 from mpmfx.mpm import preset
 from mpmfx.mpm.constitutive import pack_material
+from tests.mpm.mpm_wp_kernels import eval_return_map
 
 
 def _production(mat, F, jp):
     n = len(F)
-    arrs = [wp.array(np.asarray(F, np.float32), dtype=wp.mat33, device="cpu"),
-            wp.array(np.asarray(jp, np.float32), dtype=float, device="cpu")]
-    outs = [wp.zeros(n, dtype=wp.mat33, device="cpu"), wp.zeros(n, dtype=float, device="cpu"),
-            wp.zeros(n, dtype=wp.mat33, device="cpu")]
+    arrs = [
+        wp.array(np.asarray(F, np.float32), dtype=wp.mat33, device="cpu"),
+        wp.array(np.asarray(jp, np.float32), dtype=float, device="cpu"),
+    ]
+    outs = [
+        wp.zeros(n, dtype=wp.mat33, device="cpu"),
+        wp.zeros(n, dtype=float, device="cpu"),
+        wp.zeros(n, dtype=wp.mat33, device="cpu"),
+    ]
     wp.launch(eval_return_map, dim=n, inputs=[pack_material(mat), *arrs, *outs], device="cpu")
     return outs[0].numpy(), outs[1].numpy()
 
@@ -68,8 +74,9 @@ def test_repose_fit_takes_the_angle_of_repose_as_the_friction_coefficient():
     for phi in (22.0, 31.6, 40.0):
         rp = preset("Granular", friction_angle=phi, friction_fit="repose").dp_alpha
         assert 3 / np.sqrt(2) * rp == pytest.approx(np.tan(np.radians(phi)))
-        ps = preset("Granular", friction_angle=np.degrees(np.arcsin(np.tan(np.radians(phi)))),
-                    friction_fit="plane_strain").dp_alpha
+        ps = preset(
+            "Granular", friction_angle=np.degrees(np.arcsin(np.tan(np.radians(phi)))), friction_fit="plane_strain"
+        ).dp_alpha
         assert rp == pytest.approx(ps)
     with pytest.raises(ValueError, match="angle of repose must be < 45"):
         preset("Granular", friction_angle=45.0, friction_fit="repose")

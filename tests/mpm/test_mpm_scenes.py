@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
+from mpmfx.mpm import PRESETS, Collider, ColliderKind, Mode, Solver, SolverConfig, preset
 from tests.mpm.mpm_helpers import block, concat, free_bar
-from mpmfx.mpm import PRESETS, Collider, ColliderKind, Material, Mode, Solver, SolverConfig, preset
 
 ZERO_G = (0.0, 0.0, 0.0)
 
@@ -15,7 +15,7 @@ def test_every_preset_survives_a_drop():
     names = list(PRESETS)
     grid_n, size = 24, 0.1
     parts = []
-    for i, name in enumerate(names):
+    for i, _name in enumerate(names):
         x0, y0 = 0.13 + 0.155 * (i % 5), 0.25 + 0.2 * (i // 5)
         parts.append(block((x0, y0, 0.44), (x0 + size, y0 + size, 0.44 + size), grid_n=grid_n, material=i))
     p = concat(*parts)
@@ -90,8 +90,7 @@ def test_free_elastic_bar_period_matches_the_analytic_mode():
 
 def _land_on(collider, grid_n=16):
     p = block((0.4, 0.55, 0.4), (0.6, 0.65, 0.6), grid_n=grid_n)
-    solver = Solver([preset("Elastic")], SolverConfig(grid_n=grid_n, damping=2.0),
-                    colliders=[collider], device="cpu")
+    solver = Solver([preset("Elastic")], SolverConfig(grid_n=grid_n, damping=2.0), colliders=[collider], device="cpu")
     state = solver.init_state(p)
     for f in range(8):
         solver.advance(state, f / 24, (f + 1) / 24)
@@ -120,8 +119,12 @@ def test_static_sphere_collider_holds_material_and_its_sdf_twin_agrees():
 def test_keyframed_box_collider_pushes_material():
     grid_n = 16
     p = block((0.45, 3 / 16, 0.4), (0.6, 0.3, 0.6), grid_n=grid_n)
-    box = Collider(ColliderKind.BOX, half_extents=(0.05, 0.1, 0.3), times=[0.0, 0.4],
-                   translations=[[0.3, 0.25, 0.5], [0.5, 0.25, 0.5]])
+    box = Collider(
+        ColliderKind.BOX,
+        half_extents=(0.05, 0.1, 0.3),
+        times=[0.0, 0.4],
+        translations=[[0.3, 0.25, 0.5], [0.5, 0.25, 0.5]],
+    )
     solver = Solver([preset("Elastic")], SolverConfig(grid_n=grid_n, damping=2.0), colliders=[box], device="cpu")
     state = solver.init_state(p)
     x_before = p.x[:, 0].min()
@@ -137,8 +140,13 @@ def _slide(multi_field, contact_friction=0.0):
     grid_n = 24
     lower = block((0.2, 3 / 24, 0.3), (0.8, 0.3, 0.7), grid_n=grid_n, body=0)
     upper = block((0.25, 0.3, 0.35), (0.5, 0.5, 0.65), grid_n=grid_n, body=1, v=(1.0, 0.0, 0.0))
-    cfg = SolverConfig(grid_n=grid_n, multi_field=multi_field, contact_friction=contact_friction,
-                       wall_friction=1.0, gravity=(0.0, -4.9, 0.0))  # the floor's grip scales with gravity
+    cfg = SolverConfig(
+        grid_n=grid_n,
+        multi_field=multi_field,
+        contact_friction=contact_friction,
+        wall_friction=1.0,
+        gravity=(0.0, -4.9, 0.0),
+    )  # the floor's grip scales with gravity
     solver = Solver([preset("Elastic")], cfg, device="cpu")
     state = solver.init_state(concat(lower, upper))
     for f in range(3):

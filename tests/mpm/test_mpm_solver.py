@@ -3,10 +3,10 @@
 import numpy as np
 import pytest
 
-from tests.mpm.mpm_helpers import block, concat
 from mpmfx.bench.reference_step import fixed_corotated_tau, hencky_tau
 from mpmfx.mpm import Material, Mode, Particles, SimulationError, Solver, SolverConfig, preset
 from mpmfx.mpm.state import m33_assign
+from tests.mpm.mpm_helpers import block, concat
 
 ZERO_G = (0.0, 0.0, 0.0)
 
@@ -139,8 +139,9 @@ def test_stored_stress_is_the_stress_of_the_stored_deformation():
     (solid_tau), also where the snow clamp and the sand projection fired. Then a checkpoint
     without the stored stress (version 1) resumes to the same motion."""
     mats = [preset("Mushy"), preset("Granular"), preset("Elastic")]
-    parts = concat(*(block((0.15 + 0.25 * i, 0.3, 0.3), (0.35 + 0.25 * i, 0.6, 0.6), grid_n=16, material=i)
-                     for i in range(3)))
+    parts = concat(
+        *(block((0.15 + 0.25 * i, 0.3, 0.3), (0.35 + 0.25 * i, 0.6, 0.6), grid_n=16, material=i) for i in range(3))
+    )
     solver = Solver(mats, SolverConfig(grid_n=16, gravity=ZERO_G), device="cpu")
     state = solver.init_state(parts)
     dt = 1e-3  # one substep squeezing the blocks by ~5 % an axis (their gathered C is ~1/8 of this one
@@ -169,7 +170,12 @@ def test_stored_stress_is_the_stress_of_the_stored_deformation():
         err_guide = np.abs(recomputed[sel] - exact).max()
         # float32 SVDs: both ~1e-4 of the largest stress; the stress of the trial (unclamped)
         # F would be off by the clamp itself, ~1.5 % strain
-        assert err_stored < 5e-4 * scale and err_stored < 4 * err_guide + 1e-6 * scale, (i, err_stored, err_guide, scale)
+        assert err_stored < 5e-4 * scale and err_stored < 4 * err_guide + 1e-6 * scale, (
+            i,
+            err_stored,
+            err_guide,
+            scale,
+        )
 
     old = {k: v for k, v in ckpt.items() if k != "tau"}
     old["meta"] = old["meta"].copy()
@@ -186,8 +192,9 @@ def test_the_volume_ratio_computed_on_the_device_is_det_f_water_j_or_one():
     36): det F for snow and sand, J for water, 1 for a tracer, in particle order, after the
     blocks have been squeezed."""
     mats = [preset("Mushy"), preset("Granular"), preset("Water"), Material(Mode.TRACER)]
-    parts = concat(*(block((0.12 + 0.2 * i, 0.3, 0.3), (0.28 + 0.2 * i, 0.5, 0.5), grid_n=16, material=i)
-                     for i in range(4)))
+    parts = concat(
+        *(block((0.12 + 0.2 * i, 0.3, 0.3), (0.28 + 0.2 * i, 0.5, 0.5), grid_n=16, material=i) for i in range(4))
+    )
     solver = Solver(mats, SolverConfig(grid_n=16, gravity=ZERO_G), device="cpu")
     state = solver.init_state(parts)
     m33_assign(state.cur.C, np.tile(np.diag([-300.0, 100.0, -50.0]).astype(np.float32), (state.n, 1, 1)))
@@ -217,8 +224,9 @@ def test_too_large_a_step_is_rejected_and_redone_not_exploded():
     """A gravity far beyond the wave speed's scale accelerates material across more than a
     cell within one CFL-sized substep: those substeps are redone at half dt, and nothing
     non-finite is ever committed."""
-    solver = Solver([preset("Elastic")], SolverConfig(grid_n=16, cfl=1.0, damping=1.0, gravity=(0, -4e4, 0)),
-                    device="cpu")
+    solver = Solver(
+        [preset("Elastic")], SolverConfig(grid_n=16, cfl=1.0, damping=1.0, gravity=(0, -4e4, 0)), device="cpu"
+    )
     state = solver.init_state(block((0.3, 0.2, 0.3), (0.6, 0.45, 0.6), grid_n=16))
     reports = [solver.advance(state, f / 24, (f + 1) / 24) for f in range(2)]
     out = solver.state_to_numpy(state)

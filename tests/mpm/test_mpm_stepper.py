@@ -9,41 +9,65 @@ deterministic mode bit-identical replays and resumes."""
 import numpy as np
 import pytest
 
-from tests.mpm.mpm_helpers import block, concat
 from mpmfx.mpm import SimulationError, Solver, SolverConfig, preset
+from tests.mpm.mpm_helpers import block, concat
 
 CASES = {
     # name: (materials, particles, config overrides, frames)
-    "water+snow, deterministic": (["Water", "Mushy"], lambda: concat(
-        block((0.2, 0.15, 0.2), (0.45, 0.4, 0.8), grid_n=16),
-        block((0.55, 0.15, 0.2), (0.8, 0.4, 0.8), grid_n=16, material=1)), {}, 6),
+    "water+snow, deterministic": (
+        ["Water", "Mushy"],
+        lambda: concat(
+            block((0.2, 0.15, 0.2), (0.45, 0.4, 0.8), grid_n=16),
+            block((0.55, 0.15, 0.2), (0.8, 0.4, 0.8), grid_n=16, material=1),
+        ),
+        {},
+        6,
+    ),
     "sand": (["Granular"], lambda: block((0.3, 0.2, 0.3), (0.7, 0.5, 0.7), grid_n=16), {}, 6),
-    "water+snow, fast mode": (["Water", "Mushy"], lambda: concat(
-        block((0.2, 0.15, 0.2), (0.45, 0.4, 0.8), grid_n=16),
-        block((0.55, 0.15, 0.2), (0.8, 0.4, 0.8), grid_n=16, material=1)), {"deterministic": False}, 6),
-    "rejections": (["Elastic"], lambda: block((0.3, 0.2, 0.3), (0.6, 0.45, 0.6), grid_n=16),
-                   {"cfl": 1.0, "damping": 1.0, "gravity": (0, -4e4, 0)}, 2),
+    "water+snow, fast mode": (
+        ["Water", "Mushy"],
+        lambda: concat(
+            block((0.2, 0.15, 0.2), (0.45, 0.4, 0.8), grid_n=16),
+            block((0.55, 0.15, 0.2), (0.8, 0.4, 0.8), grid_n=16, material=1),
+        ),
+        {"deterministic": False},
+        6,
+    ),
+    "rejections": (
+        ["Elastic"],
+        lambda: block((0.3, 0.2, 0.3), (0.6, 0.45, 0.6), grid_n=16),
+        {"cfl": 1.0, "damping": 1.0, "gravity": (0, -4e4, 0)},
+        2,
+    ),
     # keyframed colliders (posed on the device by the device stepper): a box sweeping and
     # turning through snow, a sphere that stays, time_scale != 1
-    "colliders": (["Mushy"], lambda: block((0.25, 0.15, 0.25), (0.75, 0.4, 0.75), grid_n=16),
-                  {"time_scale": 0.8}, 5),
+    "colliders": (["Mushy"], lambda: block((0.25, 0.15, 0.25), (0.75, 0.4, 0.75), grid_n=16), {"time_scale": 0.8}, 5),
 }
 
 
 def _colliders():
     from scipy.spatial.transform import Rotation
+
     from mpmfx.mpm import Collider, ColliderKind
+
     quats = Rotation.from_euler("y", [[0], [50], [140]], degrees=True).as_quat().astype(np.float32)
-    box = Collider(ColliderKind.BOX, half_extents=(0.04, 0.12, 0.2), friction=0.3, times=[0.0, 0.09, 0.2],
-                   translations=[(0.15, 0.3, 0.5), (0.45, 0.27, 0.5), (0.7, 0.3, 0.45)], rotations=quats)
+    box = Collider(
+        ColliderKind.BOX,
+        half_extents=(0.04, 0.12, 0.2),
+        friction=0.3,
+        times=[0.0, 0.09, 0.2],
+        translations=[(0.15, 0.3, 0.5), (0.45, 0.27, 0.5), (0.7, 0.3, 0.45)],
+        rotations=quats,
+    )
     sphere = Collider(ColliderKind.SPHERE, radius=0.08, translations=[(0.5, 0.2, 0.25)])
     return [box, sphere]
 
 
 def _solver(stepper, mats, cfg, p2g):
     colliders = _colliders() if "time_scale" in cfg else ()
-    solver = Solver([preset(m) for m in mats], SolverConfig(grid_n=16, **cfg), colliders=colliders, device="cpu",
-                    stepper=stepper)
+    solver = Solver(
+        [preset(m) for m in mats], SolverConfig(grid_n=16, **cfg), colliders=colliders, device="cpu", stepper=stepper
+    )
     if not solver.flags.multi_field:
         solver._device_advance.p2g = p2g
     return solver
@@ -63,8 +87,9 @@ def test_device_stepper_matches_the_host_loop_bit_for_bit(case):
     ref, ref_reports, ref_clock = _run("host", mats, make(), cfg, frames)
     # deterministic: the stepper's own logic, with the host loop's P2G; fast: the brick P2G
     # (its deterministic mode rounds per run: test_brick_p2g_deterministic_mode below)
-    out, reports, clock = _run("device", mats, make(), cfg, frames,
-                               p2g="brick" if cfg.get("deterministic") is False else "reference")
+    out, reports, clock = _run(
+        "device", mats, make(), cfg, frames, p2g="brick" if cfg.get("deterministic") is False else "reference"
+    )
     assert sum(r.substeps for r in reports) >= 50
     if case == "rejections":
         assert sum(r.rejected_substeps for r in reports) > 0
@@ -77,8 +102,20 @@ def test_device_stepper_matches_the_host_loop_bit_for_bit(case):
         np.testing.assert_array_equal(out[key], ref[key], err_msg=key)
     assert clock == ref_clock
     for a, b in zip(reports, ref_reports):
-        for f in ("substeps", "rejected_substeps", "dt_min", "dt_max", "max_speed", "cfl_used", "j_min", "j_max",
-                  "particles_lost", "inverted", "mass", "kinetic_energy"):
+        for f in (
+            "substeps",
+            "rejected_substeps",
+            "dt_min",
+            "dt_max",
+            "max_speed",
+            "cfl_used",
+            "j_min",
+            "j_max",
+            "particles_lost",
+            "inverted",
+            "mass",
+            "kinetic_energy",
+        ):
             assert getattr(a, f) == getattr(b, f), f
         np.testing.assert_array_equal(a.momentum, b.momentum)
 

@@ -7,10 +7,10 @@ contributions). A missed or doubled particle would change a node by a whole part
 import numpy as np
 import pytest
 
-from tests.mpm.mpm_helpers import block, concat
 from mpmfx.mpm import Particles, Solver, SolverConfig, preset
 from mpmfx.mpm.p2g_brick import BrickP2G
 from mpmfx.mpm.stepper import SubstepDev
+from tests.mpm.mpm_helpers import block, concat
 
 GRID = 16
 
@@ -23,10 +23,16 @@ def _set_substep(solver):
 
 
 def _scene(deterministic: bool):
-    solver = Solver([preset("Water"), preset("Mushy")], SolverConfig(grid_n=GRID, deterministic=deterministic),
-                    device="cpu", stepper="device")
-    parts = concat(block((0.2, 0.15, 0.2), (0.45, 0.4, 0.6), grid_n=GRID),
-                   block((0.5, 0.15, 0.2), (0.8, 0.4, 0.6), grid_n=GRID, material=1))
+    solver = Solver(
+        [preset("Water"), preset("Mushy")],
+        SolverConfig(grid_n=GRID, deterministic=deterministic),
+        device="cpu",
+        stepper="device",
+    )
+    parts = concat(
+        block((0.2, 0.15, 0.2), (0.45, 0.4, 0.6), grid_n=GRID),
+        block((0.5, 0.15, 0.2), (0.8, 0.4, 0.6), grid_n=GRID, material=1),
+    )
     rng = np.random.default_rng(3)
     parts.v[:] = rng.normal(0.0, 0.5, parts.v.shape)
     state = solver.init_state(parts)
@@ -37,8 +43,17 @@ def _scene(deterministic: bool):
 def _grid(solver, state, brick=None, *, sort=False, keep_grid=True) -> np.ndarray:
     """One substep's phases; the grid P2G scattered (keep_grid: else the brick path's update
     zeroes it as it reads it, and this returns zeros)."""
-    solver._phases(state, state.cur, state.nxt, 0.0, device_clock=True, brick=brick, resort=sort,
-                   chunk_start=sort, keep_grid=keep_grid)
+    solver._phases(
+        state,
+        state.cur,
+        state.nxt,
+        0.0,
+        device_clock=True,
+        brick=brick,
+        resort=sort,
+        chunk_start=sort,
+        keep_grid=keep_grid,
+    )
     if solver.config.deterministic:
         return solver._grid_fixed.numpy().copy()  # on the CPU numpy() is a view
     return np.concatenate([solver._grid_m.numpy()[..., None], solver._grid_mv.numpy()], -1)
@@ -76,14 +91,21 @@ SPARSE_GRID = 64
 def _sparse_scene(deterministic=True):
     """A few hundred particles strewn through the domain: most bricks' neighbours are empty,
     so a window's marks are all that covers the nodes its particles reach."""
-    solver = Solver([preset("Water"), preset("Mushy")], SolverConfig(grid_n=SPARSE_GRID, deterministic=deterministic),
-                    device="cpu", stepper="device")
+    solver = Solver(
+        [preset("Water"), preset("Mushy")],
+        SolverConfig(grid_n=SPARSE_GRID, deterministic=deterministic),
+        device="cpu",
+        stepper="device",
+    )
     rng = np.random.default_rng(5)
     n = 100
-    parts = Particles(x=rng.uniform(0.15, 0.85, (n, 3)).astype(np.float32),
-                      v=rng.normal(0.0, 0.5, (n, 3)).astype(np.float32),
-                      volume=np.full(n, SPARSE_GRID ** -3.0 / 8, np.float32),
-                      material=(np.arange(n) % 2).astype(np.int32), body=np.zeros(n, np.int32))
+    parts = Particles(
+        x=rng.uniform(0.15, 0.85, (n, 3)).astype(np.float32),
+        v=rng.normal(0.0, 0.5, (n, 3)).astype(np.float32),
+        volume=np.full(n, SPARSE_GRID**-3.0 / 8, np.float32),
+        material=(np.arange(n) % 2).astype(np.int32),
+        body=np.zeros(n, np.int32),
+    )
     state = solver.init_state(parts)
     _set_substep(solver)
     return solver, state, rng
@@ -124,6 +146,7 @@ def test_substeps_after_the_first_clear_and_update_only_the_marked_node_bricks(k
 
 def test_travel_cadence_keeps_the_fastest_particle_inside_its_window():
     from mpmfx.mpm.p2g_brick import SORT_TRAVEL, travel_cadence
+
     dx, dt = 1.0 / 256, 5e-5
     assert travel_cadence(0.0, dt, dx, 32) == 32  # at rest: once a chunk
     for cells in (0.001, 0.016, 0.03, 0.059, 0.1, 0.2, 1.5):
@@ -146,6 +169,7 @@ def test_sort_cadence_balances_the_sort_against_the_wear_it_removes():
     pieces, g the pieces gained a substep). The figures are hero_dam's and hero_castle's on an
     H200 (lab/cadence_fit.py), where the measured optimum is 4 and 8."""
     from mpmfx.mpm.p2g_brick import SORT_PIECES_FIXED, SORT_PIECES_PER_PARTICLE, sort_cadence
+
     n = 3_400_000
     S = SORT_PIECES_PER_PARTICLE * n + SORT_PIECES_FIXED
     assert sort_cadence(_frag(4, 487_000, 110_000), 4, n, 32) == 4  # hero_dam
@@ -167,6 +191,7 @@ def test_the_brick_scatter_counts_the_wear_of_the_order():
     """BrickP2G.frag, what sort_cadence reads: the runs scattered right after a sort and
     later, the particles that left their window (scattered directly), the substeps of each kind."""
     from mpmfx.mpm.p2g_brick import FRAG_FALLBACKS, FRAG_PIECES, FRAG_SUBSTEPS
+
     solver, state, rng = _scene(False)
     brick = BrickP2G(solver.flags, state.n, solver.device, nodes=GRID + 1)
     brick.frag.zero_()

@@ -1,5 +1,6 @@
 """A real client: Blender (bpy, its own USD libraries, in its own process) opens the exported
 USD stage of a small shot, and sees what the pipeline wrote; the Cycles render stage draws it."""
+
 from __future__ import annotations
 
 import json
@@ -12,8 +13,8 @@ import numpy as np
 import pytest
 
 import mpmfx
-from mpmfx.io.frames import SurfaceFrame
 from mpmfx.blender import bpy_available
+from mpmfx.io.frames import SurfaceFrame
 from tests.conftest import write_tiny_shot
 
 # Two objects (two surface groups), a keyframed collider: every kind of prim the export writes.
@@ -61,8 +62,9 @@ for f in json.loads(sys.argv[2]):
 print("INSPECT " + json.dumps(out))
 """
 
-pytestmark = pytest.mark.skipif(not bpy_available(), reason="bpy (Blender as a module) is part of the test "
-                                "set-up: bash setup.sh test installs it")
+pytestmark = pytest.mark.skipif(
+    not bpy_available(), reason="bpy (Blender as a module) is part of the test set-up: bash setup.sh test installs it"
+)
 
 
 def _blender(script: str, *args: str) -> str:
@@ -84,8 +86,11 @@ def exported(tmp_path_factory):
 def test_blender_sees_every_object_frame_and_volume(exported):
     _, _, entries = exported
     frames = [2, 4]
-    line = next(s for s in _blender(INSPECT, str(entries["export"] / "shot.usda"), json.dumps(frames)).splitlines()
-                if s.startswith("INSPECT "))
+    line = next(
+        s
+        for s in _blender(INSPECT, str(entries["export"] / "shot.usda"), json.dumps(frames)).splitlines()
+        if s.startswith("INSPECT ")
+    )
     seen = json.loads(line.removeprefix("INSPECT "))
     assert seen["frame_range"] == [1, 4] and seen["fps"] == pytest.approx(24.0)
     # surface groups (one per material), particles per object, the collider, the shot camera
@@ -111,22 +116,36 @@ def test_cycles_render_stage_draws_the_looks(exported):
     """The render stage in Cycles: every frame written (frame_step holds the ones between), the
     .blend saved, the jelly drawn red and in frame, through the glass of a tank (render.looks.basin)."""
     import imageio.v2 as imageio
+
     folder, shot, _ = exported
     cwd = os.getcwd()
     os.chdir(folder)  # renders/<shot>/ is published relative to the working directory
     try:
-        run = mpmfx.load_shot(shot, cache_root=folder / "cache", quiet=True,
-                              overrides=["render.engine=cycles", "render.samples=2", "render.width=96",
-                                         "render.height=64", "render.frame_step=2", "render.movie=true",
-                                         "render.basin=0.05", 'render.looks={basin = "glass"}'])
+        run = mpmfx.load_shot(
+            shot,
+            cache_root=folder / "cache",
+            quiet=True,
+            overrides=[
+                "render.engine=cycles",
+                "render.samples=2",
+                "render.width=96",
+                "render.height=64",
+                "render.frame_step=2",
+                "render.movie=true",
+                "render.basin=0.05",
+                'render.looks={basin = "glass"}',
+            ],
+        )
         entry = {r.stage: r for r in run.run()}["render"].entry
     finally:
         os.chdir(cwd)
     published = folder / "renders" / "tiny"
     # (failed once in four full runs with no PNG published; say what was there, should it recur)
-    seen = {"published": sorted(p.name for p in published.iterdir()) if published.exists() else None,
-            "render entry": sorted(p.name for p in (entry / "frames").glob("*")) if (entry / "frames").exists() else None,
-            "renders/": sorted(p.name for p in (folder / "renders").glob("*")) if (folder / "renders").exists() else None}
+    seen = {
+        "published": sorted(p.name for p in published.iterdir()) if published.exists() else None,
+        "render entry": sorted(p.name for p in (entry / "frames").glob("*")) if (entry / "frames").exists() else None,
+        "renders/": sorted(p.name for p in (folder / "renders").glob("*")) if (folder / "renders").exists() else None,
+    }
     assert sorted(p.name for p in published.glob("[0-9]*.png")) == [f"{f:04d}.png" for f in range(1, 5)], seen
     assert (published / "tiny.blend").stat().st_size > 0 and (published / "tiny.mp4").is_file()
     one, two = (imageio.imread(entry / "frames" / f"{f:04d}.png") for f in (1, 2))
@@ -142,6 +161,7 @@ def test_material_lands_on_the_drawn_ground(exported):
     from mpmfx.config import load_shot_config
     from mpmfx.io.frames import ParticleFrame
     from mpmfx.render.camera import solver_floor
+
     _, shot_path, entries = exported
     shot = load_shot_config(shot_path)
     floor, dx = solver_floor(shot), shot.domain.size / shot.domain.grid_n
@@ -157,7 +177,12 @@ def test_preview_engine_and_engine_switch_rerender_only(exported, tmp_path, monk
     monkeypatch.chdir(tmp_path)
     cache = exported[0] / "cache"
     results = mpmfx.load_shot(shot, cache_root=cache, quiet=True, overrides=["render.engine=preview"]).run()
-    assert {r.stage: r.state for r in results} == {"voxelise": "cached", "simulate": "cached", "surface": "cached",
-                                                   "export": "cached", "render": "ran"}
+    assert {r.stage: r.state for r in results} == {
+        "voxelise": "cached",
+        "simulate": "cached",
+        "surface": "cached",
+        "export": "cached",
+        "render": "ran",
+    }
     pngs = sorted((tmp_path / "renders" / "tiny").glob("[0-9]*.png"))
     assert len(pngs) == 4 and all(p.stat().st_size > 1000 for p in pngs)

@@ -64,8 +64,14 @@ def test_a_non_finite_frame_writes_nothing(tmp_path):
             return tmp_path / "frames" / f"{frame:04d}.{ext}"
 
     n = 4
-    state = {"x": np.full((n, 3), 0.5, np.float32), "v": np.zeros((n, 3), np.float32), "alive": np.ones(n, np.int32),
-             "material": np.zeros(n, np.int32), "body": np.zeros(n, np.int32), "J": np.ones(n, np.float32)}
+    state = {
+        "x": np.full((n, 3), 0.5, np.float32),
+        "v": np.zeros((n, 3), np.float32),
+        "alive": np.ones(n, np.int32),
+        "material": np.zeros(n, np.int32),
+        "body": np.zeros(n, np.int32),
+        "J": np.ones(n, np.float32),
+    }
     state["v"][2, 1] = np.nan
     with pytest.raises(StageError, match="frame 7: the solver returned non-finite values"):
         _write_frame(Entry, 7, {"substeps": 3}, {"x": state["x"]}, state, np.zeros(3), 2.0)
@@ -73,7 +79,10 @@ def test_a_non_finite_frame_writes_nothing(tmp_path):
     state["v"][2, 1] = 0.0
     _write_frame(Entry, 7, {"substeps": 3}, {"x": state["x"]}, state, np.zeros(3), 2.0)
     assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.*")) == [
-        "checkpoints/0007.npz", "frames/0007.npz", "qa/0007.json"]
+        "checkpoints/0007.npz",
+        "frames/0007.npz",
+        "qa/0007.json",
+    ]
 
 
 def test_several_threads_write_at_once_and_hold_at_most_that_many():

@@ -1,5 +1,6 @@
 """Nothing stale, nothing misleading. Bad physics is said at run time, advice names
 shot keys and helps, published outputs are the current variant's."""
+
 from __future__ import annotations
 
 from pathlib import Path
@@ -13,6 +14,7 @@ from tests.conftest import write_tiny_shot
 
 def test_flags_cfl_above_the_cap_and_inverted_particles():
     from mpmfx.stages.qa import flags
+
     out = flags({1: {"mass": 1.0, "cfl_used": 0.4}, 2: {"mass": 1.0, "cfl_used": 1.6, "inverted": 12}})
     assert 1 not in out and "CFL 1.6" in "; ".join(out[2]) and "12 inverted" in "; ".join(out[2])
 
@@ -21,6 +23,7 @@ def test_flags_cfl_above_the_cap_and_inverted_particles():
 def bad_physics(tmp_path, monkeypatch):
     """The tiny shot, with frame 3's QA made to show what a blown-up run shows."""
     import mpmfx.stages.simulate as sim
+
     real = sim._qa
 
     def qa(report, size):
@@ -50,6 +53,7 @@ def test_bad_physics_warns_at_run_time_and_strict_fails(bad_physics, capsys):
 def _advice(err: str) -> list[str]:
     """The `--set KEY=VALUE` suggestions in an error message."""
     import re
+
     return re.findall(r"--set (\S+=[^\s;,)]+)", err)
 
 
@@ -69,6 +73,7 @@ def test_publishing_follows_every_run_and_the_label_names_the_overrides(tmp_path
     import json
 
     import mpmfx.stages.render as render_stage
+
     titles = []
     real = render_stage.FrameRenderer
 
@@ -96,6 +101,7 @@ def test_publishing_follows_every_run_and_the_label_names_the_overrides(tmp_path
 
 def test_usd_and_vdb_are_published_at_a_stable_path(tmp_path, monkeypatch, capsys):
     from pxr import Usd, UsdGeom, UsdVol
+
     monkeypatch.chdir(tmp_path)
     shot = write_tiny_shot(tmp_path, frame_end=3)
     args = ["run", str(shot), "--until", "export", "--cache", str(tmp_path / "c"), "-q"]
@@ -130,11 +136,14 @@ def test_status_qa_has_units_whole_headers_and_the_first_frame(tmp_path, capsys)
 def test_version_and_no_warp_banner_on_stdout():
     import subprocess
     import sys
+
     out = subprocess.run([sys.executable, "-m", "mpmfx.cli", "--version"], capture_output=True, text=True)
     assert out.returncode == 0 and out.stdout.strip() == f"mpmfx {mpmfx.__version__}"
-    code = ("import sys, mpmfx.bench as b, mpmfx.cli as c\n"
-            "b.main = lambda *a, **k: (__import__('warp').init(), 0)[1]\n"
-            "sys.exit(c.main(['bench', 'solver', '--quick']))")
+    code = (
+        "import sys, mpmfx.bench as b, mpmfx.cli as c\n"
+        "b.main = lambda *a, **k: (__import__('warp').init(), 0)[1]\n"
+        "sys.exit(c.main(['bench', 'solver', '--quick']))"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0 and "Warp" not in out.stdout
 

@@ -4,6 +4,7 @@ what each layer may import.
 Every import statement of every module under mpmfx/ counts, at the top of a module or inside a
 function: the graph here is the one that runs, not only the one the top of a file shows.
 """
+
 from __future__ import annotations
 
 import ast
@@ -45,11 +46,11 @@ BLENDER_SIDE = {"mpmfx.geometry.blender_export", "mpmfx.render.cycles_job", "mpm
 
 @dataclass(frozen=True)
 class Import:
-    module: str          # the importing module
-    names: tuple         # dotted names the statement imports (a from-import: the module and module.name)
+    module: str  # the importing module
+    names: tuple  # dotted names the statement imports (a from-import: the module and module.name)
     line: int
     in_function: bool
-    text: str            # the statement's source lines
+    text: str  # the statement's source lines
 
 
 def _module_name(path: Path) -> str:
@@ -81,12 +82,15 @@ def imports() -> tuple[Import, ...]:
                         base = ".".join([*parts, base] if base else parts)
                     # `from pkg import submodule` imports the submodule (pkg's __init__ runs as
                     # every parent does); `from module import name` imports the module
-                    names = tuple(dict.fromkeys(
-                        f"{base}.{a.name}" if f"{base}.{a.name}" in modules() else base for a in child.names))
+                    names = tuple(
+                        dict.fromkeys(
+                            f"{base}.{a.name}" if f"{base}.{a.name}" in modules() else base for a in child.names
+                        )
+                    )
                 else:
                     visit(child, in_function or isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)))
                     continue
-                text = "\n".join(lines[child.lineno - 1: child.end_lineno])
+                text = "\n".join(lines[child.lineno - 1 : child.end_lineno])
                 out.append(Import(name, names, child.lineno, in_function, text))
 
         visit(ast.parse(source), False)
@@ -130,8 +134,13 @@ def _closure(module: str) -> frozenset[str]:
         seen.add(m)
         todo += [p for p in _parents(m) if p in modules()]
         todo += top[m]
-        outside |= {n.split(".")[0] for i in imports() if i.module == m and not i.in_function
-                    for n in i.names if n.split(".")[0] != "mpmfx"}
+        outside |= {
+            n.split(".")[0]
+            for i in imports()
+            if i.module == m and not i.in_function
+            for n in i.names
+            if n.split(".")[0] != "mpmfx"
+        }
     return frozenset(outside)
 
 
@@ -168,8 +177,13 @@ def test_each_layer_imports_only_what_is_below_it():
 def test_no_stage_imports_a_sibling_stage():
     for name in STAGES:
         siblings = {f"mpmfx.stages.{s}" for s in STAGES if s != name}
-        bad = [f"{i.module}:{i.line} imports {n}" for i in imports() if i.module == f"mpmfx.stages.{name}"
-               for n in i.names if _target(n) in siblings]
+        bad = [
+            f"{i.module}:{i.line} imports {n}"
+            for i in imports()
+            if i.module == f"mpmfx.stages.{name}"
+            for n in i.names
+            if _target(n) in siblings
+        ]
         assert not bad, "\n".join(bad) + "\nexchange data through mpmfx.io records"
 
 
@@ -181,14 +195,24 @@ def test_stages_declare_code_that_exists():
 
 def test_the_solver_imports_only_numpy_warp_and_the_standard_library():
     allowed = {"numpy", "warp", *sys.stdlib_module_names}
-    bad = [f"{i.module}:{i.line} imports {n}" for i in imports() if _in(i.module, "mpmfx.mpm") for n in i.names
-           if not _in(n, "mpmfx.mpm") and n.split(".")[0] not in allowed]
+    bad = [
+        f"{i.module}:{i.line} imports {n}"
+        for i in imports()
+        if _in(i.module, "mpmfx.mpm")
+        for n in i.names
+        if not _in(n, "mpmfx.mpm") and n.split(".")[0] not in allowed
+    ]
     assert not bad, "\n".join(bad)
 
 
 def test_blender_side_modules_are_imported_only_in_blenders_process():
-    bad = [f"{i.module}:{i.line} imports {n}" for i in imports() if i.module not in BLENDER_SIDE
-           for n in i.names if _target(n) in BLENDER_SIDE or n.split(".")[0] in {"bpy", "bmesh", "mathutils"}]
+    bad = [
+        f"{i.module}:{i.line} imports {n}"
+        for i in imports()
+        if i.module not in BLENDER_SIDE
+        for n in i.names
+        if _target(n) in BLENDER_SIDE or n.split(".")[0] in {"bpy", "bmesh", "mathutils"}
+    ]
     assert not bad, "\n".join(bad) + "\nrun them as a child process (mpmfx.blender)"
 
 
@@ -255,10 +279,11 @@ def test_imports_sit_at_the_top_except_marked_boundaries():
 
 
 def test_help_loads_no_engine():
-    code = ("import sys\nfrom mpmfx.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
-            "print('loaded:', *sorted({m.split('.')[0] for m in sys.modules}.intersection("
-            f"{sorted(START_UP | BACKEND | {'bpy', 'pyvista'})!r})))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         cwd=PACKAGE.parent)
+    code = (
+        "import sys\nfrom mpmfx.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+        "print('loaded:', *sorted({m.split('.')[0] for m in sys.modules}.intersection("
+        f"{sorted(START_UP | BACKEND | {'bpy', 'pyvista'})!r})))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=PACKAGE.parent)
     assert "usage: mpmfx" in out.stdout
     assert out.stdout.splitlines()[-1] == "loaded:", out.stdout.splitlines()[-1]

@@ -1,4 +1,5 @@
 """Per-frame stages on a two-worker Dask LocalCluster, killed workers, and wedges."""
+
 from __future__ import annotations
 
 import os
@@ -10,8 +11,8 @@ import numpy as np
 import pytest
 from distributed import WorkerPlugin
 
-from mpmfx.config import ShotError, load_shot_config
 from mpmfx.cache import TEMP_GLOB
+from mpmfx.config import ShotError, load_shot_config
 from mpmfx.stages.parallel import Frames, worth_a_cluster
 from mpmfx.stages.runner import ShotRun
 from mpmfx.wedge import parse_vary, pick, run_wedge, variant_shots, write_sheets
@@ -43,6 +44,7 @@ def test_workers_share_the_cores_for_the_surfacers_threads(cluster):
     import os
 
     from mpmfx.threads import cpu_threads
+
     cores = len(os.sched_getaffinity(0))
     threads = cluster.client().run(cpu_threads)  # worker address -> its split
     assert sorted(threads.values()) == [max(1, cores // 2)] * 2
@@ -58,8 +60,11 @@ def _cache_with_simulation(reference, cache: Path) -> Path:
 
 
 def _files(root: Path) -> dict[str, bytes]:
-    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*"))
-            if p.is_file() and p.name != "manifest.json"}
+    return {
+        str(p.relative_to(root)): p.read_bytes()
+        for p in sorted(root.rglob("*"))
+        if p.is_file() and p.name != "manifest.json"
+    }
 
 
 def test_two_worker_cluster_writes_the_serial_cache_byte_for_byte(reference, cluster, tmp_path, monkeypatch):
@@ -68,8 +73,13 @@ def test_two_worker_cluster_writes_the_serial_cache_byte_for_byte(reference, clu
     monkeypatch.chdir(tmp_path)
     results = ShotRun(load_shot_config(shot), cache_root=cache, quiet=True, executor=cluster).run()
     got = {r.stage: r for r in results}
-    assert [got[s].state for s in ("voxelise", "simulate", "surface", "export", "render")] == \
-        ["cached", "cached", "ran", "ran", "ran"]
+    assert [got[s].state for s in ("voxelise", "simulate", "surface", "export", "render")] == [
+        "cached",
+        "cached",
+        "ran",
+        "ran",
+        "ran",
+    ]
     for stage in ("surface", "export", "render"):
         a, b = _files(ref[stage]), _files(got[stage].entry)
         assert a.keys() == b.keys(), stage
@@ -83,6 +93,7 @@ def test_two_worker_cluster_writes_the_serial_cache_byte_for_byte(reference, clu
 
 def _vdb_values(path: Path) -> dict[str, bytes]:
     from mpmfx.io.vdb import read_vdb
+
     return {name: np.asarray(g["values"]).tobytes() for name, g in read_vdb(path, with_values=True)["grids"].items()}
 
 
@@ -128,10 +139,13 @@ def test_wedge_of_a_surfacing_field_shares_one_simulation(reference, cluster, tm
     assert all(shot.solver.deterministic and shot.voxelise.seed == 0 for shot in shots)
     a, b = (sorted((r["render"] / "frames").glob("*.png")) for r in roots)
     assert len(a) == len(b) == 3 and a[0].read_bytes() != b[0].read_bytes()
-    tiles = [(f"smooth_iters={v}", {f: r["render"] / "frames" / f"{f:04d}.png" for f in (1, 2, 3)})
-             for v, r in zip(values, roots)]
+    tiles = [
+        (f"smooth_iters={v}", {f: r["render"] / "frames" / f"{f:04d}.png" for f in (1, 2, 3)})
+        for v, r in zip(values, roots)
+    ]
     made = write_sheets(tmp_path / "wedge", tiles, [1, 2, 3], fps=24, movie=False)
     import imageio.v2 as imageio
+
     sheet = imageio.imread(made["sheets"] / "0002.png")
     assert sheet.shape[1] == 2 * 160 and sheet.shape[0] == 120  # two tiles side by side
 
@@ -147,11 +161,13 @@ def test_vary_ranges_and_pick_writes_a_loadable_copy(tmp_path):
     assert picked.objects[0].overrides == {"youngs_modulus": 3000}
     assert picked.objects[0].mesh != load_shot_config(shot).objects[0].mesh  # rewritten for the new folder
     assert picked.model_dump(exclude={"objects", "base_dir"}) == load_shot_config(shot).model_dump(
-        exclude={"objects", "base_dir"})
+        exclude={"objects", "base_dir"}
+    )
 
 
 def test_status_names_the_host_that_wrote_an_entry(reference, tmp_path):
     import json
+
     shot, ref = reference
     cache = _cache_with_simulation(reference, tmp_path / "cache")
     man = next((cache / "tiny" / "simulate").iterdir()) / "manifest.json"
@@ -163,15 +179,16 @@ def test_status_names_the_host_that_wrote_an_entry(reference, tmp_path):
 
 def test_a_bad_worker_count_is_bad_input_not_a_traceback(tiny_shot, tmp_path, monkeypatch, capsys):
     from mpmfx.cli import main
+
     monkeypatch.setenv("MPMFX_WORKERS", "two")
     assert main(["run", str(tiny_shot), "--cache", str(tmp_path / "cache"), "--until", "voxelise"]) == 2
     assert "$MPMFX_WORKERS = 'two'" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("value, fix", [("two", "whole number"), ("0", "at least 1")])
-def test_a_bad_surfacer_thread_count_is_bad_input_not_a_traceback(tiny_shot, tmp_path, monkeypatch, capsys, value,
-                                                                  fix):
+def test_a_bad_surfacer_thread_count_is_bad_input_not_a_traceback(tiny_shot, tmp_path, monkeypatch, capsys, value, fix):
     from mpmfx.cli import main
+
     monkeypatch.setenv("MPMFX_SURFACE_THREADS", value)
     assert main(["run", str(tiny_shot), "--cache", str(tmp_path / "cache"), "--until", "voxelise"]) == 2
     err = capsys.readouterr().err
@@ -199,4 +216,3 @@ def test_auto_keeps_light_frames_serial(monkeypatch):
         out = ex.map(lambda job, f: seen.append(f) or f * 2, [(None, f) for f in range(12)], quiet=True)
         assert ex._cluster is None and ex._client is None
     assert out == [f * 2 for f in range(12)] and seen == list(range(12))
-

@@ -1,4 +1,5 @@
 """The cache contract (docs/architecture.md, "The cache and its keys"), on a tiny shot, end to end on the CPU."""
+
 from __future__ import annotations
 
 import os
@@ -72,8 +73,7 @@ def test_surface_change_reruns_only_surface_and_after(first_run):
 
 def test_material_change_reruns_simulate_and_after(first_run):
     shot, cache, _ = first_run
-    run = mpmfx.load_shot(shot, overrides=["objects.0.overrides.youngs_modulus=3000"], cache_root=cache,
-                          quiet=True)
+    run = mpmfx.load_shot(shot, overrides=["objects.0.overrides.youngs_modulus=3000"], cache_root=cache, quiet=True)
     status = {s.stage: s for s in run.status()}
     assert status["voxelise"].state == "cached"
     assert status["simulate"].state == "stale" and "materials" in status["simulate"].why
@@ -117,6 +117,7 @@ def test_killed_simulation_resumes_to_identical_frames(tmp_path):
 
 def test_cli_status_and_clean(first_run, capsys):
     from mpmfx.cli import main
+
     shot, cache, _ = first_run
     assert main(["status", str(shot), "--cache", str(cache)]) == 0
     out = capsys.readouterr().out
@@ -133,6 +134,7 @@ def test_close_voids_is_a_surface_knob(first_run, tmp_path, capsys):
     it since the redistancing starts from the crossing plane)."""
     from mpmfx.cli import main
     from mpmfx.io.frames import SurfaceFrame
+
     shot, cache, first = first_run
     h = mpmfx.load_shot(shot, cache_root=cache, quiet=True).shot.particle_spacing
     run = mpmfx.load_shot(shot, overrides=[f"surface.close_voids={3 * h}"], cache_root=cache, quiet=True)
@@ -151,9 +153,10 @@ def test_sharp_edges_is_a_surface_knob(first_run, tmp_path, capsys):
     rounds its edges in the first frame (only surface re-runs); a value that is not a boolean is a
     config error naming the field."""
     from mpmfx.cli import main
-    from mpmfx.io.frames import SurfaceFrame
     from mpmfx.config import load_shot_config
+    from mpmfx.io.frames import SurfaceFrame
     from mpmfx.stages.surface import surface_params
+
     shot, cache, first = first_run
     run = mpmfx.load_shot(shot, overrides=["surface.sharp_edges=false"], cache_root=cache, quiet=True)
     results = run.run(until="surface")
@@ -166,8 +169,21 @@ def test_sharp_edges_is_a_surface_knob(first_run, tmp_path, capsys):
     # without smoothing there is no edge gate to sharpen at: asked for, a config error, not a
     # silent no-op; left at its default, it goes off with the smoothing
     assert not surface_params(load_shot_config(shot, ["surface.smooth_iters=0"]), "Elastic").sharp_edges
-    assert main(["run", str(shot), "--set", "surface.sharp_edges=true", "--set", "surface.smooth_iters=0",
-                 "--cache", str(tmp_path / "c")]) == 2
+    assert (
+        main(
+            [
+                "run",
+                str(shot),
+                "--set",
+                "surface.sharp_edges=true",
+                "--set",
+                "surface.smooth_iters=0",
+                "--cache",
+                str(tmp_path / "c"),
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert "surface.sharp_edges" in err and "surface.smooth_iters" in err and str(shot.name) in err
     assert not (tmp_path / "c").exists()
@@ -175,6 +191,7 @@ def test_sharp_edges_is_a_surface_knob(first_run, tmp_path, capsys):
 
 def test_cli_bad_config_exit_2(tmp_path, capsys):
     from mpmfx.cli import main
+
     shot = write_tiny_shot(tmp_path, extra="\n[solver]\n")  # duplicate table: invalid TOML
     assert main(["run", str(shot), "--cache", str(tmp_path / "c")]) == 2
     assert "not valid TOML" in capsys.readouterr().err
@@ -191,6 +208,7 @@ def test_exported_usd_matches_voxelised_plus_simulated(first_run):
 
     from mpmfx.io.frames import read_arrays
     from mpmfx.io.usd import validate_stage
+
     _, _, results = first_run
     vox, sim, exp = results[0].entry, results[1].entry, results[3].entry
     stage = Usd.Stage.Open(str(exp / "shot.usda"))
@@ -207,6 +225,7 @@ def test_exported_usd_matches_voxelised_plus_simulated(first_run):
 
 def test_exported_vdb_is_a_level_set(first_run):
     from mpmfx.io.vdb import read_vdb
+
     _, _, results = first_run
     vdbs = sorted(results[3].entry.rglob("*.vdb"))
     info = read_vdb(vdbs[0])
@@ -228,9 +247,11 @@ keyframes = [{ time = 0.0, translate = [0.5, 0.2, 0.5] }, { time = 0.25, transla
 def test_moving_collider_holds_material_and_is_exported(tmp_path):
     """A keyframed box rising under the falling cube: no particle ends inside it; USD has its motion."""
     from pxr import Usd, UsdGeom
+
     shot = write_tiny_shot(tmp_path, extra=COLLIDER)
     results = mpmfx.load_shot(shot, cache_root=tmp_path / "c", quiet=True).run(until="export")
     from mpmfx.io.frames import read_arrays
+
     x = read_arrays(results[1].entry / "frames" / "0006.npz")["x"]
     dx = 1.0 / 24
     top = 0.2 + 0.08 * (5 / 24) / 0.25 + 0.04  # the paddle's top at frame 6 (t = 5/24 s)
@@ -245,6 +266,7 @@ def test_moving_collider_holds_material_and_is_exported(tmp_path):
 
 def test_mesh_outside_domain_fails_clearly_and_caches_nothing(tmp_path, capsys):
     from mpmfx.cli import main
+
     shot = write_tiny_shot(tmp_path)
     code = main(["run", str(shot), "--set", "objects.0.translate=[3.0, 0.4, 0.5]", "--cache", str(tmp_path / "c")])
     err = capsys.readouterr().err
@@ -255,6 +277,7 @@ def test_mesh_outside_domain_fails_clearly_and_caches_nothing(tmp_path, capsys):
 
 def _cuda_available() -> bool:
     import warp as wp
+
     wp.config.quiet = True
     return wp.is_cuda_available()
 
@@ -262,6 +285,7 @@ def _cuda_available() -> bool:
 @pytest.mark.skipif(_cuda_available(), reason="this machine has CUDA: the message is for machines without it")
 def test_device_cuda_without_gpu_says_what_to_do(tmp_path, capsys):
     from mpmfx.cli import main
+
     shot = write_tiny_shot(tmp_path)
     assert main(["run", str(shot), "--device", "cuda", "-q", "--cache", str(tmp_path / "c")]) == 1
     assert "--device cpu" in capsys.readouterr().err
@@ -273,8 +297,13 @@ def test_particle_debug_render_reuses_the_simulation(first_run, tmp_path, monkey
     shot, cache, _ = first_run
     monkeypatch.chdir(tmp_path)
     results = mpmfx.load_shot(shot, overrides=["render.mode=particles"], cache_root=cache, quiet=True).run()
-    assert _states(results) == {"voxelise": "cached", "simulate": "cached", "surface": "cached",
-                                "export": "cached", "render": "ran"}
+    assert _states(results) == {
+        "voxelise": "cached",
+        "simulate": "cached",
+        "surface": "cached",
+        "export": "cached",
+        "render": "ran",
+    }
     pngs = sorted((tmp_path / "renders" / "tiny").glob("[0-9]*.png"))
     assert len(pngs) == 6 and all(p.stat().st_size > 1000 for p in pngs)
 
@@ -298,9 +327,10 @@ def test_density_flag_changes_the_surface_key_and_reruns_from_surface(density_ru
 def test_density_grid_is_a_fog_volume_in_the_vdb_and_the_usd(density_run):
     from pxr import Usd, UsdVol
 
+    from mpmfx.io.frames import read_arrays
     from mpmfx.io.usd import validate_stage
     from mpmfx.io.vdb import read_vdb
-    from mpmfx.io.frames import read_arrays
+
     *_, results = density_run
     exp = results[3].entry
     vdb = exp / "vdb" / "Elastic" / "0003.vdb"
@@ -326,6 +356,7 @@ def test_density_off_writes_no_density(first_run):
 
     from mpmfx.io.frames import read_arrays
     from mpmfx.io.vdb import read_vdb
+
     _, _, results = first_run
     surf, exp = results[2].entry, results[3].entry
     assert not [k for k in read_arrays(surf / "frames" / "0003.npz") if "density" in k]
@@ -342,8 +373,21 @@ def test_a_surface_too_big_for_one_call_names_the_shot_key_and_keeps_the_cache(f
     shot, cache, first = first_run
     sim_before = _bytes(first[1].entry / "frames")
     monkeypatch.setattr("mpmfx.surface.sparse.MAX_ACTIVE_BLOCKS", 1)
-    rc = main(["run", str(shot), "--cache", str(cache), "--until", "surface", "--set", "surface.radius_scale=1.45",
-               "--workers", "1", "-q"])
+    rc = main(
+        [
+            "run",
+            str(shot),
+            "--cache",
+            str(cache),
+            "--until",
+            "surface",
+            "--set",
+            "surface.radius_scale=1.45",
+            "--workers",
+            "1",
+            "-q",
+        ]
+    )
     err = capsys.readouterr().err
     assert rc == 1
     assert f"error: {shot}: surface.voxel_size, frame 1, group" in err

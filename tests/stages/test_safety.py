@@ -1,5 +1,6 @@
 """Nothing lost. Paths stay inside their roots, clean removes exactly what it lists,
 one run per shot at a time, and a failing writer leaves nothing under a final name."""
+
 from __future__ import annotations
 
 import os
@@ -28,6 +29,7 @@ def test_shot_names_that_are_paths_are_refused(tmp_path, monkeypatch, capsys, na
 
 def test_cache_refuses_paths_outside_its_root(tmp_path):
     from mpmfx.cache import Cache, PathError
+
     with pytest.raises(PathError):
         Cache(tmp_path / "cache", "..")
     with pytest.raises(PathError):
@@ -85,10 +87,15 @@ def test_a_second_run_on_a_busy_shot_stops_and_names_the_first(tmp_path, capsys)
     import subprocess
     import sys
     import time
+
     shot = write_tiny_shot(tmp_path, frame_end=8)
     cache = tmp_path / "cache"
-    proc = subprocess.Popen([sys.executable, "-c", SLOW, "run", str(shot), "--until", "simulate", "--cache",
-                             str(cache), "-q"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SLOW, "run", str(shot), "--until", "simulate", "--cache", str(cache), "-q"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     run = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
     frames = run.entries()["simulate"].frames_dir
     deadline = time.time() + 120
@@ -120,6 +127,7 @@ def test_a_lost_frame_is_redone_not_trusted(tmp_path):
 def _truncating_vdb(monkeypatch):
     """pyopenvdb as on a full disk: the write 'succeeds' and leaves half a file."""
     import mpmfx.io.vdb as vdb_io
+
     real = vdb_io.import_pyopenvdb()
 
     class Full:
@@ -137,6 +145,7 @@ def _truncating_vdb(monkeypatch):
 
 def test_a_failing_vdb_writer_leaves_nothing_under_a_final_name(tmp_path, monkeypatch, capsys):
     from mpmfx.io.vdb import read_vdb
+
     shot = write_tiny_shot(tmp_path, frame_end=3)
     cache = tmp_path / "c"
     _truncating_vdb(monkeypatch)
@@ -160,6 +169,7 @@ def test_a_failing_vdb_writer_leaves_nothing_under_a_final_name(tmp_path, monkey
 @pytest.mark.parametrize("errno_, words", [(28, "free space"), (13, "permission")])
 def test_disk_full_and_permission_errors_name_the_path_and_the_fix(tmp_path, monkeypatch, capsys, errno_, words):
     import mpmfx.io.frames as frames
+
     shot = write_tiny_shot(tmp_path, frame_end=3)
     real = frames.write_arrays
 
@@ -191,12 +201,16 @@ def test_a_killed_simulation_resumes_from_its_last_complete_frame(tmp_path):
     import subprocess
     import sys
     import time
+
     shot = write_tiny_shot(tmp_path, frame_end=8)
     shot.write_text(shot.read_text().replace("checkpoint_every = 2\n", ""))  # the default
     ref = mpmfx.load_shot(shot, cache_root=tmp_path / "ref", quiet=True).run(until="simulate")[1].entry
     cache = tmp_path / "killed"
-    proc = subprocess.Popen([sys.executable, "-c", SLOW, "run", str(shot), "--until", "simulate", "--cache",
-                             str(cache), "-q"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SLOW, "run", str(shot), "--until", "simulate", "--cache", str(cache), "-q"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     run = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
     frames = run.entries()["simulate"].frames_dir
     deadline = time.time() + 120
@@ -208,12 +222,14 @@ def test_a_killed_simulation_resumes_from_its_last_complete_frame(tmp_path):
     assert 3 <= len(kept) < 8
     assert {r.stage: r.state for r in run.run(until="simulate")}["simulate"] == "resumed"
     assert {n: (frames / n).stat().st_ino for n in kept} == kept  # not one complete frame redone
-    assert [p.read_bytes() for p in sorted(frames.glob("*.npz"))] == \
-        [p.read_bytes() for p in sorted((ref / "frames").glob("*.npz"))]
+    assert [p.read_bytes() for p in sorted(frames.glob("*.npz"))] == [
+        p.read_bytes() for p in sorted((ref / "frames").glob("*.npz"))
+    ]
 
 
 def test_status_reports_sizes_and_prune_keeps_the_newest_and_the_published(tmp_path, monkeypatch, capsys):
     import time
+
     monkeypatch.chdir(tmp_path)
     shot = write_tiny_shot(tmp_path, frame_end=2)
     cache = tmp_path / "c"
@@ -232,9 +248,9 @@ def test_status_reports_sizes_and_prune_keeps_the_newest_and_the_published(tmp_p
     assert main(["cache", "prune", "--keep", "1", "--cache", str(cache), "--dry-run"]) == 0
     assert all(s.is_dir() for s in surfaces)
     assert main(["cache", "prune", "--keep", "1", "--cache", str(cache), "--yes"]) == 0
-    assert surfaces[0].is_dir()      # the published export uses it (through its upstream key)
+    assert surfaces[0].is_dir()  # the published export uses it (through its upstream key)
     assert not surfaces[1].exists()  # neither newest nor published
-    assert surfaces[2].is_dir()      # the newest
+    assert surfaces[2].is_dir()  # the newest
     assert published_variant.entries()["simulate"].complete()  # one simulate variant: kept
     assert (tmp_path / "published" / "tiny" / "shot.usda").is_file()
 
@@ -248,11 +264,17 @@ def test_frames_are_stored_compactly_and_byte_deterministic(tmp_path):
     import numpy as np
 
     from mpmfx.io.frames import GroupSurface, ParticleFrame, SurfaceFrame
+
     n = 4000
     rng = np.random.default_rng(1)
-    p = ParticleFrame(x=rng.random((n, 3), np.float32), v=rng.random((n, 3), np.float32),
-                      id=np.arange(n, dtype=np.int32), material=np.zeros(n, np.int32), body=np.zeros(n, np.int32),
-                      Jp=np.ones(n, np.float32))
+    p = ParticleFrame(
+        x=rng.random((n, 3), np.float32),
+        v=rng.random((n, 3), np.float32),
+        id=np.arange(n, dtype=np.int32),
+        material=np.zeros(n, np.int32),
+        body=np.zeros(n, np.int32),
+        Jp=np.ones(n, np.float32),
+    )
     p.write(tmp_path / "a.npz")
     p.write(tmp_path / "b.npz")
     assert (tmp_path / "a.npz").read_bytes() == (tmp_path / "b.npz").read_bytes()
@@ -260,11 +282,18 @@ def test_frames_are_stored_compactly_and_byte_deterministic(tmp_path):
         stored = {i.filename: i.compress_size / i.file_size for i in z.infolist() if i.file_size > 1000}
     assert stored["body.npy"] < 0.1 and stored["material.npy"] < 0.1 and stored["Jp.npy"] < 0.1
     assert stored["id.npy"] > 0.99 and stored["x.npy"] > 0.99
-    g = GroupSurface(vertices=rng.random((900, 3)).astype(np.float32), faces=np.arange(2700, dtype=np.int32).reshape(-1, 3),
-                     normals=rng.random((900, 3)).astype(np.float32), velocities=rng.random((900, 3)).astype(np.float32),
-                     block_ijk=np.zeros((4, 3), np.int64), blocks=np.full((4, 8, 8, 8), 0.1, np.float32),
-                     inside_ijk=np.zeros((0, 3), np.int64), voxel_size=0.01, background=0.03,
-                     vel_blocks=np.zeros((4, 8, 8, 8, 3), np.float16))
+    g = GroupSurface(
+        vertices=rng.random((900, 3)).astype(np.float32),
+        faces=np.arange(2700, dtype=np.int32).reshape(-1, 3),
+        normals=rng.random((900, 3)).astype(np.float32),
+        velocities=rng.random((900, 3)).astype(np.float32),
+        block_ijk=np.zeros((4, 3), np.int64),
+        blocks=np.full((4, 8, 8, 8), 0.1, np.float32),
+        inside_ijk=np.zeros((0, 3), np.int64),
+        voxel_size=0.01,
+        background=0.03,
+        vel_blocks=np.zeros((4, 8, 8, 8, 3), np.float16),
+    )
     SurfaceFrame({"g": g}).write(tmp_path / "s.npz")
     with zipfile.ZipFile(tmp_path / "s.npz") as z:
         stored = {i.filename: i.compress_size / i.file_size for i in z.infolist() if i.file_size > 1000}

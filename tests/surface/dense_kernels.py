@@ -12,6 +12,7 @@ LABEL_BIG = wp.constant(2147483647)  # region voxel not (yet) reached by any see
 
 # The flood fill's line sweep is the product's (the same kernel over any 3-D label grid, the same labels).
 from mpmfx.surface.classify import sweep_block_labels as sweep_labels  # noqa: E402,F401
+
 # ... and the smoothing's arithmetic (the dense grid reads its neighbours its own way)
 from mpmfx.surface.smooth import flow_step, flow_taper  # noqa: E402
 
@@ -310,9 +311,7 @@ def sample_vertices(
 
 
 @wp.kernel
-def particle_labels(
-    g: wp.array(dtype=wp.vec3), labels: wp.array3d(dtype=wp.int32), out: wp.array(dtype=wp.int32)
-):
+def particle_labels(g: wp.array(dtype=wp.vec3), labels: wp.array3d(dtype=wp.int32), out: wp.array(dtype=wp.int32)):
     """Label of the voxel nearest to each particle (LABEL_NONE when outside the surface)."""
     p = wp.tid()
     gp = g[p]

@@ -30,9 +30,9 @@ import time
 
 import numpy as np
 
+from mpmfx.surface.grid import NORMAL_STEP, smooth_reach
 from mpmfx.surface.params import LevelSet, SurfaceMesh, SurfaceParams, SurfaceResult, kernel_volume
 from mpmfx.surface.reconstruct import check_inputs
-from mpmfx.surface.grid import NORMAL_STEP, smooth_reach
 from mpmfx.surface.smooth import FLOW_BAND, FLOW_DT
 from mpmfx.surface.sparse import SMOOTH_LIMIT
 
@@ -55,8 +55,10 @@ def surface_dense(
     from tests.surface import dense_kernels as K
 
     if params.density:
-        raise ValueError("SurfaceParams.density: the fog density comes from the sparse surfacer "
-                         "(mpmfx.surface.surface_particles); use it, or density=False")
+        raise ValueError(
+            "SurfaceParams.density: the fog density comes from the sparse surfacer "
+            "(mpmfx.surface.surface_particles); use it, or density=False"
+        )
     wp.init()
     x, v = check_inputs(x, v)
     dev = wp.get_device(device)
@@ -82,7 +84,9 @@ def surface_dense(
         wp.launch(K.average_into, phi.shape, inputs=[distance, again])
         distance = wp.array(_redistance(distance.numpy(), wide), dtype=float)
         phi = _smooth(wp, K, wp.clone(distance), params.smooth_iters)
-        if params.smooth_iters > 0:  # at most SMOOTH_LIMIT r inward, as the sparse surfacer on bodies without edges (its
+        if (
+            params.smooth_iters > 0
+        ):  # at most SMOOTH_LIMIT r inward, as the sparse surfacer on bodies without edges (its
             # edges' limit, mpmfx.surface.edges, is not modelled here: the cases compared have none)
             phi = wp.array(np.minimum(phi.numpy(), distance.numpy() + SMOOTH_LIMIT * grid.r_vox), dtype=float)
         timings["smooth"] = _lap(wp, t0)

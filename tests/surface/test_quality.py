@@ -18,8 +18,9 @@ def test_random_sphere_within_an_eighth_of_a_spacing_with_the_shot_setting():
     # by its curvature, here 17 spacings in radius
     x, h = sample_shape("sphere", 20_000, "random")
     setting = dict(OURS["fine"])
-    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False,
-                           **setting)
+    params = SurfaceParams(
+        PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False, **setting
+    )
     mesh = surface_particles(x, None, params, device="cpu").mesh
     err = np.abs(shape_sdf("sphere")[0](mesh.vertices.astype(np.float64))) / h
     volume, pieces = mesh_stats(mesh.vertices, mesh.faces)
@@ -56,7 +57,9 @@ def test_smoothing_does_not_thin_a_flat_sheet():
     # one lattice layer at "fine": thirty smoothing steps move its faces by 0.03 h (thickness
     # +0.166 h unsmoothed, +0.136 h smoothed); thirty passes of a [1 2 1]/4 blur instead of the
     # flow would take it to -0.133 h, held only by the inward limit
-    unsmoothed = measure_sheet(3000, "lattice", label="round", device="cpu", smooth_iters=0)  # sharp edges need smoothing
+    unsmoothed = measure_sheet(
+        3000, "lattice", label="round", device="cpu", smooth_iters=0
+    )  # sharp edges need smoothing
     smoothed = measure_sheet(3000, "lattice", label="fine", device="cpu", smooth_iters=30)
     assert smoothed["holes"] == 0 and smoothed["components"] == 1
     assert abs(smoothed["thickness_err"] - unsmoothed["thickness_err"]) < 0.1, (smoothed, unsmoothed)
@@ -98,8 +101,9 @@ def test_closing_the_voids_brings_random_surfaces_closer_without_growing_them():
     voxel = setting.pop("voxel_h") * h
     rows = []
     for close in (0.0, h):
-        params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel, dense_output=False, close_voids=close,
-                               **setting)
+        params = SurfaceParams(
+            PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel, dense_output=False, close_voids=close, **setting
+        )
         mesh = surface_particles(x, None, params, device="cpu").mesh
         err = np.abs(shape_sdf("sphere")[0](mesh.vertices.astype(np.float64))) / h
         volume, pieces = mesh_stats(mesh.vertices, mesh.faces)
@@ -126,8 +130,9 @@ def test_closing_the_voids_leaves_a_lattice_box_where_it_is(label):
     voxel = setting.pop("voxel_h") * h
     errs = []
     for close in (0.0, h):
-        params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel, dense_output=False, close_voids=close,
-                               **setting)
+        params = SurfaceParams(
+            PARTICLE_RADIUS_PER_SPACING * h, voxel_size=voxel, dense_output=False, close_voids=close, **setting
+        )
         mesh = surface_particles(x, None, params, device="cpu").mesh
         errs.append(np.abs(shape_sdf("box")[0](mesh.vertices.astype(np.float64))).mean() / h)
     assert errs[1] <= errs[0] + 0.001, f"lattice box mean vertex error {errs[0]:.4f} -> {errs[1]:.4f} h"

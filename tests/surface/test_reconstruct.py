@@ -18,8 +18,15 @@ pytest.importorskip("warp")
 DEVICE = "cpu"
 
 
-def run(shape: str, count: int, sampling: str, *, spheres: bool = False, radius_h: float = PARTICLE_RADIUS_PER_SPACING,
-        **overrides):
+def run(
+    shape: str,
+    count: int,
+    sampling: str,
+    *,
+    spheres: bool = False,
+    radius_h: float = PARTICLE_RADIUS_PER_SPACING,
+    **overrides,
+):
     x, h = sample_shape(shape, count, sampling)
     kw = {"voxel_size": 0.5 * h} | overrides
     params = SurfaceParams(particle_radius=radius_h * h, **kw)
@@ -33,7 +40,9 @@ def run(shape: str, count: int, sampling: str, *, spheres: bool = False, radius_
     return res, err, mesh_volume / volume - 1.0, pieces, x, h
 
 
-@pytest.mark.parametrize(("shape", "count", "mean_tol", "vol_tol"), [("sphere", 8000, 0.15, 0.03), ("torus", 6000, 0.2, 0.05)])
+@pytest.mark.parametrize(
+    ("shape", "count", "mean_tol", "vol_tol"), [("sphere", 8000, 0.15, 0.03), ("torus", 6000, 0.2, 0.05)]
+)
 def test_smooth_shapes_reconstructed_within_tolerance(shape, count, mean_tol, vol_tol):
     # volume tolerance ~ 3 * 0.1 h / radius: these shapes are only ~12 h (sphere), ~5 h (torus tube) thick
     res, err, vol_err, pieces, _, _ = run(shape, count, "lattice")
@@ -139,8 +148,12 @@ def test_spheres_method_gives_one_closed_piece():
 
 @pytest.mark.parametrize(
     ("field", "kwargs"),
-    [("particle_radius", {"particle_radius": 0.0}), ("voxel_size", {"particle_radius": 1.0, "voxel_size": -1.0}),
-     ("band_voxels", {"particle_radius": 1.0, "band_voxels": 0}), ("radius_scale", {"particle_radius": 1.0, "radius_scale": float("nan")})],
+    [
+        ("particle_radius", {"particle_radius": 0.0}),
+        ("voxel_size", {"particle_radius": 1.0, "voxel_size": -1.0}),
+        ("band_voxels", {"particle_radius": 1.0, "band_voxels": 0}),
+        ("radius_scale", {"particle_radius": 1.0, "radius_scale": float("nan")}),
+    ],
 )
 def test_bad_params_name_the_field(field, kwargs):
     with pytest.raises(ValueError, match=f"SurfaceParams.{field}"):
@@ -160,7 +173,9 @@ def test_too_many_active_blocks_names_the_voxel_size(monkeypatch):
     work, not by Warp's array-shape error deep in the marching cubes."""
     monkeypatch.setattr("mpmfx.surface.sparse.MAX_ACTIVE_BLOCKS", 10)
     x, h = sample_shape("sphere", 3000, "lattice")
-    with pytest.raises(ValueError, match=r"SurfaceParams.voxel_size: these 3\d+ particles need \d+ active blocks.*raise voxel_size"):
+    with pytest.raises(
+        ValueError, match=r"SurfaceParams.voxel_size: these 3\d+ particles need \d+ active blocks.*raise voxel_size"
+    ):
         surface_particles(x, None, SurfaceParams(0.6 * h, voxel_size=0.5 * h), device=DEVICE)
 
 
@@ -175,8 +190,9 @@ def test_leaves_hold_the_distance_to_the_mesh(shape, sampling, most):
 
     x, h = sample_shape(shape, 10_000, sampling)
     setting = dict(OURS["fine"])
-    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False,
-                           **setting)
+    params = SurfaceParams(
+        PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False, **setting
+    )
     res = surface_particles(x, None, params, device=DEVICE)
     leaves, voxel = res.sparse, res.sparse.voxel_size
     local = np.stack(np.meshgrid(*[np.arange(8)] * 3, indexing="ij"), -1).reshape(-1, 3)

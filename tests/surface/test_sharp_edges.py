@@ -15,8 +15,9 @@ pytest.importorskip("warp")
 def surface(shape: str, count: int, label: str, *, seed: int = 0, **overrides):
     x, h = sample_shape(shape, count, "random", seed=seed)
     setting = {**OURS[label], **overrides}
-    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False,
-                           **setting)
+    params = SurfaceParams(
+        PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False, **setting
+    )
     return surface_particles(x, None, params, device="cpu").mesh, h
 
 
@@ -35,8 +36,13 @@ def test_a_random_box_keeps_its_edges_and_corners(label):
             err = sdf(v) / h  # + outside
             faces_near = ((half - np.abs(v)) / h < 2.0).sum(axis=1)
             edge, corner = faces_near == 2, faces_near == 3
-            rows[sharp] = (np.abs(err[edge]).mean(), err[edge].mean(), np.abs(err[corner]).mean(), np.abs(err).mean(),
-                           np.abs(err).max())
+            rows[sharp] = (
+                np.abs(err[edge]).mean(),
+                err[edge].mean(),
+                np.abs(err[corner]).mean(),
+                np.abs(err).mean(),
+                np.abs(err).max(),
+            )
         off, on = rows[False], rows[True]
         assert off[1] < -0.05, f"seed {seed}: the edges without sharpening sit {off[1]:+.3f} h (rounded in)"
         assert on[0] < off[0] - 0.02, f"seed {seed}: edge error {off[0]:.3f} -> {on[0]:.3f} h"
@@ -118,8 +124,9 @@ def test_split_across_threads_the_same_surface(monkeypatch):
     # thread writes only its own cells: any split gives the one-thread surface, bit for bit
     x, h = sample_shape("box", 8000, "random", seed=1)
     setting = {**OURS["fine"]}
-    params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False,
-                           **setting)
+    params = SurfaceParams(
+        PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False, **setting
+    )
     monkeypatch.setenv("MPMFX_SURFACE_THREADS", "3")
     monkeypatch.setattr("mpmfx.surface.launch.MIN_SPLIT", 64)
     split = surface_particles(x, None, params, device="cpu").mesh

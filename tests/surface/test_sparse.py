@@ -121,7 +121,9 @@ def test_the_active_blocks_hold_what_is_read_around_the_raw_surface(monkeypatch)
             bmap = raw["bmap"]
             inside = np.zeros(np.array(bmap.shape) * 8, bool)
             for b, (i, j, k) in enumerate(raw["bcoord"]):
-                inside[i * 8:i * 8 + 8, j * 8:j * 8 + 8, k * 8:k * 8 + 8] = raw["phi"][b * 512:(b + 1) * 512].reshape(8, 8, 8) <= 0
+                inside[i * 8 : i * 8 + 8, j * 8 : j * 8 + 8, k * 8 : k * 8 + 8] = (
+                    raw["phi"][b * 512 : (b + 1) * 512].reshape(8, 8, 8) <= 0
+                )
             held = np.repeat(np.repeat(np.repeat(bmap != -1, 8, 0), 8, 1), 8, 2)  # active blocks and INSIDE tiles
             read = sparse.SparseGrid(x.min(0), x.max(0), params).read_vox
             near = ndimage.distance_transform_edt(~inside) <= read
@@ -162,8 +164,11 @@ def test_particles_already_on_the_device_give_the_same_surface():
     x, h = sample_shape("torus", 3000, "random")
     v = np.tile(np.float32([[0.0, 1.0, 0.0]]), (len(x), 1))
     host = surface_particles(x, v, SurfaceParams(0.5 * h, dense_output=False), device=DEVICE)
-    on_dev = surface_particles(wp.array(x, dtype=wp.vec3, device=DEVICE), wp.array(v, dtype=wp.vec3, device=DEVICE),
-                               SurfaceParams(0.5 * h, dense_output=False))
+    on_dev = surface_particles(
+        wp.array(x, dtype=wp.vec3, device=DEVICE),
+        wp.array(v, dtype=wp.vec3, device=DEVICE),
+        SurfaceParams(0.5 * h, dense_output=False),
+    )
     assert np.array_equal(host.mesh.faces, on_dev.mesh.faces)
     assert np.array_equal(host.mesh.vertices, on_dev.mesh.vertices)
     assert np.allclose(on_dev.mesh.velocities[:, 1], 1.0, atol=1e-5)
@@ -208,8 +213,9 @@ def test_a_lattice_block_keeps_its_edges_at_both_settings():
     sdf, _, _ = shape_sdf("box")
     for label, setting in OURS.items():
         setting = dict(setting)
-        params = SurfaceParams(PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False,
-                               **setting)
+        params = SurfaceParams(
+            PARTICLE_RADIUS_PER_SPACING * h, voxel_size=setting.pop("voxel_h") * h, dense_output=False, **setting
+        )
         mesh = surface_particles(x, None, params, device=DEVICE).mesh
         v = mesh.vertices.astype(np.float64)
         near_edge = np.sort(BOX_HALF - np.abs(v), axis=1)[:, 1] < h

@@ -55,7 +55,9 @@ def test_imports_sit_at_the_top_or_name_their_boundary():
                 for inner in ast.walk(node):
                     if isinstance(inner, (ast.Import, ast.ImportFrom)):
                         line = lines[inner.lineno - 1]
-                        assert "# backend:" in line or "# optional:" in line, f"{path.name}:{inner.lineno}: {line.strip()}"
+                        assert "# backend:" in line or "# optional:" in line, (
+                            f"{path.name}:{inner.lineno}: {line.strip()}"
+                        )
 
 
 def test_modules_stay_small():
