@@ -1,4 +1,4 @@
-"""Calibrate the brick P2G's re-sort cadence (p2g_brick.sort_cadence): how much a worn particle
+"""Calibrate the brick P2G's re-sort cadence (bricks.sort_cadence): how much a worn particle
 order costs the scatter, against what a sort costs. Per scene and forced cadence (sort every
 1 ... 32 substeps): ms a substep through advance() (CUDA graphs, as shots run), the scatter's
 device ms a substep, and the order's wear the scatter counts (BrickP2G.frag: runs scattered,

@@ -185,7 +185,7 @@ def sort_ms(solver, state, reps: int = 10, *, whole: bool = False) -> float:
     """Device ms of one brick-P2G sort of `state`, timed alone (CUDA; 0 without the brick P2G):
     its CUB calls (radix sort and scan), which are not Warp launches, so Warp's kernel timing
     (_phase_split) does not see them (its Warp kernels, keys and segments, are in P2G's); whole:
-    the whole sort (what p2g_brick.sort_cadence weighs)."""
+    the whole sort (what bricks.sort_cadence weighs)."""
     brick = solver._device_advance._brick
     if brick is None or not solver.device.is_cuda or solver._device_advance.p2g != "brick":
         return 0.0
@@ -224,7 +224,7 @@ def run_case(
     """One scene through advance(). path: "device" (the default stepper), "device-nograph"
     (same, CUDA graphs off), "device-unbinned" (same, with the reference P2G instead of the
     brick P2G, the default on a GPU), "device-sortK" (the brick P2G re-sorted every K
-    substeps, not at the cadence p2g_brick.sort_cadence picks; 32: once a chunk) or "host" (the reference loop and kernels: statistics read every
+    substeps, not at the cadence bricks.sort_cadence picks; 32: once a chunk) or "host" (the reference loop and kernels: statistics read every
     substep)."""
     mats, parts, colliders = scene(name, grid_n)
     cfg = SolverConfig(grid_n=grid_n, deterministic=deterministic)
@@ -242,7 +242,7 @@ def run_case(
     solver.advance(state, 0.0, span)
     solver.advance(state, span, 2 * span)
     # the block speeds up as it falls, and the brick P2G re-sorts more often as it does
-    # (p2g_brick.sort_cadence): a new cadence is a new graph to capture, so the timed interval
+    # (bricks.sort_cadence): a new cadence is a new graph to capture, so the timed interval
     # keeps the one the warm-up ended with (steady state; a shot pays each capture once), after
     # two more warm-up intervals that capture that cadence's graphs (without them they would be
     # captured inside the timing)

@@ -14,8 +14,9 @@ import time
 import numpy as np
 import warp as wp
 
+from .bricks import fits_brick_keys, sort_cadence, travel_cadence
 from .colliders import ColliderKeys, pack_colliders
-from .p2g_brick import BrickP2G, fits_brick_keys, sort_cadence, travel_cadence
+from .p2g_brick import BrickP2G
 from .slots import Clock, Count, Status
 from .stepper import CHUNKS, StepperParams, WaveParams, make_clock_kernels, pose_colliders, wave_table
 
@@ -181,7 +182,7 @@ class DeviceAdvance:
 
     def _sort_every(self, state, c: np.ndarray, dt_guess: float, frag) -> int:
         """The next chunk's substeps between the brick P2G's sorts: from the wear the last
-        chunk's scatters counted (`frag`; p2g_brick.sort_cadence), or at an advance's first
+        chunk's scatters counted (`frag`; bricks.sort_cadence), or at an advance's first
         chunk the cadence the last advance ended with (state.clock, checkpointed: a resumed run
         picks what the uninterrupted one did), never longer than the fastest particle's travel
         allows (travel_cadence)."""

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import warp as wp
 
-from .p2g_brick import BRICK, marked_node
+from .bricks import BRICK, marked_node
 
 
 def clear_grid(grid_m, grid_mv, grid_normal, grid_fixed, *, deterministic: bool, multi_field: bool, marks=None) -> None:
     """Zero the accumulators P2G is about to write (float or fixed-point ones; the mass
-    gradients too in multi-field mode). marks: per node brick (p2g_brick.node_brick order,
+    gradients too in multi-field mode). marks: per node brick (bricks.node_brick order,
     int32), 1 where the last P2G wrote; given, only those bricks are zeroed."""
     if marks is not None:
         nn = grid_fixed.shape[0] if deterministic else grid_m.shape[0]

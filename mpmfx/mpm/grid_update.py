@@ -17,9 +17,9 @@ import functools
 
 import warp as wp
 
+from .bricks import BRICK, marked_node
 from .clear_grid import zero_node
 from .colliders import ColliderParams, apply_collider
-from .p2g_brick import BRICK, marked_node
 from .slots import Count, WallCode
 from .stepper import SubstepDev
 

@@ -20,6 +20,7 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
+from .bricks import BRICK
 from .chunked import DeviceAdvance
 from .clear_grid import clear_grid
 from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
@@ -31,7 +32,6 @@ from .grid_update import GridParams, make_grid_update
 from .materials import Material, Mode
 from .order import in_particle_order, to_slots
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
-from .p2g_brick import BRICK
 from .slots import REJECTING, Count, Stat
 from .state import ParticleBuffers, SceneFlags, State, StepperClock, load_m33, m33_assign, m33_to_host
 from .stepper import SubstepDev, sum_partials

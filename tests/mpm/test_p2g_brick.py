@@ -145,7 +145,7 @@ def test_substeps_after_the_first_clear_and_update_only_the_marked_node_bricks(k
 
 
 def test_travel_cadence_keeps_the_fastest_particle_inside_its_window():
-    from mpmfx.mpm.p2g_brick import SORT_TRAVEL, travel_cadence
+    from mpmfx.mpm.bricks import SORT_TRAVEL, travel_cadence
 
     dx, dt = 1.0 / 256, 5e-5
     assert travel_cadence(0.0, dt, dx, 32) == 32  # at rest: once a chunk
@@ -168,7 +168,7 @@ def test_sort_cadence_balances_the_sort_against_the_wear_it_removes():
     """k = sqrt(2 S / g): the cadence whose sorts cost what the runs' wear would (S a sort in
     pieces, g the pieces gained a substep). The figures are hero_dam's and hero_castle's on an
     H200 (lab/cadence_fit.py), where the measured optimum is 4 and 8."""
-    from mpmfx.mpm.p2g_brick import SORT_PIECES_FIXED, SORT_PIECES_PER_PARTICLE, sort_cadence
+    from mpmfx.mpm.bricks import SORT_PIECES_FIXED, SORT_PIECES_PER_PARTICLE, sort_cadence
 
     n = 3_400_000
     S = SORT_PIECES_PER_PARTICLE * n + SORT_PIECES_FIXED
@@ -190,7 +190,7 @@ def test_sort_cadence_balances_the_sort_against_the_wear_it_removes():
 def test_the_brick_scatter_counts_the_wear_of_the_order():
     """BrickP2G.frag, what sort_cadence reads: the runs scattered right after a sort and
     later, the particles that left their window (scattered directly), the substeps of each kind."""
-    from mpmfx.mpm.p2g_brick import FRAG_FALLBACKS, FRAG_PIECES, FRAG_SUBSTEPS
+    from mpmfx.mpm.bricks import FRAG_FALLBACKS, FRAG_PIECES, FRAG_SUBSTEPS
 
     solver, state, rng = _scene(False)
     brick = BrickP2G(solver.flags, state.n, solver.device, nodes=GRID + 1)
