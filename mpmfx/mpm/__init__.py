@@ -27,9 +27,9 @@ _WHERE = {
     "Mode": "materials",
     "preset": "materials",
     "Particles": "solver",
-    "SimulationError": "solver",
+    "SimulationError": "errors",
     "Solver": "solver",
-    "StepReport": "solver",
+    "StepReport": "report",
     "State": "state",
 }
 __all__ = list(_WHERE)

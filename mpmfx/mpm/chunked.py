@@ -16,7 +16,9 @@ import warp as wp
 
 from .bricks import fits_brick_keys, sort_cadence, travel_cadence
 from .colliders import ColliderKeys, pack_colliders
+from .errors import raise_too_small, too_many
 from .p2g_brick import BrickP2G
+from .report import step_report
 from .slots import Clock, Count, Status
 from .stepper import CHUNKS, StepperParams, WaveParams, make_clock_kernels, pose_colliders, wave_table
 
@@ -236,14 +238,15 @@ class DeviceAdvance:
         t = t0 + c[Clock.DONE] / cfg.time_scale
         if int(c[Clock.STATUS]) == Status.DT_TOO_SMALL:
             s._last_bad = self.last_bad.numpy() if c[Clock.HAS_BAD] else None
-            s._raise_too_small(state, t, float(c[Clock.DT_CFL]))
+            raise_too_small(s, state, t, float(c[Clock.DT_CFL]))
         if int(c[Clock.STATUS]) == Status.TOO_MANY:
-            raise s._too_many(
-                state, t, t1, int(c[Clock.N_SUB]), float(c[Clock.DT_CFL]), float(c[Clock.TOTAL] - c[Clock.DONE])
+            raise too_many(
+                s, state, t, t1, int(c[Clock.N_SUB]), float(c[Clock.DT_CFL]), float(c[Clock.TOTAL] - c[Clock.DONE])
             )
         n = int(c[Clock.N_SUB])
         dts = [float(c[Clock.DT_MIN]), float(c[Clock.DT_MAX])] if n else []
-        report = s._report(
+        report = step_report(
+            s,
             state,
             n,
             int(c[Clock.N_REJ]),

@@ -20,39 +20,28 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
+from . import readback
 from .bricks import BRICK
 from .chunked import DeviceAdvance
 from .clear_grid import clear_grid
 from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
-from .constitutive import MODE_SAND, MODE_SNOW, MODE_WATER, MaterialParams, pack_material
-from .energy import ENERGY_CHUNK, SUMS, make_report
+from .constitutive import MaterialParams, pack_material
+from .energy import make_report
+from .errors import SimulationError, raise_too_small, too_many
 from .g2p import G2PParams, g2p_launch_shape, make_g2p, solid_stress
 from .grid_update import GridParams, make_grid_update
 from .materials import Material, Mode
-from .order import in_particle_order, to_slots
+from .order import to_slots
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
+from .report import StepReport, particle_sums, step_report
 from .slots import REJECTING, Count, Stat
-from .state import ParticleBuffers, SceneFlags, State, StepperClock, load_m33, m33_assign, m33_to_host
-from .stepper import SubstepDev, sum_partials
+from .state import ParticleBuffers, SceneFlags, State, StepperClock, m33_assign
+from .stepper import SubstepDev
 
 __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
 
-CHECKPOINT_VERSION = 3  # 3: with the slots' particles (pid); 2: with the solids' stored stress (tau); 1 and 2 are
-# restored too
 MAX_FIELDS = 8  # multi-field contact: grid memory grows with the number of fields
-_SYMPTOM = "Everything explodes / NaNs"  # the symptom row of the tutorial's tuning table the errors point at
-
-
-class SimulationError(RuntimeError):
-    """The solver cannot continue without a knob change; the message says which. `field`: the
-    SolverConfig knob whose limit was hit ("dt_min", "max_substeps_per_frame") or None;
-    `needed`: what would have passed it (the substep dt in s, or the substeps the frame needs),
-    so a caller can phrase the advice in its own keys."""
-
-    def __init__(self, message: str, *, field: str | None = None, needed: float | None = None):
-        super().__init__(message)
-        self.field, self.needed = field, needed
 
 
 @dataclass
@@ -71,60 +60,8 @@ class Particles:
     body: np.ndarray
 
 
-@dataclass
-class StepReport:
-    """What one `advance` did. Times in s, speeds domain/s, mass in density*domain^3.
-
-    cfl_used: largest dt * (c_max + |v|max) / dx, with c and |v| measured at the end of
-    each accepted substep (the CFL actually experienced); momentum: (3,);
-    kinetic_energy, elastic_energy: at the end of the advance, mass*domain^2/s^2 (see
-    `Solver.elastic_energy`); their sum is conserved by an undamped scene without walls;
-    j_min, j_max: range of J (det F for solids, J for water) over the accepted substeps;
-    j_min <= 0 when a particle inverted, even though it was mirrored back out;
-    inverted: particle-substeps whose F inverted (det F <= 0) and was mirrored back out
-    (see `constitutive.uninvert`); 0 in a healthy run.
-    """
-
-    substeps: int
-    rejected_substeps: int
-    dt_min: float
-    dt_max: float
-    max_speed: float
-    cfl_used: float
-    particles_lost: int
-    mass: float
-    momentum: np.ndarray
-    kinetic_energy: float
-    elastic_energy: float | None
-    j_min: float
-    j_max: float
-    wall_time_s: float
-    inverted: int = 0
-
-
 def _pow2_at_least(x: float) -> float:
     return 2.0 ** math.ceil(math.log2(max(x, 1e-30)))
-
-
-@wp.kernel(enable_backward=False)
-def _volume_ratio(
-    materials: wp.array(dtype=MaterialParams),
-    material: wp.array(dtype=wp.int32),
-    F: wp.array2d(dtype=wp.vec3),
-    J: wp.array(dtype=float),
-    solid: int,
-    water: int,
-    out: wp.array(dtype=float),
-):
-    """out[p] = det F (snow, sand), J (water) or 1 (tracers)."""
-    p = wp.tid()
-    mode = materials[material[p]].mode
-    j = float(1.0)
-    if solid != 0 and (mode == MODE_SNOW or mode == MODE_SAND):
-        j = wp.determinant(load_m33(F, p))
-    if water != 0 and mode == MODE_WATER:
-        j = J[p]
-    out[p] = j
 
 
 class Solver:
@@ -543,18 +480,6 @@ class Solver:
             return self._device_advance.run(state, t0, t1)
         return self._advance_host(state, t0, t1)
 
-    def _too_many(
-        self, state: State, t: float, t1: float, substeps: int, dt_cfl: float, remaining: float
-    ) -> SimulationError:
-        """`remaining`: simulated seconds still to go (sets `needed`, the substeps that would do)."""
-        return SimulationError(
-            f"t={t:.4f}s: {substeps} substeps did not reach t1={t1:.4f}s "
-            f"(dt ~ {dt_cfl:.3g}s, c_max {self.wave_speed(state.clock):.3g} domain/s). Raise "
-            f"SolverConfig.max_substeps_per_frame, or lower youngs_modulus / bulk_modulus / grid_n",
-            field="max_substeps_per_frame",
-            needed=substeps + math.ceil(remaining / dt_cfl),
-        )
-
     def _advance_host(self, state: State, t0: float, t1: float) -> StepReport:
         """The reference stepper: statistics read back after every substep."""
         cfg = self.config
@@ -567,9 +492,9 @@ class Solver:
             remaining = total - done
             dt_cfl = self._cfl_dt(state.clock)
             if dt_cfl < cfg.dt_min:
-                self._raise_too_small(state, t0 + done / cfg.time_scale, dt_cfl)
+                raise_too_small(self, state, t0 + done / cfg.time_scale, dt_cfl)
             if substeps >= cfg.max_substeps_per_frame:
-                raise self._too_many(state, t0 + done / cfg.time_scale, t1, substeps, dt_cfl, total - done)
+                raise too_many(self, state, t0 + done / cfg.time_scale, t1, substeps, dt_cfl, total - done)
             last = remaining <= dt_cfl * (1.0 + 1e-6)
             dt = remaining if last else (0.5 * remaining if remaining < 2.0 * dt_cfl else dt_cfl)
             ts0 = t0 + done / cfg.time_scale
@@ -603,83 +528,13 @@ class Solver:
                 jmax = max(jmax, float(stats[Stat.J_MAX]))
             lost += int(counts[Count.LOST])
             inverted += int(counts[Count.INVERTED])
-        report = self._report(state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0)
+        report = step_report(self, state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0)
         report.inverted = inverted
         return report
 
-    def _raise_too_small(self, state: State, t: float, dt: float) -> None:
-        bad = getattr(self, "_last_bad", None)
-        per_mat = [] if bad is None else bad[Count.PER_MATERIAL :]
-        names = [self._describe_material(i) for i, k in enumerate(per_mat) if k > 0] or [
-            self._describe_material(i) for i in range(len(self.materials))
-        ]
-        n_bad = 0 if bad is None else int(bad[Count.NONFINITE] + bad[Count.TOO_FAR])
-        what = (
-            f"the last rejected substep had {n_bad} particle(s) non-finite or moving more than one cell"
-            if bad is not None
-            else "no substep was rejected; the CFL step is this small"
-        )
-        raise SimulationError(
-            f"t={t:.4f}s: the substep fell to dt={dt:.3g}s < dt_min={self.config.dt_min:g}s "
-            f"({state.n} particles, max speed {state.clock.max_speed:.3g} domain/s, c_max "
-            f"{self.wave_speed(state.clock):.3g} domain/s); {what}, in {', '.join(names)} "
-            f"('{_SYMPTOM}'). Lower youngs_modulus / bulk_modulus or raise damping; "
-            f"or lower SolverConfig.dt_min if this dt is intended (a lower cfl only shrinks dt further)",
-            field="dt_min",
-            needed=dt,
-        )
-
-    def _describe_material(self, i: int) -> str:
-        m = self.materials[i]
-        if m.mode == Mode.WATER:
-            return f"material {i} (WATER, bulk_modulus={m.bulk_modulus:g})"
-        return f"material {i} ({m.mode.name}, youngs_modulus={m.youngs_modulus:g})"
-
-    def _report(self, state, substeps, rejected, dts, vmax, cfl_used, lost, jmin, jmax, wall0) -> StepReport:
-        sums = self.report_sums(state)
-        return StepReport(
-            substeps=substeps,
-            rejected_substeps=rejected,
-            dt_min=min(dts) if dts else 0.0,
-            dt_max=max(dts) if dts else 0.0,
-            max_speed=vmax,
-            cfl_used=cfl_used,
-            particles_lost=lost,
-            mass=float(sums[0]),
-            momentum=sums[1:4].copy(),
-            kinetic_energy=float(0.5 * sums[4]),
-            elastic_energy=float(sums[5]),
-            j_min=jmin if dts else 1.0,
-            j_max=jmax if dts else 1.0,
-            wall_time_s=time.perf_counter() - wall0,
-        )
-
     def report_sums(self, state: State) -> np.ndarray:
-        """(6,) float64 over the live particles, summed on the device in a fixed order (replays
-        give the same bits; only a few partial sums come to the host): mass, momentum (3),
-        mass * |v|^2 (twice the kinetic energy) and the elastic energy (`elastic_energy`)."""
-        cur = state.cur
-        part = wp.empty(((state.n + ENERGY_CHUNK - 1) // ENERGY_CHUNK, SUMS), dtype=wp.float64, device=self.device)
-        wp.launch(
-            self._report_partials,
-            dim=part.shape[0],
-            device=self.device,
-            inputs=[
-                self._materials_dev,
-                state.material,
-                state.mass,
-                state.volume,
-                cur.v,
-                cur.F,
-                cur.J,
-                cur.Jp,
-                cur.alive,
-                state.n,
-                int(self.device.is_cuda),
-                part,
-            ],
-        )
-        return sum_partials(part, self.device)
+        """(6,) float64: mass, momentum (3), twice the kinetic energy, elastic energy (report.particle_sums)."""
+        return particle_sums(self, state)
 
     def elastic_energy(self, state: State) -> float:
         """Energy stored in the particles' elastic state, mass*domain^2/s^2 (same units as
@@ -690,95 +545,21 @@ class Solver:
 
     # ------------------------------------------------------------------ I/O
     def state_to_numpy(self, state: State) -> dict[str, np.ndarray]:
-        """Host copy: x (n,3), v (n,3), C (n,3,3), F (n,3,3) if any solid, J (n,) (det F for
-        solids, J for water, 1 for tracers), Jp (n,), mass, volume (n,), material, body,
-        alive (n,) int32."""
-        return {**self.host_arrays(state), "J": self.volume_ratios(state)}
+        """Host copy of the particles, in particle order (readback.state_to_numpy)."""
+        return readback.state_to_numpy(self, state)
 
     def host_arrays(self, state: State, names=None) -> dict[str, np.ndarray]:
-        """Host copies of the particle arrays as the solver stores them (`names`: a subset):
-        x, v, C, Jp, alive, mass, volume, material, body, F (if any solid) and J (water's
-        volume ratio, if any water; other particles' entries unused). `volume_ratios` gives every
-        particle's J."""
-        cur = state.cur
-        arrays = {
-            "x": cur.x,
-            "v": cur.v,
-            "C": cur.C,
-            "Jp": cur.Jp,
-            "alive": cur.alive,
-            "mass": state.mass,
-            "volume": state.volume,
-            "material": state.material,
-            "body": state.body,
-        }
-        if self.flags.solid:
-            arrays["F"] = cur.F
-        if self.flags.water:
-            arrays["J"] = cur.J
-        return self._to_host(state, {k: a for k, a in arrays.items() if names is None or k in names})
-
-    @staticmethod
-    def _to_host(state: State, arrays: dict) -> dict[str, np.ndarray]:
-        """Host copies of device arrays, in particle order (see State: storage order)."""
-        if state.permuted:
-            arrays = {k: in_particle_order(a, state.pid) for k, a in arrays.items()}
-        return {k: m33_to_host(a) if k in ParticleBuffers.MATRICES else a.numpy() for k, a in arrays.items()}
+        """Host copies of the particle arrays as stored (readback.host_arrays)."""
+        return readback.host_arrays(self, state, names)
 
     def volume_ratios(self, state: State) -> np.ndarray:
-        """J (n,) float32 in particle order: det F for snow and sand, J for water, 1 for tracers,
-        computed on the device (a frame takes 4 bytes a particle off the device instead of F's
-        36, and the host neither transposes F nor takes its determinant)."""
-        out = wp.empty(state.n, dtype=float, device=self.device)
-        wp.launch(
-            _volume_ratio,
-            dim=state.n,
-            device=self.device,
-            inputs=[
-                self._materials_dev,
-                state.material,
-                state.cur.F,
-                state.cur.J,
-                int(self.flags.solid),
-                int(self.flags.water),
-                out,
-            ],
-        )
-        return self._to_host(state, {"J": out})["J"]
+        """J (n,) float32 in particle order, computed on the device (readback.volume_ratios)."""
+        return readback.volume_ratios(self, state)
 
     def checkpoint(self, state: State, t: float) -> dict[str, np.ndarray]:
-        """Full state + stepper clock, as numpy arrays in particle order, and `pid`: the particle
-        each storage slot held (State), which `restore` puts back, so it resumes bit-identically."""
-        data = self._to_host(
-            state,
-            {
-                **dict(zip(ParticleBuffers.NAMES, state.cur.arrays())),
-                "mass": state.mass,
-                "volume": state.volume,
-                "material": state.material,
-                "body": state.body,
-            },
-        )
-        data["pid"] = state.pid.numpy()
-        data["clock"] = state.clock.to_array()
-        data["t"] = np.array([t], np.float64)
-        data["meta"] = np.array([CHECKPOINT_VERSION, self.config.grid_n, state.n], np.int64)
-        return data
+        """Full state and stepper clock at shot time t, s, as numpy arrays (readback.checkpoint)."""
+        return readback.checkpoint(self, state, t)
 
     def restore(self, data: dict[str, np.ndarray]) -> tuple[State, float]:
-        """State and shot time t from `checkpoint` output (ValueError if it does not fit)."""
-        required = {*ParticleBuffers.NAMES, "mass", "volume", "material", "body", "clock", "t", "meta"} - {"tau"}
-        missing = sorted(required - set(data))
-        if missing:
-            raise ValueError(
-                f"checkpoint: missing arrays {', '.join(missing)}; it was not written by "
-                "Solver.checkpoint (or is truncated); re-simulate from the start"
-            )
-        meta = np.asarray(data["meta"])
-        if int(meta[0]) not in (1, 2, CHECKPOINT_VERSION) or int(meta[1]) != self.config.grid_n:
-            raise ValueError(
-                f"checkpoint: version/grid_n {meta[:2].tolist()} do not match this solver "
-                f"({CHECKPOINT_VERSION}, {self.config.grid_n}); re-simulate from the start"
-            )
-        state = self._build_state(data, StepperClock.from_array(data["clock"]))
-        return state, float(data["t"][0])
+        """State and shot time t from `checkpoint` output (readback.restore)."""
+        return readback.restore(self, data)
