@@ -5,8 +5,8 @@ world units and in units of the particle spacing h, and the mesh's area-weighted
 (`surface_error`: the vertex mean moves with where a flat face sits between voxel planes); volume error of the closed mesh against
 the analytic volume; number of connected mesh pieces (1 = no interior bubbles, no specks);
 jitter = how far the vertices move between two frames of a body at rest (ours only; see
-`rest_jitter`); moving = the same for a slowly moving body, measured against the moved
-surface (`moving_jitter`).
+`surface_jitter.rest_jitter`); moving = the same for a slowly moving body, measured against
+the moved surface (`surface_jitter.moving_jitter`).
 The peers (mpmfx.bench.surface_peers: splashsurf, Newton) run on the same particles and get
 the same columns. Our surfacer runs at the shipped particle radius
 (mpmfx.surface.PARTICLE_RADIUS_PER_SPACING x h).
@@ -25,8 +25,8 @@ import numpy as np
 import warp as wp
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
+from mpmfx.bench.surface_jitter import moving_jitter, rest_jitter
 from mpmfx.bench.surface_peers import run_peer
 from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_particles
 
@@ -271,66 +271,6 @@ def measure_sheet_peer(name: str, count: int, sampling: str, *, device: str | No
         "device": res.device,
         "settings": res.settings,
     }
-
-
-REST_NOISE = 0.01
-"""Particle motion between two frames of a body at rest, in particle spacings h (per axis, rms):
-an MPM block settled on the floor creeps by about this much per frame."""
-
-
-def rest_jitter(
-    x: np.ndarray, h: float, params: SurfaceParams, first, *, device: str | None = None, seed: int = 0
-) -> tuple[float, float]:
-    """(mean vertex displacement / h between two frames of a body at rest, the same for the very
-    same particles surfaced again). x: (n, 3) m; first: the SurfaceResult of x. The second frame
-    moves each particle by N(0, REST_NOISE h) per axis. Where both frames have the same triangles
-    (the usual case) vertices are compared one to one, else each to the other frame's nearest."""
-
-    def moved(a, b) -> float:
-        if a.faces.shape == b.faces.shape and np.array_equal(a.faces, b.faces):
-            return float(np.linalg.norm(a.vertices - b.vertices, axis=1).mean() / h)
-        if len(a.vertices) == 0 or len(b.vertices) == 0:
-            return float("nan")
-        d1 = cKDTree(a.vertices).query(b.vertices)[0]
-        d2 = cKDTree(b.vertices).query(a.vertices)[0]
-        return float((d1.mean() + d2.mean()) / 2 / h)
-
-    dev = wp.get_device(device)
-    up = (lambda a: a) if dev.is_cpu else (lambda a: wp.array(a, dtype=wp.vec3, device=dev))
-    same = surface_particles(up(x), None, params, device=device).mesh
-    noise = np.random.default_rng(seed).normal(0.0, REST_NOISE * h, size=x.shape).astype(np.float32)
-    later = surface_particles(up(x + noise), None, params, device=device).mesh
-    return moved(first.mesh, later), moved(first.mesh, same)
-
-
-MOVE_STEP = 0.1
-"""How far a slowly moving body travels between two frames, in particle spacings h."""
-
-
-def moving_jitter(
-    x: np.ndarray, h: float, params: SurfaceParams, first, *, device: str | None = None, seed: int = 1
-) -> float:
-    """Flicker of a slowly moving body: the particles x (m) travel MOVE_STEP h along a fixed
-    oblique direction and creep as at rest (REST_NOISE h); returns the mean distance / h of the
-    second frame's vertices, moved back, to the first frame's surface (point to the tangent
-    plane of the nearest first-frame vertex, so a different triangulation of the same surface
-    reads 0). A surfacer that follows the body exactly gives about the rest jitter."""
-    a = first.mesh
-    if len(a.vertices) == 0:
-        return float("nan")
-    step = np.array([0.57, 0.41, 0.71]) / np.linalg.norm([0.57, 0.41, 0.71]) * MOVE_STEP * h
-    noise = np.random.default_rng(seed).normal(0.0, REST_NOISE * h, size=x.shape)
-    dev = wp.get_device(device)
-    y = (x + noise + step).astype(np.float32)
-    later = surface_particles(
-        y if dev.is_cpu else wp.array(y, dtype=wp.vec3, device=dev), None, params, device=device
-    ).mesh
-    if len(later.vertices) == 0:
-        return float("nan")
-    back = later.vertices.astype(np.float64) - step
-    _, i = cKDTree(a.vertices).query(back)
-    off = np.einsum("ij,ij->i", back - a.vertices[i], a.normals[i].astype(np.float64))
-    return float(np.abs(off).mean() / h)
 
 
 def measure(

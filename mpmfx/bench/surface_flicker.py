@@ -31,7 +31,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from mpmfx.bench.report import write_rows
-from mpmfx.bench.surface_cases import BOX_HALF, MOVE_STEP, OURS, REST_NOISE, RUN_ERRORS, Table, mesh_stats, sample_shape
+from mpmfx.bench.surface_cases import BOX_HALF, OURS, RUN_ERRORS, Table, mesh_stats, sample_shape
+from mpmfx.bench.surface_jitter import MOVE_STEP, REST_NOISE
 from mpmfx.bench.surface_peers import run_peer
 from mpmfx.render import import_pyvista
 from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, SurfaceParams, surface_particles
