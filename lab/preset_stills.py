@@ -24,6 +24,7 @@ grid). Run from the repository root, with mpmfx installed (`pip install -e .` or
 About 3 minutes of wall time on a 2-core CPU from an empty cache (Cycles included); the stage
 cache makes a re-run free.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -85,16 +86,35 @@ velocity = [0.0, -3.0, 0.0]
 """
 
 # The frame of each preset's still (24 fps; frame 1 is the release, the foot lands in frame 2).
-STILLS = {"Soft": 13, "Mushy": 12, "Goopy": 8, "Wet": 8, "Slush": 8, "Elastic": 3,
-          "Granular": 4, "CohesiveGranular": 4, "Water": 3, "Tracer": 3}
+STILLS = {
+    "Soft": 13,
+    "Mushy": 12,
+    "Goopy": 8,
+    "Wet": 8,
+    "Slush": 8,
+    "Elastic": 3,
+    "Granular": 4,
+    "CohesiveGranular": 4,
+    "Water": 3,
+    "Tracer": 3,
+}
 
 
 def shot_text(name: str, *, engine: str, width: int, height: int, samples: int, frame_end: int) -> str:
     pillar, ball = ((ROOT / "assets" / f).as_posix() for f in ("sand_column.obj", "snowball.obj"))
     material = "Water" if name == "Tracer" else name
     tracer = TRACER.format(ball=ball) if name == "Tracer" else ""
-    return SCENE.format(name=name, pillar=pillar, material=material, tracer=tracer, engine=engine,
-                        width=width, height=height, samples=samples, frame_end=frame_end)
+    return SCENE.format(
+        name=name,
+        pillar=pillar,
+        material=material,
+        tracer=tracer,
+        engine=engine,
+        width=width,
+        height=height,
+        samples=samples,
+        frame_end=frame_end,
+    )
 
 
 def still(name: str, folder: Path, *, cache: Path, frame: int, **render) -> Path:
