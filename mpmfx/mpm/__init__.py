@@ -17,6 +17,7 @@ so the shot schema reads the solver's defaults from them without starting Warp.
 import importlib
 
 _WHERE = {
+    "AnimatedMesh": "animated",
     "Collider": "colliders",
     "ColliderKind": "colliders",
     "OutOfDomain": "config",

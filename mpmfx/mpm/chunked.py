@@ -92,6 +92,8 @@ class DeviceAdvance:
                         s._colliders_dev,
                     ],
                 )
+            if s._meshes is not None:  # the interpolation weight from the device clock; refit
+                s._meshes.pose_device(self.sp, self.clk)
             s._phases(
                 state,
                 bufs[i % 2],

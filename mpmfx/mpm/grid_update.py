@@ -17,6 +17,7 @@ import functools
 
 import warp as wp
 
+from .animated import MeshColliders, apply_mesh_colliders
 from .bricks import BRICK, marked_node
 from .clear_grid import zero_node
 from .colliders import ColliderParams, apply_collider
@@ -208,19 +209,29 @@ def update_node(
         grid_v[fi, j, k] = v
 
 
+@wp.func
+def mesh_boundaries(gp: GridParams, mc: MeshColliders, v: wp.vec3, i: int, j: int, k: int) -> wp.vec3:
+    """A node's velocity after the animated meshes, then the walls again (each wall is a
+    projection, so a node no mesh touched keeps what `boundaries` gave it)."""
+    v = apply_mesh_colliders(mc, wp.vec3(float(i), float(j), float(k)) * gp.dx, v, gp.dx)
+    return apply_walls(v, wp.vec3i(i, j, k), gp)
+
+
 @functools.lru_cache(maxsize=None)
-def make_grid_update(*, device_clock: bool = False, sparse: bool = False, clears: bool = False):
+def make_grid_update(*, device_clock: bool = False, sparse: bool = False, clears: bool = False, meshes: bool = False):
     """The grid-update kernel; device_clock as in p2g.make_p2g. sparse: launched over the
     node bricks (BRICK^3 threads each, `marks` order), it updates only those `marks` flags
     (the brick P2G's, p2g_brick.py): G2P reads no other node, and the others' velocities are
     left as they were. Otherwise launched over the nodes (3D). clears (sparse only): each node's
     mass and momentum are zeroed once read, which is the next substep's clear (the same marked
     bricks), so that substep launches none; only where G2P reads no node mass (water volume
-    recovery does)."""
+    recovery does). meshes: the scene has animated mesh colliders (animated.py), met after the
+    rigid ones; without, the `mesh_cols` argument is never read."""
     module = (
         ("mpmfx_mpm_grid_dev" if device_clock else __name__)
         + ("_sparse" if sparse else "")
         + ("_clears" if clears else "")
+        + ("_meshes" if meshes else "")
     )
 
     @wp.kernel(enable_backward=False, module=module)
@@ -236,6 +247,7 @@ def make_grid_update(*, device_clock: bool = False, sparse: bool = False, clears
         counts: wp.array(dtype=wp.int32),
         marks: wp.array(dtype=wp.int32),
         sub: wp.array(dtype=SubstepDev),
+        mesh_cols: MeshColliders,
     ):
         if wp.static(device_clock):
             if sub[0].active == 0:
@@ -248,12 +260,20 @@ def make_grid_update(*, device_clock: bool = False, sparse: bool = False, clears
                 m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, node[0], node[1], node[2])
                 if m > 0.0:
                     v = boundaries(gp, colliders, sdf, counts, v, node[0], node[1], node[2])
+                    if wp.static(meshes):
+                        v = mesh_boundaries(gp, mesh_cols, v, node[0], node[1], node[2])
                 grid_v[node[0], node[1], node[2]] = v
                 if wp.static(clears):
                     zero_node(gp.deterministic, grid_m, grid_mv, grid_fixed, node[0], node[1], node[2])
         else:
             i, j, k = wp.tid()
             update_node(gp, grid_m, grid_mv, grid_normal, grid_fixed, colliders, sdf, grid_v, counts, i, j, k)
+            if wp.static(meshes):
+                for f in range(gp.n_fields):
+                    fi = f * gp.nodes + i
+                    m, _v = node_velocity(gp, grid_m, grid_mv, grid_fixed, fi, j, k)
+                    if m > 0.0:
+                        grid_v[fi, j, k] = mesh_boundaries(gp, mesh_cols, grid_v[fi, j, k], i, j, k)
 
     return grid_update
 

@@ -21,6 +21,7 @@ import numpy as np
 import warp as wp
 
 from . import readback
+from .animated import BAND_CELLS, AnimatedMesh, AnimatedMeshes, no_mesh_colliders
 from .bricks import BRICK
 from .chunked import DeviceAdvance
 from .clear_grid import clear_grid
@@ -68,7 +69,7 @@ class Solver:
     """Explicit MLS-MPM on a dense grid in the domain [0, 1]^3.
 
     materials: the material table; particles index into it. config: solver knobs.
-    colliders: kinematic Colliders. device: Warp device ("cpu", "cuda:0"; None = default).
+    colliders: kinematic Colliders. animated: AnimatedMesh colliders (animated.py). device: Warp device ("cpu", "cuda:0"; None = default).
     stepper: "device" runs `advance` in chunks of substeps decided and colliders posed on the
     device (stepper.py), "host" the reference loop that reads the
     statistics back after every substep; both give the same substeps and results.
@@ -80,6 +81,7 @@ class Solver:
         config: SolverConfig,
         *,
         colliders: Sequence[Collider] = (),
+        animated: Sequence[AnimatedMesh] = (),
         device: str | None = None,
         stepper: str = "device",
     ):
@@ -100,7 +102,7 @@ class Solver:
             dc: (
                 make_p2g(self.flags, device_clock=dc),
                 make_g2p(self.flags, device_clock=dc),
-                make_grid_update(device_clock=dc),
+                make_grid_update(device_clock=dc, meshes=bool(animated)),
             )
             for dc in (False, True)
         }
@@ -120,6 +122,10 @@ class Solver:
             self._counts = wp.zeros(Count.size(len(self.materials)), dtype=wp.int32)
             self._stats_init = wp.array(np.array(Stat.initial(), np.float32), dtype=float)
             self._sub = wp.zeros(1, dtype=SubstepDev)
+        self._meshes = None  # the animated mesh colliders, posed each substep (animated.py)
+        if animated:
+            self._meshes = AnimatedMeshes(animated, self.device, band=BAND_CELLS * config.dx)
+        self._mesh_params = self._meshes.params if self._meshes else no_mesh_colliders()
         self._q_mass = 1.0
         self._q_mom = 1.0
         self._last_bad = None  # counts of the last rejected substep, for error messages
@@ -274,6 +280,8 @@ class Solver:
         self._counts.zero_()
         if self.colliders:
             self._colliders_dev.assign(pack_colliders(self.colliders, t0, t1, dt))
+        if self._meshes is not None:
+            self._meshes.pose_host(t0, t1, dt)
         self._phases(state, state.cur, state.nxt, dt, device_clock=False)
 
     def _phases(
@@ -366,7 +374,9 @@ class Solver:
         self._grid_cleared = brick is not None and not self.flags.volume_recovery and not keep_grid
         max_blocks = 0
         if brick is not None:
-            grid = make_grid_update(device_clock=device_clock, sparse=True, clears=self._grid_cleared)
+            grid = make_grid_update(
+                device_clock=device_clock, sparse=True, clears=self._grid_cleared, meshes=self._meshes is not None
+            )
             dim = brick.marks.shape[0] * BRICK**3
             # a grid-stride loop over a few blocks a multiprocessor: one thread per node brick slot
             # is ~69k short-lived blocks at grid 256, most of whose bricks are unmarked; 8 blocks a
@@ -389,6 +399,7 @@ class Solver:
                 self._counts,
                 brick.marks if brick is not None else self._counts,
                 self._sub,
+                self._mesh_params,
             ],
         )
         # 4 · G2P
