@@ -124,6 +124,12 @@ class ColliderCfg(_Section):
     radius: Real = Field(0.1, gt=0, description="sphere: radius (m).")
     mesh: Path | None = Field(None, description="mesh: file, relative to the shot file.")
     scale: Real = Field(1.0, gt=0, description="mesh: uniform scale.")
+    animated: Bool = Field(
+        False,
+        description="mesh: the file's own animation moves and deforms it (USD time samples; .blend / .fbx "
+        "as Blender evaluates them), sampled at every shot frame, met on the grid each substep; "
+        "the keyframes move it further. The animation must cover the shot's frames.",
+    )
     keyframes: list[Keyframe] = Field(
         default_factory=lambda: [Keyframe(time=0.0)], description="Rigid transform keys, interpolated per substep."
     )
@@ -543,6 +549,13 @@ def _check_semantics(shot: Shot, source: str) -> None:
                 problems.append(f'{source}: colliders[{i}].mesh: a shape = "mesh" collider needs mesh = "file"')
             elif not shot.resolve(col.mesh).is_file():
                 problems.append(f"{source}: colliders[{i}].mesh: file not found: {shot.resolve(col.mesh)}")
+            elif col.animated and col.mesh.suffix.lower() not in (".usd", ".usda", ".usdc", ".usdz", ".blend", ".fbx"):
+                problems.append(
+                    f"{source}: colliders[{i}].animated: {col.mesh} is not USD, .blend or .fbx; export the "
+                    "animation as USD (time-sampled points or transforms)"
+                )
+        elif col.animated:
+            problems.append(f'{source}: colliders[{i}].animated: only a shape = "mesh" collider is animated')
         times = [k.time for k in col.keyframes]
         if times != sorted(times) or len(set(times)) != len(times):
             problems.append(f"{source}: colliders[{i}].keyframes: times must be strictly increasing")

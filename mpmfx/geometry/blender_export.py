@@ -2,7 +2,7 @@
 mpmfx.geometry.mesh: Blender opens the file in its own process (it bundles its own USD
 libraries, so bpy never shares a process with pxr) and writes the triangles to an .npz.
 
-    python -m mpmfx.geometry.blender_export IN.blend|IN.fbx|IN.glb OUT.npz [PART]
+    python -m mpmfx.geometry.blender_export IN.blend|IN.fbx|IN.glb OUT.npz [--frames=F1,F2,..@FPS] [PART]
 
 PART: the name of an object or collection to take alone (the object, what it instances, the
 collection's objects however deeply nested); all of the scene without it.
@@ -14,6 +14,10 @@ at its own transform; objects and collections disabled for rendering left out. L
 metres (the scene's unit scale applied; Blender's FBX importer applies the file's unit) in our
 Y-up world: Blender's Z-up (x, y, z) becomes (x, z, -y), as its own USD and glTF exporters do.
 OUT holds vertices (n, 3) float64 and faces (f, 3) int64, wound outward as Blender winds them.
+With --frames (shot frames of FPS; for animated colliders, mpmfx.geometry.animated) the scene is
+evaluated at each, Blender frame F * scene fps / FPS (scene.frame_set, subframes kept), and OUT
+holds every frame's vertices and faces one after another, with counts (frames, 2): each frame's
+vertex and face count; a frame outside the scene's frame range is an error.
 """
 
 from __future__ import annotations
@@ -100,7 +104,35 @@ def triangles(chosen: set[str] | None = None) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(verts), np.concatenate(faces)
 
 
+def frames_of(arg: str) -> tuple[list[float], float]:
+    """'--frames=1,2,3@24' -> ([1, 2, 3], 24.0)."""
+    frames, fps = arg.removeprefix("--frames=").split("@")
+    return [float(f) for f in frames.split(",")], float(fps)
+
+
+def evaluated_frames(chosen: set[str] | None, frames: list[float], fps: float):
+    """(vertices, faces) of `triangles` at each shot frame, or an error line where a frame lies
+    outside the scene's frame range."""
+    scene = bpy.context.scene
+    rate = scene.render.fps / scene.render.fps_base / fps
+    want = [f * rate for f in frames]
+    if want[0] < scene.frame_start - 1e-6 or want[-1] > scene.frame_end + 1e-6:
+        return (
+            f"the animation's frame range {scene.frame_start}..{scene.frame_end} does not cover the shot's "
+            f"frames {frames[0]:g}..{frames[-1]:g} (Blender frames {want[0]:g}..{want[-1]:g}): extend the "
+            "scene's frame range or change shot.frame_start / frame_end"
+        )
+    out = []
+    for f in want:
+        whole = int(np.floor(f))
+        scene.frame_set(whole, subframe=float(f - whole))
+        out.append(triangles(chosen))
+    return out
+
+
 def main(argv: list[str]) -> int:
+    frames = next((a for a in argv[2:] if a.startswith("--frames=")), None)
+    argv = [a for a in argv if a != frames]
     src, out, part = argv[0], argv[1], (argv[2] if len(argv) > 2 else None)
     try:
         open_file(src)
@@ -112,8 +144,23 @@ def main(argv: list[str]) -> int:
         print(f"{ERROR}no object or collection named '{part}'; its surfaces: {', '.join(names) or 'none'}", flush=True)
         return 1
     as_rendered()
+    unit = bpy.context.scene.unit_settings.scale_length
+    if frames is not None:
+        each = evaluated_frames(part_objects(part), *frames_of(frames))
+        if isinstance(each, str):
+            print(f"{ERROR}{each}", flush=True)
+            return 1
+        counts = np.array([[len(v), len(f)] for v, f in each], np.int64)
+        with open(out, "wb") as fh:
+            np.savez(
+                fh,
+                vertices=np.concatenate([v for v, _ in each]) * unit @ Z_UP_TO_Y_UP,
+                faces=np.concatenate([f for _, f in each]),
+                counts=counts,
+            )
+        return 0
     v, f = triangles(part_objects(part))
-    v = v * bpy.context.scene.unit_settings.scale_length @ Z_UP_TO_Y_UP
+    v = v * unit @ Z_UP_TO_Y_UP
     with open(out, "wb") as fh:  # a file object: np.savez would add .npz to a name without it
         np.savez(fh, vertices=v, faces=f)
     return 0

@@ -17,10 +17,10 @@ from mpmfx.geometry.common import Z_UP_TO_Y_UP, MeshError, fan_triangulate
 from mpmfx.geometry.subdivide import Creases, catmull_clark
 
 
-def load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray]:
+def load_usd(path: Path, prim_path: str | None, time_code: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(vertices (n, 3) float64 metres in our Y-up world, faces (f, 3) int64) of what a renderer
-    draws of the stage at `path` under `prim_path` (None: the whole stage); MeshError where
-    there is nothing to load."""
+    draws of the stage at `path` under `prim_path` (None: the whole stage) at USD time code
+    `time_code` (None: the earliest); MeshError where there is nothing to load."""
     try:
         from pxr import Usd, UsdGeom  # backend: pxr
     except ImportError as exc:  # pragma: no cover - usd-core is a dependency
@@ -38,7 +38,7 @@ def load_usd(path: Path, prim_path: str | None) -> tuple[np.ndarray, np.ndarray]
     # Y-up world: a Z-up stage (Blender's USD export) turns -90 degrees about x, (x, y, z) -> (x, z, -y),
     # a rotation, so the winding stands (left as it was, a 1 m post from Blender lay along z)
     up = Z_UP_TO_Y_UP if UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z else np.eye(3)
-    time = Usd.TimeCode.EarliestTime()
+    time = Usd.TimeCode.EarliestTime() if time_code is None else Usd.TimeCode(time_code)
     all_v, all_f, offset = [], [], 0
     for geom, m in _usd_meshes(root, time):
         points = geom.GetPointsAttr().Get(time)

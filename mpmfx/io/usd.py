@@ -112,12 +112,15 @@ class ColliderSample:
     points: (m, 3) float32 metres in the collider's local frame (the same every frame);
     faces: (k, 3) int32 triangles; xform: (4, 4) float64 local-to-world at this frame in the
     column-vector convention (world = xform @ [p, 1]; translation in xform[:3, 3]).
+    animated: the points change from frame to frame (a deforming collider): written as time
+    samples, not as the static default.
     """
 
     name: str
     points: np.ndarray
     faces: np.ndarray
     xform: np.ndarray
+    animated: bool = False
 
 
 @contextlib.contextmanager
@@ -300,10 +303,14 @@ def _write_collider(stage: Any, sample: ColliderSample, time: float) -> None:
     mesh = UsdGeom.Mesh.Define(stage, f"/World/colliders/{sample.name}")
     # Static geometry goes in as defaults: the stitched topology layer keeps one copy of it.
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
-    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
+    if sample.animated:
+        mesh.CreatePointsAttr().Set(Vt.Vec3fArray.FromNumpy(pts), time)
+        mesh.CreateExtentAttr().Set(_extent(pts), time)
+    else:
+        mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
+        mesh.CreateExtentAttr(_extent(pts))
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(tris), 3, np.int32)))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(tris.reshape(-1)))
-    mesh.CreateExtentAttr(_extent(pts))
     op = mesh.MakeMatrixXform()
     # USD multiplies row vectors (translation in the last row): transpose ours.
     op.Set(Gf.Matrix4d(xform.T.tolist()), time)

@@ -17,7 +17,7 @@ from mpmfx.io.vdb import VdbGrid, write_vdb
 from mpmfx.mpm.colliders import pose_matrix
 from mpmfx.render.camera import default_camera
 from mpmfx.stages.base import Context
-from mpmfx.stages.colliders import collider_geometry
+from mpmfx.stages.colliders import animated_collider, collider_geometry
 from mpmfx.stages.parallel import FrameJob
 from mpmfx.surface.params import SparseLevelSet
 
@@ -29,6 +29,7 @@ CODE = (
     "mpmfx.render.camera",
     "mpmfx.stages.colliders",
     "mpmfx.geometry.colliders",
+    "mpmfx.geometry.animated",
     "mpmfx.geometry.mesh",
     "mpmfx.mpm.colliders",
 )
@@ -113,7 +114,12 @@ def _colliders(shot: Shot, frame: int) -> list:
     """Each collider's mesh (local frame, m) and its pose at this frame, for USD."""
     t = (frame - shot.shot.frame_start) / shot.shot.fps
     out = []
-    for col in shot.colliders:
+    for i, col in enumerate(shot.colliders):
+        if col.animated:  # world points at every frame, time-sampled
+            _, pts, faces = animated_collider(shot, i)
+            p, tri = pts[frame - shot.shot.frame_start].astype(np.float32), faces.astype(np.int32)
+            out.append(ColliderSample(name=col.name, points=p, faces=tri, xform=np.eye(4), animated=True))
+            continue
         geom = collider_geometry(col)
         m = collider_mesh(geom, resolve=shot.resolve, plane_size=2 * shot.domain.size)
         out.append(

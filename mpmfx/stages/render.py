@@ -24,7 +24,7 @@ from mpmfx.render.cycles import CyclesError, blender_version, run_job, write_job
 from mpmfx.render.frames import FrameRenderer, colour_for, contact_sheet, write_movie
 from mpmfx.render.looks import PROP_LOOKS, look_for
 from mpmfx.stages.base import Context, StageError
-from mpmfx.stages.colliders import collider_geometry
+from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
 from mpmfx.stages.parallel import FrameJob
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "render", 2, True, "png"
@@ -34,6 +34,7 @@ CODE = (
     "mpmfx.io.frames",
     "mpmfx.stages.colliders",
     "mpmfx.geometry.colliders",
+    "mpmfx.geometry.animated",
     "mpmfx.geometry.mesh",
     "mpmfx.mpm.colliders",
 )
@@ -45,7 +46,7 @@ def params(shot: Shot) -> dict:
         "camera": default_camera(shot),
         "domain": shot.domain.model_dump(mode="json"),
         "materials": [o.material for o in shot.objects],
-        "colliders": [c.model_dump(mode="json") for c in shot.colliders],
+        "colliders": [collider_key(c) for c in shot.colliders],
         "floor": solver_floor(shot),
         "title": title(shot),
     }
@@ -223,7 +224,11 @@ def _collider_meshes(shot: Shot, frame: int) -> dict:
     """Each collider posed at this frame's time, in a neutral grey, so the audience sees what hits."""
     t = (frame - shot.shot.frame_start) / shot.shot.fps
     out = {}
-    for col in shot.colliders:
+    for i, col in enumerate(shot.colliders):
+        if col.animated:
+            _, pts, faces = animated_collider(shot, i)
+            out[f"collider_{col.name}"] = (pts[frame - shot.shot.frame_start], faces, "#9aa0a8")
+            continue
         geom = collider_geometry(col)
         m = collider_mesh(geom, resolve=shot.resolve, plane_size=2 * shot.domain.size)
         xf = pose_matrix(*keyframes(geom), t)

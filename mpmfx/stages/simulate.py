@@ -24,10 +24,10 @@ from mpmfx.config import ColliderShape, Shot, ShotError
 from mpmfx.geometry import MESH_LOADING
 from mpmfx.geometry.colliders import collider_mesh, keyframes, mesh_sdf
 from mpmfx.io.frames import ParticleFrame, SeedParticles, read_arrays, write_arrays
-from mpmfx.mpm import Collider, ColliderKind, Particles, SimulationError, Solver
+from mpmfx.mpm import AnimatedMesh, Collider, ColliderKind, Particles, SimulationError, Solver
 from mpmfx.mpm.materials import preset
 from mpmfx.stages.base import Context, StageError, quiet_warp
-from mpmfx.stages.colliders import collider_geometry
+from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
 from mpmfx.stages.writer import FrameWriter
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "simulate", 1, True, ParticleFrame.EXT
@@ -36,6 +36,7 @@ CODE = (
     "mpmfx.mpm",
     "mpmfx.stages.colliders",
     "mpmfx.geometry.colliders",
+    "mpmfx.geometry.animated",
     *MESH_LOADING,
     "mpmfx.geometry.voxelise",
     "mpmfx.geometry.inside",
@@ -57,7 +58,7 @@ def params(shot: Shot) -> dict:
         "solver": cfg,
         "materials": [m.__dict__ | {"mode": int(m.mode)} for m in mats],
         "object_material": object_material,
-        "colliders": [c.model_dump(mode="json") for c in shot.colliders],
+        "colliders": [collider_key(c) for c in shot.colliders],
         "time": {"fps": shot.shot.fps, "frame_start": shot.shot.frame_start},
     }
 
@@ -92,6 +93,8 @@ def colliders(shot: Shot) -> list:
     origin, L = np.asarray(shot.domain.origin, float), shot.domain.size
     out = []
     for col in shot.colliders:
+        if col.animated:
+            continue  # animated_meshes
         geom = collider_geometry(col)
         t, tr, rot = keyframes(geom)
         common = dict(
@@ -121,12 +124,26 @@ def colliders(shot: Shot) -> list:
     return out
 
 
+def animated_meshes(shot: Shot) -> list:
+    """The shot's animated colliders as `mpmfx.mpm.AnimatedMesh`es in domain units, sampled
+    at every shot frame (times on the shot clock)."""
+    origin, L = np.asarray(shot.domain.origin, float), shot.domain.size
+    out = []
+    for i, col in enumerate(shot.colliders):
+        if col.animated:
+            times, pts, faces = animated_collider(shot, i)
+            out.append(AnimatedMesh(times, ((pts - origin) / L).astype(np.float32), faces, friction=col.friction))
+    return out
+
+
 def run(ctx: Context) -> dict:
     quiet_warp(ctx.device)
     shot, entry = ctx.shot, ctx.entry
     origin, size = np.asarray(shot.domain.origin), shot.domain.size
     mats, obj_mat = materials(shot)
-    solver = Solver(mats, shot.solver_config(), colliders=colliders(shot), device=ctx.device)
+    solver = Solver(
+        mats, shot.solver_config(), colliders=colliders(shot), animated=animated_meshes(shot), device=ctx.device
+    )
     start, fps = shot.shot.frame_start, shot.shot.fps
     last = max(ctx.frames)
     ckpt = _latest_checkpoint(entry.root / "checkpoints", entry.done_frames(FRAME_EXT), start)
