@@ -303,14 +303,17 @@ def _write_collider(stage: Any, sample: ColliderSample, time: float) -> None:
     mesh = UsdGeom.Mesh.Define(stage, f"/World/colliders/{sample.name}")
     # Static geometry goes in as defaults: the stitched topology layer keeps one copy of it.
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    # (a deforming one's points and extent are time samples; the attributes in this order either way)
     if sample.animated:
         mesh.CreatePointsAttr().Set(Vt.Vec3fArray.FromNumpy(pts), time)
-        mesh.CreateExtentAttr().Set(_extent(pts), time)
     else:
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
-        mesh.CreateExtentAttr(_extent(pts))
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(tris), 3, np.int32)))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(tris.reshape(-1)))
+    if sample.animated:
+        mesh.CreateExtentAttr().Set(_extent(pts), time)
+    else:
+        mesh.CreateExtentAttr(_extent(pts))
     op = mesh.MakeMatrixXform()
     # USD multiplies row vectors (translation in the last row): transpose ours.
     op.Set(Gf.Matrix4d(xform.T.tolist()), time)

@@ -13,14 +13,18 @@ stepper's chunk):
    seconds as `collider_velocity` does for the rigid colliders;
 2. `wp.Mesh.refit()` refits the BVH to the new points (on a GPU a few kernel launches on the
    current stream, a memset and a CUB scan whose scratch comes from Warp's stream-ordered
-   allocator: legal inside a CUDA graph capture where the device has a memory pool, Warp's default).
+   allocator: legal inside a CUDA graph capture where the device has a memory pool, Warp's default;
+   with the winding number the refit also updates the BVH's solid-angle data, one more kernel).
 
 The grid update (`apply_mesh_colliders`) then finds, at each node holding mass, the closest point
-within `band` of the surface (`wp.mesh_query_point_sign_normal`); at a node inside the mesh the
+within `band` of the surface, and whether the node is inside from the mesh's generalised winding
+number (`wp.mesh_query_point_sign_winding_number`; the angle-weighted pseudo-normal sign,
+`..._sign_normal`, takes points just outside a booleaned mesh's finely split faces for inside,
+where the winding number does not); at a node inside the mesh the
 velocity relative to the surface velocity there (barycentric interpolation of the vertex
 velocities, `wp.mesh_eval_velocity`: the collider's own deformation, not a rigid pose) loses
 its approaching normal part and Coulomb friction, as the rigid colliders do (`apply_collider`).
-The meshes must be closed and wound outward (their sign comes from angle-weighted normals).
+The meshes must be closed (small gaps are tolerated by the winding number) and wound outward.
 """
 
 from __future__ import annotations
@@ -159,6 +163,7 @@ class AnimatedMeshes:
                     points=wp.array(m.points[0], dtype=wp.vec3),
                     indices=wp.array(m.triangles.ravel(), dtype=wp.int32),
                     velocities=wp.zeros(m.points.shape[1], dtype=wp.vec3),
+                    support_winding_number=True,
                 )
                 for m in self.meshes
             ]
@@ -209,7 +214,7 @@ def apply_mesh_colliders(mc: MeshColliders, xn: wp.vec3, v: wp.vec3, dx: float) 
     velocity (domain units, /s); dx: cell size, for the normal where the node is on the surface."""
     for c in range(mc.count):
         mid = mc.ids[c]
-        q = wp.mesh_query_point_sign_normal(mid, xn, mc.band)
+        q = wp.mesh_query_point_sign_winding_number(mid, xn, mc.band)
         if q.result and q.sign < 0.0:
             cp = wp.mesh_eval_position(mid, q.face, q.u, q.v)
             d = cp - xn  # inside: from the node out to the surface
