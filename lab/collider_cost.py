@@ -4,7 +4,7 @@ would be) pressed into its top; the same run without the collider for the step a
 collider's own per-substep work (interpolate + refit), timed alone. One table; rows as JSON
 under --out.
 
-    python lab/collider_cost.py [--device cpu|cuda] [--grid 32] [--particles 20000 ...] [--subdiv 3] [--frames 3]
+    python lab/collider_cost.py [--device cpu|cuda] [--grid 32] [--particles 20000 ...] [--subdiv 3] [--frames 3] [--no-graphs]
 
 (On a GPU: --device cuda --grid 256 --particles 2400000 19000000.)
 """
@@ -49,9 +49,11 @@ def squashing_ball(top: float, radius: float, subdiv: int, frames: int) -> Anima
     return AnimatedMesh(times, np.asarray(pts, np.float32), ball.faces, friction=0.3)
 
 
-def run(device, grid_n, parts, mesh, frames):
-    """(seconds a substep, substeps) of `frames` frames, the kernels compiled and warm."""
+def run(device, grid_n, parts, mesh, frames, graphs=True):
+    """(seconds a substep, substeps, solver) of `frames` frames, the kernels compiled and warm;
+    graphs: the device stepper's chunks as CUDA graphs (the default), else launched one by one."""
     s = Solver([preset("Mushy")], SolverConfig(grid_n=grid_n), animated=[mesh] if mesh else [], device=device)
+    s._device_advance.graphs = graphs
     st = s.init_state(parts)
     s.advance(st, 0.0, 0.25 / FPS)  # compile, capture
     wp.synchronize_device(device)
@@ -82,6 +84,7 @@ def main():
     ap.add_argument("--particles", type=int, nargs="+", default=[20000])
     ap.add_argument("--subdiv", type=int, default=3, help="icosphere subdivisions (3: 642 vertices, 5: 10242)")
     ap.add_argument("--frames", type=int, default=3)
+    ap.add_argument("--no-graphs", action="store_true", help="launch the substeps' kernels one by one (no CUDA graphs)")
     ap.add_argument("--out", default=OUT)
     a = ap.parse_args()
     wp.config.quiet = True
@@ -90,8 +93,8 @@ def main():
         parts = snow_block(n, a.grid)
         top = float(parts.x[:, 1].max())
         mesh = squashing_ball(top, 0.15, a.subdiv, a.frames + 1)
-        step, subs, _ = run(a.device, a.grid, parts, None, a.frames)
-        step_c, subs_c, s = run(a.device, a.grid, parts, mesh, a.frames)
+        step, subs, _ = run(a.device, a.grid, parts, None, a.frames, not a.no_graphs)
+        step_c, subs_c, s = run(a.device, a.grid, parts, mesh, a.frames, not a.no_graphs)
         pose = pose_alone(s)
         rows.append(
             {
