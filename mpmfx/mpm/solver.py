@@ -69,7 +69,8 @@ class Solver:
     """Explicit MLS-MPM on a dense grid in the domain [0, 1]^3.
 
     materials: the material table; particles index into it. config: solver knobs.
-    colliders: kinematic Colliders. animated: AnimatedMesh colliders (animated.py). device: Warp device ("cpu", "cuda:0"; None = default).
+    colliders: kinematic Colliders. animated: AnimatedMesh colliders (animated.py).
+    device: Warp device ("cpu", "cuda:0"; None = default).
     stepper: "device" runs `advance` in chunks of substeps decided and colliders posed on the
     device (stepper.py), "host" the reference loop that reads the
     statistics back after every substep; both give the same substeps and results.
@@ -130,6 +131,8 @@ class Solver:
         self._q_mom = 1.0
         self._last_bad = None  # counts of the last rejected substep, for error messages
         self._device_advance = DeviceAdvance(self)
+        if self._meshes is not None and self.device.is_cuda and not wp.is_mempool_enabled(self.device):
+            self._device_advance.graphs = False  # the refit's scratch allocation is capturable only from a pool
 
     # ------------------------------------------------------------------ setup
     def _allocate_grid(self, n_fields: int) -> None:
