@@ -29,3 +29,13 @@ def test_only_a_mesh_collider_is_animated(tmp_path, capsys):
     shot = write_tiny_shot(tmp_path, extra=COLLIDER.format(shape="box"))
     assert main(["run", str(shot), "--until", "voxelise", "--cache", str(tmp_path / "c"), "-q"]) == 2
     assert "colliders[0].animated" in capsys.readouterr().err
+
+
+def test_a_shot_without_animated_colliders_keeps_its_cache_key_inputs(tmp_path):
+    from mpmfx.config import load_shot_config
+    from mpmfx.stages import simulate
+
+    box = '\n[[colliders]]\nname = "paddle"\nshape = "box"\n'
+    shot = load_shot_config(write_tiny_shot(tmp_path, extra=box))
+    assert len(shot.colliders) == 1
+    assert all("animated" not in c for c in simulate.params(shot)["colliders"])
