@@ -10,7 +10,7 @@ import pytest
 
 import mpmfx
 from mpmfx.cli import main
-from mpmfx.io.frames import ParticleFrame, SeedParticles
+from mpmfx.io.frames import ParticleFrame, SeedParticles, SurfaceFrame
 from tests.conftest import write_tiny_shot
 
 FPS = 24.0
@@ -59,6 +59,7 @@ def test_the_emitted_mass_per_second_is_the_rate(ran):
     spout = seed.body == 2  # objects cube, late; then the emitter
     vp = (shot.domain.size / shot.domain.grid_n) ** 3 / shot.voxelise.ppc
     assert seed.volume[spout].sum() == pytest.approx(RATE * 0.2, abs=vp)
+    assert results["simulate"].flagged == 0  # the QA expects the mass that has entered (stages/qa.py)
     frames = _frames(results["simulate"].entry)
     density = 1000.0  # kg/m^3 (Water's, in the shot's world): any constant checks the same ratio
     for f, p in frames.items():
@@ -92,6 +93,10 @@ def test_ids_stay_with_their_particles_and_reach_the_usd_points(ran):
         prev = np.isin(a.id, b.id) & (a.body > 0)
         miss = np.linalg.norm(b.x[same] - (a.x[prev] + a.v[prev] / FPS), axis=1)
         assert miss.max(initial=0) < 0.02  # m: where its velocity took it: the same particle, not another's
+    surfaces = [SurfaceFrame.read(p) for p in sorted((results["surface"].entry / "frames").glob("*.npz"))]
+    assert all(list(s.groups) == ["Elastic", "Water"] for s in surfaces)  # one mesh a material, as it grows
+    water = [len(s.groups["Water"].vertices) for s in surfaces]
+    assert water[0] == 0 and 0 < water[2] < water[-1]  # (none emitted yet at t = 0)
     stage = Usd.Stage.Open(str(results["export"].entry / "shot.usda"))
     last = run.shot.shot.frame_end
     points = UsdGeom.Points(stage.GetPrimAtPath("/World/spout/particles"))
