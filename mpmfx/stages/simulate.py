@@ -147,9 +147,8 @@ def run(ctx: Context) -> dict:
             )
             _budget(ctx, solver, p)
             state, frame = solver.init_state(parts), start
-            qa0 = _qa(
-                solver.advance(state, 0.0, 0.0), size, solver, state
-            )  # a zero-length advance: the initial observables
+            qa0 = _qa(solver.advance(state, 0.0, 0.0), size)  # a zero-length advance: the initial observables
+            qa0 |= _entered(solver, state)
             here = slice(None) if p.birth is None else p.birth <= 0  # (late ones are not there yet)
             qa0["max_speed"] = float(np.linalg.norm(p.v[here], axis=1).max(initial=0.0))  # m/s; no substep measured it
             consts = _consts(solver, state)  # material and body: the same every frame, copied once
@@ -174,7 +173,8 @@ def run(ctx: Context) -> dict:
             # the frame's arrays are the checkpoint's where there is one (one copy off the device)
             host = _host(solver, state, consts, ckpt_data)
             t2 = time.perf_counter()
-            writer.submit(_write_frame, entry, f, _qa(report, size, solver, state), ckpt_data, host, origin, size)
+            qa = _qa(report, size) | _entered(solver, state)
+            writer.submit(_write_frame, entry, f, qa, ckpt_data, host, origin, size)
             for k, dt in zip(split, (t1 - t0, t2 - t1, time.perf_counter() - t2)):
                 split[k] += dt
         t0 = time.perf_counter()
@@ -289,18 +289,22 @@ def _write_frame(entry, frame: int, qa: dict | None, checkpoint: dict | None, st
     particles.write(entry.frame_path(frame, FRAME_EXT))
 
 
-def _qa(report, size: float, solver=None, state=None) -> dict:
+def _qa(report, size: float) -> dict:
     """The frame's observables, JSON-safe: max_speed in m/s; mass, momentum and
-    energies in the solver's domain units (the presets' units), comparable frame to frame; with
-    particles entering during the shot, mass_entered: the mass of those in it so far (what the
-    mass should be: stages/qa.py)."""
+    energies in the solver's domain units (the presets' units), comparable frame to frame."""
     d = {k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in vars(report).items()}
     if "max_speed" in d:
         d["max_speed"] = float(d["max_speed"]) * size
-    if state is not None and state.birth is not None:
-        mass = solver.host_arrays(state, ("mass",))["mass"]  # particle order, as the births
-        d["mass_entered"] = float(mass[np.isinf(state.birth.numpy())].sum(dtype=np.float64))
     return d
+
+
+def _entered(solver, state) -> dict:
+    """With particles entering during the shot, the QA's mass_entered: the mass (domain units) of
+    those in it so far, what the mass should be (stages/qa.py); else nothing."""
+    if state.birth is None:
+        return {}
+    mass = solver.host_arrays(state, ("mass",))["mass"]  # particle order, as the births
+    return {"mass_entered": float(mass[np.isinf(state.birth.numpy())].sum(dtype=np.float64))}
 
 
 def _latest_checkpoint(folder: Path, done: list[int], start: int) -> int | None:
