@@ -169,3 +169,20 @@ def test_an_open_mesh_as_an_emitter_exits_2(tmp_path, capsys):
     assert main(["run", str(shot), "--until", "voxelise", "--cache", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err
     assert str(shot) in err and "emitters[1].mesh" in err and "not closed" in err
+
+
+def test_cache_keys_cover_emitters_and_start_times(tmp_path):
+    """Where a particle is emitted, and when it enters, are voxelise's parameters (and so every key
+    after it); an emitter's material is simulate's, as an object's is."""
+    shot = _shot(tmp_path)
+
+    def keys(*sets):
+        entries = mpmfx.load_shot(shot, overrides=list(sets), cache_root=tmp_path / "c", quiet=True).entries()
+        return {stage: e.root.name for stage, e in entries.items()}
+
+    base = keys()
+    for change in ("emitters.0.rate=0.01", "emitters.0.seed=1", "emitters.0.end_time=0.3", "objects.1.start_time=0.2"):
+        changed = keys(change)
+        assert changed["voxelise"] != base["voxelise"] and changed["simulate"] != base["simulate"], change
+    changed = keys("emitters.0.material=Mushy")
+    assert changed["voxelise"] == base["voxelise"] and changed["simulate"] != base["simulate"]
