@@ -67,15 +67,16 @@ def test_the_device_stepper_wakes_particles_as_the_host_loop_does(stepper, p2g):
             np.testing.assert_allclose(a["x"], b["x"], rtol=0, atol=1e-4)
 
 
-def test_a_resumed_run_wakes_the_same_particles_bit_identically():
-    whole, _ = _run(_solver(), 4)
-    solver = _solver()
+@pytest.mark.parametrize("p2g", ["reference", "brick"])
+def test_a_resumed_run_wakes_the_same_particles_bit_identically(p2g):
+    whole, _ = _run(_solver(p2g=p2g), 4)
+    solver = _solver(p2g=p2g)
     state = solver.init_state(_parts()[0])
     for f in range(2):
         solver.advance(state, f / FPS, (f + 1) / FPS)
     ckpt = solver.checkpoint(state, 2 / FPS)
     assert "birth" in ckpt
-    resumed = _solver()
+    resumed = _solver(p2g=p2g)
     state2, t = resumed.restore(ckpt)
     for f in (2, 3):
         resumed.advance(state2, f / FPS, (f + 1) / FPS)
