@@ -8,7 +8,9 @@ removed at the domain edge later (also alive = 0) never comes back. A rejected s
 the same start time, so waking again there changes nothing.
 
 `State.birth` is indexed by particle (State.pid), not by storage slot: the brick P2G's sorts move
-the slots, never the births. Only a state made from Particles with births has the array, and
+the slots, never the births. The brick P2G (a GPU's) sorts a dormant particle last, outside every
+segment, and a woken one gets a segment only at the next sort: so an advance in which particles
+wake sorts at every substep (chunked.py; every chunk's first substep sorts anyway). Only a state made from Particles with births has the array, and
 only then is the kernel launched: other scenes compile and run nothing of this.
 """
 
