@@ -27,6 +27,7 @@ from .clear_grid import clear_grid
 from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
 from .constitutive import MaterialParams, pack_material
+from .emission import activate
 from .energy import make_report
 from .errors import SimulationError, raise_too_small, too_many
 from .g2p import G2PParams, g2p_launch_shape, make_g2p, solid_stress
@@ -50,7 +51,10 @@ class Particles:
 
     x: (n, 3) float32 domain units, inside [0, 1]; v: (n, 3) float32 domain/s;
     volume: (n,) float32 rest volume, domain^3 (mass = volume * material density);
-    material: (n,) int32 index into the solver's materials; body: (n,) int32 object id.
+    material: (n,) int32 index into the solver's materials; body: (n,) int32 object id;
+    birth: (n,) float32 shot time (s) at which each particle enters, or None (all there at the
+    start): one with birth > 0 is dormant until the first substep starting at or after it
+    (emission.py), with its x and v then.
     """
 
     x: np.ndarray
@@ -58,6 +62,7 @@ class Particles:
     volume: np.ndarray
     material: np.ndarray
     body: np.ndarray
+    birth: np.ndarray | None = None
 
 
 def _pow2_at_least(x: float) -> float:
@@ -183,7 +188,7 @@ class Solver:
         return n
 
     def init_state(self, particles: Particles) -> State:
-        """Upload particles; F = I, C = 0, J = Jp = 1, alive = 1."""
+        """Upload particles; F = I, C = 0, J = Jp = 1, alive = 1 (0: dormant until its birth)."""
         n = self._check_particles(particles)
         mat_idx = np.asarray(particles.material, dtype=np.int32)
         density = np.array([m.density for m in self.materials], dtype=np.float64)
@@ -203,7 +208,13 @@ class Solver:
             "material": mat_idx,
             "body": np.asarray(particles.body, np.int32),
         }
-        clock = StepperClock(max_speed=float(np.linalg.norm(data["v"], axis=1).max()))
+        speed = np.linalg.norm(data["v"], axis=1)
+        if particles.birth is not None:  # dormant until their birth; born ones: birth +inf
+            dormant = np.asarray(particles.birth, np.float32) > 0
+            data["alive"] = (~dormant).astype(np.int32)
+            data["birth"] = np.where(dormant, np.asarray(particles.birth, np.float32), np.float32(np.inf))
+            speed = speed[~dormant] if (~dormant).any() else np.zeros(1)
+        clock = StepperClock(max_speed=float(speed.max()))
         return self._build_state(data, clock)
 
     def _build_state(self, data: dict, clock: StepperClock) -> State:
@@ -239,6 +250,9 @@ class Solver:
                 clock=clock,
                 permuted=permuted,
             )
+            if "birth" in data:  # in particle order (State.birth)
+                state.birth = wp.array(np.asarray(data["birth"], np.float32), dtype=wp.float32)
+                state.birth_host = np.sort(np.asarray(data["birth"], np.float64))
         if "tau" not in data:  # a new state, or a version 1 checkpoint
             self.update_stress(state)
         m = np.asarray(data["mass"], np.float64)
@@ -274,7 +288,7 @@ class Solver:
         self._counts.zero_()
         if self.colliders:
             self._colliders_dev.assign(pack_colliders(self.colliders, t0, t1, dt))
-        self._phases(state, state.cur, state.nxt, dt, device_clock=False)
+        self._phases(state, state.cur, state.nxt, dt, device_clock=False, t=t0)
 
     def _phases(
         self,
@@ -288,6 +302,7 @@ class Solver:
         resort: bool = False,
         chunk_start: bool = True,
         keep_grid: bool = False,
+        t: float = 0.0,
     ) -> None:
         """Launch the four phases reading `cur`, writing `nxt`. device_clock: the kernels take
         dt (and the dt-dependent factors) from self._sub instead of `dt` (stepper.py);
@@ -295,7 +310,8 @@ class Solver:
         resort: the brick P2G re-sorts its particle order first; chunk_start: clear the whole
         grid even where the brick P2G's marks would allow a sparse clear; keep_grid: leave the
         scattered node masses and momenta in place for inspection (tests), where the brick
-        path's grid update would zero them as it reads them."""
+        path's grid update would zero them as it reads them; t: the substep's start, s on the
+        shot clock (the host loop's; the device clock has its own), when dormant particles wake."""
         cfg = self.config
         inv_dx = float(cfg.grid_n)
         nn = cfg.grid_n + 1
@@ -316,6 +332,21 @@ class Solver:
         if brick is not None:
             brick.marks.zero_()  # the scatter below marks what it writes
         self._grid_writer = brick
+        if state.birth is not None:  # particles entering now (emission.py), before they scatter
+            wp.launch(
+                activate,
+                dim=state.n,
+                device=self.device,
+                inputs=[
+                    t,
+                    int(device_clock),
+                    cfg.time_scale,
+                    self._device_advance.clk,
+                    state.pid,
+                    state.birth,
+                    cur.alive,
+                ],
+            )
         # 2 · P2G
         pp = P2GParams()
         pp.inv_dx, pp.dt, pp.nodes = inv_dx, float(dt), nn
