@@ -80,6 +80,19 @@ def sand_castle():
     return union(*parts)
 
 
+def glass():
+    """A tumbler for water_pour, standing on y = 0: 0.32 m across, 0.26 m tall, walls and bottom
+    5 cm thick: three cells at its shot's dx (1.7 cm), so that a grid collider holds water (two
+    let it seep through)."""
+
+    def upright(r, h, y0):
+        c = cylinder(radius=r, height=h, sections=48)
+        c.apply_transform(trimesh.transformations.rotation_matrix(-np.pi / 2, [1, 0, 0]))
+        return at(c, 0, y0 + h / 2, 0)
+
+    return trimesh.boolean.difference([upright(0.17, 0.26, 0.0), upright(0.11, 0.3, 0.06)], engine="manifold")
+
+
 def main():
     meshes = {
         "jelly_bear.obj": jelly_bear(),
@@ -91,6 +104,7 @@ def main():
         "snow_bed.obj": slab(0.45, 0.12, 0.4),
         "thin_fin.obj": thin_fin(),
         "sand_castle.obj": sand_castle(),
+        "glass.obj": glass(),
     }
     for name, m in meshes.items():
         assert m.is_watertight, name

@@ -25,6 +25,7 @@ import json
 import os
 import shutil
 import socket
+import stat
 import sys
 import time
 import uuid
@@ -267,8 +268,7 @@ class Cache:
         or a clean touches the shot; a second one stops at once naming the holder (host, pid,
         command). Held by the orchestrating process only: workers it starts write freely."""
         self.shot_dir.mkdir(parents=True, exist_ok=True)
-        path = self.shot_dir / ".lock"
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        fd = open_private(self.shot_dir / ".lock", root=self.root)
         try:
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -298,6 +298,40 @@ class Cache:
     def entries(self, stage: str) -> list[Path]:
         d = self.shot_dir / stage
         return sorted(d.glob(f"{stage}-*")) if d.is_dir() else []
+
+
+def no_links(path: Path, *, root: Path) -> None:
+    """Refuse `path` (PathError) unless it lies inside `root` through real folders: a symbolic
+    link anywhere below the root would send a write or a delete outside it."""
+    base = root.resolve()
+    rel = Path(os.path.abspath(path)).relative_to(Path(os.path.abspath(root)))
+    step = Path(os.path.abspath(root))
+    for part in rel.parts:
+        step = step / part
+        if step.is_symlink():
+            raise PathError(
+                f"{step} is a symbolic link: mpmfx writes and deletes only its own folders; remove the link"
+            )
+    if base not in path.resolve().parents and path.resolve() != base:
+        raise PathError(f"{path} resolves to {path.resolve()}, outside {base}")
+
+
+def open_private(path: Path, *, root: Path) -> int:
+    """Open (create) a small file of mpmfx's own for reading and writing, never through a link:
+    a `.lock` that is a link to another file must not make a run overwrite that file."""
+    no_links(path.parent, root=root)
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_CLOEXEC, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise PathError(f"{path} is a symbolic link, not mpmfx's lock file: remove it") from None
+        if exc.errno == errno.EISDIR:
+            raise PathError(f"{path} is not a regular file, so it is not mpmfx's lock file: remove it") from None
+        raise
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise PathError(f"{path} is not a regular file, so it is not mpmfx's lock file: remove it")
+    return fd
 
 
 def _holder(raw: bytes) -> str:

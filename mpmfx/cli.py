@@ -18,7 +18,7 @@ from mpmfx.bench import main as bench_main
 from mpmfx.cache import BusyError, Cache, PathError, default_root
 from mpmfx.cli_args import add_parallel_args, add_wedge_parser, frame_range
 from mpmfx.maintain import clean_targets, delete, human, prune_targets, tree_size
-from mpmfx.publish import published_entries
+from mpmfx.publish import drop_dangling, published_entries
 from mpmfx.stages import STAGES
 from mpmfx.stages.qa import print_qa
 
@@ -259,7 +259,10 @@ def _dispatch(args) -> int:
     if args.cmd == "clean":
         with run.cache.lock():
             targets = clean_targets(run, stage=args.stage, all_variants=args.all_variants)
-            return delete(targets, root=run.cache.root, dry_run=args.dry_run, yes=args.yes)
+            code = delete(targets, root=run.cache.root, dry_run=args.dry_run, yes=args.yes)
+            for link in drop_dangling(run.cache.shot_dir) if code == 0 and not args.dry_run else []:
+                print(f"removed {link}: its export entry was deleted; run the shot again to publish it")
+            return code
     raise AssertionError(args.cmd)
 
 
@@ -275,7 +278,7 @@ def _prune(args) -> int:
     with contextlib.ExitStack() as locks:
         for shot_dir in sorted(p for p in root.iterdir() if p.is_dir()):
             locks.enter_context(Cache(root, shot_dir.name).lock())
-        targets = prune_targets(root, keep=args.keep, in_use=published_entries())
+        targets = prune_targets(root, keep=args.keep, in_use=published_entries(root))
         return delete(targets, root=root, dry_run=args.dry_run, yes=args.yes)
 
 

@@ -83,6 +83,28 @@ class SceneObject(_Section):
     scale: Real = Field(1.0, gt=0, description="Uniform scale of the mesh file's units to metres.")
     velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Initial linear velocity (m/s).")
     angular_velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Initial angular velocity about the centroid (rad/s).")
+    start_time: Real = Field(0.0, ge=0, description="Seconds from frame_start at which the object enters the shot.")
+
+
+class Emitter(_Section):
+    """A continuous source (a pour, a hose, a hopper): docs/physics.md, "Emitters and late entries"."""
+
+    name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="Emitter name (a USD prim name).")
+    shape: Literal["box", "sphere", "mesh"] = Field("box", description="Source volume: box, sphere or a mesh file.")
+    size: Vec3 = Field((0.1, 0.1, 0.1), description="box: edge lengths (m).")
+    radius: Real = Field(0.05, gt=0, description="sphere: radius (m).")
+    mesh: Path | None = Field(None, description="mesh: a closed mesh file, relative to the shot file.")
+    prim_path: str | None = Field(None, description="mesh: the part of the file taken (as for objects).")
+    translate: Vec3 = Field((0.0, 0.0, 0.0), description="Translation (m) of the source, after rotate and scale.")
+    rotate: Vec3 = Field((0.0, 0.0, 0.0), description="XYZ Euler rotation (degrees).")
+    scale: Real = Field(1.0, gt=0, description="mesh: uniform scale of the file's units to metres.")
+    material: str = Field("Water", description="Material preset (as for objects).")
+    overrides: dict[str, Real | Bool | str] = Field(default_factory=dict, description="Material fields to change.")
+    rate: Real = Field(gt=0, description="Volume emitted per second (m^3/s); mass per second = rate x density.")
+    velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Velocity of the emitted material (m/s).")
+    start_time: Real = Field(0.0, ge=0, description="Seconds from frame_start at which emission starts.")
+    end_time: Real = Field(gt=0, description="Seconds from frame_start at which emission stops.")
+    seed: Int = Field(0, ge=0, description="Jitter seed of the emitted particles.")
 
 
 class Thickness(str, enum.Enum):
@@ -174,6 +196,9 @@ class Solver(_Section):
     max_substeps_per_frame: Int = Field(
         _SOLVER.max_substeps_per_frame,
         description="A frame needing more substeps stops the run with advice (a runaway guard).",
+    )
+    max_particles: Int = Field(
+        50_000_000, ge=1, description="Particle budget: objects and all emitted; over it, no simulation."
     )
     checkpoint_every: Int = Field(
         1,
@@ -318,7 +343,8 @@ class Shot(_Section):
         description="The simulated box: a cube of `size` metres from `origin`, cut "
         "into grid_n cells per axis; the solver's walls are its faces.",
     )
-    objects: list[SceneObject] = Field(min_length=1, description="The meshes that become material, one table each.")
+    objects: list[SceneObject] = Field(default_factory=list, description="Meshes that become material, one table each.")
+    emitters: list[Emitter] = Field(default_factory=list, description="Sources that emit material during the shot.")
     colliders: list[ColliderCfg] = Field(
         default_factory=list,
         description="Kinematic bodies the material hits: they push it and are not pushed back, and move by keyframes.",
@@ -355,6 +381,11 @@ class Shot(_Section):
         return SolverConfig(**knobs)
 
     @property
+    def bodies(self) -> list[SceneObject | Emitter]:
+        """What becomes material, in the order a particle's `body` indexes: objects, then emitters."""
+        return [*self.objects, *self.emitters]
+
+    @property
     def particle_spacing(self) -> float:
         """Mean particle spacing h (m): dx / ppc^(1/3)."""
         return self.domain.size / self.domain.grid_n / self.voxelise.ppc ** (1 / 3)
@@ -365,7 +396,7 @@ class Shot(_Section):
         by_name = {k.lower(): m for k, m in PRESETS.items()}
         return [
             o.material.lower() in by_name and by_name[o.material.lower()].mode in (Mode.WATER, Mode.TRACER)
-            for o in self.objects
+            for o in self.bodies
         ]
 
     def sharp_edges_for(self, group: str) -> bool:
@@ -383,10 +414,10 @@ class Shot(_Section):
         name, or 'all' (`surface.group`)."""
         g = self.surface.group
         if g is SurfaceGroup.OBJECT:
-            return [o.name for o in self.objects]
+            return [o.name for o in self.bodies]
         if g is SurfaceGroup.MATERIAL:
-            return [o.material for o in self.objects]
-        return ["all" for _ in self.objects]
+            return [o.material for o in self.bodies]
+        return ["all" for _ in self.bodies]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -534,9 +565,12 @@ def _check_semantics(shot: Shot, source: str) -> None:
             f"{source}: surface.sharp_edges: needs surface.smooth_iters > 0 (the edges are found while "
             f"smoothing): raise surface.smooth_iters or set surface.sharp_edges = false"
         )
-    names = [o.name for o in shot.objects] + [c.name for c in shot.colliders]
+    names = [o.name for o in shot.bodies] + [c.name for c in shot.colliders]
     for dup in sorted({n for n in names if names.count(n) > 1}):
-        problems.append(f"{source}: name '{dup}' is used twice in objects/colliders: names must be unique")
+        problems.append(f"{source}: name '{dup}' is used twice in objects/emitters/colliders: names must be unique")
+    if not shot.bodies:
+        problems.append(f"{source}: missing key 'objects': a shot needs [[objects]] or [[emitters]]")
+    problems += _check_emitters(shot, source)
     for i, obj in enumerate(shot.objects):
         if not shot.resolve(obj.mesh).is_file():
             problems.append(
@@ -561,3 +595,20 @@ def _check_semantics(shot: Shot, source: str) -> None:
             problems.append(f"{source}: colliders[{i}].keyframes: times must be strictly increasing")
     if problems:
         raise ShotError("\n".join(problems))
+
+
+def _check_emitters(shot: Shot, source: str) -> list[str]:
+    """Emitter times and files, and the particle budget of what they emit (before any work)."""
+    problems, total, vp = [], 0, (shot.domain.size / shot.domain.grid_n) ** 3 / shot.voxelise.ppc  # m^3, as voxelise
+    for i, e in enumerate(shot.emitters):
+        if e.end_time <= e.start_time:
+            problems.append(f"{source}: emitters[{i}].end_time ({e.end_time}) must be after its start_time")
+        if e.shape == "mesh" and (e.mesh is None or not shot.resolve(e.mesh).is_file()):
+            problems.append(f'{source}: emitters[{i}].mesh: shape = "mesh" needs an existing mesh file (got {e.mesh})')
+        total += round(e.rate * max(0.0, e.end_time - e.start_time) / vp)
+    if total > shot.solver.max_particles:
+        problems.append(
+            f"{source}: emitters[].rate: the emitters emit {total:,} particles, over solver.max_particles "
+            f"({shot.solver.max_particles:,}): lower the rates or the emission times, or raise solver.max_particles"
+        )
+    return problems

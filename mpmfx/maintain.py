@@ -12,17 +12,37 @@ import shutil
 import sys
 from pathlib import Path
 
-from mpmfx.cache import child
+from mpmfx.cache import PathError, child, no_links
 from mpmfx.stages import STAGES
 
 ASK_BEFORE = ("simulate",)  # stages whose entries cost minutes: deleted only after a yes
 
 
 def tree_size(path: Path) -> int:
-    """Bytes in the files under `path` (0 if absent)."""
+    """Bytes in the files under `path` (0 if absent), links neither followed nor counted."""
+    if path.is_symlink():
+        return 0
     if path.is_file():
         return path.stat().st_size
-    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file() and not p.is_symlink())
+    total = 0
+    for folder, _dirs, files in os.walk(path):  # os.walk does not enter linked folders
+        total += sum(os.lstat(os.path.join(folder, f)).st_size for f in files)
+    return total
+
+
+def check_targets(targets: list[Path], *, root: Path) -> None:
+    """Every target must be an entry folder inside `root` reached through real folders (no
+    link on the way, none as the entry): all are checked before anything is deleted, so a
+    refusal deletes nothing (PathError, exit 2)."""
+    bad = []
+    for t in targets:
+        try:
+            child(root, *t.relative_to(root).parts, what="cache entry")
+            no_links(t, root=root)
+        except (PathError, ValueError) as exc:
+            bad.append(str(exc))
+    if bad:
+        raise PathError("nothing deleted: " + "; ".join(bad))
 
 
 def human(n: float) -> str:
@@ -47,6 +67,7 @@ def delete(targets: list[Path], *, root: Path, dry_run: bool, yes: bool, verb: s
     if not targets:
         print("nothing to delete")
         return 0
+    check_targets(targets, root=root)
     sizes = [tree_size(t) for t in targets]
     for t, n in zip(targets, sizes):
         print(f"{'would ' + verb if dry_run else verb:>12}  {human(n):>9}  {os.path.relpath(t)}")
@@ -66,8 +87,7 @@ def delete(targets: list[Path], *, root: Path, dry_run: bool, yes: bool, verb: s
             print("nothing deleted")
             return 1
     for t in targets:
-        child(root, *t.relative_to(root).parts, what="cache entry")  # never outside the root
-        shutil.rmtree(t)
+        shutil.rmtree(t)  # checked above; rmtree itself never follows a link inside the entry
     return 0
 
 

@@ -305,7 +305,7 @@ def pick(path: str | Path, field: str, value: Any, *, out: str | Path | None = N
     apply_override(data, field.split("."), value, source=str(path))
     target = Path(out) if out else path.with_name(f"{path.stem}-{field.split('.')[-1]}-{_slug(value)}.toml")
     here, there = path.resolve().parent, target.resolve().parent
-    for section in ("objects", "colliders"):
+    for section in ("objects", "emitters", "colliders"):
         for item in data.get(section, []):
             if isinstance(item, dict) and isinstance(item.get("mesh"), str) and not Path(item["mesh"]).is_absolute():
                 item["mesh"] = os.path.relpath(here / item["mesh"], there)

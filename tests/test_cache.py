@@ -1,4 +1,6 @@
-"""Cache keys and atomic writes."""
+"""Cache keys, atomic writes and the lock."""
+
+import os
 
 import pytest
 
@@ -81,3 +83,35 @@ def test_keys_hash_exactly_the_code_each_stage_declares(tmp_path):
     after = keys()
     assert after["voxelise"] == before["voxelise"] and after["simulate"] == before["simulate"]
     assert after["surface"] != before["surface"] and after["export"] != before["export"]
+
+
+def test_the_lock_never_writes_through_a_link(tmp_path):
+    from mpmfx.cache import PathError
+
+    victim = tmp_path / "victim.txt"
+    victim.write_text("precious")
+    shot_dir = tmp_path / "cache" / "shot"
+    shot_dir.mkdir(parents=True)
+    os.symlink(victim, shot_dir / ".lock")
+    with pytest.raises(PathError, match="link"):
+        with Cache(tmp_path / "cache", "shot").lock():
+            pass
+    assert victim.read_text() == "precious"
+    (shot_dir / ".lock").unlink()
+    (shot_dir / ".lock").mkdir()  # not a regular file either
+    with pytest.raises(PathError, match="regular file"):
+        with Cache(tmp_path / "cache", "shot").lock():
+            pass
+
+
+def test_a_shot_folder_that_is_a_link_is_refused(tmp_path):
+    from mpmfx.cache import PathError
+
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    (tmp_path / "cache").mkdir()
+    os.symlink(elsewhere, tmp_path / "cache" / "shot")
+    with pytest.raises(PathError, match="symbolic link"):
+        with Cache(tmp_path / "cache", "shot").lock():
+            pass
+    assert list(elsewhere.iterdir()) == []

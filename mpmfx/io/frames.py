@@ -64,17 +64,20 @@ def read_arrays(path: str | Path) -> dict[str, np.ndarray]:
 @dataclass
 class SeedParticles:
     """The voxelise stage's particles, world units: x (n,3) float64 m, v (n,3) float64 m/s,
-    volume (n,) float64 m^3, body (n,) int32 (index into shot.objects)."""
+    volume (n,) float64 m^3, body (n,) int32 (index into shot.bodies: objects, then emitters);
+    birth (n,) float64 s from frame_start at which the particle enters (late objects, emitters),
+    or None: every particle is there from the start."""
 
     x: np.ndarray
     v: np.ndarray
     volume: np.ndarray
     body: np.ndarray
+    birth: np.ndarray | None = None
 
     FILE = "particles.npz"
 
     def write(self, folder: str | Path) -> Path:
-        return write_arrays(Path(folder) / self.FILE, dict(vars(self)))
+        return write_arrays(Path(folder) / self.FILE, {k: a for k, a in vars(self).items() if a is not None})
 
     @classmethod
     def read(cls, folder: str | Path) -> SeedParticles:
@@ -84,8 +87,10 @@ class SeedParticles:
 @dataclass
 class ParticleFrame:
     """One simulated frame, world units: x, v (n,3) float32 m, m/s; id, material, body (n,)
-    int32 (id: the particle's index at frame_start; material: index into the simulate stage's
-    materials; body: index into shot.objects); Jp (snow/sand plastic volume ratio) and J (water
+    int32 (id: the particle's index among the voxelise stage's particles, the same in every
+    frame; a frame holds the particles in the shot, not the removed ones nor those that enter
+    later, before they do; material: index into the simulate stage's materials; body: index
+    into shot.bodies); Jp (snow/sand plastic volume ratio) and J (water
     volume ratio) (n,) float32 where a material has them, else None."""
 
     x: np.ndarray

@@ -29,6 +29,7 @@ The meshes must be closed (small gaps are tolerated by the winding number) and w
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -149,9 +150,10 @@ def _stepper_clock(sp: StepperParams, clk: wp.array(dtype=wp.float64), clock: wp
 
 class AnimatedMeshes:
     """The animated meshes of one Solver on its device: every sample, a `wp.Mesh` each, and
-    `params` (MeshColliders) for the grid update. band: domain units."""
+    `params` (MeshColliders) for the grid update, which meets them within BAND_CELLS cells of
+    dx (domain units) of their surface."""
 
-    def __init__(self, meshes, device, band: float):
+    def __init__(self, meshes, device, dx: float):
         self.meshes = tuple(meshes)
         self.device = device
         with wp.ScopedDevice(device):
@@ -171,7 +173,7 @@ class AnimatedMeshes:
             p.ids = wp.array([m.id for m in self.wp_meshes], dtype=wp.uint64)
             p.friction = wp.array([float(m.friction) for m in self.meshes], dtype=float)
             p.count = len(self.meshes)
-            p.band = float(band)
+            p.band = float(BAND_CELLS * dx)
         self.params = p
 
     @property
@@ -199,9 +201,15 @@ class AnimatedMeshes:
         wp.launch(_stepper_clock, dim=1, device=self.device, inputs=[sp, clk, self.clock])
         self._pose()
 
+    @staticmethod
+    def grid_argument(meshes: "AnimatedMeshes | None") -> MeshColliders:
+        """The grid update's `mesh_cols`: `meshes.params`, or without animated meshes an
+        empty one (never read: that kernel compiles no mesh code)."""
+        return meshes.params if meshes is not None else _no_meshes()
 
-def no_mesh_colliders() -> MeshColliders:
-    """The grid update's argument in a scene without animated meshes (never read there)."""
+
+@functools.lru_cache(maxsize=None)
+def _no_meshes() -> MeshColliders:
     p = MeshColliders()
     p.count = 0
     p.band = 0.0

@@ -16,6 +16,7 @@ import warp as wp
 
 from .bricks import fits_brick_keys, sort_cadence, travel_cadence
 from .colliders import ColliderKeys, pack_colliders
+from .emission import pending_between
 from .errors import raise_too_small, too_many
 from .p2g_brick import BrickP2G
 from .report import step_report
@@ -49,7 +50,9 @@ class DeviceAdvance:
         self.begin, self.end = make_clock_kernels(solver.flags.snow, solver.flags.water)
         # keyframes on the device: the chunk poses the colliders itself (no host round trip)
         self.keys = ColliderKeys(solver.colliders, solver.device) if solver.colliders else None
-        self.graphs = True  # capture chunks in CUDA graphs (off: launch each kernel; for measuring)
+        # capture chunks in CUDA graphs (off: launch each kernel; for measuring); an animated
+        # collider's refit allocates scratch, which a capture allows only from a memory pool
+        self.graphs = solver._meshes is None or not solver.device.is_cuda or wp.is_mempool_enabled(solver.device)
         # P2G: "brick" (p2g_brick.py) on a GPU, several times faster there than the reference;
         # "reference" (p2g.py) everywhere else: on the CPU a sorted P2G's extra passes cost
         # more than the atomics it saves, and multi-field
@@ -221,6 +224,8 @@ class DeviceAdvance:
             dt_guess = s._cfl_dt(state.clock)  # the first chunk's: the host's CFL dt
             k = self._chunk_length(c, dt_guess)
             cadence = self._sort_every(state, c, dt_guess, frag)
+            if self.p2g == "brick" and pending_between(state.birth_host, t0, t1):
+                cadence = 1  # a particle woken since the last sort has no segment: sort every substep
             self.last_sort_every = min(k, cadence)  # (a chunk no longer than it sorts at its start only: one graph)
             consts = (state.consts(), state.spare)  # (spare: allocated above where the brick P2G runs)
             self._chunk(state, k, self.last_sort_every)

@@ -112,6 +112,8 @@ def checkpoint(solver, state: State, t: float) -> dict[str, np.ndarray]:
         },
     )
     data["pid"] = state.pid.numpy()
+    if state.birth is not None:  # pending births (+inf: born), by particle
+        data["birth"] = state.birth.numpy()
     data["clock"] = state.clock.to_array()
     data["t"] = np.array([t], np.float64)
     data["meta"] = np.array([CHECKPOINT_VERSION, solver.config.grid_n, state.n], np.int64)

@@ -21,13 +21,14 @@ import numpy as np
 import warp as wp
 
 from . import readback
-from .animated import BAND_CELLS, AnimatedMesh, AnimatedMeshes, no_mesh_colliders
+from .animated import AnimatedMesh, AnimatedMeshes
 from .bricks import BRICK
 from .chunked import DeviceAdvance
 from .clear_grid import clear_grid
 from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
 from .constitutive import MaterialParams, pack_material
+from .emission import activate
 from .energy import make_report
 from .errors import SimulationError, raise_too_small, too_many
 from .g2p import G2PParams, g2p_launch_shape, make_g2p, solid_stress
@@ -51,7 +52,10 @@ class Particles:
 
     x: (n, 3) float32 domain units, inside [0, 1]; v: (n, 3) float32 domain/s;
     volume: (n,) float32 rest volume, domain^3 (mass = volume * material density);
-    material: (n,) int32 index into the solver's materials; body: (n,) int32 object id.
+    material: (n,) int32 index into the solver's materials; body: (n,) int32 object id;
+    birth: (n,) float32 shot time (s) at which each particle enters, or None (all there at the
+    start): one with birth > 0 is dormant until the first substep starting at or after it
+    (emission.py), with its x and v then.
     """
 
     x: np.ndarray
@@ -59,6 +63,7 @@ class Particles:
     volume: np.ndarray
     material: np.ndarray
     body: np.ndarray
+    birth: np.ndarray | None = None
 
 
 def _pow2_at_least(x: float) -> float:
@@ -69,8 +74,7 @@ class Solver:
     """Explicit MLS-MPM on a dense grid in the domain [0, 1]^3.
 
     materials: the material table; particles index into it. config: solver knobs.
-    colliders: kinematic Colliders. animated: AnimatedMesh colliders (animated.py).
-    device: Warp device ("cpu", "cuda:0"; None = default).
+    colliders: kinematic Colliders; animated: AnimatedMeshes. device: Warp device ("cpu", "cuda:0"; None = default).
     stepper: "device" runs `advance` in chunks of substeps decided and colliders posed on the
     device (stepper.py), "host" the reference loop that reads the
     statistics back after every substep; both give the same substeps and results.
@@ -123,16 +127,11 @@ class Solver:
             self._counts = wp.zeros(Count.size(len(self.materials)), dtype=wp.int32)
             self._stats_init = wp.array(np.array(Stat.initial(), np.float32), dtype=float)
             self._sub = wp.zeros(1, dtype=SubstepDev)
-        self._meshes = None  # the animated mesh colliders, posed each substep (animated.py)
-        if animated:
-            self._meshes = AnimatedMeshes(animated, self.device, band=BAND_CELLS * config.dx)
-        self._mesh_params = self._meshes.params if self._meshes else no_mesh_colliders()
+        self._meshes = AnimatedMeshes(animated, self.device, config.dx) if animated else None  # posed every substep
         self._q_mass = 1.0
         self._q_mom = 1.0
         self._last_bad = None  # counts of the last rejected substep, for error messages
         self._device_advance = DeviceAdvance(self)
-        if self._meshes is not None and self.device.is_cuda and not wp.is_mempool_enabled(self.device):
-            self._device_advance.graphs = False  # the refit's scratch allocation is capturable only from a pool
 
     # ------------------------------------------------------------------ setup
     def _allocate_grid(self, n_fields: int) -> None:
@@ -192,7 +191,7 @@ class Solver:
         return n
 
     def init_state(self, particles: Particles) -> State:
-        """Upload particles; F = I, C = 0, J = Jp = 1, alive = 1."""
+        """Upload particles; F = I, C = 0, J = Jp = 1, alive = 1 (0: dormant until its birth)."""
         n = self._check_particles(particles)
         mat_idx = np.asarray(particles.material, dtype=np.int32)
         density = np.array([m.density for m in self.materials], dtype=np.float64)
@@ -212,7 +211,13 @@ class Solver:
             "material": mat_idx,
             "body": np.asarray(particles.body, np.int32),
         }
-        clock = StepperClock(max_speed=float(np.linalg.norm(data["v"], axis=1).max()))
+        speed = np.linalg.norm(data["v"], axis=1)
+        if particles.birth is not None:  # dormant until their birth; born ones: birth +inf
+            dormant = np.asarray(particles.birth, np.float32) > 0
+            data["alive"] = (~dormant).astype(np.int32)
+            data["birth"] = np.where(dormant, np.asarray(particles.birth, np.float32), np.float32(np.inf))
+            speed = speed[~dormant] if (~dormant).any() else np.zeros(1)
+        clock = StepperClock(max_speed=float(speed.max()))
         return self._build_state(data, clock)
 
     def _build_state(self, data: dict, clock: StepperClock) -> State:
@@ -248,6 +253,9 @@ class Solver:
                 clock=clock,
                 permuted=permuted,
             )
+            if "birth" in data:  # in particle order (State.birth)
+                state.birth = wp.array(np.asarray(data["birth"], np.float32), dtype=wp.float32)
+                state.birth_host = np.sort(np.asarray(data["birth"], np.float64))
         if "tau" not in data:  # a new state, or a version 1 checkpoint
             self.update_stress(state)
         m = np.asarray(data["mass"], np.float64)
@@ -285,7 +293,7 @@ class Solver:
             self._colliders_dev.assign(pack_colliders(self.colliders, t0, t1, dt))
         if self._meshes is not None:
             self._meshes.pose_host(t0, t1, dt)
-        self._phases(state, state.cur, state.nxt, dt, device_clock=False)
+        self._phases(state, state.cur, state.nxt, dt, device_clock=False, t=t0)
 
     def _phases(
         self,
@@ -299,6 +307,7 @@ class Solver:
         resort: bool = False,
         chunk_start: bool = True,
         keep_grid: bool = False,
+        t: float = 0.0,
     ) -> None:
         """Launch the four phases reading `cur`, writing `nxt`. device_clock: the kernels take
         dt (and the dt-dependent factors) from self._sub instead of `dt` (stepper.py);
@@ -306,7 +315,8 @@ class Solver:
         resort: the brick P2G re-sorts its particle order first; chunk_start: clear the whole
         grid even where the brick P2G's marks would allow a sparse clear; keep_grid: leave the
         scattered node masses and momenta in place for inspection (tests), where the brick
-        path's grid update would zero them as it reads them."""
+        path's grid update would zero them as it reads them; t: the substep's start, s on the
+        shot clock (the host loop's; the device clock has its own), when dormant particles wake."""
         cfg = self.config
         inv_dx = float(cfg.grid_n)
         nn = cfg.grid_n + 1
@@ -327,6 +337,21 @@ class Solver:
         if brick is not None:
             brick.marks.zero_()  # the scatter below marks what it writes
         self._grid_writer = brick
+        if state.birth is not None:  # particles entering now (emission.py), before they scatter
+            wp.launch(
+                activate,
+                dim=state.n,
+                device=self.device,
+                inputs=[
+                    t,
+                    int(device_clock),
+                    cfg.time_scale,
+                    self._device_advance.clk,
+                    state.pid,
+                    state.birth,
+                    cur.alive,
+                ],
+            )
         # 2 · P2G
         pp = P2GParams()
         pp.inv_dx, pp.dt, pp.nodes = inv_dx, float(dt), nn
@@ -378,7 +403,7 @@ class Solver:
         max_blocks = 0
         if brick is not None:
             grid = make_grid_update(
-                device_clock=device_clock, sparse=True, clears=self._grid_cleared, meshes=self._meshes is not None
+                device_clock=device_clock, sparse=True, clears=self._grid_cleared, meshes=bool(self._meshes)
             )
             dim = brick.marks.shape[0] * BRICK**3
             # a grid-stride loop over a few blocks a multiprocessor: one thread per node brick slot
@@ -402,7 +427,7 @@ class Solver:
                 self._counts,
                 brick.marks if brick is not None else self._counts,
                 self._sub,
-                self._mesh_params,
+                AnimatedMeshes.grid_argument(self._meshes),
             ],
         )
         # 4 · G2P

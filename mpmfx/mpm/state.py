@@ -194,7 +194,7 @@ class State:
     Storage order: on a GPU the brick P2G keeps the particles themselves in its sort order (a
     sorting substep's G2P writes them there, p2g_brick.py), so every array above is in slot
     order, not particle order: `Solver.host_arrays` and `checkpoint` give them back in particle
-    order. The constants' other copy (`spare`, CONSTS order) is where a sorting G2P writes the
+    order (`birth`, where there is one, is indexed by particle). The constants' other copy (`spare`, CONSTS order) is where a sorting G2P writes the
     permuted ones; `swap_consts` makes it current.
     """
 
@@ -211,6 +211,8 @@ class State:
     clock: StepperClock = field(default_factory=StepperClock)
     spare: tuple | None = None  # the constants' second copy (spare_consts)
     permuted: bool = False  # whether slots may differ from particles (pid not the identity)
+    birth: wp.array | None = None  # (n,) float32 by particle: pending birth, s (emission.py), or None
+    birth_host: np.ndarray | None = None  # the births sorted, float64 (which advances wake particles)
 
     CONSTS = ("mass", "volume", "material", "body", "field_id", "pid")
 

@@ -40,7 +40,7 @@ def params(shot: Shot) -> dict:
         "export": shot.export.model_dump(mode="json"),
         "fps": shot.shot.fps,
         "frames": [shot.shot.frame_start, shot.shot.frame_end],
-        "objects": [o.name for o in shot.objects],
+        "objects": [o.name for o in shot.bodies],
     }
 
 
@@ -88,7 +88,7 @@ def _writer(shot: Shot, entry):
 
 def _points(shot: Shot, p: ParticleFrame) -> dict:
     out = {}
-    for body, obj in enumerate(shot.objects):
+    for body, obj in enumerate(shot.bodies):
         sel = p.body == body
         primvars = {"material": p.material[sel], "body": p.body[sel]}
         if p.Jp is not None:

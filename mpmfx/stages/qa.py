@@ -23,8 +23,9 @@ def flags(qa: dict[int, dict], *, gravity: float = 9.81, frame_dt: float = 1 / 2
     prev = None
     for f in frames:
         q, why = qa[f], []
-        if m0 and q.get("mass") is not None and abs(q["mass"] - m0) > MASS_TOL * abs(m0):
-            why.append(f"mass changed {100 * (q['mass'] - m0) / m0:+.3f} %")
+        m_ref = q.get("mass_entered", m0)  # (a shot with emitters or late objects gains mass as they enter)
+        if m_ref and q.get("mass") is not None and abs(q["mass"] - m_ref) > MASS_TOL * abs(m_ref):
+            why.append(f"mass changed {100 * (q['mass'] - m_ref) / m_ref:+.3f} %")
         ke = (q.get("kinetic_energy") or 0.0) + (q.get("elastic_energy") or 0.0)
         speed = q.get("max_speed") or 0.0
         if (

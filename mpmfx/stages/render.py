@@ -45,7 +45,7 @@ def params(shot: Shot) -> dict:
         "render": shot.render.model_dump(mode="json"),
         "camera": default_camera(shot),
         "domain": shot.domain.model_dump(mode="json"),
-        "materials": [o.material for o in shot.objects],
+        "materials": [o.material for o in shot.bodies],
         "colliders": [collider_key(c) for c in shot.colliders],
         "floor": solver_floor(shot),
         "title": title(shot),
@@ -120,8 +120,8 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
     shot, entry, r = job.shot, job.entry, job.shot.render
     if not frames:
         return {}
-    looks = {g: look_for([g, o.name, o.material], r.looks) for g, o in zip(shot.surface_groups(), shot.objects)}
-    looks |= {o.name: look_for([o.name, o.material], r.looks) for o in shot.objects}
+    looks = {g: look_for([g, o.name, o.material], r.looks) for g, o in zip(shot.surface_groups(), shot.bodies)}
+    looks |= {o.name: look_for([o.name, o.material], r.looks) for o in shot.bodies}
     looks |= {prop: r.looks.get(prop, look) for prop, look in PROP_LOOKS.items()}
     cam = None
     if r.camera_position is not None:
@@ -189,11 +189,11 @@ def _preview(job: FrameJob, f: int) -> None:
     with atomic_path(job.entry.frame_path(f, FRAME_EXT)) as out:
         if r.mode == "particles":
             p = ParticleFrame.read(job.upstream["simulate"].frame_path(f, ParticleFrame.EXT))
-            pts = {o.name: (p.x[p.body == i], colour_for(o.material, i)) for i, o in enumerate(shot.objects)}
+            pts = {o.name: (p.x[p.body == i], colour_for(o.material, i)) for i, o in enumerate(shot.bodies)}
             px = r.height * shot.particle_spacing / shot.domain.size * 1.5
             renderer.particles(pts, px, out, label=label)
         else:
-            material_of = {g: o.material for g, o in zip(shot.surface_groups(), shot.objects)}
+            material_of = {g: o.material for g, o in zip(shot.surface_groups(), shot.bodies)}
             groups = SurfaceFrame.read(job.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
             meshes = {
                 g: (d.vertices, d.faces, colour_for(material_of.get(g, g), i))

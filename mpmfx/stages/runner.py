@@ -15,7 +15,7 @@ from pathlib import Path
 
 from mpmfx.cache import Cache, Entry, code_hash, default_root, remove_temps
 from mpmfx.config import Shot, ShotError, load_shot_config
-from mpmfx.publish import publish_renders, publish_stage
+from mpmfx.publish import check_publishable, publish_renders, publish_stage, record, sweep
 from mpmfx.stages import STAGES, export, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage, StageError
 from mpmfx.stages.parallel import Frames
@@ -129,6 +129,8 @@ class ShotRun:
         with contextlib.nullcontext() if self.locked else self.cache.lock():
             if not self.locked:
                 self.cache.remove_orphans()
+            if self.publish:
+                sweep(self.shot.shot.name)
             try:
                 results = self._run_locked(until, force, frames)
             finally:
@@ -143,7 +145,10 @@ class ShotRun:
         return results
 
     def check(self, *, until: str = "render", force=(), frames: list[int] | None = None) -> None:
-        """Refuse an unknown stage or a frame outside the shot (ShotError, exit 2)."""
+        """Refuse an unknown stage, a frame outside the shot (ShotError) or a shot whose publish
+        would replace a folder mpmfx did not make (PathError): exit 2, before anything runs."""
+        if self.publish:
+            check_publishable(self.shot.shot.name)
         for name in (until, *force):
             if name not in STAGES:
                 raise ShotError(f"unknown stage '{name}': one of {', '.join(STAGES)}")
@@ -163,6 +168,8 @@ class ShotRun:
             out["usd"] = publish_stage(self.shot, entries["export"])
         if "render" in done:
             out["renders"] = publish_renders(self.shot, entries["render"])
+        if out:
+            record(self.cache.shot_dir, out)
         return out
 
     def _run_locked(self, until: str, force, frames: list[int] | None) -> list[StageResult]:

@@ -14,6 +14,7 @@ Frame files are `mpmfx.io.frames.ParticleFrame` records.
 from __future__ import annotations
 
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -25,6 +26,7 @@ from mpmfx.geometry import MESH_LOADING
 from mpmfx.geometry.colliders import collider_mesh, keyframes, mesh_sdf
 from mpmfx.io.frames import ParticleFrame, SeedParticles, read_arrays, write_arrays
 from mpmfx.mpm import AnimatedMesh, Collider, ColliderKind, Particles, SimulationError, Solver
+from mpmfx.mpm.emission import device_bytes
 from mpmfx.mpm.materials import preset
 from mpmfx.stages.base import Context, StageError, quiet_warp
 from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
@@ -72,14 +74,15 @@ def inputs(shot: Shot) -> dict[str, str]:
 
 
 def materials(shot: Shot) -> tuple[list, list[int]]:
-    """Distinct materials of the shot and, per object, its index into them."""
+    """Distinct materials of the shot and, per body (objects, then emitters), its index into them."""
     mats, index = [], []
-    for i, obj in enumerate(shot.objects):
+    for i, obj in enumerate(shot.bodies):
         try:
             mat = preset(obj.material, **obj.overrides)
         except (ValueError, TypeError) as exc:
+            where = f"objects[{i}]" if i < len(shot.objects) else f"emitters[{i - len(shot.objects)}]"
             raise ShotError(
-                f"{shot.source or shot.base_dir}: objects[{i}] ({obj.name}) material / overrides: {exc}"
+                f"{shot.source or shot.base_dir}: {where} ({obj.name}) material / overrides: {exc}"
             ) from None
         if mat not in mats:
             mats.append(mat)
@@ -157,10 +160,14 @@ def run(ctx: Context) -> dict:
                 volume=(p.volume / size**3).astype(np.float32),
                 material=np.asarray(obj_mat, np.int32)[body],
                 body=body,
+                birth=None if p.birth is None else p.birth.astype(np.float32),
             )
+            _budget(ctx, solver, p)
             state, frame = solver.init_state(parts), start
             qa0 = _qa(solver.advance(state, 0.0, 0.0), size)  # a zero-length advance: the initial observables
-            qa0["max_speed"] = float(np.linalg.norm(p.v, axis=1).max())  # m/s; no substep measured it
+            qa0 |= _entered(solver, state)
+            here = slice(None) if p.birth is None else p.birth <= 0  # (late ones are not there yet)
+            qa0["max_speed"] = float(np.linalg.norm(p.v[here], axis=1).max(initial=0.0))  # m/s; no substep measured it
             consts = _consts(solver, state)  # material and body: the same every frame, copied once
             writer.submit(_write_frame, entry, frame, qa0, None, _host(solver, state, consts), origin, size)
         else:
@@ -183,7 +190,8 @@ def run(ctx: Context) -> dict:
             # the frame's arrays are the checkpoint's where there is one (one copy off the device)
             host = _host(solver, state, consts, ckpt_data)
             t2 = time.perf_counter()
-            writer.submit(_write_frame, entry, f, _qa(report, size), ckpt_data, host, origin, size)
+            qa = _qa(report, size) | _entered(solver, state)
+            writer.submit(_write_frame, entry, f, qa, ckpt_data, host, origin, size)
             for k, dt in zip(split, (t1 - t0, t2 - t1, time.perf_counter() - t2)):
                 split[k] += dt
         t0 = time.perf_counter()
@@ -196,6 +204,25 @@ def run(ctx: Context) -> dict:
         "materials": [m.mode.name for m in mats],
         "seconds_split": {k: round(v, 3) for k, v in split.items()},
     }
+
+
+def _budget(ctx: Context, solver, p: SeedParticles) -> None:
+    """State the particle count (emitted ones included) and the device memory before the run,
+    and stop (a ShotError: exit 2) when the count is over solver.max_particles."""
+    shot, n = ctx.shot, len(p.x)
+    late = 0 if p.birth is None else int(np.count_nonzero(p.birth > 0))
+    det, births = shot.solver.deterministic, p.birth is not None
+    b = device_bytes(n, solver.flags, shot.domain.grid_n, deterministic=det, births=births)
+    mem = f"{b / 1e9:.1f} GB" if b >= 1e9 else f"{b / 1e6:.0f} MB"
+    line = f"{n:,} particles ({n - late:,} at the start, {late:,} entering later); device memory ~{mem}"
+    ctx.notes.append(line)
+    if not ctx.quiet:
+        print(f"[simulate] {line}", file=sys.stderr)
+    if n > shot.solver.max_particles:
+        raise ShotError(
+            f"{shot.source or shot.base_dir}: solver.max_particles: the shot has {n:,} particles, over the budget "
+            f"({shot.solver.max_particles:,}): lower the emitters' rates or domain.grid_n, or raise solver.max_particles"
+        )
 
 
 def _advice(shot: Shot, exc) -> str:
@@ -286,6 +313,15 @@ def _qa(report, size: float) -> dict:
     if "max_speed" in d:
         d["max_speed"] = float(d["max_speed"]) * size
     return d
+
+
+def _entered(solver, state) -> dict:
+    """With particles entering during the shot, the QA's mass_entered: the mass (domain units) of
+    those in it so far, what the mass should be (stages/qa.py); else nothing."""
+    if state.birth is None:
+        return {}
+    mass = solver.host_arrays(state, ("mass",))["mass"]  # particle order, as the births
+    return {"mass_entered": float(mass[np.isinf(state.birth.numpy())].sum(dtype=np.float64))}
 
 
 def _latest_checkpoint(folder: Path, done: list[int], start: int) -> int | None:

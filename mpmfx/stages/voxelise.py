@@ -13,6 +13,7 @@ import numpy as np
 from mpmfx.cache import file_hash, write_json
 from mpmfx.config import Shot, ShotError, Thickness
 from mpmfx.geometry import MESH_LOADING
+from mpmfx.geometry.emitters import EmitterError, emit, shape_mesh, source_points
 from mpmfx.geometry.mesh import MeshError, check_in_domain, load_mesh, transform_mesh
 from mpmfx.geometry.thickness import Verdict, check_thickness, refine_for_heatmap
 from mpmfx.geometry.voxelise import voxelise
@@ -26,6 +27,7 @@ CODE = (
     *MESH_LOADING,
     "mpmfx.geometry.inside",
     "mpmfx.geometry.voxelise",
+    "mpmfx.geometry.emitters",
     "mpmfx.geometry.thickness",
     "mpmfx.render.thickness",
     "mpmfx.mpm.materials",
@@ -36,26 +38,30 @@ CODE = (
 def params(shot: Shot) -> dict:
     objects = [
         o.model_dump(
-            mode="json", include={"name", "prim_path", "translate", "rotate", "scale", "velocity", "angular_velocity"}
+            mode="json",
+            include={"name", "prim_path", "translate", "rotate", "scale", "velocity", "angular_velocity", "start_time"},
         )
         for o in shot.objects
     ]
+    emitters = [e.model_dump(mode="json", exclude={"material", "overrides"}) for e in shot.emitters]
     for o, fluid in zip(objects, shot.fluid_objects()):
         o["fluid"] = fluid
     return {
         "domain": shot.domain.model_dump(mode="json"),
         "objects": objects,
+        "emitters": emitters,
         "voxelise": shot.voxelise.model_dump(mode="json"),
     }
 
 
 def inputs(shot: Shot) -> dict[str, str]:
-    return {o.name: file_hash(shot.resolve(o.mesh)) for o in shot.objects}
+    out = {o.name: file_hash(shot.resolve(o.mesh)) for o in shot.objects}
+    return out | {f"emitter:{e.name}": file_hash(shot.resolve(e.mesh)) for e in shot.emitters if e.shape == "mesh"}
 
 
 def run(ctx: Context) -> dict:
     shot, dom = ctx.shot, ctx.shot.domain
-    xs, vs, vols, bodies, reports = [], [], [], [], {}
+    xs, vs, vols, bodies, births, reports = [], [], [], [], [], {}
     fluid = shot.fluid_objects()
     for body, obj in enumerate(ctx.progress(shot.objects, total=len(shot.objects), desc="voxelise", unit="object")):
         path = shot.resolve(obj.mesh)
@@ -94,16 +100,54 @@ def run(ctx: Context) -> dict:
         v = np.asarray(obj.velocity) + np.cross(np.asarray(obj.angular_velocity), vox.points - centroid)
         xs.append(vox.points), vs.append(v), vols.append(vox.volume)
         bodies.append(np.full(len(vox.points), body, np.int32))
+        births.append(np.full(len(vox.points), obj.start_time))
         write_arrays(
             ctx.entry.root / f"sdf_{obj.name}.npz",
             {"sdf": vox.sdf, "origin": np.asarray(vox.sdf_origin), "voxel": np.float64(vox.sdf_voxel)},
         )
+    for i, em in enumerate(shot.emitters):
+        out = _emit(shot, i, em)
+        xs.append(out.points), vs.append(np.tile(np.asarray(em.velocity, float), (len(out.points), 1)))
+        vols.append(np.full(len(out.points), out.volume)), births.append(out.birth)
+        bodies.append(np.full(len(out.points), len(shot.objects) + i, np.int32))
     write_json(ctx.entry.root / "thickness.json", reports)
+    birth = np.concatenate(births)
     SeedParticles(
-        x=np.concatenate(xs), v=np.concatenate(vs), volume=np.concatenate(vols), body=np.concatenate(bodies)
+        x=np.concatenate(xs),
+        v=np.concatenate(vs),
+        volume=np.concatenate(vols),
+        body=np.concatenate(bodies),
+        birth=birth if np.any(birth > 0) else None,  # a shot without late entries: as before
     ).write(ctx.entry.root)
     n = sum(len(x) for x in xs)
-    return {"particles": n, "thickness": {k: r.get("verdict", "skipped") for k, r in reports.items()}}
+    extra = {"entering_later": int(np.count_nonzero(birth > 0))} if np.any(birth > 0) else {}
+    return {"particles": n, **extra, "thickness": {k: r.get("verdict", "skipped") for k, r in reports.items()}}
+
+
+def _emit(shot: Shot, i: int, em):
+    """Emitter i's particles and births (geometry.emitters); bad input is a ShotError naming the key."""
+    dom, key = shot.domain, f"{shot.source or shot.base_dir}: emitters[{i}]"
+    try:
+        if em.shape == "mesh":
+            mesh = load_mesh(shot.resolve(em.mesh), prim_path=em.prim_path)
+        else:
+            mesh = shape_mesh(em.shape, size=em.size, radius=em.radius)
+        mesh = transform_mesh(mesh, translate=em.translate, rotate_deg=em.rotate, scale=em.scale)
+        check_in_domain(mesh, origin=dom.origin, size=dom.size, name=f"emitters.{em.name}")
+        points, h = source_points(mesh, origin=dom.origin, size=dom.size, grid_n=dom.grid_n, ppc=shot.voxelise.ppc)
+    except (MeshError, EmitterError) as exc:
+        raise ShotError(f"{key}.{'mesh' if em.shape == 'mesh' else 'shape'} ({em.name}): {exc}") from None
+    vp = (dom.size / dom.grid_n) ** 3 / shot.voxelise.ppc  # m^3 a particle: the objects' (voxelise) and the budget's
+    return emit(
+        points,
+        h,
+        particle_volume=vp,
+        rate=em.rate,
+        velocity=em.velocity,
+        start=em.start_time,
+        end=em.end_time,
+        seed=em.seed,
+    )
 
 
 def _thickness(ctx, obj, mesh, check_thickness, Verdict):
