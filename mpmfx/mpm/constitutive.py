@@ -67,6 +67,19 @@ def pack_material(m: Material) -> MaterialParams:
 
 
 @wp.func
+def vary_material(mat: MaterialParams, f: wp.vec4) -> MaterialParams:
+    """A particle's own copy of its material row under variation: f = (stiffness, hardening,
+    dp_alpha, cohesion) factors (materials.variation_factors). The array row is unchanged."""
+    out = mat
+    out.mu0 = mat.mu0 * f[0]
+    out.lambda0 = mat.lambda0 * f[0]
+    out.hardening = mat.hardening * f[1]
+    out.dp_alpha = mat.dp_alpha * f[2]
+    out.cohesion = mat.cohesion * f[3]
+    return out
+
+
+@wp.func
 def pack_f_jp(F: wp.mat33, jp: float) -> wp.mat44:
     """(F, Jp) -> mat44, because a wp.func returns one value here."""
     return wp.mat44(

@@ -39,7 +39,8 @@ from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
 from .report import StepReport, particle_sums, step_report
 from .slots import REJECTING, Count, Stat
 from .state import ParticleBuffers, SceneFlags, State, StepperClock, m33_assign
-from .stepper import SubstepDev
+from .stepper import SubstepDev, WaveParams, wave_table
+from .variation import DENSITY, check_variation, device_factors
 
 __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
 
@@ -56,6 +57,8 @@ class Particles:
     birth: (n,) float32 shot time (s) at which each particle enters, or None (all there at the
     start): one with birth > 0 is dormant until the first substep starting at or after it
     (emission.py), with its x and v then.
+    variation: (n, 5) float32 multipliers (> 0) of each particle's material fields, columns
+    variation.VARIED_FIELDS, for a Solver made with variation=True; else None.
     """
 
     x: np.ndarray
@@ -64,6 +67,7 @@ class Particles:
     material: np.ndarray
     body: np.ndarray
     birth: np.ndarray | None = None
+    variation: np.ndarray | None = None
 
 
 def _pow2_at_least(x: float) -> float:
@@ -78,6 +82,8 @@ class Solver:
     stepper: "device" runs `advance` in chunks of substeps decided and colliders posed on the
     device (stepper.py), "host" the reference loop that reads the
     statistics back after every substep; both give the same substeps and results.
+    variation: particles carry multipliers of their material's fields (Particles.variation);
+    the kernels read them only then (SceneFlags.varied).
     """
 
     def __init__(
@@ -89,6 +95,7 @@ class Solver:
         animated: Sequence[AnimatedMesh] = (),
         device: str | None = None,
         stepper: str = "device",
+        variation: bool = False,
     ):
         self.materials = tuple(materials)
         if not self.materials:
@@ -99,7 +106,8 @@ class Solver:
         self.config = config
         self.colliders = tuple(colliders)
         self.device = wp.get_device(device)
-        self.flags = SceneFlags.of(self.materials, multi_field=config.multi_field)
+        self.flags = SceneFlags.of(self.materials, multi_field=config.multi_field, varied=variation)
+        self._wave_materials = self.materials  # the CFL's materials: the stiffest particle's moduli (_vary)
         # specialised kernels for this scene: all three land in one Warp module per flags,
         # built before the first launch so the module compiles once
         # [device_clock]: the reference kernels, and the device stepper's (stepper.py)
@@ -188,6 +196,7 @@ class Solver:
             )
         if np.any(np.asarray(p.volume) <= 0):
             raise ValueError("Particles.volume: rest volumes must be > 0 (domain units^3)")
+        check_variation(p.variation, n, self.flags.varied)
         return n
 
     def init_state(self, particles: Particles) -> State:
@@ -197,7 +206,10 @@ class Solver:
         density = np.array([m.density for m in self.materials], dtype=np.float64)
         tracer = np.array([m.mode == Mode.TRACER for m in self.materials])
         volume = np.asarray(particles.volume, dtype=np.float32)
-        mass = np.where(tracer[mat_idx], 0.0, volume * density[mat_idx]).astype(np.float32)
+        rho = density[mat_idx]
+        if self.flags.varied:  # the density multiplier acts on the mass alone
+            rho = rho * np.asarray(particles.variation, np.float64)[:, DENSITY]
+        mass = np.where(tracer[mat_idx], 0.0, volume * rho).astype(np.float32)
         data = {
             "x": np.asarray(particles.x, np.float32),
             "v": np.asarray(particles.v, np.float32),
@@ -217,6 +229,8 @@ class Solver:
             data["alive"] = (~dormant).astype(np.int32)
             data["birth"] = np.where(dormant, np.asarray(particles.birth, np.float32), np.float32(np.inf))
             speed = speed[~dormant] if (~dormant).any() else np.zeros(1)
+        if self.flags.varied:
+            data["variation"] = np.asarray(particles.variation, np.float32)
         clock = StepperClock(max_speed=float(speed.max()))
         return self._build_state(data, clock)
 
@@ -225,6 +239,7 @@ class Solver:
         n = int(data["x"].shape[0])
         pid = np.asarray(data["pid"], np.int32) if "pid" in data else np.arange(n, dtype=np.int32)
         permuted = bool(np.any(pid != np.arange(n)))
+        vary = self._vary(data)  # from the particle-order materials, before they move into slots
         if permuted:  # back into the slots they were in, so a resumed run sums as the first did
             per_particle = (*ParticleBuffers.NAMES, "mass", "volume", "material", "body")
             data = {k: to_slots(np.asarray(v), pid, n) if k in per_particle else v for k, v in data.items()}
@@ -252,6 +267,8 @@ class Solver:
                 n_fields=n_fields,
                 clock=clock,
                 permuted=permuted,
+                vary=wp.array(vary, dtype=wp.vec4),
+                variation=np.asarray(data["variation"], np.float32) if self.flags.varied else None,
             )
             if "birth" in data:  # in particle order (State.birth)
                 state.birth = wp.array(np.asarray(data["birth"], np.float32), dtype=wp.float32)
@@ -265,16 +282,25 @@ class Solver:
         self._q_mom = self._q_mass
         return state
 
+    def _vary(self, data: dict) -> np.ndarray:
+        """The (n, 4) device factors of a varied state's particles ((1, 4) ones otherwise), in
+        particle order; sets the CFL's materials (variation.device_factors)."""
+        if not self.flags.varied:
+            return np.ones((1, 4), np.float32)
+        if "variation" not in data:
+            raise ValueError("checkpoint: no 'variation' array, but this Solver varies its materials; re-simulate")
+        out, self._wave_materials = device_factors(self.materials, data["variation"], np.asarray(data["material"]))
+        with wp.ScopedDevice(self.device):  # into the device stepper's table (a captured chunk keeps its address)
+            wp.copy(self._device_advance.waves, wp.array(wave_table(self._wave_materials), dtype=WaveParams))
+        return out
+
     def update_stress(self, state: State) -> None:
         """Recompute the stored stress (state.cur.tau) of every solid from its F and Jp. G2P
         keeps it current; call this after writing F or Jp of `state.cur` directly."""
         if self.flags.solid:
-            wp.launch(
-                solid_stress,
-                dim=state.n,
-                device=self.device,
-                inputs=[self._materials_dev, state.material, state.cur.F, state.cur.Jp, state.cur.tau],
-            )
+            cur, varied = state.cur, int(self.flags.varied)
+            inputs = [self._materials_dev, state.material, cur.F, cur.Jp, cur.tau, state.vary, state.pid, varied]
+            wp.launch(solid_stress, dim=state.n, device=self.device, inputs=inputs)
 
     # ------------------------------------------------------------------ one substep
     def step(self, state: State, dt: float, *, t: float = 0.0) -> None:
@@ -468,6 +494,7 @@ class Solver:
                 state.body,
                 state.pid,
                 *outs,
+                state.vary,
             ],
         )
         if permute:
@@ -500,7 +527,7 @@ class Solver:
             m.wave_speed(
                 hardening_factor=max(1.0, clock.max_hardening) if m.mode == Mode.SNOW else 1.0, j_min=clock.water_j_min
             )
-            for m in self.materials
+            for m in self._wave_materials
         )
 
     def _cfl_dt(self, clock: StepperClock) -> float:
