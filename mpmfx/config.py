@@ -23,6 +23,7 @@ from pydantic import AllowInfNan, BaseModel, ConfigDict, Field, Strict, Validati
 
 from mpmfx.mpm.config import STANDARD_GRAVITY, SolverConfig, SolverConfigError, WallType
 from mpmfx.mpm.materials import PRESETS, Mode
+from mpmfx.mpm.variation import VARIED_BY_MODE
 from mpmfx.render.looks import LOOKS
 
 # Every number of the schema is one of these: finite (NaN or inf in a TOML file or a --set is a
@@ -58,6 +59,27 @@ class Domain(_Section):
     grid_n: Int = Field(64, description="Grid cells per axis (8-4096, checked by the solver); dx = size / grid_n (m).")
 
 
+class Variation(_Section):
+    """Seeded noise on an object's material fields (docs/physics.md, "Variation"): a field's
+    value at a particle is its material's value times exp(amplitude * n), n a smooth noise of
+    unit standard deviation (clipped to +-3) at the particle's rest position."""
+
+    youngs_modulus: Real = Field(
+        0.0, ge=0, le=1, description="Amplitude on the stiffness (so mu and lambda); 0 = none."
+    )
+    hardening: Real = Field(0.0, ge=0, le=1, description="Amplitude on the snow's hardening; 0 = none.")
+    friction_angle: Real = Field(
+        0.0, ge=0, le=1, description="Amplitude on the sand's friction coefficient tan(friction_angle); 0 = none."
+    )
+    cohesion: Real = Field(0.0, ge=0, le=1, description="Amplitude on the sand's cohesion; 0 = none.")
+    density: Real = Field(0.0, ge=0, le=1, description="Amplitude on the density (the particles' mass); 0 = none.")
+    feature_size: Real = Field(
+        gt=0,
+        description="Size of the noise's features (m): its correlation length (correlation 0.61 at this distance).",
+    )
+    seed: Int = Field(0, ge=0, description="Noise seed; each field draws its own noise from it.")
+
+
 class SceneObject(_Section):
     name: str = Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="Object name (a USD prim name).")
     mesh: Path = Field(
@@ -84,6 +106,11 @@ class SceneObject(_Section):
     velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Initial linear velocity (m/s).")
     angular_velocity: Vec3 = Field((0.0, 0.0, 0.0), description="Initial angular velocity about the centroid (rad/s).")
     start_time: Real = Field(0.0, ge=0, description="Seconds from frame_start at which the object enters the shot.")
+    variation: Variation | None = Field(
+        None,
+        description="Per-particle noise on the material, e.g. {youngs_modulus = 0.3, friction_angle = 0.1, "
+        "feature_size = 0.05, seed = 7}; default: none (uniform material).",
+    )
 
 
 class Emitter(_Section):
@@ -577,6 +604,7 @@ def _check_semantics(shot: Shot, source: str) -> None:
                 f"{source}: objects[{i}].mesh: file not found: {shot.resolve(obj.mesh)} "
                 f"(paths are relative to the shot file)"
             )
+    problems += _variation_problems(shot, source)
     for i, col in enumerate(shot.colliders):
         if col.shape is ColliderShape.MESH:
             if col.mesh is None:
@@ -612,3 +640,23 @@ def _check_emitters(shot: Shot, source: str) -> list[str]:
             f"({shot.solver.max_particles:,}): lower the rates or the emission times, or raise solver.max_particles"
         )
     return problems
+
+
+def _variation_problems(shot: Shot, source: str) -> list[str]:
+    """A variation of a field the object's material has no use for (water; a snow's friction)."""
+    by_name, out = {k.lower(): m for k, m in PRESETS.items()}, []
+    for i, obj in enumerate(shot.objects):
+        var, preset = obj.variation, by_name.get(obj.material.lower())
+        if var is None or preset is None:  # (an unknown preset is reported where materials are made)
+            continue
+        allowed, mode = VARIED_BY_MODE.get(preset.mode, ()), preset.mode.name.lower()
+        if not allowed:
+            out.append(f"{source}: objects[{i}].variation: {obj.material} is {mode}; only snow and sand vary")
+            continue
+        for name in set(Variation.model_fields) - {"feature_size", "seed", *allowed}:
+            if getattr(var, name) > 0:
+                out.append(
+                    f"{source}: objects[{i}].variation.{name}: {obj.material} is {mode}, which has no {name}; "
+                    f"vary {', '.join(allowed)}"
+                )
+    return sorted(out)
