@@ -66,10 +66,15 @@ def pack_material(m: Material) -> MaterialParams:
     return p
 
 
+vec5 = wp.types.vector(length=5, dtype=wp.float32)
+"""A varied particle's factors (variation.variation_factors): stiffness, hardening, dp_alpha,
+cohesion, and stiffness / density (its wave speed's, squared)."""
+
+
 @wp.func
-def vary_material(mat: MaterialParams, f: wp.vec4) -> MaterialParams:
-    """A particle's own copy of its material row under variation: f = (stiffness, hardening,
-    dp_alpha, cohesion) factors (materials.variation_factors). The array row is unchanged."""
+def vary_material(mat: MaterialParams, f: vec5) -> MaterialParams:
+    """A particle's own copy of its material row under variation, f its factors (vec5). The
+    array row is unchanged."""
     out = mat
     out.mu0 = mat.mu0 * f[0]
     out.lambda0 = mat.lambda0 * f[0]

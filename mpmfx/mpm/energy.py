@@ -26,6 +26,7 @@ from .constitutive import (
     solid_energy_density,
     tait_energy_density,
     vary_material,
+    vec5,
 )
 from .state import SceneFlags, load_m33
 from .stepper import chunk_particle
@@ -56,7 +57,7 @@ def make_report(flags: SceneFlags):
         n: int,
         coalesced: int,
         partial: wp.array2d(dtype=wp.float64),
-        vary: wp.array(dtype=wp.vec4),
+        vary: wp.array(dtype=vec5),
         pid: wp.array(dtype=wp.int32),
     ):
         b = wp.tid()

@@ -30,6 +30,7 @@ from .constitutive import (
     sym6,
     uninvert,
     vary_material,
+    vec5,
     vec6,
 )
 from .slots import Count, Stat
@@ -270,7 +271,7 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
         body_out: wp.array(dtype=wp.int32),
         field_id_out: wp.array(dtype=wp.int32),
         pid_out: wp.array(dtype=wp.int32),
-        vary: wp.array(dtype=wp.vec4),
+        vary: wp.array(dtype=vec5),
     ):
         slot = wp.tid()
         if wp.static(device_clock):
@@ -322,8 +323,11 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
             if wp.static(not one):
                 mid = material[p]
             mat = materials[mid]
+            wave = float(1.0)  # the particle's stiffness / density factor (snow: on its hardening statistic)
             if wp.static(varied):
-                mat = vary_material(mat, vary[pid[p]])  # (particle order: pid, as slots move)
+                f = vary[pid[p]]  # (particle order: pid, as slots move)
+                mat = vary_material(mat, f)
+                wave = f[4]
             j_now = float(1.0)
             finite = bool(True)
             if wp.static(has_solid):
@@ -337,7 +341,10 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
                         j_now = j_trial
                     finite = wp.isfinite(F_new) and wp.isfinite(jp_new)
                     if mat.mode == MODE_SNOW:
-                        wp.atomic_max(stats, Stat.MAX_HARDENING, hardening_factor(mat, jp_new))
+                        h = hardening_factor(mat, jp_new)
+                        if wp.static(varied):
+                            h = h * wave
+                        wp.atomic_max(stats, Stat.MAX_HARDENING, h)
             if wp.static(has_water):
                 if mat.mode == MODE_WATER:
                     # water keeps only its volume ratio: J^{n+1} = det(I + dt C) J^n
@@ -389,7 +396,7 @@ def solid_stress(
     F: wp.array2d(dtype=wp.vec3),
     Jp: wp.array(dtype=float),
     tau: wp.array(dtype=vec6),
-    vary: wp.array(dtype=wp.vec4),
+    vary: wp.array(dtype=vec5),
     pid: wp.array(dtype=wp.int32),
     varied: int,
 ):

@@ -27,7 +27,7 @@ from .chunked import DeviceAdvance
 from .clear_grid import clear_grid
 from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
-from .constitutive import MaterialParams, pack_material
+from .constitutive import MaterialParams, pack_material, vec5
 from .emission import activate
 from .energy import make_report
 from .errors import SimulationError, raise_too_small, too_many
@@ -232,7 +232,10 @@ class Solver:
         if self.flags.varied:
             data["variation"] = np.asarray(particles.variation, np.float32)
         clock = StepperClock(max_speed=float(speed.max()))
-        return self._build_state(data, clock)
+        state = self._build_state(data, clock)
+        if self.flags.varied:  # the stiffest snow particle's waves, before G2P reports them
+            state.clock.max_hardening = self._first_hardening
+        return state
 
     def _build_state(self, data: dict, clock: StepperClock) -> State:
         """data: arrays in particle order, and `pid` (a checkpoint's: the slot order to restore)."""
@@ -267,7 +270,7 @@ class Solver:
                 n_fields=n_fields,
                 clock=clock,
                 permuted=permuted,
-                vary=wp.array(vary, dtype=wp.vec4),
+                vary=wp.array(vary, dtype=vec5),
                 variation=np.asarray(data["variation"], np.float32) if self.flags.varied else None,
             )
             if "birth" in data:  # in particle order (State.birth)
@@ -283,13 +286,15 @@ class Solver:
         return state
 
     def _vary(self, data: dict) -> np.ndarray:
-        """The (n, 4) device factors of a varied state's particles ((1, 4) ones otherwise), in
+        """The (n, 5) device factors of a varied state's particles ((1, 5) ones otherwise), in
         particle order; sets the CFL's materials (variation.device_factors)."""
         if not self.flags.varied:
-            return np.ones((1, 4), np.float32)
+            return np.ones((1, 5), np.float32)
         if "variation" not in data:
             raise ValueError("checkpoint: no 'variation' array, but this Solver varies its materials; re-simulate")
-        out, self._wave_materials = device_factors(self.materials, data["variation"], np.asarray(data["material"]))
+        out, self._wave_materials, self._first_hardening = device_factors(
+            self.materials, data["variation"], np.asarray(data["material"])
+        )
         with wp.ScopedDevice(self.device):  # into the device stepper's table (a captured chunk keeps its address)
             wp.copy(self._device_advance.waves, wp.array(wave_table(self._wave_materials), dtype=WaveParams))
         return out

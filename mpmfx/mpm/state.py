@@ -157,7 +157,8 @@ class StepperClock:
     Checkpointed with the state so a resumed run picks exactly the same dt sequence.
     dt_scale: factor in (0, 1] on the CFL step, halved per rejected substep and regrown by
     1.25x per accepted one; max_speed: |v|max of the last accepted substep, domain/s;
-    max_hardening: largest exp(xi (1 - Jp)) among snow particles; water_j_min: smallest
+    max_hardening: largest exp(xi (1 - Jp)) among snow particles (with variation, each times the
+    particle's stiffness / density factor: variation.py); water_j_min: smallest
     J among water particles; substeps: accepted substeps since init_state; sort_every: the
     brick P2G's re-sort cadence the last advance ended with (0: none yet; chunked.py).
     """
@@ -198,10 +199,11 @@ class State:
     Storage order: on a GPU the brick P2G keeps the particles themselves in its sort order (a
     sorting substep's G2P writes them there, p2g_brick.py), so every array above is in slot
     order, not particle order: `Solver.host_arrays` and `checkpoint` give them back in particle
-    order (`birth`, where there is one, is indexed by particle). vary: (n,) vec4 material factors
-    of a varied scene (SceneFlags.varied; materials.variation_factors), in particle order (read
+    order (`birth`, where there is one, is indexed by particle). vary: (n,) vec5 material factors
+    of a varied scene (SceneFlags.varied; variation.variation_factors), in particle order (read
     through pid), else (1,) unused; variation: its (n, 5) host multipliers (Particles.variation),
-    which a checkpoint carries. The constants' other copy (`spare`, CONSTS order) is where a sorting G2P writes the
+    which a checkpoint carries. The constants' other copy (`spare`, CONSTS order) is where a
+    sorting G2P writes the
     permuted ones; `swap_consts` makes it current.
     """
 

@@ -3,8 +3,9 @@
 A varied particle carries multipliers of its material's fields (Particles.variation, columns
 VARIED_FIELDS). G2P multiplies its material row by the device factors made here
 (constitutive.vary_material), the density multiplier goes into its mass at init, and the CFL
-step is taken with the stiffest particle's moduli. Scenes without variation compile none of it
-(SceneFlags.varied).
+step follows the fastest particle: a snow particle's stiffness / density factor multiplies the
+hardening factor it reports (the clock's max_hardening), and a sand material's wave speed takes
+its particles' largest. Scenes without variation compile none of it (SceneFlags.varied).
 """
 
 from __future__ import annotations
@@ -49,8 +50,9 @@ def check_variation(variation, n: int, varied: bool) -> None:
 
 
 def variation_factors(m: Material, mult: np.ndarray) -> np.ndarray:
-    """What G2P multiplies a varied particle's material row by: (n, 4) float32 factors of
-    (mu0 and lambda0, hardening, dp_alpha, cohesion), from (n, 5) multipliers of VARIED_FIELDS
+    """What G2P multiplies a varied particle's material row by: (n, 5) float32 factors of
+    (mu0 and lambda0, hardening, dp_alpha, cohesion) and its stiffness / density multiplier
+    (c^2 of its waves relative to the material's), from (n, 5) multipliers of VARIED_FIELDS
     (> 0). Density acts on the particle's mass only (Solver.init_state)."""
     mult = np.asarray(mult, np.float64).reshape(-1, len(VARIED_FIELDS))
     alpha = np.ones(len(mult))
@@ -64,22 +66,27 @@ def variation_factors(m: Material, mult: np.ndarray) -> np.ndarray:
             alpha = (math.sqrt(2.0) * s / 3.0) / m.dp_alpha
         else:
             alpha = (math.sqrt(2.0 / 3.0) * 2.0 * s / (3.0 - s)) / m.dp_alpha
-    cols = [mult[:, STIFF], mult[:, VARIED_FIELDS.index("hardening")], alpha, mult[:, VARIED_FIELDS.index("cohesion")]]
-    return np.stack(cols, axis=1).astype(np.float32)
+    hard, coh = mult[:, VARIED_FIELDS.index("hardening")], mult[:, VARIED_FIELDS.index("cohesion")]
+    return np.stack([mult[:, STIFF], hard, alpha, coh, mult[:, STIFF] / mult[:, DENSITY]], axis=1).astype(np.float32)
 
 
-def device_factors(materials, mult: np.ndarray, material: np.ndarray) -> tuple[np.ndarray, tuple]:
-    """(n, 4) device factors of particles in particle order (variation_factors of each one's
-    material), and the materials for the CFL step: each with youngs_modulus times the largest
-    stiffness / density multiplier among its particles, so dt follows the fastest wave
-    (c = sqrt((lambda + 2 mu) / rho) scales by sqrt of that ratio)."""
+def device_factors(materials, mult: np.ndarray, material: np.ndarray) -> tuple[np.ndarray, tuple, float]:
+    """(n, 5) device factors of particles in particle order (variation_factors of each one's
+    material); the materials for the CFL step: a sand material with youngs_modulus times the
+    largest stiffness / density multiplier among its particles (c = sqrt((lambda + 2 mu) / rho)
+    scales by the root of that ratio), a snow one as it is (G2P reports each snow particle's
+    factor times its hardening); and the clock's first max_hardening, the largest snow
+    particle's factor (>= 1), for the substeps before G2P has reported one."""
     mult = np.asarray(mult, np.float32)
-    out = np.ones((len(material), 4), np.float32)
-    waves = list(materials)
+    out = np.ones((len(material), 5), np.float32)
+    waves, hardening = list(materials), 1.0
     for i, m in enumerate(materials):
         rows = material == i
         if rows.any():
             out[rows] = variation_factors(m, mult[rows])
-            scale = float(np.max(mult[rows, STIFF].astype(np.float64) / mult[rows, DENSITY]))
-            waves[i] = dataclasses.replace(m, youngs_modulus=m.youngs_modulus * scale)
-    return out, tuple(waves)
+            scale = float(np.max(out[rows, 4]))
+            if m.mode == Mode.SNOW:
+                hardening = max(hardening, scale)
+            else:
+                waves[i] = dataclasses.replace(m, youngs_modulus=m.youngs_modulus * scale)
+    return out, tuple(waves), hardening

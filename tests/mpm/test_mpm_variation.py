@@ -82,6 +82,13 @@ def test_density_multiplies_the_mass_and_stiffness_shortens_the_step():
     solver, state, rep = _sand_column(stiff, frames=1)
     _, _, rep_plain = _sand_column(None, frames=1)
     assert rep[0].substeps > 1.5 * rep_plain[0].substeps  # the device stepper's CFL sees the stiff particles
+    # snow: the particle's factor rides on the hardening the clock tracks, from the first substep
+    solver, state, _ = _sand_column(stiff, frames=0, material="Soft")
+    plain, ref, _ = _sand_column(None, frames=0, material="Soft")
+    assert state.clock.max_hardening == pytest.approx(4.0)
+    assert solver.wave_speed(state.clock) == pytest.approx(2.0 * plain.wave_speed(ref.clock), rel=1e-6)
+    solver, state, _ = _sand_column(stiff, frames=1, material="Soft")
+    assert state.clock.max_hardening >= 4.0
 
 
 def test_friction_factor_keeps_the_angle_physical():
