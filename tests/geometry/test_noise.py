@@ -38,3 +38,11 @@ def test_unit_deviation_and_the_feature_size_is_its_correlation_length(feature):
 def test_a_feature_size_must_be_positive():
     with pytest.raises(ValueError, match="feature_size"):
         fourier_noise(np.zeros((1, 3)), 0.0, 0)
+
+
+def test_the_values_do_not_depend_on_the_thread_count(monkeypatch):
+    x = _points(150_000, 1.0)  # three blocks
+    monkeypatch.setenv("MPMFX_SURFACE_THREADS", "1")
+    one = fourier_noise(x, 0.05, 4)
+    monkeypatch.setenv("MPMFX_SURFACE_THREADS", "3")
+    assert np.array_equal(one, fourier_noise(x, 0.05, 4))
