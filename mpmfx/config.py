@@ -22,8 +22,7 @@ from typing import Annotated, Any, Literal
 from pydantic import AllowInfNan, BaseModel, ConfigDict, Field, Strict, ValidationError, field_validator
 
 from mpmfx.mpm.config import STANDARD_GRAVITY, SolverConfig, SolverConfigError, WallType
-from mpmfx.mpm.materials import PRESETS, Mode
-from mpmfx.mpm.variation import VARIED_BY_MODE
+from mpmfx.mpm.materials import PRESETS, VARIED_BY_MODE, Mode
 from mpmfx.render.looks import LOOKS
 
 # Every number of the schema is one of these: finite (NaN or inf in a TOML file or a --set is a

@@ -39,8 +39,8 @@ from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
 from .report import StepReport, particle_sums, step_report
 from .slots import REJECTING, Count, Stat
 from .state import ParticleBuffers, SceneFlags, State, StepperClock, m33_assign
-from .stepper import SubstepDev, WaveParams, wave_table
-from .variation import DENSITY, check_variation, device_factors
+from .stepper import SubstepDev
+from .variation import DENSITY, check_variation, state_factors
 
 __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
 
@@ -58,7 +58,7 @@ class Particles:
     start): one with birth > 0 is dormant until the first substep starting at or after it
     (emission.py), with its x and v then.
     variation: (n, 5) float32 multipliers (> 0) of each particle's material fields, columns
-    variation.VARIED_FIELDS, for a Solver made with variation=True; else None.
+    materials.VARIED_FIELDS, for a Solver made with variation=True; else None.
     """
 
     x: np.ndarray
@@ -107,7 +107,7 @@ class Solver:
         self.colliders = tuple(colliders)
         self.device = wp.get_device(device)
         self.flags = SceneFlags.of(self.materials, multi_field=config.multi_field, varied=variation)
-        self._wave_materials = self.materials  # the CFL's materials: the stiffest particle's moduli (_vary)
+        self._wave_materials = self.materials  # the CFL's materials: the stiffest particle's moduli (variation.py)
         # specialised kernels for this scene: all three land in one Warp module per flags,
         # built before the first launch so the module compiles once
         # [device_clock]: the reference kernels, and the device stepper's (stepper.py)
@@ -242,7 +242,7 @@ class Solver:
         n = int(data["x"].shape[0])
         pid = np.asarray(data["pid"], np.int32) if "pid" in data else np.arange(n, dtype=np.int32)
         permuted = bool(np.any(pid != np.arange(n)))
-        vary = self._vary(data)  # from the particle-order materials, before they move into slots
+        vary = state_factors(self, data)  # from the particle-order materials, before they move into slots
         if permuted:  # back into the slots they were in, so a resumed run sums as the first did
             per_particle = (*ParticleBuffers.NAMES, "mass", "volume", "material", "body")
             data = {k: to_slots(np.asarray(v), pid, n) if k in per_particle else v for k, v in data.items()}
@@ -284,20 +284,6 @@ class Solver:
         self._q_mass = _pow2_at_least(m_ref) * 2.0**-FIXED_POINT_BITS
         self._q_mom = self._q_mass
         return state
-
-    def _vary(self, data: dict) -> np.ndarray:
-        """The (n, 5) device factors of a varied state's particles ((1, 5) ones otherwise), in
-        particle order; sets the CFL's materials (variation.device_factors)."""
-        if not self.flags.varied:
-            return np.ones((1, 5), np.float32)
-        if "variation" not in data:
-            raise ValueError("checkpoint: no 'variation' array, but this Solver varies its materials; re-simulate")
-        out, self._wave_materials, self._first_hardening = device_factors(
-            self.materials, data["variation"], np.asarray(data["material"])
-        )
-        with wp.ScopedDevice(self.device):  # into the device stepper's table (a captured chunk keeps its address)
-            wp.copy(self._device_advance.waves, wp.array(wave_table(self._wave_materials), dtype=WaveParams))
-        return out
 
     def update_stress(self, state: State) -> None:
         """Recompute the stored stress (state.cur.tau) of every solid from its F and Jp. G2P

@@ -14,21 +14,12 @@ import dataclasses
 import math
 
 import numpy as np
+import warp as wp
 
-from .materials import Material, Mode
+from .materials import VARIED_BY_MODE, VARIED_FIELDS, Material, Mode
+from .stepper import WaveParams, wave_table
 
-__all__ = ["VARIED_FIELDS", "VARIED_BY_MODE", "check_variation", "variation_factors", "device_factors"]
-
-VARIED_FIELDS = ("youngs_modulus", "hardening", "friction_angle", "cohesion", "density")
-"""The columns of a particle's variation multipliers, in order. Each multiplies the material's
-field, except friction_angle's, which multiplies the friction coefficient tan(friction_angle):
-any factor > 0 keeps the angle in [0, 90) degrees."""
-
-VARIED_BY_MODE = {
-    Mode.SNOW: ("youngs_modulus", "hardening", "density"),
-    Mode.SAND: ("youngs_modulus", "friction_angle", "cohesion", "density"),
-}
-"""The fields a mode has a use for (water and tracers: none)."""
+__all__ = ["VARIED_FIELDS", "VARIED_BY_MODE", "check_variation", "variation_factors", "device_factors", "state_factors"]
 
 STIFF, DENSITY = VARIED_FIELDS.index("youngs_modulus"), VARIED_FIELDS.index("density")
 
@@ -90,3 +81,19 @@ def device_factors(materials, mult: np.ndarray, material: np.ndarray) -> tuple[n
             else:
                 waves[i] = dataclasses.replace(m, youngs_modulus=m.youngs_modulus * scale)
     return out, tuple(waves), hardening
+
+
+def state_factors(solver, data: dict) -> np.ndarray:
+    """The (n, 5) device factors of a state's particles from its data (Solver._build_state:
+    particle order), (1, 5) ones where the solver does not vary; sets the solver's CFL materials
+    and first max_hardening (device_factors) and the device stepper's wave table."""
+    if not solver.flags.varied:
+        return np.ones((1, 5), np.float32)
+    if "variation" not in data:
+        raise ValueError("checkpoint: no 'variation' array, but this Solver varies its materials; re-simulate")
+    out, solver._wave_materials, solver._first_hardening = device_factors(
+        solver.materials, data["variation"], np.asarray(data["material"])
+    )
+    with wp.ScopedDevice(solver.device):  # into the stepper's table (a captured chunk keeps its address)
+        wp.copy(solver._device_advance.waves, wp.array(wave_table(solver._wave_materials), dtype=WaveParams))
+    return out

@@ -28,8 +28,7 @@ from mpmfx.geometry.noise import fourier_noise
 from mpmfx.io.frames import ParticleFrame, SeedParticles, read_arrays, write_arrays
 from mpmfx.mpm import AnimatedMesh, Collider, ColliderKind, Particles, SimulationError, Solver
 from mpmfx.mpm.emission import device_bytes
-from mpmfx.mpm.materials import preset
-from mpmfx.mpm.variation import VARIED_FIELDS
+from mpmfx.mpm.materials import VARIED_FIELDS, preset
 from mpmfx.stages.base import Context, StageError, quiet_warp
 from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
 from mpmfx.stages.writer import FrameWriter
