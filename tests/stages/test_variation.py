@@ -75,3 +75,16 @@ def test_bad_variation_is_refused_naming_file_and_key(snow, capsys):
     args = ["run", str(shot), "--set", "objects.0.variation={density = 2.0, feature_size = 0.1}", "--cache", str(cache)]
     assert main(args) == 2
     assert "objects[0].variation.density" in capsys.readouterr().err
+
+
+def test_a_varied_run_continues_from_its_checkpoint_byte_for_byte(snow, tmp_path):
+    """A longer shot continues from the cached frames (the checkpoint carries the multipliers):
+    its frames are those of one uninterrupted run."""
+    shot, cache = snow
+    _run(shot, cache, 0.3, DROP)  # (a cache hit after the test above)
+    longer = [*DROP, "shot.frame_end=4"]
+    continued, straight = _run(shot, cache, 0.3, longer), _run(shot, tmp_path, 0.3, longer)
+    frames = [sorted((e["simulate"] / "frames").glob("*.npz")) for e in (continued, straight)]
+    assert len(frames[0]) == len(frames[1]) == 4
+    for a, b in zip(*frames):
+        assert a.read_bytes() == b.read_bytes(), a.name
