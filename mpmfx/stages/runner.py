@@ -14,8 +14,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from mpmfx.cache import Cache, Entry, code_hash, default_root, remove_temps
-from mpmfx.config import Shot, ShotError, load_shot_config
+from mpmfx.config import Shot, ShotError
 from mpmfx.publish import check_publishable, publish_renders, publish_stage, record, sweep
+from mpmfx.shotfile import load_shot_config
 from mpmfx.stages import STAGES, export, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage, StageError
 from mpmfx.stages.parallel import Frames

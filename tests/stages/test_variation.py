@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 
 import mpmfx
-from mpmfx.config import ShotError, load_shot_config
+from mpmfx.config import ShotError
 from mpmfx.io.frames import ParticleFrame
+from mpmfx.shotfile import load_shot_config
 from tests.conftest import write_tiny_shot
 
 VARY = "objects.0.variation={{youngs_modulus = {a}, hardening = {a}, feature_size = 0.04, seed = 5}}"
