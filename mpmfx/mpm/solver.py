@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -36,38 +35,16 @@ from .grid_update import GridParams, make_grid_update
 from .materials import Material, Mode
 from .order import to_slots
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
+from .particles import Particles, check_particles
 from .report import StepReport, particle_sums, step_report
 from .slots import REJECTING, Count, Stat
 from .state import ParticleBuffers, SceneFlags, State, StepperClock, m33_assign
 from .stepper import SubstepDev
-from .variation import DENSITY, check_variation, state_factors
+from .variation import DENSITY, state_factors
 
 __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
 
 MAX_FIELDS = 8  # multi-field contact: grid memory grows with the number of fields
-
-
-@dataclass
-class Particles:
-    """Solver input (host, numpy).
-
-    x: (n, 3) float32 domain units, inside [0, 1]; v: (n, 3) float32 domain/s;
-    volume: (n,) float32 rest volume, domain^3 (mass = volume * material density);
-    material: (n,) int32 index into the solver's materials; body: (n,) int32 object id;
-    birth: (n,) float32 shot time (s) at which each particle enters, or None (all there at the
-    start): one with birth > 0 is dormant until the first substep starting at or after it
-    (emission.py), with its x and v then.
-    variation: (n, 5) float32 multipliers (> 0) of each particle's material fields, columns
-    materials.VARIED_FIELDS, for a Solver made with variation=True; else None.
-    """
-
-    x: np.ndarray
-    v: np.ndarray
-    volume: np.ndarray
-    material: np.ndarray
-    body: np.ndarray
-    birth: np.ndarray | None = None
-    variation: np.ndarray | None = None
 
 
 def _pow2_at_least(x: float) -> float:
@@ -173,35 +150,9 @@ class Solver:
             )
         return ids.astype(np.int32), len(bodies)
 
-    def _check_particles(self, p: Particles) -> int:
-        x = np.asarray(p.x)
-        n = x.shape[0] if x.ndim == 2 else -1
-        shapes = {"x": (n, 3), "v": (n, 3), "volume": (n,), "material": (n,), "body": (n,)}
-        for name, shape in shapes.items():
-            arr = np.asarray(getattr(p, name))
-            if n < 1 or arr.shape != shape:
-                raise ValueError(f"Particles.{name}: shape {arr.shape}, expected {shape} with n >= 1")
-            if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
-                raise ValueError(f"Particles.{name}: contains NaN or inf; fix the particle source")
-        if x.min() < 0.0 or x.max() > 1.0:
-            raise ValueError(
-                "Particles.x: positions outside the domain [0, 1]^3 (min %.3g, max %.3g); map world "
-                "space into the domain before simulating" % (x.min(), x.max())
-            )
-        mat = np.asarray(p.material)
-        if mat.min() < 0 or mat.max() >= len(self.materials):
-            raise ValueError(
-                f"Particles.material: indices must be in [0, {len(self.materials) - 1}] "
-                f"(the solver has {len(self.materials)} materials), got {mat.min()}..{mat.max()}"
-            )
-        if np.any(np.asarray(p.volume) <= 0):
-            raise ValueError("Particles.volume: rest volumes must be > 0 (domain units^3)")
-        check_variation(p.variation, n, self.flags.varied)
-        return n
-
     def init_state(self, particles: Particles) -> State:
         """Upload particles; F = I, C = 0, J = Jp = 1, alive = 1 (0: dormant until its birth)."""
-        n = self._check_particles(particles)
+        n = check_particles(particles, len(self.materials), varied=self.flags.varied)
         mat_idx = np.asarray(particles.material, dtype=np.int32)
         density = np.array([m.density for m in self.materials], dtype=np.float64)
         tracer = np.array([m.mode == Mode.TRACER for m in self.materials])
