@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from mpmfx.config import load_shot_config
 from mpmfx.mpm.animated import AnimatedMeshes
+from mpmfx.shotfile import load_shot_config
 from mpmfx.stages import simulate
 
 ROOT = Path(__file__).resolve().parents[2]
