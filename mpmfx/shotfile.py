@@ -21,6 +21,9 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     if "=" not in text:
         raise ShotError(f"--set {text!r}: expected key=value, e.g. --set solver.cfl=0.3")
     key, raw = text.split("=", 1)
+    if "[" in key or "]" in key:
+        dotted = key.replace("[", ".").replace("]", "").strip()
+        raise ShotError(f"--set {text!r}: list items are numbered with dots: --set {dotted}={raw}")
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
@@ -77,16 +80,17 @@ _TYPE_ERRORS = {"float_type", "int_type", "bool_type", "float_parsing", "int_par
 def _format_error(err: dict, source: str) -> str:
     # a union's members add their tag to the location (overrides.x.float): the key is without it
     loc = tuple(p for p in err["loc"] if not (isinstance(p, str) and (p in _UNION_TAGS or "[" in p)))
-    key = _loc(loc)
-    if err["type"] == "extra_forbidden":
+    key = _loc(loc) or "(the file)"
+    if err["type"] == "extra_forbidden" and loc:
         model = _model_at(loc)
-        known = list(model.model_fields) if model else []
+        # keys a shot file may hold: not the internal ones the loader fills in (exclude=True)
+        known = [k for k, f in model.model_fields.items() if not f.exclude] if model else []
         close = difflib.get_close_matches(str(loc[-1]), known, n=1)
         hint = f"did you mean '{close[0]}'?" if close else f"known keys: {', '.join(known)}"
         return f"{source}: unknown key '{key}': {hint}"
     if err["type"] == "missing":
         return f"{source}: missing key '{key}': add it (see pipeline/shots/*.toml for examples)"
-    model = _model_at(loc)
+    model = _model_at(loc) if loc else None
     field = model.model_fields.get(str(loc[-1])) if model else None
     doc = f" ({field.description})" if field is not None and field.description else ""
     hint = ""

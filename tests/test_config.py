@@ -177,3 +177,16 @@ def test_sharp_edges_auto_leaves_fluids_round(tmp_path):
         ShotError, match="surface.sharp_edges' = 'sometimes': Input should be 'auto' or a valid boolean"
     ):
         load_shot_config(path, ["surface.sharp_edges=sometimes"])
+
+
+def test_bracketed_list_items_and_internal_keys_get_a_message_not_a_traceback(tmp_path, capsys):
+    from mpmfx.cli import main
+    from tests.conftest import write_tiny_shot
+
+    shot = write_tiny_shot(tmp_path)
+    args = ["run", str(shot), "--until", "voxelise", "--cache", str(tmp_path / "cache")]
+    assert main([*args, "--set", "objects[0].overrides={hardening=10}"]) == 2
+    assert "--set objects.0.overrides={hardening=10}" in capsys.readouterr().err
+    assert main([*args, "--set", "bogus_key=1"]) == 2
+    err = capsys.readouterr().err
+    assert "unknown key 'bogus_key'" in err and "base_dir" not in err and "source" not in err
