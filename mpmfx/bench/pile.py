@@ -92,10 +92,11 @@ def hopper(
 def repose_angle(x: np.ndarray, volume: np.ndarray, dx: float, *, origin=(0.0, 0.0, 0.0), sector=1.0, fit=FIT):
     """(angle in degrees, radius, height) of a pile whose axis is the vertical line through
     `origin` (domain units; origin[1] the floor), `sector` of a whole one (0.25: a quarter pile
-    in a corner): the top surface h(r), the highest particle
-    in each one-cell radial bin, fitted by a line between fit[0] and fit[1] of the radius.
-    The radius is the far edge of the last bin whose rest volume covers its annulus LAYER of
-    a cell deep; the height the highest particle's. NaN angle when fewer than 3 bins fit."""
+    in a corner): the top surface h(r), the highest particle in each one-cell radial bin,
+    fitted by a line between fit[0] and fit[1] of the radius. The radius is the far edge of
+    the last bin whose rest volume covers its annulus LAYER of a cell deep; the height the
+    highest particle's. x: (n, 3), volume: (n,) rest volumes. NaN angle when fewer than 3 bins
+    fit."""
     r = np.hypot(x[:, 0] - origin[0], x[:, 2] - origin[2])
     y = x[:, 1] - origin[1]
     edges = np.arange(0.0, r.max() + 2 * dx, dx)
