@@ -34,8 +34,8 @@ from pathlib import Path
 
 from PIL import Image, ImageDraw, ImageFont
 
-from mpmfx.config import load_shot_config
 from mpmfx.mpm.materials import PRESETS
+from mpmfx.shotfile import load_shot_config
 from mpmfx.stages.runner import ShotRun
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from mpmfx.bench.surface_splash import SPLASH_SHOT, _row, splash_params
-from mpmfx.config import load_shot_config
+from mpmfx.shotfile import load_shot_config
 from mpmfx.surface import surface_particles
 
 

@@ -11,9 +11,12 @@ from __future__ import annotations
 
 import importlib.util
 import os
+import subprocess
 import sys
 from pathlib import Path
 
+TIMEOUT_ENV = "MPMFX_BLENDER_TIMEOUT"  # seconds a Blender child that reads a file may take
+TIMEOUT_S = 600.0
 FRAME_LINE = "MPMFX_FRAME"  # a Cycles child's line per finished frame: FRAME_LINE frame wall_s cpu_s
 ERROR = "mpmfx-blender-error: "  # a child's line the parent reads the reason of a failure from
 
@@ -34,3 +37,25 @@ def child_env() -> dict:
 def child_command(module: str, *args: str) -> list[str]:
     """The command line that runs `module` (`python -m`) in a child process with this Python."""
     return [sys.executable, "-m", module, *args]
+
+
+class ChildTimeout(RuntimeError):
+    """A Blender child that did not finish in time (it was killed)."""
+
+
+def run_child(cmd: list[str], *, what: str) -> subprocess.CompletedProcess:
+    """Run a Blender child that reads a file, output captured, killed after $MPMFX_BLENDER_TIMEOUT
+    seconds (default TIMEOUT_S): a rig with a scripted driver makes Blender refuse the script
+    (auto-run is off) and then wait at exit forever, and a run must never hang on an asset."""
+    try:
+        timeout = float(os.environ.get(TIMEOUT_ENV, TIMEOUT_S))
+    except ValueError:
+        raise ChildTimeout(f"${TIMEOUT_ENV} = {os.environ[TIMEOUT_ENV]!r}: give seconds, e.g. 600") from None
+    try:
+        return subprocess.run(cmd, capture_output=True, text=True, env=child_env(), timeout=timeout)
+    except subprocess.TimeoutExpired:  # subprocess.run has killed the child and reaped it
+        raise ChildTimeout(
+            f"{what}: Blender did not finish within {timeout:g} s and was stopped. A rig with a "
+            f"scripted (Python) driver can make it wait forever: remove the driver or bake the "
+            f"animation, or export the asset as USD; ${TIMEOUT_ENV} sets the limit"
+        ) from None

@@ -176,10 +176,9 @@ class Entry:
         return self.frames_dir / f"{frame:04d}.{ext}"
 
     def manifest(self) -> dict | None:
-        try:
-            return json.loads(self.manifest_path.read_text())
-        except (FileNotFoundError, json.JSONDecodeError):
-            return None
+        """The manifest, or None when it is missing, unreadable or not of the shape this code
+        writes (a hand-edited or foreign one): the entry then counts as partial and is redone."""
+        return read_manifest(self.root)
 
     def done_frames(self, ext: str) -> list[int]:
         """Frames whose file is complete (temp files never match: they start with '.')."""
@@ -248,6 +247,29 @@ class Entry:
 
     def remove(self) -> None:
         shutil.rmtree(self.root, ignore_errors=True)
+
+
+def read_manifest(entry_root: Path) -> dict | None:
+    """The manifest of the entry folder `entry_root` if it is readable and of the right shape."""
+    try:
+        man = json.loads((entry_root / "manifest.json").read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError):
+        return None
+    return man if valid_manifest(man) else None
+
+
+def valid_manifest(man: Any) -> bool:
+    """Whether `man` has the shape `Entry.write_manifest` writes, field by field."""
+    if not isinstance(man, dict) or man.get("schema") != MANIFEST_SCHEMA:
+        return False
+    frames, files = man.get("frames"), man.get("files")
+    if not isinstance(frames, list) or not all(isinstance(f, int) and not isinstance(f, bool) for f in frames):
+        return False
+    if not isinstance(files, dict) or not all(
+        isinstance(k, str) and isinstance(v, int) and not isinstance(v, bool) and v >= 0 for k, v in files.items()
+    ):
+        return False
+    return all(isinstance(man.get(k), dict) for k in ("timings", "qa", "key_inputs"))
 
 
 class Cache:

@@ -6,13 +6,12 @@ inside the cache root; a simulation (minutes of work) is deleted only after a ye
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import sys
 from pathlib import Path
 
-from mpmfx.cache import PathError, child, no_links
+from mpmfx.cache import PathError, child, no_links, read_manifest
 from mpmfx.stages import STAGES
 
 ASK_BEFORE = ("simulate",)  # stages whose entries cost minutes: deleted only after a yes
@@ -102,9 +101,8 @@ def prune_targets(root: Path, *, keep: int, in_use: set[Path]) -> list[Path]:
         if entry in protected or not entry.is_dir():
             continue
         protected.add(entry)
-        try:
-            upstream = json.loads((entry / "manifest.json").read_text())["key_inputs"]["upstream"]
-        except (OSError, ValueError, KeyError):
+        upstream = (read_manifest(entry) or {}).get("key_inputs", {}).get("upstream")
+        if not isinstance(upstream, dict):
             continue
         for stage, key in upstream.items():
             todo.append((entry.parent.parent / stage / f"{stage}-{key[:12]}").resolve())

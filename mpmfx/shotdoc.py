@@ -153,6 +153,8 @@ def _sections() -> list[tuple[str, type[BaseModel], FieldInfo]]:
             for sub_key, sub in inner.model_fields.items():
                 sub_tp = sub.annotation
                 sub_inner = typing.get_args(sub_tp)[0] if typing.get_origin(sub_tp) is list else sub_tp
+                if typing.get_origin(sub_tp) in (typing.Union, types.UnionType):  # an optional table
+                    sub_inner = next(a for a in typing.get_args(sub_tp) if a is not type(None))
                 if isinstance(sub_inner, type) and issubclass(sub_inner, BaseModel):
                     nested = f"[[{key}.{sub_key}]]" if typing.get_origin(sub_tp) is list else f"[{key}.{sub_key}]"
                     out.append((nested, sub_inner, sub))

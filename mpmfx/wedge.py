@@ -34,8 +34,9 @@ from PIL import Image, ImageDraw, ImageFont
 
 from mpmfx.cache import Cache, atomic_path, default_root
 from mpmfx.cli_args import frame_range
-from mpmfx.config import ShotError, apply_override, load_shot_config
+from mpmfx.config import ShotError
 from mpmfx.render.frames import write_movie
+from mpmfx.shotfile import apply_override, load_shot_config
 from mpmfx.stages import STAGES
 from mpmfx.stages.base import Context
 from mpmfx.stages.parallel import Frames, task_key

@@ -115,3 +115,18 @@ def test_a_shot_folder_that_is_a_link_is_refused(tmp_path):
         with Cache(tmp_path / "cache", "shot").lock():
             pass
     assert list(elsewhere.iterdir()) == []
+
+
+@pytest.mark.parametrize(
+    "text",
+    ['{"files": []}', '{"frames": null}', "[1, 2]", "not json", '{"schema": 1, "frames": [1], "files": {"a": "x"}}'],
+)
+def test_a_manifest_of_the_wrong_shape_makes_the_entry_partial_not_a_crash(tmp_path, text):
+    e = Cache(tmp_path, "shot").entry("simulate", 1, {"a": 1}, {}, {})
+    with atomic_path(e.frame_path(1, "npz")) as tmp:
+        tmp.write_bytes(b"x")
+    e.write_manifest(frames=[1], timings={})
+    assert e.complete([1])
+    e.manifest_path.write_text(text)
+    assert e.manifest() is None and not e.complete([1]) and e.damaged() == []
+    assert e.done_frames("npz") == [1]  # the complete frame stays: a run resumes, then rewrites the manifest

@@ -4,7 +4,8 @@ from pathlib import Path
 
 import pytest
 
-from mpmfx.config import ShotError, load_shot_config
+from mpmfx.config import ShotError
+from mpmfx.shotfile import load_shot_config
 from tests.conftest import write_tiny_shot
 
 REPO = Path(__file__).resolve().parents[1]

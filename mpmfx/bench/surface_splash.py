@@ -30,7 +30,7 @@ from scipy.sparse.csgraph import connected_components
 from mpmfx.bench.report import write_rows
 from mpmfx.bench.surface_cases import Table, mesh_stats, sheet_stats
 from mpmfx.bench.surface_peers import run_peer
-from mpmfx.config import load_shot_config
+from mpmfx.shotfile import load_shot_config
 from mpmfx.stages.surface import surface_params
 from mpmfx.surface import SurfaceParams, surface_particles
 

@@ -19,14 +19,13 @@ every frame. Otherwise MeshError, naming the file and what to change.
 
 from __future__ import annotations
 
-import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from mpmfx.blender import ERROR, bpy_available, child_command, child_env
+from mpmfx.blender import ERROR, ChildTimeout, bpy_available, child_command, run_child
 from mpmfx.geometry.common import MeshError
 from mpmfx.geometry.mesh import BLENDER_SUFFIXES, USD_SUFFIXES
 from mpmfx.geometry.usd_asset import load_usd
@@ -124,9 +123,10 @@ def _blender_animation(path: Path, frames, fps: float, part: str | None) -> Anim
         out = Path(tmp) / "anim.npz"
         frame_arg = "--frames=" + ",".join(f"{f:g}" for f in frames) + f"@{fps:g}"
         cmd = child_command("mpmfx.geometry.blender_export", str(path.resolve()), str(out), frame_arg)
-        res = subprocess.run(
-            cmd + ([part.lstrip("/")] if part else []), capture_output=True, text=True, env=child_env()
-        )
+        try:
+            res = run_child(cmd + ([part.lstrip("/")] if part else []), what=str(path))
+        except ChildTimeout as exc:
+            raise MeshError(str(exc)) from None
         if res.returncode != 0 or not out.is_file():
             lines = (res.stdout + res.stderr).strip().splitlines()
             why = next((s.removeprefix(ERROR) for s in lines if s.startswith(ERROR)), " / ".join(lines[-3:]))

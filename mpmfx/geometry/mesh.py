@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import json
 import struct
-import subprocess
 import tempfile
 from pathlib import Path
 
@@ -19,7 +18,7 @@ import numpy as np
 import trimesh
 from scipy.spatial.transform import Rotation
 
-from mpmfx.blender import ERROR, bpy_available, child_command, child_env
+from mpmfx.blender import ERROR, ChildTimeout, bpy_available, child_command, run_child
 from mpmfx.geometry.common import MeshError
 from mpmfx.geometry.usd_asset import load_usd
 
@@ -124,9 +123,10 @@ def _load_blender(path: Path, part: str | None) -> tuple[np.ndarray, np.ndarray]
     with tempfile.TemporaryDirectory(prefix="mpmfx-blender-") as tmp:
         out = Path(tmp) / "mesh.npz"
         cmd = child_command("mpmfx.geometry.blender_export", str(path.resolve()), str(out))
-        res = subprocess.run(
-            cmd + ([part.lstrip("/")] if part else []), capture_output=True, text=True, env=child_env()
-        )
+        try:
+            res = run_child(cmd + ([part.lstrip("/")] if part else []), what=str(path))
+        except ChildTimeout as exc:
+            raise MeshError(str(exc)) from None
         if res.returncode != 0 or not out.is_file():
             lines = (res.stdout + res.stderr).strip().splitlines()
             why = next((s.removeprefix(ERROR) for s in lines if s.startswith(ERROR)), " / ".join(lines[-3:]))

@@ -27,7 +27,7 @@ _WHERE = {
     "Material": "materials",
     "Mode": "materials",
     "preset": "materials",
-    "Particles": "solver",
+    "Particles": "particles",
     "SimulationError": "errors",
     "Solver": "solver",
     "StepReport": "report",

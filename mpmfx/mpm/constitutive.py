@@ -66,6 +66,24 @@ def pack_material(m: Material) -> MaterialParams:
     return p
 
 
+vec5 = wp.types.vector(length=5, dtype=wp.float32)
+"""A varied particle's factors (variation.variation_factors): stiffness, hardening, dp_alpha,
+cohesion, and stiffness / density (its wave speed's, squared)."""
+
+
+@wp.func
+def vary_material(mat: MaterialParams, f: vec5) -> MaterialParams:
+    """A particle's own copy of its material row under variation, f its factors (vec5). The
+    array row is unchanged."""
+    out = mat
+    out.mu0 = mat.mu0 * f[0]
+    out.lambda0 = mat.lambda0 * f[0]
+    out.hardening = mat.hardening * f[1]
+    out.dp_alpha = mat.dp_alpha * f[2]
+    out.cohesion = mat.cohesion * f[3]
+    return out
+
+
 @wp.func
 def pack_f_jp(F: wp.mat33, jp: float) -> wp.mat44:
     """(F, Jp) -> mat44, because a wp.func returns one value here."""

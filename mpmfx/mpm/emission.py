@@ -61,12 +61,13 @@ def pending_between(birth_host: np.ndarray | None, t0: float, t1: float) -> bool
 def device_bytes(n: int, flags: SceneFlags, grid_n: int, *, deterministic: bool, births: bool, gpu: bool = True) -> int:
     """Estimated device memory (bytes) of a run of n particles: the particle buffers (two
     copies: current and next substep), the constants (two copies on a GPU: the brick P2G's
-    sorts), births, the brick P2G's scratch, and the dense grid. An estimate for the budget
+    sorts), variation factors, births, the brick P2G's scratch, and the dense grid. An estimate for the budget
     line before a run, not an allocator's count (Warp's own pools and the kernels come on top)."""
     per = 12 + 12 + 36 + 4 + 4  # x, v, C, Jp, alive
     per += (36 + 24) if flags.solid else 0  # F, tau
     per += 4 if flags.water else 0  # J
     consts = 6 * 4 * (2 if gpu else 1)  # mass, volume, material, body, field_id, pid
+    consts += 20 if flags.varied else 0  # the variation factors (one copy: read by particle)
     brick = 28 if gpu else 0
     nodes = (grid_n + 1) ** 3
     grid = nodes * (12 + (4 * 8 if deterministic else 16))  # grid_v, and fixed-point or float mass+momentum

@@ -18,7 +18,16 @@ import functools
 
 import warp as wp
 
-from .constitutive import MODE_SAND, MODE_SNOW, MODE_WATER, MaterialParams, solid_energy_density, tait_energy_density
+from .constitutive import (
+    MODE_SAND,
+    MODE_SNOW,
+    MODE_WATER,
+    MaterialParams,
+    solid_energy_density,
+    tait_energy_density,
+    vary_material,
+    vec5,
+)
 from .state import SceneFlags, load_m33
 from .stepper import chunk_particle
 
@@ -32,6 +41,7 @@ def make_report(flags: SceneFlags):
     partial[b] = thread b's SUMS columns over its ENERGY_CHUNK live particles, float64."""
     has_solid = flags.solid
     has_water = flags.water
+    varied = flags.varied
 
     @wp.kernel(enable_backward=False, module=flags.key)
     def report_partials(
@@ -47,6 +57,8 @@ def make_report(flags: SceneFlags):
         n: int,
         coalesced: int,
         partial: wp.array2d(dtype=wp.float64),
+        vary: wp.array(dtype=vec5),
+        pid: wp.array(dtype=wp.int32),
     ):
         b = wp.tid()
         acc = wp.vector(length=SUMS, dtype=wp.float64)
@@ -56,6 +68,8 @@ def make_report(flags: SceneFlags):
                 break
             if alive[p] != 0:
                 mat = materials[material[p]]
+                if wp.static(varied):
+                    mat = vary_material(mat, vary[pid[p]])
                 psi = float(0.0)
                 if wp.static(has_solid):
                     if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:

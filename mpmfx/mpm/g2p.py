@@ -29,6 +29,8 @@ from .constitutive import (
     solid_tau,
     sym6,
     uninvert,
+    vary_material,
+    vec5,
     vec6,
 )
 from .slots import Count, Stat
@@ -217,6 +219,7 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
     recovery = flags.volume_recovery
     multi = flags.multi_field
     one = flags.one_material
+    varied = flags.varied
 
     # registers capped (g2p_launch_shape): a solid's return map took the compiler to 128, which
     # leaves a multiprocessor 512 threads
@@ -268,6 +271,7 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
         body_out: wp.array(dtype=wp.int32),
         field_id_out: wp.array(dtype=wp.int32),
         pid_out: wp.array(dtype=wp.int32),
+        vary: wp.array(dtype=vec5),
     ):
         slot = wp.tid()
         if wp.static(device_clock):
@@ -319,6 +323,11 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
             if wp.static(not one):
                 mid = material[p]
             mat = materials[mid]
+            wave = float(1.0)  # the particle's stiffness / density factor (snow: on its hardening statistic)
+            if wp.static(varied):
+                f = vary[pid[p]]  # (particle order: pid, as slots move)
+                mat = vary_material(mat, f)
+                wave = f[4]
             j_now = float(1.0)
             finite = bool(True)
             if wp.static(has_solid):
@@ -332,7 +341,10 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
                         j_now = j_trial
                     finite = wp.isfinite(F_new) and wp.isfinite(jp_new)
                     if mat.mode == MODE_SNOW:
-                        wp.atomic_max(stats, Stat.MAX_HARDENING, hardening_factor(mat, jp_new))
+                        h = hardening_factor(mat, jp_new)
+                        if wp.static(varied):
+                            h = h * wave
+                        wp.atomic_max(stats, Stat.MAX_HARDENING, h)
             if wp.static(has_water):
                 if mat.mode == MODE_WATER:
                     # water keeps only its volume ratio: J^{n+1} = det(I + dt C) J^n
@@ -384,10 +396,16 @@ def solid_stress(
     F: wp.array2d(dtype=wp.vec3),
     Jp: wp.array(dtype=float),
     tau: wp.array(dtype=vec6),
+    vary: wp.array(dtype=vec5),
+    pid: wp.array(dtype=wp.int32),
+    varied: int,
 ):
     """tau (n,) of every snow and sand particle from its F and Jp (solid_tau), for a state
-    that has no stored stress yet (a new one, or a checkpoint written before G2P stored it)."""
+    that has no stored stress yet (a new one, or a checkpoint written before G2P stored it).
+    varied: 1 to apply the particles' own factors (vary, in particle order: see State)."""
     p = wp.tid()
     mat = materials[material[p]]
+    if varied != 0:
+        mat = vary_material(mat, vary[pid[p]])
     if mat.mode == MODE_SNOW or mat.mode == MODE_SAND:
         tau[p] = sym6(solid_tau(mat, load_m33(F, p), Jp[p]))

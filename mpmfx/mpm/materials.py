@@ -14,7 +14,7 @@ import enum
 import math
 from dataclasses import dataclass
 
-__all__ = ["Mode", "Material", "PRESETS", "preset"]
+__all__ = ["Mode", "Material", "PRESETS", "VARIED_FIELDS", "VARIED_BY_MODE", "preset"]
 
 
 class Mode(enum.IntEnum):
@@ -212,6 +212,18 @@ PRESETS: dict[str, Material] = {
     "Water": Material(Mode.WATER, bulk_modulus=100.0),
     "Tracer": Material(Mode.TRACER),
 }
+
+
+VARIED_FIELDS = ("youngs_modulus", "hardening", "friction_angle", "cohesion", "density")
+"""The columns of a particle's variation multipliers, in order. Each multiplies the material's
+field, except friction_angle's, which multiplies the friction coefficient tan(friction_angle):
+any factor > 0 keeps the angle in [0, 90) degrees."""
+
+VARIED_BY_MODE = {
+    Mode.SNOW: ("youngs_modulus", "hardening", "density"),
+    Mode.SAND: ("youngs_modulus", "friction_angle", "cohesion", "density"),
+}
+"""The fields a mode has a use for (water and tracers: none)."""
 
 
 def preset(name: str, **overrides) -> Material:

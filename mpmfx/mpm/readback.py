@@ -111,6 +111,8 @@ def checkpoint(solver, state: State, t: float) -> dict[str, np.ndarray]:
             "body": state.body,
         },
     )
+    if state.variation is not None:  # a varied scene's multipliers (particle order): the factors and dt follow
+        data["variation"] = state.variation
     data["pid"] = state.pid.numpy()
     if state.birth is not None:  # pending births (+inf: born), by particle
         data["birth"] = state.birth.numpy()

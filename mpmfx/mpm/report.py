@@ -92,6 +92,8 @@ def particle_sums(solver, state: State) -> np.ndarray:
             state.n,
             int(solver.device.is_cuda),
             part,
+            state.vary,
+            state.pid,
         ],
     )
     return sum_partials(part, solver.device)

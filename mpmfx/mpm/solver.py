@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -27,7 +26,7 @@ from .chunked import DeviceAdvance
 from .clear_grid import clear_grid
 from .colliders import Collider, ColliderParams, concat_sdfs, pack_colliders
 from .config import OutOfDomain, SolverConfig
-from .constitutive import MaterialParams, pack_material
+from .constitutive import MaterialParams, pack_material, vec5
 from .emission import activate
 from .energy import make_report
 from .errors import SimulationError, raise_too_small, too_many
@@ -36,34 +35,16 @@ from .grid_update import GridParams, make_grid_update
 from .materials import Material, Mode
 from .order import to_slots
 from .p2g import FIXED_POINT_BITS, P2GParams, make_p2g
+from .particles import Particles, check_particles
 from .report import StepReport, particle_sums, step_report
 from .slots import REJECTING, Count, Stat
 from .state import ParticleBuffers, SceneFlags, State, StepperClock, m33_assign
 from .stepper import SubstepDev
+from .variation import DENSITY, state_factors
 
 __all__ = ["Particles", "Solver", "StepReport", "SimulationError"]
 
 MAX_FIELDS = 8  # multi-field contact: grid memory grows with the number of fields
-
-
-@dataclass
-class Particles:
-    """Solver input (host, numpy).
-
-    x: (n, 3) float32 domain units, inside [0, 1]; v: (n, 3) float32 domain/s;
-    volume: (n,) float32 rest volume, domain^3 (mass = volume * material density);
-    material: (n,) int32 index into the solver's materials; body: (n,) int32 object id;
-    birth: (n,) float32 shot time (s) at which each particle enters, or None (all there at the
-    start): one with birth > 0 is dormant until the first substep starting at or after it
-    (emission.py), with its x and v then.
-    """
-
-    x: np.ndarray
-    v: np.ndarray
-    volume: np.ndarray
-    material: np.ndarray
-    body: np.ndarray
-    birth: np.ndarray | None = None
 
 
 def _pow2_at_least(x: float) -> float:
@@ -78,6 +59,8 @@ class Solver:
     stepper: "device" runs `advance` in chunks of substeps decided and colliders posed on the
     device (stepper.py), "host" the reference loop that reads the
     statistics back after every substep; both give the same substeps and results.
+    variation: particles carry multipliers of their material's fields (Particles.variation);
+    the kernels read them only then (SceneFlags.varied).
     """
 
     def __init__(
@@ -89,6 +72,7 @@ class Solver:
         animated: Sequence[AnimatedMesh] = (),
         device: str | None = None,
         stepper: str = "device",
+        variation: bool = False,
     ):
         self.materials = tuple(materials)
         if not self.materials:
@@ -99,7 +83,8 @@ class Solver:
         self.config = config
         self.colliders = tuple(colliders)
         self.device = wp.get_device(device)
-        self.flags = SceneFlags.of(self.materials, multi_field=config.multi_field)
+        self.flags = SceneFlags.of(self.materials, multi_field=config.multi_field, varied=variation)
+        self._wave_materials = self.materials  # the CFL's materials: the stiffest particle's moduli (variation.py)
         # specialised kernels for this scene: all three land in one Warp module per flags,
         # built before the first launch so the module compiles once
         # [device_clock]: the reference kernels, and the device stepper's (stepper.py)
@@ -165,39 +150,17 @@ class Solver:
             )
         return ids.astype(np.int32), len(bodies)
 
-    def _check_particles(self, p: Particles) -> int:
-        x = np.asarray(p.x)
-        n = x.shape[0] if x.ndim == 2 else -1
-        shapes = {"x": (n, 3), "v": (n, 3), "volume": (n,), "material": (n,), "body": (n,)}
-        for name, shape in shapes.items():
-            arr = np.asarray(getattr(p, name))
-            if n < 1 or arr.shape != shape:
-                raise ValueError(f"Particles.{name}: shape {arr.shape}, expected {shape} with n >= 1")
-            if arr.dtype.kind == "f" and not np.all(np.isfinite(arr)):
-                raise ValueError(f"Particles.{name}: contains NaN or inf; fix the particle source")
-        if x.min() < 0.0 or x.max() > 1.0:
-            raise ValueError(
-                "Particles.x: positions outside the domain [0, 1]^3 (min %.3g, max %.3g); map world "
-                "space into the domain before simulating" % (x.min(), x.max())
-            )
-        mat = np.asarray(p.material)
-        if mat.min() < 0 or mat.max() >= len(self.materials):
-            raise ValueError(
-                f"Particles.material: indices must be in [0, {len(self.materials) - 1}] "
-                f"(the solver has {len(self.materials)} materials), got {mat.min()}..{mat.max()}"
-            )
-        if np.any(np.asarray(p.volume) <= 0):
-            raise ValueError("Particles.volume: rest volumes must be > 0 (domain units^3)")
-        return n
-
     def init_state(self, particles: Particles) -> State:
         """Upload particles; F = I, C = 0, J = Jp = 1, alive = 1 (0: dormant until its birth)."""
-        n = self._check_particles(particles)
+        n = check_particles(particles, len(self.materials), varied=self.flags.varied)
         mat_idx = np.asarray(particles.material, dtype=np.int32)
         density = np.array([m.density for m in self.materials], dtype=np.float64)
         tracer = np.array([m.mode == Mode.TRACER for m in self.materials])
         volume = np.asarray(particles.volume, dtype=np.float32)
-        mass = np.where(tracer[mat_idx], 0.0, volume * density[mat_idx]).astype(np.float32)
+        rho = density[mat_idx]
+        if self.flags.varied:  # the density multiplier acts on the mass alone
+            rho = rho * np.asarray(particles.variation, np.float64)[:, DENSITY]
+        mass = np.where(tracer[mat_idx], 0.0, volume * rho).astype(np.float32)
         data = {
             "x": np.asarray(particles.x, np.float32),
             "v": np.asarray(particles.v, np.float32),
@@ -217,14 +180,20 @@ class Solver:
             data["alive"] = (~dormant).astype(np.int32)
             data["birth"] = np.where(dormant, np.asarray(particles.birth, np.float32), np.float32(np.inf))
             speed = speed[~dormant] if (~dormant).any() else np.zeros(1)
+        if self.flags.varied:
+            data["variation"] = np.asarray(particles.variation, np.float32)
         clock = StepperClock(max_speed=float(speed.max()))
-        return self._build_state(data, clock)
+        state = self._build_state(data, clock)
+        if self.flags.varied:  # the stiffest snow particle's waves, before G2P reports them
+            state.clock.max_hardening = self._first_hardening
+        return state
 
     def _build_state(self, data: dict, clock: StepperClock) -> State:
         """data: arrays in particle order, and `pid` (a checkpoint's: the slot order to restore)."""
         n = int(data["x"].shape[0])
         pid = np.asarray(data["pid"], np.int32) if "pid" in data else np.arange(n, dtype=np.int32)
         permuted = bool(np.any(pid != np.arange(n)))
+        vary = state_factors(self, data)  # from the particle-order materials, before they move into slots
         if permuted:  # back into the slots they were in, so a resumed run sums as the first did
             per_particle = (*ParticleBuffers.NAMES, "mass", "volume", "material", "body")
             data = {k: to_slots(np.asarray(v), pid, n) if k in per_particle else v for k, v in data.items()}
@@ -252,6 +221,8 @@ class Solver:
                 n_fields=n_fields,
                 clock=clock,
                 permuted=permuted,
+                vary=wp.array(vary, dtype=vec5),
+                variation=np.asarray(data["variation"], np.float32) if self.flags.varied else None,
             )
             if "birth" in data:  # in particle order (State.birth)
                 state.birth = wp.array(np.asarray(data["birth"], np.float32), dtype=wp.float32)
@@ -269,12 +240,9 @@ class Solver:
         """Recompute the stored stress (state.cur.tau) of every solid from its F and Jp. G2P
         keeps it current; call this after writing F or Jp of `state.cur` directly."""
         if self.flags.solid:
-            wp.launch(
-                solid_stress,
-                dim=state.n,
-                device=self.device,
-                inputs=[self._materials_dev, state.material, state.cur.F, state.cur.Jp, state.cur.tau],
-            )
+            cur, varied = state.cur, int(self.flags.varied)
+            inputs = [self._materials_dev, state.material, cur.F, cur.Jp, cur.tau, state.vary, state.pid, varied]
+            wp.launch(solid_stress, dim=state.n, device=self.device, inputs=inputs)
 
     # ------------------------------------------------------------------ one substep
     def step(self, state: State, dt: float, *, t: float = 0.0) -> None:
@@ -468,6 +436,7 @@ class Solver:
                 state.body,
                 state.pid,
                 *outs,
+                state.vary,
             ],
         )
         if permute:
@@ -500,7 +469,7 @@ class Solver:
             m.wave_speed(
                 hardening_factor=max(1.0, clock.max_hardening) if m.mode == Mode.SNOW else 1.0, j_min=clock.water_j_min
             )
-            for m in self.materials
+            for m in self._wave_materials
         )
 
     def _cfl_dt(self, clock: StepperClock) -> float:

@@ -29,6 +29,7 @@ class SceneFlags:
     A water-only scene compiles no SVD and keeps no F; a snow-only scene keeps no J;
     only a scene with water volume recovery compiles the grid-density gather; a scene of one
     material reads no particle's material index (it is 0), and one of one field no field index.
+    varied: particles carry their own factors on their material's row (State.vary).
     """
 
     snow: bool
@@ -37,9 +38,10 @@ class SceneFlags:
     multi_field: bool = False
     volume_recovery: bool = False
     one_material: bool = False
+    varied: bool = False
 
     @classmethod
-    def of(cls, materials, *, multi_field: bool = False) -> "SceneFlags":
+    def of(cls, materials, *, multi_field: bool = False, varied: bool = False) -> "SceneFlags":
         modes = {m.mode for m in materials}
         recovery = any(m.mode == Mode.WATER and m.volume_recovery for m in materials)
         return cls(
@@ -49,6 +51,7 @@ class SceneFlags:
             bool(multi_field),
             recovery,
             len(materials) == 1,
+            bool(varied),
         )
 
     @property
@@ -66,6 +69,7 @@ class SceneFlags:
             ("m", self.multi_field),
             ("r", self.volume_recovery),
             ("1", self.one_material),
+            ("v", self.varied),
         )
         tag = "".join(c for c, on in flags if on)
         return f"mpmfx_mpm_scene_{tag or 'tracer'}"
@@ -153,7 +157,8 @@ class StepperClock:
     Checkpointed with the state so a resumed run picks exactly the same dt sequence.
     dt_scale: factor in (0, 1] on the CFL step, halved per rejected substep and regrown by
     1.25x per accepted one; max_speed: |v|max of the last accepted substep, domain/s;
-    max_hardening: largest exp(xi (1 - Jp)) among snow particles; water_j_min: smallest
+    max_hardening: largest exp(xi (1 - Jp)) among snow particles (with variation, each times the
+    particle's stiffness / density factor: variation.py); water_j_min: smallest
     J among water particles; substeps: accepted substeps since init_state; sort_every: the
     brick P2G's re-sort cadence the last advance ended with (0: none yet; chunked.py).
     """
@@ -194,7 +199,11 @@ class State:
     Storage order: on a GPU the brick P2G keeps the particles themselves in its sort order (a
     sorting substep's G2P writes them there, p2g_brick.py), so every array above is in slot
     order, not particle order: `Solver.host_arrays` and `checkpoint` give them back in particle
-    order (`birth`, where there is one, is indexed by particle). The constants' other copy (`spare`, CONSTS order) is where a sorting G2P writes the
+    order (`birth`, where there is one, is indexed by particle). vary: (n,) vec5 material factors
+    of a varied scene (SceneFlags.varied; variation.variation_factors), in particle order (read
+    through pid), else (1,) unused; variation: its (n, 5) host multipliers (Particles.variation),
+    which a checkpoint carries. The constants' other copy (`spare`, CONSTS order) is where a
+    sorting G2P writes the
     permuted ones; `swap_consts` makes it current.
     """
 
@@ -213,6 +222,8 @@ class State:
     permuted: bool = False  # whether slots may differ from particles (pid not the identity)
     birth: wp.array | None = None  # (n,) float32 by particle: pending birth, s (emission.py), or None
     birth_host: np.ndarray | None = None  # the births sorted, float64 (which advances wake particles)
+    vary: wp.array | None = None
+    variation: np.ndarray | None = None
 
     CONSTS = ("mass", "volume", "material", "body", "field_id", "pid")
 

@@ -7,15 +7,15 @@
 from __future__ import annotations
 
 import contextlib
-import json
 import socket
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from mpmfx.cache import Cache, Entry, code_hash, default_root, remove_temps
-from mpmfx.config import Shot, ShotError, load_shot_config
+from mpmfx.cache import Cache, Entry, code_hash, default_root, read_manifest, remove_temps
+from mpmfx.config import Shot, ShotError
 from mpmfx.publish import check_publishable, publish_renders, publish_stage, record, sweep
+from mpmfx.shotfile import load_shot_config
 from mpmfx.stages import STAGES, export, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage, StageError
 from mpmfx.stages.parallel import Frames
@@ -265,9 +265,8 @@ def _ranges(frames: list[int]) -> str:
 
 def _why_stale(entry: Entry, other: Path) -> str:
     """Name the key inputs that differ from the newest other entry of the same stage."""
-    try:
-        old = json.loads((other / "manifest.json").read_text())["key_inputs"]
-    except (OSError, KeyError, ValueError):
+    old = (read_manifest(other) or {}).get("key_inputs")
+    if old is None:
         return "parameters or inputs changed"
     new = entry.key_inputs
     changed = []

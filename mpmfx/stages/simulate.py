@@ -24,10 +24,11 @@ from mpmfx.cache import file_hash, write_json
 from mpmfx.config import ColliderShape, Shot, ShotError
 from mpmfx.geometry import MESH_LOADING
 from mpmfx.geometry.colliders import collider_mesh, keyframes, mesh_sdf
+from mpmfx.geometry.noise import fourier_noise
 from mpmfx.io.frames import ParticleFrame, SeedParticles, read_arrays, write_arrays
 from mpmfx.mpm import AnimatedMesh, Collider, ColliderKind, Particles, SimulationError, Solver
 from mpmfx.mpm.emission import device_bytes
-from mpmfx.mpm.materials import preset
+from mpmfx.mpm.materials import VARIED_FIELDS, preset
 from mpmfx.stages.base import Context, StageError, quiet_warp
 from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
 from mpmfx.stages.writer import FrameWriter
@@ -39,6 +40,7 @@ CODE = (
     "mpmfx.stages.colliders",
     "mpmfx.geometry.colliders",
     "mpmfx.geometry.animated",
+    "mpmfx.geometry.noise",
     *MESH_LOADING,
     "mpmfx.geometry.voxelise",
     "mpmfx.geometry.inside",
@@ -62,7 +64,29 @@ def params(shot: Shot) -> dict:
         "object_material": object_material,
         "colliders": [collider_key(c) for c in shot.colliders],
         "time": {"fps": shot.shot.fps, "frame_start": shot.shot.frame_start},
+        # (only where an object has one: a shot without variation keeps its key's inputs)
+        **({"variation": [o.variation and o.variation.model_dump() for o in shot.objects]} if _varied(shot) else {}),
     }
+
+
+def _varied(shot: Shot) -> bool:
+    return any(o.variation is not None for o in shot.objects)
+
+
+def variation(shot: Shot, x: np.ndarray, body: np.ndarray) -> np.ndarray:
+    """(n, 5) float32 multipliers of VARIED_FIELDS at rest positions x (n, 3), m, of the
+    particles of objects `body` (n,): exp(amplitude * noise), one seeded noise per object and
+    field (mpmfx.geometry.noise); 1 for objects without variation."""
+    out = np.ones((len(x), len(VARIED_FIELDS)), np.float32)
+    for b, obj in enumerate(shot.objects):
+        var, rows = obj.variation, body == b
+        if var is None or not rows.any():
+            continue
+        for j, name in enumerate(VARIED_FIELDS):
+            if getattr(var, name) > 0:
+                n = fourier_noise(x[rows], var.feature_size, (var.seed, j))
+                out[rows, j] = np.exp(getattr(var, name) * n)
+    return out
 
 
 def inputs(shot: Shot) -> dict[str, str]:
@@ -145,7 +169,12 @@ def run(ctx: Context) -> dict:
     origin, size = np.asarray(shot.domain.origin), shot.domain.size
     mats, obj_mat = materials(shot)
     solver = Solver(
-        mats, shot.solver_config(), colliders=colliders(shot), animated=animated_meshes(shot), device=ctx.device
+        mats,
+        shot.solver_config(),
+        colliders=colliders(shot),
+        animated=animated_meshes(shot),
+        device=ctx.device,
+        variation=_varied(shot),
     )
     start, fps = shot.shot.frame_start, shot.shot.fps
     last = max(ctx.frames)
@@ -161,6 +190,7 @@ def run(ctx: Context) -> dict:
                 material=np.asarray(obj_mat, np.int32)[body],
                 body=body,
                 birth=None if p.birth is None else p.birth.astype(np.float32),
+                variation=variation(shot, p.x, body) if _varied(shot) else None,
             )
             _budget(ctx, solver, p)
             state, frame = solver.init_state(parts), start

@@ -9,7 +9,7 @@ from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING
 
 
 def test_fine_is_the_surface_stage_setting_at_the_shipped_radius():
-    from mpmfx.config import load_shot_config
+    from mpmfx.shotfile import load_shot_config
     from mpmfx.stages.surface import surface_params
 
     shot = load_shot_config(

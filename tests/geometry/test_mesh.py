@@ -333,3 +333,22 @@ def test_an_unreadable_fbx_is_named_with_the_fix(tmp_path):
     bad.write_bytes(b"not an fbx file at all")
     with pytest.raises(MeshError, match=r"broken\.fbx: Blender could not read it.*export the asset as USD"):
         load_mesh(bad)
+
+
+def test_a_blender_child_that_hangs_is_stopped_with_a_message(tmp_path, monkeypatch):
+    """A rig with a scripted driver makes Blender wait at exit forever: the read must end, name
+    the file and say what to do."""
+    import sys
+    import time
+
+    from mpmfx.geometry import mesh as mesh_module
+
+    asset = tmp_path / "rig.blend"
+    asset.write_bytes(b"BLENDER")
+    monkeypatch.setattr(mesh_module, "bpy_available", lambda: True)
+    monkeypatch.setattr(mesh_module, "child_command", lambda *a: [sys.executable, "-c", "import time; time.sleep(60)"])
+    monkeypatch.setenv("MPMFX_BLENDER_TIMEOUT", "1")
+    t0 = time.monotonic()
+    with pytest.raises(MeshError, match=r"rig\.blend: Blender did not finish within 1 s.*driver"):
+        load_mesh(asset)
+    assert time.monotonic() - t0 < 20

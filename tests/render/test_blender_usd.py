@@ -158,9 +158,9 @@ def test_cycles_render_stage_draws_the_looks(exported):
 
 def test_material_lands_on_the_drawn_ground(exported):
     """The renders' ground is the solver's floor (the top of its wall band), where material stops."""
-    from mpmfx.config import load_shot_config
     from mpmfx.io.frames import ParticleFrame
     from mpmfx.render.camera import solver_floor
+    from mpmfx.shotfile import load_shot_config
 
     _, shot_path, entries = exported
     shot = load_shot_config(shot_path)

@@ -32,7 +32,7 @@ def test_only_a_mesh_collider_is_animated(tmp_path, capsys):
 
 
 def test_a_shot_without_animated_colliders_keeps_its_cache_key_inputs(tmp_path):
-    from mpmfx.config import load_shot_config
+    from mpmfx.shotfile import load_shot_config
     from mpmfx.stages import simulate
 
     box = '\n[[colliders]]\nname = "paddle"\nshape = "box"\n'

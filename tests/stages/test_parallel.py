@@ -12,7 +12,8 @@ import pytest
 from distributed import WorkerPlugin
 
 from mpmfx.cache import TEMP_GLOB
-from mpmfx.config import ShotError, load_shot_config
+from mpmfx.config import ShotError
+from mpmfx.shotfile import load_shot_config
 from mpmfx.stages.parallel import Frames, worth_a_cluster
 from mpmfx.stages.runner import ShotRun
 from mpmfx.wedge import parse_vary, pick, run_wedge, variant_shots, write_sheets

@@ -153,8 +153,8 @@ def test_sharp_edges_is_a_surface_knob(first_run, tmp_path, capsys):
     rounds its edges in the first frame (only surface re-runs); a value that is not a boolean is a
     config error naming the field."""
     from mpmfx.cli import main
-    from mpmfx.config import load_shot_config
     from mpmfx.io.frames import SurfaceFrame
+    from mpmfx.shotfile import load_shot_config
     from mpmfx.stages.surface import surface_params
 
     shot, cache, first = first_run

@@ -327,3 +327,18 @@ def test_a_surfacing_error_keeps_the_frames_before_it_and_a_rerun_resumes(tmp_pa
     monkeypatch.setattr(surface_stage, "_surfaces", real)
     assert {r.stage: r.state for r in run.run(until="surface")}["surface"] == "resumed"
     assert len(list(entry.frames_dir.glob("[0-9]*.npz"))) == len(run.entries()["simulate"].done_frames("npz"))
+
+
+@pytest.mark.parametrize("text", ['{"files": []}', '{"frames": null}', "[1, 2]"])
+def test_a_hand_edited_manifest_is_redone_not_a_traceback(tmp_path, monkeypatch, capsys, text):
+    shot = write_tiny_shot(tmp_path, frame_end=2)
+    monkeypatch.chdir(tmp_path)
+    cache = str(tmp_path / "cache")
+    assert main(["run", str(shot), "--until", "surface", "--cache", cache, "-q"]) == 0
+    run = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
+    entry = run.entries()["surface"]
+    entry.manifest_path.write_text(text)
+    assert main(["status", str(shot), "--cache", cache]) == 0
+    assert "surface" in capsys.readouterr().out
+    assert main(["run", str(shot), "--until", "surface", "--cache", cache, "-q"]) == 0
+    assert entry.complete()  # its frames kept, its manifest written again
