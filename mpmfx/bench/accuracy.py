@@ -6,9 +6,10 @@ and particles per cell, error against the exact solution) and in time (halve dt 
 error against the smallest-CFL run: self-convergence, since the spatial error does not vanish
 with dt), and writes accuracy.csv/json, orders.csv/json and accuracy.png (speed against error,
 log-log) under `out`. Then the experiments section (mpmfx.bench.lab): dam break and granular
-column collapse against published laboratory data at three resolutions, with their error
-trend, experiments.csv/json, experiments_trend.csv and experiments_{water,sand}.png. Needs numpy + warp + mpmfx.mpm only; the PNG needs pyvista and is
-skipped with a message without it.
+column collapse against published laboratory data, and a poured pile's repose angle against
+the friction angle (mpmfx.bench.pile), at three resolutions, with their error trend,
+experiments.csv/json, experiments_trend.csv and experiments_{water,sand}.png. Needs numpy +
+warp + mpmfx.mpm only; the PNG needs pyvista and is skipped with a message without it.
 """
 
 from __future__ import annotations

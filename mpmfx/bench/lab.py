@@ -6,6 +6,8 @@
   Lajeunesse et al. 2005 (quasi-2D) and Lube et al. 2004 (axisymmetric): the Granular preset
   as shipped, and the "repose" fit at a range of angles of repose (the materials differ:
   Lube's natural sands, rice and sugar, Lajeunesse's glass beads);
+- pile: sand poured from a hopper heaps into a cone whose slope (its angle of repose) is
+  compared with the material's friction angle (mpmfx.bench.pile);
 - snow: the confined-compression table derived from Stomakhin et al. 2013 (the paper's
   constants; docs/physics.md, "Validation"), a per-particle check of the return map (no grid, so one resolution).
 Each at the sweep's resolutions; rows carry the source, the error and the cells across the
@@ -23,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from mpmfx.bench import experiments as ex
+from mpmfx.bench import pile
 from mpmfx.bench.plot import COLORS
 from mpmfx.bench.snow_table import snow_compression
 from mpmfx.render import import_pyvista
@@ -34,7 +37,8 @@ DATA = Path(__file__).parent / "data"
 class LabSweep:
     """dam_grids / sand_grids / axi_grids: grid_n of each resolution; ppz: particles per cell
     across the channel depth (the flow is uniform there); aspects: a = H0 / L0; materials:
-    (friction_fit, friction_angle in degrees) of each Granular variant."""
+    (friction_fit, friction_angle in degrees) of each Granular variant; pile_grids: grid_n of
+    each poured pile, of the Granular preset as shipped."""
 
     dam_grids: tuple = (16,)
     dam_width: float = 0.25
@@ -45,6 +49,7 @@ class LabSweep:
     axi_grids: tuple = ()
     axi_aspects: tuple = (1.0,)
     ppz: int = 1
+    pile_grids: tuple = (32,)
 
 
 QUICK = LabSweep(axi_grids=(16,))
@@ -57,6 +62,7 @@ FULL = LabSweep(
     materials=(("compression", 38.0),) + tuple(("repose", p) for p in (24.0, 28.0, 32.0, 36.0)),
     axi_grids=(32, 64, 128),
     axi_aspects=(0.5, 1.0, 2.0, 4.0),
+    pile_grids=(32, 48, 64),
 )
 
 
@@ -187,6 +193,37 @@ def sand_rows(sweep: LabSweep, device) -> tuple[list[dict], list]:
     return rows, runs
 
 
+def pile_rows(sweep: LabSweep, device) -> list[dict]:
+    """The poured pile's repose angle against the Granular preset's friction angle."""
+    rows = []
+    for n in sweep.pile_grids:
+        p = pile.pour(grid_n=n, device=device)
+        phi = p.extra["friction_angle"]
+        print(
+            f"  pile grid {n}: repose angle {p.angle:.1f} deg (outer flank {p.extra['outer_angle']:.1f}; "
+            f"friction angle {phi:g}), radius "
+            f"{p.extra['cells_across']:.1f} cells, {p.particles} particles, {p.wall_s:.1f} s",
+            flush=True,
+        )
+        rows.append(
+            {
+                "case": f"pile {p.extra['fit']} {phi:g}",
+                "reference": "friction_angle",
+                "grid_n": n,
+                "cells_across": p.extra["cells_across"],
+                "value": p.angle,
+                "law": phi,
+                "error": p.angle / phi - 1.0,
+                "metric": "repose angle / friction angle - 1",
+                "outer_angle": p.extra["outer_angle"],
+                "particles": p.particles,
+                "wall_s": p.wall_s,
+                "device": p.device,
+            }
+        )
+    return rows
+
+
 def snow_rows(device) -> list[dict]:
     row = snow_compression(device=device)
     return [
@@ -244,7 +281,7 @@ def run_lab(sweep: LabSweep, device=None) -> tuple[list[dict], dict]:
             for r in s_runs
         ],
     }
-    return w_rows + s_rows + snow_rows(device), series
+    return w_rows + s_rows + pile_rows(sweep, device) + snow_rows(device), series
 
 
 def lab_plot(series: dict, out, *, name: str = "experiments") -> list[Path]:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from mpmfx.bench import accuracy, cases
@@ -46,7 +48,7 @@ def test_plot_and_tables_are_written(tmp_path):
     assert img.shape[:2] == (700, 1000) and np.ptp(img) > 0  # not a blank image
 
 
-def test_experiments_section_runs_and_reads_its_sources(tmp_path):
+def test_experiments_section_runs_and_reads_its_sources(tmp_path, monkeypatch):
     """The quick experiments section: every row finite, the data files' laws match the code's."""
     from mpmfx.bench import experiments as ex
     from mpmfx.bench import lab
@@ -57,6 +59,7 @@ def test_experiments_section_runs_and_reads_its_sources(tmp_path):
             assert laws[name][k] == law[k], (name, k)
     refs = lab.water_references()
     assert set(refs) == {"martin_moyce_1952_a1.125in", "martin_moyce_1952_a2.25in", "koshizuka_oka_1996"}
+    monkeypatch.setattr(lab, "QUICK", dataclasses.replace(lab.QUICK, pile_grids=(16,)))  # grid 32 takes ~40 s here
     rows = accuracy.experiments(quick=True, device=None, out=tmp_path)
     assert rows and all(np.isfinite(r["error"]) for r in rows), rows
     assert (tmp_path / "experiments.csv").exists() and (tmp_path / "experiments_trend.csv").exists()
