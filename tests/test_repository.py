@@ -172,3 +172,9 @@ def test_images_are_exactly_those_the_docs_show():
     missing = sorted(p.relative_to(ROOT).as_posix() for p in shown if p.is_relative_to(images) and not p.exists())
     assert not uncited, "docs/images/ holds pictures no document shows (delete them):\n" + "\n".join(uncited)
     assert not missing, "documents show pictures that docs/images/ lacks:\n" + "\n".join(missing)
+
+
+def test_every_lab_script_has_its_line_in_the_lab_index():
+    index = (ROOT / "lab" / "README.md").read_text()
+    missing = [p.name for p in sorted((ROOT / "lab").glob("*.py")) if f"`{p.name}`" not in index]
+    assert not missing, f"lab/README.md: add a line for {missing} (what it measures, which figure it makes)"
