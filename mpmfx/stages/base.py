@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import sys
+import tempfile
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -75,13 +77,36 @@ class Stage(Protocol):
     def run(self, ctx: Context) -> dict: ...  # writes into ctx.entry; returns manifest extras
 
 
+NO_DRIVER = "Could not find or load the NVIDIA CUDA driver"  # Warp's native line on a CPU machine
+
+
 def quiet_warp(device: str | None = None) -> None:
     """Silence Warp's start-up banner and per-module compile lines (the stage has its own progress
-    bar), and check that the asked-for device exists before any kernel is built."""
+    bar), start it without its no-driver warning (a CPU machine is a supported one, not a fault),
+    and check that the asked-for device exists before any kernel is built."""
     wp.config.quiet = True
     wp.config.log_level = wp.LOG_WARNING  # Warp 1.19 prints module loads at INFO
+    _init_without(NO_DRIVER)
     if device and device.startswith("cuda") and not wp.is_cuda_available():
         raise StageError(
             "--device cuda: Warp finds no CUDA device or driver on this machine; "
             "run with --device cpu (the same kernels, slower) or on a GPU machine"
         )
+
+
+def _init_without(line: str) -> None:
+    """wp.init() with its native stderr captured, and written back less the lines holding
+    `line` (the library prints them from C, past Python's sys.stderr and Warp's own settings).
+    Once Warp has started, wp.init() prints nothing, so later calls pass nothing."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            wp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        captured.seek(0)
+        text = captured.read().decode(errors="replace")
+    sys.stderr.write("".join(s for s in text.splitlines(keepends=True) if line not in s))

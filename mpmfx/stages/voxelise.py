@@ -19,7 +19,7 @@ from mpmfx.geometry.thickness import Verdict, check_thickness, refine_for_heatma
 from mpmfx.geometry.voxelise import voxelise
 from mpmfx.io.frames import SeedParticles, write_arrays
 from mpmfx.render.thickness import render_thickness_heatmap
-from mpmfx.stages.base import Context, StageError
+from mpmfx.stages.base import Context, StageError, quiet_warp
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "voxelise", 1, False, "npz"
 CODE = (
@@ -60,6 +60,7 @@ def inputs(shot: Shot) -> dict[str, str]:
 
 
 def run(ctx: Context) -> dict:
+    quiet_warp()  # the inside tests may start Warp: without its no-driver warning on a CPU
     shot, dom = ctx.shot, ctx.shot.domain
     xs, vs, vols, bodies, births, reports = [], [], [], [], [], {}
     fluid = shot.fluid_objects()

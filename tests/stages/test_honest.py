@@ -148,6 +148,19 @@ def test_version_and_no_warp_banner_on_stdout():
     assert out.returncode == 0 and "Warp" not in out.stdout
 
 
+def test_a_run_on_a_machine_without_a_gpu_prints_no_cuda_warning(tmp_path):
+    """A CPU machine is a supported one: no driver warning from Warp on any run (on a GPU machine
+    Warp prints none either, so this holds on both)."""
+    import subprocess
+    import sys
+
+    shot = write_tiny_shot(tmp_path, frame_end=2)
+    cmd = [sys.executable, "-m", "mpmfx.cli", "run", str(shot), "--until", "surface", "-q"]
+    out = subprocess.run([*cmd, "--cache", str(tmp_path / "c")], capture_output=True, text=True, cwd=tmp_path)
+    assert out.returncode == 0, out.stderr
+    assert "CUDA warning" not in out.stderr and "NVIDIA CUDA driver" not in out.stderr
+
+
 def test_a_nan_mesh_vertex_is_bad_input_exit_2(tmp_path, capsys):
     shot = write_tiny_shot(tmp_path)
     lines = (tmp_path / "cube.obj").read_text().splitlines()
