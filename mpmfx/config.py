@@ -43,7 +43,9 @@ class _Section(BaseModel):
 class ShotInfo(_Section):
     name: str = Field(
         pattern=r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$",
-        description="Shot name; names the cache and renders/<name>/ (letters, digits, _ - ., not starting with '.').",
+        max_length=100,  # it names folders and files (with suffixes): far below a file system's 255
+        description="Shot name; names the cache and renders/<name>/ (letters, digits, _ - ., not starting "
+        "with '.'; at most 100 characters).",
     )
     frame_start: Int = Field(1, ge=0, description="First frame number (frame_start is the initial state, t = 0).")
     frame_end: Int = Field(48, ge=0, description="Last frame number, inclusive.")
@@ -52,7 +54,7 @@ class ShotInfo(_Section):
 
 class Domain(_Section):
     origin: Vec3 = Field((-1.0, 0.0, -1.0), description="World position (m) of the domain's min corner.")
-    size: Real = Field(2.0, gt=0, description="Edge of the cubic domain (m).")
+    size: Real = Field(2.0, gt=0, le=1.0e4, description="Edge of the cubic domain (m), at most 10 km.")
     grid_n: Int = Field(64, description="Grid cells per axis (8-4096, checked by the solver); dx = size / grid_n (m).")
 
 
@@ -187,7 +189,8 @@ class Solver(_Section):
 
     cfl: Real = Field(_SOLVER.cfl, description="CFL number: dt = cfl * dx / (c_max + |v|_max), in (0, 1].")
     gravity: Vec3 = Field(
-        (0.0, -STANDARD_GRAVITY, 0.0), description="Gravity (m/s^2, world); the solver sees it / domain.size."
+        (0.0, -STANDARD_GRAVITY, 0.0),
+        description="Gravity (m/s^2, world), at most 1000 m/s^2 (100 g) in size; the solver sees it / domain.size.",
     )
     damping: Real = Field(
         _SOLVER.damping,

@@ -41,8 +41,14 @@ def apply_override(data: dict, path: list[str], value: Any, *, source: str) -> N
                     f"[{'.'.join(path[:i])}] (0..{len(node) - 1})"
                 )
             node = node[int(part)]
-        else:
+        elif isinstance(node, dict):
             node = node.setdefault(part, {})
+        if not isinstance(node, (dict, list)):
+            have = ".".join(path[: i + 1])
+            raise ShotError(
+                f"{source}: --set {'.'.join(path)}: {have} is a single value ({node!r}), not a table; "
+                f"--set {have}=VALUE"
+            )
     last = path[-1]
     if isinstance(node, list):
         if not last.isdigit() or int(last) >= len(node):
@@ -138,9 +144,17 @@ def load_shot_config(path: str | Path, overrides: list[str] = ()) -> Shot:
     return shot
 
 
+MAX_GRAVITY = 1000.0  # m/s^2: 100 g, far past any stylised shot, far below a typo's 1e30
+
+
 def _check_semantics(shot: Shot, source: str) -> None:
     """Checks that need more than one field: frame order, file existence, time step bounds."""
     problems = []
+    if sum(g * g for g in shot.solver.gravity) > MAX_GRAVITY**2:
+        problems.append(
+            f"{source}: solver.gravity = {list(shot.solver.gravity)}: over {MAX_GRAVITY:g} m/s^2 (100 g) in size, "
+            f"no step can follow it; Earth's is [0, -9.81, 0]"
+        )
     if shot.shot.frame_end <= shot.shot.frame_start:
         problems.append(
             f"{source}: shot.frame_end ({shot.shot.frame_end}) must be after shot.frame_start ({shot.shot.frame_start})"

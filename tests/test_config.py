@@ -190,3 +190,33 @@ def test_bracketed_list_items_and_internal_keys_get_a_message_not_a_traceback(tm
     assert main([*args, "--set", "bogus_key=1"]) == 2
     err = capsys.readouterr().err
     assert "unknown key 'bogus_key'" in err and "base_dir" not in err and "source" not in err
+
+
+@pytest.mark.parametrize(
+    "override, words",
+    [
+        ("domain.size=1e300", "domain.size"),
+        ("domain.size.x=1", "--set domain.size=VALUE"),
+        ("solver.gravity=[0,-1e30,0]", "solver.gravity"),
+        ("shot.name=" + "a" * 300, "at most 100 characters"),
+    ],
+)
+def test_absurd_values_are_bad_input_naming_the_key(tmp_path, capsys, override, words):
+    from mpmfx.cli import main
+    from tests.conftest import write_tiny_shot
+
+    shot = write_tiny_shot(tmp_path)
+    assert main(["run", str(shot), "--until", "voxelise", "--cache", str(tmp_path / "c"), "--set", override]) == 2
+    assert words in capsys.readouterr().err
+    assert not (tmp_path / "c").exists()
+
+
+def test_a_step_set_by_speed_names_the_velocity_not_the_stiffness(tmp_path, capsys):
+    from mpmfx.cli import main
+    from tests.conftest import write_tiny_shot
+
+    shot = write_tiny_shot(tmp_path, frame_end=2)
+    args = ["run", str(shot), "--until", "simulate", "--cache", str(tmp_path / "c"), "-q"]
+    assert main([*args, "--set", "objects.0.velocity=[0,-1e6,0]"]) == 1
+    err = capsys.readouterr().err
+    assert "objects[0].velocity" in err and "soften" not in err

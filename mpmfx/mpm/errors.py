@@ -18,11 +18,14 @@ class SimulationError(RuntimeError):
     """The solver cannot continue without a knob change; the message says which. `field`: the
     SolverConfig knob whose limit was hit ("dt_min", "max_substeps_per_frame") or None;
     `needed`: what would have passed it (the substep dt in s, or the substeps the frame needs),
-    so a caller can phrase the advice in its own keys."""
+    so a caller can phrase the advice in its own keys; `speed_bound`: the particles' speed, not
+    the materials' wave speed, set the step (an initial velocity or a force, not a stiffness)."""
 
-    def __init__(self, message: str, *, field: str | None = None, needed: float | None = None):
+    def __init__(
+        self, message: str, *, field: str | None = None, needed: float | None = None, speed_bound: bool = False
+    ):
         super().__init__(message)
-        self.field, self.needed = field, needed
+        self.field, self.needed, self.speed_bound = field, needed, speed_bound
 
 
 def too_many(
@@ -58,6 +61,7 @@ def raise_too_small(solver, state: State, t: float, dt: float) -> None:
         f"or lower SolverConfig.dt_min if this dt is intended (a lower cfl only shrinks dt further)",
         field="dt_min",
         needed=dt,
+        speed_bound=state.clock.max_speed > solver.wave_speed(state.clock),
     )
 
 

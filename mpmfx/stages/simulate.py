@@ -260,6 +260,12 @@ def _advice(shot: Shot, exc) -> str:
     (the solver's own text names SolverConfig fields, which a shot file cannot set)."""
     what = str(exc).split(". Lower", 1)[0].split(". Raise", 1)[0]
     stiff = " or ".join(f"objects[{i}].overrides.youngs_modulus" for i in range(len(shot.objects)))
+    if exc.field == "dt_min" and getattr(exc, "speed_bound", False):
+        moving = " or ".join(f"objects[{i}].velocity" for i in range(len(shot.objects)))
+        return (
+            f"{what}. The particles' own speed sets this step, not a stiffness: check {moving} "
+            f"(m/s; the domain is {shot.domain.size:g} m across) and solver.gravity"
+        )
     if exc.field == "dt_min":
         dt = float(f"{exc.needed / 10:.0e}")  # a decade of room: the step keeps shrinking as things speed up
         return (
