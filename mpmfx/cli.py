@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import errno
+import math
 import os
 import sys
 from pathlib import Path
@@ -175,9 +176,13 @@ def _dispatch(args) -> int:
         if args.domain:
             try:
                 *o, s = (float(x) for x in args.domain.split(","))
-                assert len(o) == 3
+                assert len(o) == 3 and all(math.isfinite(v) for v in (*o, s)) and s > 0
             except (ValueError, AssertionError):
-                print(f"error: --domain {args.domain!r}: expected OX,OY,OZ,SIZE in metres", file=sys.stderr)
+                print(
+                    f"error: --domain {args.domain!r}: expected OX,OY,OZ,SIZE in metres, finite numbers, "
+                    f"SIZE above 0, e.g. --domain=-0.5,0,-0.5,1",
+                    file=sys.stderr,
+                )
                 return 2
             origin, size = tuple(o), s
         return run_check(

@@ -82,9 +82,16 @@ def parse_vary(text: str, *, log: bool = False) -> tuple[str, list[Any]]:
     if log:
         raise _bad(f"--vary {text!r}: --log goes with LO:HI:N, not a list of values")
     values = [_toml_value(part.strip()) for part in raw.split(",")]
-    if len(values) < 2 or len(set(map(repr, values))) != len(values):
+    if len(values) < 2 or len(set(map(_same_as, values))) != len(values):
         raise _bad(f"--vary {text!r}: give two or more different values")
     return key, values
+
+
+def _same_as(v: Any) -> tuple:
+    """What makes two values one variant: 1 and 1.0 are one number, true is no number."""
+    if isinstance(v, (int, float)) and not isinstance(v, bool):
+        return ("number", float(v))
+    return (type(v).__name__, repr(v))
 
 
 def _toml_value(raw: str) -> Any:

@@ -220,3 +220,14 @@ def test_a_step_set_by_speed_names_the_velocity_not_the_stiffness(tmp_path, caps
     assert main([*args, "--set", "objects.0.velocity=[0,-1e6,0]"]) == 1
     err = capsys.readouterr().err
     assert "objects[0].velocity" in err and "soften" not in err
+
+
+@pytest.mark.parametrize("domain", ["nan,0,0,1", "0,0,0,inf", "0,0,0,-1"])
+def test_check_refuses_a_domain_that_is_not_finite_naming_the_option(capsys, domain):
+    from pathlib import Path
+
+    from mpmfx.cli import main
+
+    asset = Path(__file__).resolve().parents[1] / "assets" / "snowball.obj"
+    assert main(["check", str(asset), f"--domain={domain}"]) == 2
+    assert "--domain" in capsys.readouterr().err
