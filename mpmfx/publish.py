@@ -39,7 +39,7 @@ def check_publishable(name: str, *, renders: Path = RENDERS, published: Path = P
     if name in RESERVED:
         raise PathError(f"shot.name {name!r}: renders/{name}/ belongs to `mpmfx {name}`; choose another name")
     out = child(renders, name)
-    if out.is_symlink() or (out.exists() and not (out / MARKER).is_file()):
+    if out.is_symlink() or (out.exists() and not _ours(out)):
         raise PathError(
             f"shot.name {name!r}: {out} exists and was not published by mpmfx (no {MARKER}), so a run "
             f"would replace it; choose another shot name, or move that folder away"
@@ -50,6 +50,13 @@ def check_publishable(name: str, *, renders: Path = RENDERS, published: Path = P
             f"shot.name {name!r}: {link} exists and is not the link mpmfx publishes; choose another "
             f"shot name, or move it away"
         )
+
+
+def _ours(out: Path) -> bool:
+    """A renders/<shot>/ that mpmfx made: published (its MARKER), or holding only wedges."""
+    if (out / MARKER).is_file():
+        return True
+    return out.is_dir() and all(p.is_dir() and p.name.startswith("wedge-") for p in out.iterdir())
 
 
 def sweep(name: str, *, renders: Path = RENDERS, published: Path = PUBLISHED) -> None:

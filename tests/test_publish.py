@@ -110,3 +110,11 @@ def test_clean_removes_the_published_link_it_would_leave_dangling(tmp_path, monk
     assert main(["clean", str(shot), "--stage", "export", "--yes", "--cache", cache]) == 0
     assert not link.is_symlink()
     assert "run the shot again to publish it" in capsys.readouterr().out
+
+
+def test_a_shot_whose_renders_hold_only_its_wedges_may_publish(tmp_path):
+    renders = tmp_path / "renders"
+    (renders / "s" / "wedge-surface.radius_scale").mkdir(parents=True)
+    check_publishable("s", renders=renders, published=tmp_path / "published")
+    publish_renders(_shot(), _render_entry(tmp_path), root=renders)
+    assert (renders / "s" / "wedge-surface.radius_scale").is_dir() and (renders / "s" / "published.json").is_file()
