@@ -143,7 +143,7 @@ class Frames:
             if self.scheduler:
                 try:
                     self._client = Client(self.scheduler, timeout="20s")
-                except (OSError, TimeoutError) as exc:
+                except (OSError, TimeoutError, ValueError) as exc:  # ValueError: not an address
                     raise ShotError(
                         f"--scheduler / ${SCHEDULER_ENV} = {self.scheduler!r}: no Dask scheduler "
                         f"answers there ({exc}); start one (dask scheduler) or check the address, "

@@ -149,6 +149,8 @@ class ShotRun:
         would replace a folder mpmfx did not make (PathError): exit 2, before anything runs."""
         if self.publish:
             check_publishable(self.shot.shot.name)
+        if getattr(self.executor, "scheduler", None):
+            self.executor.client()  # a farm that does not answer is said now, not after simulate
         for name in (until, *force):
             if name not in STAGES:
                 raise ShotError(f"unknown stage '{name}': one of {', '.join(STAGES)}")

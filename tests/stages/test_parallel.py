@@ -217,3 +217,14 @@ def test_auto_keeps_light_frames_serial(monkeypatch):
         out = ex.map(lambda job, f: seen.append(f) or f * 2, [(None, f) for f in range(12)], quiet=True)
         assert ex._cluster is None and ex._client is None
     assert out == [f * 2 for f in range(12)] and seen == list(range(12))
+
+
+def test_a_scheduler_address_that_is_no_address_is_refused_before_any_stage(tmp_path, capsys):
+    from mpmfx.cli import main
+
+    shot = write_tiny_shot(tmp_path)
+    cache = tmp_path / "cache"
+    code = main(["run", str(shot), "--until", "surface", "--cache", str(cache), "--scheduler", "bogus-address"])
+    assert code == 2
+    assert "--scheduler" in capsys.readouterr().err
+    assert not cache.exists()
