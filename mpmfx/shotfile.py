@@ -155,6 +155,13 @@ def _check_semantics(shot: Shot, source: str) -> None:
             f"{source}: solver.gravity = {list(shot.solver.gravity)}: over {MAX_GRAVITY:g} m/s^2 (100 g) in size, "
             f"no step can follow it; Earth's is [0, -9.81, 0]"
         )
+    dx = shot.domain.size / shot.domain.grid_n
+    if shot.surface.voxel_size is not None and shot.surface.voxel_size > dx:
+        problems.append(
+            f"{source}: surface.voxel_size = {shot.surface.voxel_size:g} m: over one simulation cell "
+            f"({dx:.3g} m), a level set cannot follow the particles (the surface comes out empty or "
+            f"blocky); leave it unset (half the particle spacing) or give at most {dx:.3g}"
+        )
     if shot.shot.frame_end <= shot.shot.frame_start:
         problems.append(
             f"{source}: shot.frame_end ({shot.shot.frame_end}) must be after shot.frame_start ({shot.shot.frame_start})"

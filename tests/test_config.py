@@ -199,6 +199,7 @@ def test_bracketed_list_items_and_internal_keys_get_a_message_not_a_traceback(tm
         ("domain.size.x=1", "--set domain.size=VALUE"),
         ("solver.gravity=[0,-1e30,0]", "solver.gravity"),
         ("shot.name=" + "a" * 300, "at most 100 characters"),
+        ("surface.voxel_size=100", "surface.voxel_size"),
     ],
 )
 def test_absurd_values_are_bad_input_naming_the_key(tmp_path, capsys, override, words):
