@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import os
 import sys
 import tempfile
@@ -94,10 +95,11 @@ def quiet_warp(device: str | None = None) -> None:
         )
 
 
+@functools.cache
 def _init_without(line: str) -> None:
     """wp.init() with its native stderr captured, and written back less the lines holding
     `line` (the library prints them from C, past Python's sys.stderr and Warp's own settings).
-    Once Warp has started, wp.init() prints nothing, so later calls pass nothing."""
+    Once per process (cached): Warp starts once, and per-frame jobs call quiet_warp."""
     sys.stderr.flush()
     saved = os.dup(2)
     with tempfile.TemporaryFile() as captured:
