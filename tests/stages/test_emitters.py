@@ -107,28 +107,11 @@ def test_ids_stay_with_their_particles_and_reach_the_usd_points(ran):
 
 def test_a_run_killed_mid_emission_resumes_byte_identically(tmp_path):
     """As tests/stages/test_safety.py kills a run: after frame 3 of 8, while the spout emits."""
-    import signal
-    import subprocess
-    import sys
-    import time
-
-    from tests.stages.test_safety import SLOW
+    from tests.stages.test_safety import kill_mid_simulate
 
     shot = _shot(tmp_path, frame_end=8)
     ref = mpmfx.load_shot(shot, cache_root=tmp_path / "ref", quiet=True).run(until="simulate")[1].entry
-    cache = tmp_path / "killed"
-    proc = subprocess.Popen(
-        [sys.executable, "-c", SLOW, "run", str(shot), "--until", "simulate", "--cache", str(cache), "-q"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    run = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
-    frames = run.entries()["simulate"].frames_dir
-    deadline = time.time() + 120
-    while time.time() < deadline and len(list(frames.glob("[0-9]*.npz"))) < 3:
-        time.sleep(0.02)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
+    run, frames = kill_mid_simulate(shot, tmp_path / "killed")
     assert 3 <= len(list(frames.glob("[0-9]*.npz"))) < 8
     assert {r.stage: r.state for r in run.run(until="simulate")}["simulate"] == "resumed"
     assert [p.read_bytes() for p in sorted(frames.glob("*.npz"))] == [

@@ -83,6 +83,29 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
+def kill_mid_simulate(shot, cache, *, after: int = 3):
+    """Run `mpmfx run SHOT --until simulate` in a child whose frame writes are slowed, and kill it
+    (SIGKILL) once `after` frames are complete. Returns the shot's run and its simulate frames dir."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SLOW, "run", str(shot), "--until", "simulate", "--cache", str(cache), "-q"],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    run = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
+    frames = run.entries()["simulate"].frames_dir
+    deadline = time.time() + 120
+    while time.time() < deadline and len(list(frames.glob("[0-9]*.npz"))) < after:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    return run, frames
+
+
 def test_a_second_run_on_a_busy_shot_stops_and_names_the_first(tmp_path, capsys):
     import subprocess
     import sys
@@ -197,27 +220,10 @@ def test_temp_files_of_a_killed_run_are_removed_by_the_next(tmp_path):
 def test_a_killed_simulation_resumes_from_its_last_complete_frame(tmp_path):
     """The README's promise, with the default checkpoints: killed after frame 3 (of 8), the next run
     keeps frames 1-3 as they are."""
-    import signal
-    import subprocess
-    import sys
-    import time
-
     shot = write_tiny_shot(tmp_path, frame_end=8)
     shot.write_text(shot.read_text().replace("checkpoint_every = 2\n", ""))  # the default
     ref = mpmfx.load_shot(shot, cache_root=tmp_path / "ref", quiet=True).run(until="simulate")[1].entry
-    cache = tmp_path / "killed"
-    proc = subprocess.Popen(
-        [sys.executable, "-c", SLOW, "run", str(shot), "--until", "simulate", "--cache", str(cache), "-q"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-    )
-    run = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
-    frames = run.entries()["simulate"].frames_dir
-    deadline = time.time() + 120
-    while time.time() < deadline and len(list(frames.glob("[0-9]*.npz"))) < 3:
-        time.sleep(0.02)
-    proc.send_signal(signal.SIGKILL)
-    proc.wait()
+    run, frames = kill_mid_simulate(shot, tmp_path / "killed")
     kept = {p.name: p.stat().st_ino for p in frames.glob("[0-9]*.npz")}
     assert 3 <= len(kept) < 8
     assert {r.stage: r.state for r in run.run(until="simulate")}["simulate"] == "resumed"
