@@ -13,12 +13,21 @@ import importlib.util
 import os
 import subprocess
 import sys
+import uuid
 from pathlib import Path
 
 TIMEOUT_ENV = "MPMFX_BLENDER_TIMEOUT"  # seconds a Blender child that reads a file may take
 TIMEOUT_S = 600.0
 FRAME_LINE = "MPMFX_FRAME"  # a Cycles child's line per finished frame: FRAME_LINE frame wall_s cpu_s
 ERROR = "mpmfx-blender-error: "  # a child's line the parent reads the reason of a failure from
+
+
+def temp_name(path: str | Path) -> Path:
+    """A temp path beside `path` (same suffix), unique to this process and call, what a Blender
+    child writes before its rename: two children (a wedge's frames on two workers) never share
+    one. It matches `mpmfx.cache.TEMP_GLOB`, so a killed child's is swept."""
+    path = Path(path)
+    return path.with_name(f".{path.stem}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
 
 
 def bpy_available() -> bool:

@@ -56,6 +56,14 @@ def _parser() -> argparse.ArgumentParser:
     e.add_argument("--frames", type=frame_range, default=None, metavar="A:B")
     add_parallel_args(r)
     add_parallel_args(e)
+    for cmd in (r, e):
+        cmd.add_argument(
+            "--publish-as",
+            choices=("variant", "default"),
+            default="variant",
+            help="where a --set run publishes: variant (default): published/SHOT@OVERRIDES and "
+            "renders/SHOT@OVERRIDES, beside the hand-off; default: also over published/SHOT and renders/SHOT",
+        )
     add_wedge_parser(shot_cmd("wedge", "side-by-side variants of a shot that differ in one field"))
     s = shot_cmd("status", "each stage: cached, partial, stale or missing, and why")
     s.add_argument("--qa", action="store_true", help="per-frame observables of the simulation")
@@ -139,11 +147,12 @@ def main(argv: list[str] | None = None) -> int:
     except Exception as exc:  # noqa: BLE001 - every error becomes a message and an exit code
         from mpmfx.config import ShotError  # backend: pydantic (keeps --help light)
         from mpmfx.stages.base import StageError  # backend: warp (keeps --help light)
+        from mpmfx.stages.parallel import TaskError  # backend: pydantic (keeps --help light)
 
         if isinstance(exc, (ShotError, PathError)):
             print(f"error: {exc}", file=sys.stderr)
             return 2
-        if isinstance(exc, (StageError, BusyError)):
+        if isinstance(exc, (StageError, TaskError, BusyError)):
             print(f"error: {exc}", file=sys.stderr)
             return 1
         if isinstance(exc, OSError) and exc.filename:
@@ -217,6 +226,7 @@ def _dispatch(args) -> int:
         quiet=getattr(args, "quiet", False),
         workers=getattr(args, "workers", None),
         scheduler=getattr(args, "scheduler", None),
+        publish_as=getattr(args, "publish_as", "variant"),
     )
     if args.cmd == "run":
         results = run.run(until=args.until, force=args.force, frames=args.frames)
@@ -291,10 +301,11 @@ def _print_outputs(run, results) -> None:
     """Where every output of this run is: the stable published paths, then the cache entries."""
     entries = {r.stage: r.entry for r in results}
     print()
-    if "usd" in run.published:
-        print(f"USD + VDB  {run.published['usd']}  (-> {os.path.relpath(entries['export'])})")
-    if "renders" in run.published:
-        print(f"renders    {run.published['renders']}/  (-> {os.path.relpath(entries['render'])})")
+    for key, path in run.published.items():
+        if key.startswith("usd"):
+            print(f"USD + VDB  {path}  (-> {os.path.relpath(entries['export'])})")
+        else:
+            print(f"renders    {path}/  (-> {os.path.relpath(entries['render'])})")
     for stage in ("simulate", "surface"):
         if stage in entries:
             print(f"{stage:<9}  {os.path.relpath(entries[stage])}/frames/")

@@ -1,15 +1,18 @@
 """Where artists and DCC scenes look: stable paths per shot, updated by every run.
 
-- `renders/<shot>/`: the render entry's PNG frames, movie, contact sheet and .blend, copied, with
+- `renders/<name>/`: the render entry's PNG frames, movie, contact sheet and .blend, copied, with
   `published.json` naming the variant (its --set overrides and cache entry). Replaced whole,
   so no frame of another variant stays behind.
-- `published/<shot>`: a symlink to the export entry, so `published/<shot>/shot.usda` (and
+- `published/<name>`: a symlink to the export entry, so `published/<name>/shot.usda` (and
   its frames/ and vdb/, reached through the link) is always the last run's stage and a DCC
   scene never needs re-pointing. Switched with one rename, so a reader sees the old stage or
   the new one. `mpmfx cache prune` never deletes an entry a link points at.
 
-Both run after every `mpmfx run` that reaches the stage, cached or not (a run of the plain
-shot after a variant publishes the plain shot again). A folder of `renders/` that mpmfx did not
+`<name>` is the shot's name for the plain shot, and `<shot>@<overrides>` for a variant
+(`publish_name`): a `--set` run publishes beside the hand-off, never over it, unless asked
+(`mpmfx run --publish-as default`, which publishes it under both names). Both run after every
+`mpmfx run` that reaches the stage, cached or not (a run of the plain shot after a variant
+publishes the plain shot again). A folder of `renders/` that mpmfx did not
 publish (no `published.json`), or one a command of its own writes (`RESERVED`), is never
 replaced: such a shot name is refused before anything runs. A wedge's `wedge-*` folders move
 with each publish. Leftovers of a killed publish are swept by the next run under the shot's
@@ -19,8 +22,10 @@ keeps what is published wherever it was run from.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import re
 import shutil
 import uuid
 from pathlib import Path
@@ -32,6 +37,23 @@ PUBLISHED = Path("published")
 MARKER = "published.json"  # in every renders/<shot>/ that mpmfx published; nothing else is replaced
 RESERVED = ("bench", "check")  # renders/ folders of `mpmfx bench` and `mpmfx check`
 RECORD = "published_to.json"  # <cache>/<shot>/published_to.json: where this shot was published
+SLUG_MAX = 48  # characters of a variant's overrides kept in its folder name
+
+
+def publish_name(shot) -> str:
+    """The folder name a run of `shot` publishes under: the shot's name, or for a variant
+    `<shot>@<its --set overrides>` (e.g. `jelly_splash@domain.grid_n=48`), in letters, digits and
+    `._=,+-`; when that had to change or shorten the overrides, a hash of them follows, so two
+    variants never share a name. `--set shot.name=...` names the shot, not a variant."""
+    name = shot.shot.name
+    overrides = [o for o in shot.overrides if o.partition("=")[0].strip() != "shot.name"]
+    if not overrides:
+        return name
+    text = ",".join(o.replace(" ", "") for o in overrides)
+    slug = re.sub(r"[^A-Za-z0-9._=,+-]+", "_", text)[:SLUG_MAX]
+    if slug != text:
+        slug = f"{slug.rstrip('_')}-{hashlib.sha256(text.encode()).hexdigest()[:8]}"
+    return f"{name}@{slug}"
 
 
 def check_publishable(name: str, *, renders: Path = RENDERS, published: Path = PUBLISHED) -> None:
@@ -75,9 +97,10 @@ def sweep(name: str, *, renders: Path = RENDERS, published: Path = PUBLISHED) ->
                 p.unlink()
 
 
-def publish_renders(shot, entry, *, root: Path = RENDERS) -> Path:
-    """Replace `renders/<shot>/` with the render entry's frames, movie and contact sheet."""
-    out = child(root, shot.shot.name)
+def publish_renders(shot, entry, *, root: Path = RENDERS, name: str | None = None) -> Path:
+    """Replace `renders/<name>/` (default `publish_name(shot)`) with the render entry's frames,
+    movie, contact sheet and .blend."""
+    out = child(root, name or publish_name(shot))
     tmp = out.with_name(f".{out.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
     tmp.mkdir(parents=True)
     extras = (entry.root / f"{shot.shot.name}.mp4", entry.root / "contact.png", entry.root / f"{shot.shot.name}.blend")
@@ -91,6 +114,7 @@ def publish_renders(shot, entry, *, root: Path = RENDERS) -> Path:
         tmp / "published.json",
         {
             "shot": shot.shot.name,
+            "name": out.name,
             "overrides": list(shot.overrides),
             "render_entry": str(entry.root.resolve()),
             "files": [p.name for p in files],
@@ -104,9 +128,10 @@ def publish_renders(shot, entry, *, root: Path = RENDERS) -> Path:
     return out
 
 
-def publish_stage(shot, entry, *, root: Path = PUBLISHED) -> Path:
-    """Point `published/<shot>` at the export entry (one atomic rename); returns the stage path."""
-    link = child(root, shot.shot.name)
+def publish_stage(shot, entry, *, root: Path = PUBLISHED, name: str | None = None) -> Path:
+    """Point `published/<name>` (default `publish_name(shot)`) at the export entry (one atomic
+    rename); returns the stage path."""
+    link = child(root, name or publish_name(shot))
     link.parent.mkdir(parents=True, exist_ok=True)
     if link.exists() and not link.is_symlink():
         raise FileExistsError(f"{link} exists and is not a link mpmfx made: move it away")

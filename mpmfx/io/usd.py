@@ -7,15 +7,24 @@ Layout on disk (all paths relative to the root stage's folder)::
     shot.manifest.usda        which attributes the clips hold time samples for
     frames/NNNN.usdc          one frame: time samples at time code = frame
 
-Prims (names from the caller; world units are metres, Y up, exactly as the arrays came in)::
+Prims (names from the caller, each a valid prim name; world units are metres, Y up, exactly as
+the arrays came in)::
 
     /World                    Xform; carries the unit / up-axis correction if the stage is not m, Y
-    /World/<name>/particles   UsdGeomPoints  (points, velocities, widths, ids, primvars:*)
-    /World/<name>/mesh        UsdGeomMesh    (points, triangles, normals, velocities)
-    /World/<name>/volume      UsdVolVolume, field:<field> -> /World/<name>/volume/<field>
-                              (UsdVolOpenVDBAsset, filePath time-sampled per frame)
+    /World/surfaces/<name>    UsdGeomMesh (points, triangles, normals, velocities); a bound
+                              UsdPreviewSurface material and a displayColor (finalize's looks)
+    /World/particles/<name>   UsdGeomPoints (points, velocities, widths, ids, primvars:*); invisible
+    /World/volumes/<name>     UsdVolVolume, field:<field> -> /World/volumes/<name>/<name>_<field>
+                              (UsdVolOpenVDBAsset, filePath time-sampled per frame); invisible
     /World/colliders/<name>   UsdGeomMesh, static local geometry, animated xformOp:transform
+    /World/looks/<look>       UsdShadeMaterial with a UsdPreviewSurface shader (finalize's looks)
     /World/camera             UsdGeomCamera (if finalize is given one)
+
+Particles and level-set volumes are data for the artist, not pictures: a plain import of the
+stage shows the surfaces only (the particles would draw spheres through every surface, a level
+set fog). Blender's importer skips invisible prims by default; `import_visible_only=False`
+brings them in hidden. Every name a DCC makes an object of is distinct (Blender's object names
+are one namespace), so the caller gives particles and volumes names of their own.
 
 The root opens without touching any frame file: USD opens a clip only when one of its values
 is read, so the cost of opening grows with the clip list (a few bytes a frame), not the data.
@@ -35,31 +44,21 @@ from typing import Any
 import numpy as np
 
 from mpmfx.cache import atomic_path
+from mpmfx.io.usd_view import PreviewLook, bind_look, check_name, write_camera
 
 INSTALL_HINT = (
     "pxr (usd-core) is not importable: run `bash setup.sh`, or "
     "`pip install usd-core` in the environment that runs mpmfx"
 )
 
-RESERVED_NAMES = ("colliders", "camera")
+SCOPES = {"surfaces": "surface", "particles": "points", "volumes": "volume", "colliders": "collider"}
+HIDDEN_SCOPES = ("particles", "volumes")  # invisible by default in the root layer
 # Known VDB fields: fieldClass, fieldDataType, vectorDataRoleHint (None = not authored).
 _FIELD_KINDS = {
     "surface": ("levelSet", "float", None),
     "density": ("fogVolume", "float", None),
     "vel": ("unknown", "float3", "Vector"),
 }
-_CAMERA_KEYS = (
-    "position",
-    "look_at",
-    "up",
-    "focal_length",
-    "horizontal_aperture",
-    "vertical_aperture",
-    "near",
-    "far",
-    "focus_distance",
-    "f_stop",
-)
 
 
 def import_pxr() -> Any:
@@ -67,7 +66,7 @@ def import_pxr() -> Any:
     how to install it."""
     try:
         import pxr  # backend: pxr
-        from pxr import Gf, Sdf, Usd, UsdGeom, UsdUtils, UsdVol, Vt  # backend: pxr  # noqa: F401
+        from pxr import Gf, Sdf, Usd, UsdGeom, UsdShade, UsdUtils, UsdVol, Vt  # backend: pxr  # noqa: F401
     except ImportError as exc:
         raise ImportError(INSTALL_HINT) from exc
     return pxr
@@ -160,19 +159,6 @@ def _array(value: Any, where: str, *, shape: tuple[int | None, ...], dtype: type
     return np.ascontiguousarray(arr, dtype=dtype)
 
 
-def _check_name(name: str, what: str) -> None:
-    from pxr import Sdf, Tf  # backend: pxr
-
-    if not isinstance(name, str) or not Sdf.Path.IsValidIdentifier(name):
-        raise ValueError(
-            f"{what} name {name!r} is not a valid USD prim name: use letters, digits "
-            f"and underscores, not starting with a digit (e.g. "
-            f"{Tf.MakeValidIdentifier(str(name))!r})"
-        )
-    if name in RESERVED_NAMES and what != "collider":
-        raise ValueError(f"{what} name {name!r} is reserved in /World; rename the object")
-
-
 def _extent(points: np.ndarray, pad: float = 0.0) -> Any:
     from pxr import Vt  # backend: pxr
 
@@ -231,7 +217,7 @@ def _write_points(stage: Any, path: str, sample: PointsSample, time: float, wher
         prim.CreateIdsAttr().Set(Vt.Int64Array.FromNumpy(ids), time)
     api = UsdGeom.PrimvarsAPI(prim)
     for name, values in sample.primvars.items():
-        _check_name(name, f"{where} primvar")
+        check_name(name, f"{where} primvar")
         arr = np.asarray(values)
         if len(arr) != n:
             raise ValueError(f"{where}.primvars[{name!r}]: length {len(arr)}, expected {n} (one value per particle)")
@@ -269,7 +255,7 @@ def _write_volume(
 
     volume = UsdVol.Volume.Define(stage, path)
     for name, file_path in fields.items():
-        _check_name(name, f"{where} field")
+        check_name(name, f"{where} field")
         target = Path(file_path)
         if target.suffix != ".vdb":
             raise ValueError(f"{where}[{name!r}]: {file_path!r} is not a .vdb file")
@@ -280,7 +266,7 @@ def _write_volume(
         else:
             rel = Path(os.path.relpath(root_dir / target, layer_dir)).as_posix()
             asset_path = rel if rel.startswith("../") else f"./{rel}"
-        asset = UsdVol.OpenVDBAsset.Define(stage, f"{path}/{name}")
+        asset = UsdVol.OpenVDBAsset.Define(stage, f"{path}/{path.rsplit('/', 1)[1]}_{name}")
         asset.CreateFilePathAttr().Set(Sdf.AssetPath(asset_path), time)
         asset.CreateFieldNameAttr(name)
         field_class, data_type, role = _FIELD_KINDS.get(name, (None, None, None))
@@ -295,7 +281,7 @@ def _write_volume(
 def _write_collider(stage: Any, sample: ColliderSample, time: float) -> None:
     from pxr import Gf, UsdGeom, Vt  # backend: pxr
 
-    _check_name(sample.name, "collider")
+    check_name(sample.name, "collider")
     where = f"collider {sample.name!r}"
     pts = _array(sample.points, f"{where}.points", shape=(None, 3), dtype=np.float32)
     tris = _array(sample.faces, f"{where}.faces", shape=(None, 3), dtype=np.int32)
@@ -317,50 +303,6 @@ def _write_collider(stage: Any, sample: ColliderSample, time: float) -> None:
     op = mesh.MakeMatrixXform()
     # USD multiplies row vectors (translation in the last row): transpose ours.
     op.Set(Gf.Matrix4d(xform.T.tolist()), time)
-
-
-def _camera_matrix(position: np.ndarray, look_at: np.ndarray, up: np.ndarray) -> np.ndarray:
-    """(4, 4) row-vector camera-to-world matrix: USD cameras look down -Z with +Y up."""
-    back = position - look_at
-    if np.linalg.norm(back) == 0:
-        raise ValueError("camera: position and look_at coincide; move the camera back")
-    z = back / np.linalg.norm(back)
-    x = np.cross(up, z)
-    if np.linalg.norm(x) < 1e-9:
-        raise ValueError("camera: up is parallel to the view direction; give another 'up'")
-    x /= np.linalg.norm(x)
-    y = np.cross(z, x)
-    m = np.eye(4)
-    m[0, :3], m[1, :3], m[2, :3], m[3, :3] = x, y, z, position
-    return m
-
-
-def _write_camera(stage: Any, camera: dict, meters_per_unit: float) -> None:
-    from pxr import Gf, UsdGeom  # backend: pxr
-
-    unknown = sorted(set(camera) - set(_CAMERA_KEYS))
-    if unknown or "position" not in camera or "look_at" not in camera:
-        raise ValueError(
-            f"camera: needs 'position' and 'look_at' (metres); unknown keys {unknown}; "
-            f"allowed: {', '.join(_CAMERA_KEYS)}"
-        )
-    pos = np.asarray(camera["position"], np.float64).reshape(3)
-    target = np.asarray(camera["look_at"], np.float64).reshape(3)
-    up = np.asarray(camera.get("up", (0.0, 1.0, 0.0)), np.float64).reshape(3)
-    cam = UsdGeom.Camera.Define(stage, "/World/camera")
-    cam.MakeMatrixXform().Set(Gf.Matrix4d(_camera_matrix(pos, target, up).tolist()))
-    # Lens values are given in mm; UsdGeomCamera wants tenths of a scene unit.
-    mm = 1.0 / (100.0 * meters_per_unit)
-    focal = float(camera.get("focal_length", 35.0))
-    h_ap = float(camera.get("horizontal_aperture", 36.0))
-    v_ap = float(camera.get("vertical_aperture", h_ap * 9.0 / 16.0))
-    cam.CreateFocalLengthAttr(focal * mm)
-    cam.CreateHorizontalApertureAttr(h_ap * mm)
-    cam.CreateVerticalApertureAttr(v_ap * mm)
-    near, far = float(camera.get("near", 0.01)), float(camera.get("far", 1000.0))
-    cam.CreateClippingRangeAttr(Gf.Vec2f(near, far))
-    cam.CreateFocusDistanceAttr(float(camera.get("focus_distance", np.linalg.norm(target - pos))))
-    cam.CreateFStopAttr(float(camera.get("f_stop", 0.0)))  # 0: no depth of field
 
 
 class UsdShotWriter:
@@ -430,7 +372,8 @@ class UsdShotWriter:
     ) -> Path:
         """Write frame `frame` to frames/NNNN.usdc (complete or absent) and return its path.
 
-        points / meshes: object name -> sample; volumes: object name -> {field name
+        points: prim name -> sample (/World/particles/<name>); meshes: prim name -> sample
+        (/World/surfaces/<name>); volumes: prim name (/World/volumes/<name>) -> {field name
         ("surface", "vel", "density"; also the grid name in the file): .vdb path relative to
         the root stage's folder (or absolute)}. Values are time samples at time code `frame`.
         """
@@ -439,18 +382,19 @@ class UsdShotWriter:
 
         stage = self._new_stage()
         time = float(frame)
-        groups = {**dict.fromkeys(points or {}), **dict.fromkeys(meshes or {}), **dict.fromkeys(volumes or {})}
-        for name in groups:
-            _check_name(name, "object")
-            UsdGeom.Xform.Define(stage, f"/World/{name}")
+        for scope, items in (("particles", points), ("surfaces", meshes), ("volumes", volumes)):
+            for name in items or {}:
+                check_name(name, SCOPES[scope])
+            if items:
+                UsdGeom.Scope.Define(stage, f"/World/{scope}")
         for name, sample in (points or {}).items():
-            _write_points(stage, f"/World/{name}/particles", sample, time, f"frame {frame} points[{name!r}]")
+            _write_points(stage, f"/World/particles/{name}", sample, time, f"frame {frame} points[{name!r}]")
         for name, sample in (meshes or {}).items():
-            _write_mesh(stage, f"/World/{name}/mesh", sample, time, f"frame {frame} meshes[{name!r}]")
+            _write_mesh(stage, f"/World/surfaces/{name}", sample, time, f"frame {frame} meshes[{name!r}]")
         for name, fields in (volumes or {}).items():
             _write_volume(
                 stage,
-                f"/World/{name}/volume",
+                f"/World/volumes/{name}",
                 fields,
                 time,
                 root_dir=self.root_path.parent,
@@ -465,13 +409,18 @@ class UsdShotWriter:
         _export_layer(stage.GetRootLayer(), path)
         return path
 
-    def finalize(self, frames: Sequence[int], *, camera: dict | None = None) -> Path:
-        """Stitch the layers of `frames` into the root stage and return its path.
+    def finalize(
+        self, frames: Sequence[int], *, camera: dict | None = None, looks: dict[str, PreviewLook] | None = None
+    ) -> Path:
+        """Stitch the layers of `frames` into the root stage and return its path. The stage's
+        start and end time codes are the first and last of `frames` (what was run).
 
         Writes the topology and manifest layers, then the root last, each atomically, so a
         root on disk always points at complete files. camera: {position, look_at (metres),
         up, focal_length, horizontal_aperture, vertical_aperture (mm), near, far,
         focus_distance (metres), f_stop}; position and look_at are required.
+        looks: surface prim name -> its `PreviewLook`: a UsdPreviewSurface material bound to the
+        mesh, and its displayColor.
         """
         import_pxr()
         from pxr import Sdf, UsdUtils  # backend: pxr
@@ -501,22 +450,31 @@ class UsdShotWriter:
                 UsdUtils.StitchClipsManifest(manifest, topology, clip_files, Sdf.Path("/World"))
                 manifest.Save()
                 del manifest
+            hidden = [
+                f"/World/{scope}/{name}"
+                for scope in HIDDEN_SCOPES
+                if (spec := topology.GetPrimAtPath(f"/World/{scope}")) is not None
+                for name in spec.nameChildren.keys()
+            ]
             topology.Save()
             del topology
-        root = self._root_layer(frames, camera)
+        root = self._root_layer(frames, camera, looks or {}, hidden)
         _export_layer(root, self.root_path)
         return self.root_path
 
-    def _root_layer(self, frames: list[int], camera: dict | None) -> Any:
-        """The root layer: stage metadata, clip metadata on /World, camera; topology sublayered."""
+    def _root_layer(
+        self, frames: list[int], camera: dict | None, looks: dict[str, PreviewLook], hidden: list[str]
+    ) -> Any:
+        """The root layer: stage metadata, clip metadata on /World, camera, materials, what is
+        hidden; topology sublayered."""
         from pxr import Gf, Sdf, Usd, UsdGeom  # backend: pxr
 
         layer = Sdf.Layer.CreateAnonymous(".usda")
         stage = Usd.Stage.Open(layer)
         stage.SetTimeCodesPerSecond(self.fps)
         stage.SetFramesPerSecond(self.fps)
-        stage.SetStartTimeCode(self.start_frame)
-        stage.SetEndTimeCode(self.end_frame)
+        stage.SetStartTimeCode(frames[0])  # the frames run (e.g. --frames 1:12), not the shot's range
+        stage.SetEndTimeCode(frames[-1])
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y if self.up_axis == "Y" else UsdGeom.Tokens.z)
         UsdGeom.SetStageMetersPerUnit(stage, self.meters_per_unit)
         world = UsdGeom.Xform.Define(stage, "/World")
@@ -535,7 +493,12 @@ class UsdShotWriter:
         if self.meters_per_unit != 1.0:
             world.AddScaleOp().Set(Gf.Vec3f(1.0 / self.meters_per_unit))
         if camera is not None:
-            _write_camera(stage, camera, self.meters_per_unit)
+            write_camera(stage, camera, self.meters_per_unit)
+        for path in hidden:
+            UsdGeom.Imageable(stage.OverridePrim(path)).CreateVisibilityAttr(UsdGeom.Tokens.invisible)
+        for name, look in looks.items():
+            check_name(name, "surface")
+            bind_look(stage, f"/World/surfaces/{name}", look)
         # Add the sublayer without a stage composing it: relative to an in-memory layer it
         # would not resolve (a spurious warning); beside the written root it does.
         del stage

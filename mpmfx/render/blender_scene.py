@@ -173,10 +173,10 @@ def add_sky(*, sun_elevation: float, sun_rotation: float, strength: float = 0.25
 # Camera
 
 
-def add_camera(position, look_at, *, focal_mm: float = 35.0) -> bpy.types.Object:
-    """A camera at `position` looking at `look_at` (stage metres), 36 mm film, horizontal fit."""
+def add_camera(position, look_at, *, focal_mm: float = 35.0, film_mm: float = 36.0) -> bpy.types.Object:
+    """A camera at `position` looking at `look_at` (stage metres), `film_mm` wide, horizontal fit."""
     cam = bpy.data.cameras.new("render_camera")
-    cam.lens, cam.sensor_width, cam.sensor_fit = focal_mm, 36.0, "HORIZONTAL"
+    cam.lens, cam.sensor_width, cam.sensor_fit = focal_mm, film_mm, "HORIZONTAL"
     cam.clip_start, cam.clip_end = 0.01, 1000.0
     obj = bpy.data.objects.new("render_camera", cam)
     bpy.context.scene.collection.objects.link(obj)
@@ -184,25 +184,3 @@ def add_camera(position, look_at, *, focal_mm: float = 35.0) -> bpy.types.Object
     obj.location = pos
     obj.rotation_euler = (target - pos).to_track_quat("-Z", "Y").to_euler()
     return obj
-
-
-def frame_bounds(lo, hi, *, direction, aspect: float, focal_mm: float = 35.0, margin: float = 1.08):
-    """(position, look_at) in stage metres for a camera looking along -`direction` (from the
-    camera towards the scene is -direction) that fits the box [lo, hi] in the picture.
-
-    Each box corner must project inside the film: with the view axes fixed, the nearest
-    camera distance that keeps every corner in frame is solved per corner and the largest wins.
-    """
-    lo, hi = Vector(lo), Vector(hi)
-    centre = (lo + hi) / 2
-    back = Vector(direction).normalized()
-    right = Vector((0, 1, 0)).cross(back).normalized()
-    up = back.cross(right)
-    tan_h = 18.0 / focal_mm / margin
-    tan_v = tan_h / aspect
-    dist = 0.0
-    for i in range(8):
-        c = Vector((hi.x if i & 1 else lo.x, hi.y if i & 2 else lo.y, hi.z if i & 4 else lo.z)) - centre
-        depth = c.dot(back)  # towards the camera
-        dist = max(dist, abs(c.dot(right)) / tan_h + depth, abs(c.dot(up)) / tan_v + depth)
-    return tuple(centre + back * dist), tuple(centre)

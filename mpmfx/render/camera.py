@@ -29,3 +29,52 @@ def solver_box(shot) -> tuple[tuple[float, ...], tuple[float, ...]]:
 def solver_floor(shot) -> float:
     """World height (m) of the solver's floor: renders draw the ground here."""
     return solver_box(shot)[0][1]
+
+
+FOCAL_MM, FILM_MM = 35.0, 36.0  # the render camera's lens and film width (horizontal fit)
+
+
+def frame_bounds(lo, hi, *, direction, aspect: float, focal_mm: float = FOCAL_MM, margin: float = 1.08):
+    """(position, look_at) in metres (Y up) for a camera looking along -`direction` that fits the
+    box [lo, hi] (m) in a picture of width / height `aspect`.
+
+    Each box corner must project inside the film: with the view axes fixed, the nearest camera
+    distance that keeps every corner in frame is solved per corner and the largest wins."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    centre = (lo + hi) / 2
+    back = np.asarray(direction, float) / np.linalg.norm(direction)
+    right = np.cross((0.0, 1.0, 0.0), back)
+    right /= np.linalg.norm(right)
+    up = np.cross(back, right)
+    tan_h = FILM_MM / 2 / focal_mm / margin
+    tan_v = tan_h / aspect
+    dist = 0.0
+    for i in range(8):
+        c = np.array([hi[0] if i & 1 else lo[0], hi[1] if i & 2 else lo[1], hi[2] if i & 4 else lo[2]]) - centre
+        depth = c @ back  # towards the camera
+        dist = max(dist, abs(c @ right) / tan_h + depth, abs(c @ up) / tan_v + depth)
+    return tuple(float(x) for x in centre + back * dist), tuple(float(x) for x in centre)
+
+
+def render_camera(shot, bounds=None) -> dict:
+    """The camera the render looks through, which the exported USD carries too: {position,
+    look_at (m), focal_length, horizontal_aperture, vertical_aperture (mm)}. Cycles without
+    `render.camera_position` frames `bounds` ((lo, hi) m of what is shown over the shot, the
+    ground contact kept in; None: the domain) along VIEW_DIRECTION; otherwise the config's
+    camera or the 3/4 view (`default_camera`)."""
+    r = shot.render
+    aspect = r.width / r.height
+    if r.camera_position is None and str(getattr(r.engine, "value", r.engine)) == "cycles":
+        o, L = np.asarray(shot.domain.origin, float), float(shot.domain.size)
+        lo, hi = (np.asarray(b, float) for b in (bounds or (o, o + L)))
+        lo[1] = min(lo[1], solver_floor(shot))
+        pos, look = frame_bounds(lo, hi, direction=VIEW_DIRECTION, aspect=aspect)
+    else:
+        pos, look = default_camera(shot)
+    return {
+        "position": pos,
+        "look_at": look,
+        "focal_length": FOCAL_MM,
+        "horizontal_aperture": FILM_MM,
+        "vertical_aperture": FILM_MM / aspect,
+    }

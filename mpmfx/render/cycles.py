@@ -51,20 +51,21 @@ def write_job(
     floor_y: float,
     domain_origin,
     domain_size: float,
-    camera: dict | None,
-    view_direction,
+    camera: dict,
     sun_elevation: float,
     sun_rotation: float,
     walls: tuple | None = None,
     basin: float | None = None,
     label: str = "",
+    blend_usd_root: str | None = None,
 ) -> Path:
     """Write the JSON job the child reads. Units: metres and degrees, in the USD stage's frame
     (Y up). looks: USD prim name (surface group or object) -> `mpmfx.render.looks.LOOKS` key;
-    camera: {"position", "look_at"} or None to frame the simulated bounds, seen along
-    -view_direction; outputs: one PNG path per frame; blend: where the lit scene is saved;
+    camera: `mpmfx.render.camera.render_camera`'s (the exported USD's camera); outputs: one PNG path per frame; blend: where the lit scene is saved;
     walls: (lo, hi) of the box the solver's walls hold, basin: height of the basin drawn there;
-    label: text burned into every frame (empty: none)."""
+    label: text burned into every frame (empty: none); blend_usd_root: what the saved .blend
+    calls the export entry's folder (a Blender path such as `//../../published/<name>`, relative
+    to where the .blend is published), None: its own absolute path."""
     job = {
         "usd": str(usd),
         "frames": [int(f) for f in frames],
@@ -82,12 +83,12 @@ def write_job(
         "domain_origin": list(domain_origin),
         "domain_size": domain_size,
         "camera": camera,
-        "view_direction": list(view_direction),
         "sun_elevation": sun_elevation,
         "sun_rotation": sun_rotation,
         "walls": walls,
         "basin": basin,
         "label": label,
+        "blend_usd_root": blend_usd_root,
     }
     path.write_text(json.dumps(job, indent=1))
     return path

@@ -16,48 +16,42 @@ progress bar); anything else on stdout/stderr is Blender's own chatter.
 from __future__ import annotations
 
 import json
-import math
 import os
 import sys
 import time
 from pathlib import Path
 
 import bpy
-from mathutils import Vector
 
-from mpmfx.blender import FRAME_LINE
+from mpmfx.blender import FRAME_LINE, temp_name
 from mpmfx.render import blender_scene as bs
-from mpmfx.render.blender_scene import Y_UP_TO_Z_UP, assign, make_material
+from mpmfx.render.blender_scene import assign, make_material
 
 
 def import_stage(usd: str) -> dict[str, list]:
     """Import the USD stage and sort what came in: {"meshes", "points", "volumes", "colliders",
-    "cameras"} -> [(prim name, object)]. The prim name is the object / surface group name
-    (the parent prim's name: /World/<name>/mesh) or the collider's own name."""
+    "cameras"} -> [(prim name, object)], by the scope each prim sits in (`mpmfx.io.usd`: /World/
+    surfaces, particles, volumes, colliders). Hidden prims (particles, level sets) come in too."""
     res = bpy.ops.wm.usd_import(
         filepath=usd,
         set_frame_range=True,
         merge_parent_xform=False,
         import_lights=False,
         import_materials=False,
+        import_visible_only=False,
         relative_path=False,
         create_world_material=False,
     )
     if res != {"FINISHED"}:
         raise RuntimeError(f"{usd}: Blender's USD importer did not finish ({res})")
     out: dict[str, list] = {k: [] for k in ("meshes", "points", "volumes", "colliders", "cameras")}
+    kinds = {"surfaces": "meshes", "particles": "points", "volumes": "volumes", "colliders": "colliders"}
     for obj in bpy.data.objects:
-        parent = _prim_name(obj.parent) if obj.parent else ""
+        scope = _prim_name(obj.parent) if obj.parent else ""
         if obj.type == "CAMERA":
             out["cameras"].append((_prim_name(obj), obj))
-        elif obj.type == "MESH" and parent == "colliders":
-            out["colliders"].append((_prim_name(obj), obj))
-        elif obj.type == "MESH":
-            out["meshes"].append((parent, obj))
-        elif obj.type == "POINTCLOUD":
-            out["points"].append((parent, obj))
-        elif obj.type == "VOLUME":
-            out["volumes"].append((parent, obj))
+        elif scope in kinds and obj.type in ("MESH", "POINTCLOUD", "VOLUME"):
+            out[kinds[scope]].append((_prim_name(obj), obj))
     return out
 
 
@@ -65,26 +59,6 @@ def _prim_name(obj) -> str:
     """The USD prim name of an imported object: Blender appends .001 to repeated names."""
     head, dot, tail = obj.name.rpartition(".")
     return head if dot and tail.isdigit() else obj.name
-
-
-def scene_bounds(objects, frames: list[int]):
-    """(lo, hi) stage metres (Y up) of `objects` over `frames` (at most 12 of them sampled)."""
-    scene = bpy.context.scene
-    back = Y_UP_TO_Z_UP.inverted()
-    lo, hi = [math.inf] * 3, [-math.inf] * 3
-    picks = sorted({frames[round(i * (len(frames) - 1) / 11)] for i in range(12)}) if len(frames) > 12 else frames
-    for f in picks:
-        scene.frame_set(f)
-        dg = bpy.context.evaluated_depsgraph_get()
-        for obj in objects:
-            ev = obj.evaluated_get(dg)
-            if not getattr(ev.data, "vertices", None):
-                continue
-            for corner in ev.bound_box:
-                p = back @ (ev.matrix_world @ Vector(corner))
-                lo = [min(a, b) for a, b in zip(lo, p)]
-                hi = [max(a, b) for a, b in zip(hi, p)]
-    return (lo, hi) if lo[0] < math.inf else None
 
 
 def set_looks(job: dict, imported: dict) -> None:
@@ -156,21 +130,10 @@ def build_scene(job: dict) -> None:
             *job["walls"], height=job["basin"], thickness=(0.012 if look == "glass" else 0.04) * dom_size, look=look
         )
     bs.add_sky(sun_elevation=job["sun_elevation"], sun_rotation=job["sun_rotation"])
-    cam = job.get("camera")
-    if cam is None:
-        shown = [o for _, o in imported["points" if job["mode"] == "particles" else "meshes"]]
-        # the stage's whole frame range, not the frames asked for: a resumed or partial render
-        # keeps the camera of the full one
-        bounds = scene_bounds(
-            shown + [o for _, o in imported["colliders"]], list(range(scene.frame_start, scene.frame_end + 1))
-        )
-        if bounds is None:  # nothing visible anywhere: frame the domain
-            bounds = (dom_lo, [o + dom_size for o in dom_lo])
-        lo, hi = bounds
-        lo = [lo[0], min(lo[1], job["floor_y"]), lo[2]]  # keep the ground contact in the picture
-        pos, look = bs.frame_bounds(lo, hi, direction=job["view_direction"], aspect=job["width"] / job["height"])
-        cam = {"position": pos, "look_at": look}
-    scene.camera = bs.add_camera(cam["position"], cam["look_at"])
+    cam = job["camera"]  # the exported USD's camera (`mpmfx.render.camera.render_camera`)
+    scene.camera = bs.add_camera(
+        cam["position"], cam["look_at"], focal_mm=cam["focal_length"], film_mm=cam["horizontal_aperture"]
+    )
     set_render(job)
 
 
@@ -181,11 +144,34 @@ def render_frames(job: dict) -> None:
         t0, c0 = time.perf_counter(), time.process_time()
         scene.frame_set(frame)
         path = Path(path)
-        tmp = path.with_name(f".{path.stem}.tmp.png")
+        tmp = temp_name(path)
         scene.render.filepath = str(tmp)
         bpy.ops.render.render(write_still=True)
         os.replace(tmp, path)
         print(f"{FRAME_LINE} {frame} {time.perf_counter() - t0:.3f} {time.process_time() - c0:.3f}", flush=True)
+
+
+def save_blend(job: dict) -> None:
+    """Save the lit scene as job["blend"], its USD and VDB paths pointing where the hand-off
+    lands: every file of the export entry (job["usd"]'s folder) by `job["blend_usd_root"]`, a
+    Blender path relative to the .blend's published folder (`//../../published/<name>`), so the
+    .blend plays from renders/<name>/ and still does when the project folder moves. Call it
+    after the frames: a relative path does not resolve before the scene is saved."""
+    export_root = str(Path(job["usd"]).parent)
+    new_root = job.get("blend_usd_root")
+    if new_root:
+        for block in [*bpy.data.cache_files, *bpy.data.volumes]:
+            path = bpy.path.abspath(block.filepath)
+            if path == export_root or path.startswith(export_root + os.sep):
+                rel = Path(os.path.relpath(path, export_root)).as_posix()
+                block.filepath = new_root if rel == "." else f"{new_root}/{rel}"
+    bpy.context.scene.frame_set(job["frames"][0])
+    blend = Path(job["blend"])
+    blend.parent.mkdir(parents=True, exist_ok=True)
+    tmp = temp_name(blend)
+    # relative_remap off: the paths stay as set above, not rewritten against the temp's folder
+    bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True, compress=True, relative_remap=False)
+    os.replace(tmp, blend)
 
 
 def main(argv: list[str]) -> int:
@@ -194,15 +180,9 @@ def main(argv: list[str]) -> int:
         return 2
     job = json.loads(Path(argv[0]).read_text())
     build_scene(job)
-    scene = bpy.context.scene
-    scene.frame_set(job["frames"][0])
-    if job.get("blend"):
-        blend = Path(job["blend"])
-        blend.parent.mkdir(parents=True, exist_ok=True)
-        tmp = blend.with_name(f".{blend.stem}.tmp.blend")
-        bpy.ops.wm.save_as_mainfile(filepath=str(tmp), copy=True, compress=True)
-        os.replace(tmp, blend)
     render_frames(job)
+    if job.get("blend"):
+        save_blend(job)
     return 0
 
 

@@ -147,3 +147,20 @@ def look_for(names: list[str], overrides: dict[str, str] | None = None) -> str:
         if name in overrides:
             return overrides[name]
     return DEFAULT_LOOK.get(names[-1], "plastic")
+
+
+def preview_surface(look: str) -> dict:
+    """`look` as UsdPreviewSurface inputs, for DCCs that import the USD: colour (linear RGB; a
+    clear look shows the tint of its depth), roughness, metallic, opacity (1 opaque; a clear
+    look is mostly see-through) and ior."""
+    spec = LOOKS[look]
+    bsdf = spec["bsdf"]
+    clear = float(bsdf.get("Transmission Weight", 0.0))
+    colour = spec["absorb"][0] if spec.get("absorb") and clear > 0.5 else bsdf["Base Color"]
+    return {
+        "colour": tuple(float(c) for c in colour),
+        "roughness": float(bsdf.get("Roughness", 0.5)),
+        "metallic": float(bsdf.get("Metallic", 0.0)),
+        "opacity": round(1.0 - 0.75 * clear, 4),
+        "ior": float(bsdf.get("IOR", 1.5)),
+    }

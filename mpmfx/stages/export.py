@@ -3,6 +3,10 @@
 Output: `shot.usda` (root stage), `frames/NNNN.usdc` (per-frame layers) and
 `vdb/<group>/NNNN.vdb` (level set `surface` + velocity `vel` per surface group, and the fog
 volume `density` when surface.density is on).
+
+The stage is the hand-off to a DCC: surfaces named after the shot's objects
+(`mpmfx.stages.names`), each with the material of its render look; particles and level sets
+hidden; the camera the render looks through; the time codes of the frames run.
 """
 
 from __future__ import annotations
@@ -13,20 +17,26 @@ from mpmfx.config import Shot
 from mpmfx.geometry.colliders import collider_mesh, keyframes
 from mpmfx.io.frames import GroupSurface, ParticleFrame, SurfaceFrame
 from mpmfx.io.usd import ColliderSample, MeshSample, PointsSample, UsdShotWriter
+from mpmfx.io.usd_view import PreviewLook
 from mpmfx.io.vdb import VdbGrid, write_vdb
 from mpmfx.mpm.colliders import pose_matrix
-from mpmfx.render.camera import default_camera
+from mpmfx.render.camera import render_camera, solver_floor
+from mpmfx.render.looks import preview_surface
 from mpmfx.stages.base import Context
 from mpmfx.stages.colliders import animated_collider, collider_geometry
+from mpmfx.stages.names import surface_looks, usd_names
 from mpmfx.stages.parallel import FrameJob
 from mpmfx.surface.params import SparseLevelSet
 
-NAME, VERSION, PER_FRAME, FRAME_EXT = "export", 1, True, "usdc"
+NAME, VERSION, PER_FRAME, FRAME_EXT = "export", 2, True, "usdc"
+CAMERA_SAMPLES = 12  # frames whose bounds the render camera frames (evenly spaced over those run)
 CODE = (
     "mpmfx.stages.export",
+    "mpmfx.stages.names",
     "mpmfx.io",
     "mpmfx.surface.params",
     "mpmfx.render.camera",
+    "mpmfx.render.looks",
     "mpmfx.stages.colliders",
     "mpmfx.geometry.colliders",
     "mpmfx.geometry.animated",
@@ -41,6 +51,16 @@ def params(shot: Shot) -> dict:
         "fps": shot.shot.fps,
         "frames": [shot.shot.frame_start, shot.shot.frame_end],
         "objects": [o.name for o in shot.bodies],
+        "names": usd_names(shot).__dict__,
+        "looks": surface_looks(shot),
+        # what the render camera depends on (`render_camera`)
+        "view": {
+            **shot.render.model_dump(
+                mode="json", include={"engine", "mode", "width", "height", "camera_position", "camera_look_at"}
+            ),
+            "domain": shot.domain.model_dump(mode="json"),
+            "floor": solver_floor(shot),
+        },
     }
 
 
@@ -64,15 +84,49 @@ def frame(job: FrameJob, f: int) -> None:
     points = {}
     if shot.export.points:
         points = _points(shot, ParticleFrame.read(job.upstream["simulate"].frame_path(f, ParticleFrame.EXT)))
+    names = usd_names(shot)
     _writer(shot, entry).write_frame(
-        f, points=points, meshes=_meshes(groups), volumes=volumes, colliders=_colliders(shot, f)
+        f,
+        points=points,
+        meshes={names.surfaces[g]: m for g, m in _meshes(groups).items()},
+        volumes={names.volumes[g]: v for g, v in volumes.items()},
+        colliders=_colliders(shot, f),
     )
 
 
 def finish(ctx: Context, results: list) -> dict:
-    """In the client, after every frame's task: the root stage stitches the frames' layers."""
-    root = _writer(ctx.shot, ctx.entry).finalize(ctx.entry.done_frames(FRAME_EXT), camera=_camera(ctx.shot))
-    return {"usd": str(root)}
+    """In the client, after every frame's task: the root stage stitches the frames' layers, with
+    the render camera (framing what the frames show) and each surface's material. The camera
+    goes in the manifest too: the render stage looks through it."""
+    frames = ctx.entry.done_frames(FRAME_EXT)
+    camera = render_camera(ctx.shot, _bounds(ctx, frames))
+    names = usd_names(ctx.shot)
+    looks = {
+        names.surfaces[g]: PreviewLook(look, **preview_surface(look)) for g, look in surface_looks(ctx.shot).items()
+    }
+    root = _writer(ctx.shot, ctx.entry).finalize(frames, camera=camera, looks=looks)
+    return {"usd": str(root), "camera": camera}
+
+
+def _bounds(ctx: Context, frames: list[int]):
+    """(lo, hi) m of what the render shows (surfaces, or particles in render.mode particles, and
+    the colliders) over up to CAMERA_SAMPLES of `frames`; None when nothing is there."""
+    shot = ctx.shot
+    n = len(frames)
+    picks = sorted({frames[round(i * (n - 1) / (CAMERA_SAMPLES - 1))] for i in range(CAMERA_SAMPLES)}) if n else []
+    pts = []
+    for f in picks:
+        if shot.render.mode == "particles":
+            pts.append(ParticleFrame.read(ctx.upstream["simulate"].frame_path(f, ParticleFrame.EXT)).x)
+        else:
+            groups = SurfaceFrame.read(ctx.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
+            pts += [d.vertices for d in groups.values()]
+        pts += [c.points @ c.xform[:3, :3].T + c.xform[:3, 3] for c in _colliders(shot, f)]
+    pts = [np.asarray(p, np.float64).reshape(-1, 3) for p in pts if len(p)]
+    if not pts:
+        return None
+    allp = np.concatenate(pts)
+    return allp.min(axis=0), allp.max(axis=0)
 
 
 def _writer(shot: Shot, entry):
@@ -87,13 +141,13 @@ def _writer(shot: Shot, entry):
 
 
 def _points(shot: Shot, p: ParticleFrame) -> dict:
-    out = {}
+    out, names = {}, usd_names(shot).particles
     for body, obj in enumerate(shot.bodies):
         sel = p.body == body
         primvars = {"material": p.material[sel], "body": p.body[sel]}
         if p.Jp is not None:
             primvars["Jp"] = p.Jp[sel]
-        out[obj.name] = PointsSample(
+        out[names[obj.name]] = PointsSample(
             positions=p.x[sel],
             velocities=p.v[sel],
             widths=float(shot.particle_spacing),
@@ -167,8 +221,3 @@ def level_set(d: GroupSurface) -> SparseLevelSet:
         background=float(d.background),
         density=d.density_blocks,
     )
-
-
-def _camera(shot: Shot) -> dict:
-    pos, look = default_camera(shot)
-    return {"position": pos, "look_at": look, "focal_length": 35.0}

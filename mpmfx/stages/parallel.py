@@ -26,6 +26,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import socket
 import sys
 import time
 from dataclasses import dataclass
@@ -35,6 +36,7 @@ from tqdm import tqdm
 
 from mpmfx.cache import Entry
 from mpmfx.config import ShotError
+from mpmfx.publish import publish_name
 from mpmfx.threads import THREADS_ENV, cpu_threads, usable_cores
 
 if TYPE_CHECKING:
@@ -223,7 +225,9 @@ class Frames:
                 if not worth_a_cluster(len(calls), wall, cpu, self.size):
                     return done + here(calls)
             client = self.client()
-            futures = [client.submit(fn, job, f, key=task_key(job.entry, f), pure=False) for job, f in calls]
+            futures = [
+                client.submit(_task, fn, job, f, desc, key=task_key(job.entry, f), pure=False) for job, f in calls
+            ]
             return done + _gather(client, futures, bar)
         finally:
             bar.close()
@@ -247,9 +251,56 @@ class Frames:
                     bar.update()
                 return out
             client = self.client()
-            return _gather(client, [client.submit(fn, *a, key=k, pure=False) for a, k in zip(args, keys)], bar)
+            futures = [client.submit(_call, fn, f"{desc} {k}", *a, key=k, pure=False) for a, k in zip(args, keys)]
+            return _gather(client, futures, bar)
         finally:
             bar.close()
+
+
+class TaskError(RuntimeError):
+    """A task failed on a worker: one line naming the worker, the stage, the frame, the variant
+    and the cause (the full output of a Blender child stays in the log the cause names)."""
+
+
+def one_line(exc: BaseException) -> str:
+    """An exception as one line: its first line, and its last where it has more (the error a
+    child's log tail ends with), e.g. 'Blender (Cycles) exited with code 1; full log: L ... Error: X'."""
+    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+    text = lines[0] if len(lines) < 2 else f"{lines[0]} ... {lines[-1]}"
+    return text if type(exc).__name__ in ("StageError", "TaskError") else f"{type(exc).__name__}: {text}"
+
+
+def _worker_name() -> str:
+    try:
+        from distributed import get_worker  # backend: distributed
+
+        return get_worker().address
+    except (ImportError, ValueError):
+        return f"{socket.gethostname()} pid {os.getpid()}"
+
+
+def _task(fn: Callable[[FrameJob, int], Any], job: FrameJob, f: int, desc: str) -> Any:
+    """fn(job, f) on a worker; a failure comes back as one TaskError line (not the task's
+    traceback, which Dask would carry to the client escaped into one long string)."""
+    try:
+        return fn(job, f)
+    except ShotError:  # bad input: its own message, exit 2
+        raise
+    except Exception as exc:  # noqa: BLE001 - every failure is reported as one line
+        raise TaskError(
+            f"{desc or job.entry.stage} frame {f} of {publish_name(job.shot)} failed on worker "
+            f"{_worker_name()}: {one_line(exc)}"
+        ) from None
+
+
+def _call(fn: Callable[..., Any], what: str, *args) -> Any:
+    """fn(*args) on a worker (a wedge's whole-shot stage); a failure as one TaskError line."""
+    try:
+        return fn(*args)
+    except ShotError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - every failure is reported as one line
+        raise TaskError(f"{what} failed on worker {_worker_name()}: {one_line(exc)}") from None
 
 
 def _worker_env(workers: int) -> dict[str, str]:

@@ -19,17 +19,20 @@ from mpmfx.config import RenderEngine, Shot
 from mpmfx.geometry.colliders import collider_mesh, keyframes
 from mpmfx.io.frames import ParticleFrame, SurfaceFrame
 from mpmfx.mpm.colliders import pose_matrix
-from mpmfx.render.camera import VIEW_DIRECTION, default_camera, solver_box, solver_floor
+from mpmfx.publish import PUBLISHED, publish_name
+from mpmfx.render.camera import default_camera, render_camera, solver_box, solver_floor
 from mpmfx.render.cycles import CyclesError, blender_version, run_job, write_job
 from mpmfx.render.frames import FrameRenderer, colour_for, contact_sheet, write_movie
 from mpmfx.render.looks import PROP_LOOKS, look_for
 from mpmfx.stages.base import Context, StageError
 from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
+from mpmfx.stages.names import surface_looks, usd_names
 from mpmfx.stages.parallel import FrameJob
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "render", 2, True, "png"
 CODE = (
     "mpmfx.stages.render",
+    "mpmfx.stages.names",
     "mpmfx.render",
     "mpmfx.io.frames",
     "mpmfx.stages.colliders",
@@ -52,7 +55,15 @@ def params(shot: Shot) -> dict:
     }
     if shot.render.engine is RenderEngine.CYCLES:
         out["blender"] = blender_version()  # another Blender may shade differently
+        out["blend_usd_root"] = blend_usd_root(shot)
     return out
+
+
+def blend_usd_root(shot: Shot) -> str:
+    """Where the .blend finds the USD stage once published to renders/<name>/: published/<name>,
+    relative to the .blend (Blender's `//`), so moving the whole project folder keeps it playing
+    (an absolute path would break; the cache path it was rendered from is not what artists get)."""
+    return f"//../../{PUBLISHED.as_posix()}/{publish_name(shot)}"
 
 
 def title(shot: Shot) -> str:
@@ -120,19 +131,22 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
     shot, entry, r = job.shot, job.entry, job.shot.render
     if not frames:
         return {}
-    looks = {g: look_for([g, o.name, o.material], r.looks) for g, o in zip(shot.surface_groups(), shot.bodies)}
-    looks |= {o.name: look_for([o.name, o.material], r.looks) for o in shot.bodies}
+    # looks by the stage's prim names: each surface, each object's particles, the props
+    names = usd_names(shot)
+    looks = {names.surfaces[g]: look for g, look in surface_looks(shot).items()}
+    looks |= {names.particles[o.name]: look_for([o.name, o.material], r.looks) for o in shot.bodies}
     looks |= {prop: r.looks.get(prop, look) for prop, look in PROP_LOOKS.items()}
-    cam = None
-    if r.camera_position is not None:
-        pos, look = default_camera(shot)
-        cam = {"position": pos, "look_at": look}
+    # the camera the export framed and wrote into the USD: the render looks through the same one
+    cam = (job.upstream["export"].manifest() or {}).get("camera") or render_camera(shot)
     name = f"cycles_{frames[0]:04d}" if len(frames) == 1 else "cycles"  # a wedge's tasks: one job each
+    blend = entry.root / f"{shot.shot.name}.blend"
     spec = write_job(
         entry.root / f"{name}_job.json",
         usd=job.upstream["export"].root / "shot.usda",
         frames=frames,
-        blend=entry.root / f"{shot.shot.name}.blend",
+        # one .blend an entry: a wedge's per-frame tasks (each a job) save it only while it is
+        # missing; two that race write the same scene through temp names of their own
+        blend=blend if len(frames) > 1 or not blend.exists() else None,
         outputs=[entry.frame_path(f, FRAME_EXT) for f in frames],
         width=r.width,
         height=r.height,
@@ -146,12 +160,12 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
         domain_origin=shot.domain.origin,
         domain_size=shot.domain.size,
         camera=cam,
-        view_direction=VIEW_DIRECTION,
         sun_elevation=r.sun_elevation,
         sun_rotation=r.sun_rotation,
         walls=solver_box(shot),
         basin=r.basin,
         label=title(shot) if shot.overrides else "",
+        blend_usd_root=blend_usd_root(shot),
     )
     entry.frames_dir.mkdir(parents=True, exist_ok=True)
     times = {}

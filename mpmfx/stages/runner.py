@@ -14,13 +14,14 @@ from pathlib import Path
 
 from mpmfx.cache import Cache, Entry, code_hash, default_root, read_manifest, remove_temps
 from mpmfx.config import Shot, ShotError
-from mpmfx.publish import check_publishable, publish_renders, publish_stage, record, sweep
+from mpmfx.publish import check_publishable, publish_name, publish_renders, publish_stage, record, sweep
 from mpmfx.shotfile import load_shot_config
 from mpmfx.stages import STAGES, export, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage, StageError
 from mpmfx.stages.parallel import Frames
 from mpmfx.stages.qa import shot_flags, warn_flags
 
+PUBLISH_AS = ("variant", "default")  # where a --set run publishes: beside the hand-off, or also over it
 MODULES: dict[str, Stage] = {m.NAME: m for m in (voxelise, simulate, surface, export, render)}
 assert tuple(MODULES) == STAGES, "mpmfx.stages.STAGES and the runner's modules disagree"
 
@@ -62,7 +63,10 @@ class ShotRun:
         executor: Frames | None = None,
         publish: bool = True,
         locked: bool = False,
+        publish_as: str = "variant",
     ):
+        if publish_as not in PUBLISH_AS:
+            raise ShotError(f"--publish-as {publish_as!r}: one of {', '.join(PUBLISH_AS)}")
         self.shot = shot
         self.cache = Cache(cache_root or default_root(), shot.shot.name)
         self.device = device
@@ -72,6 +76,11 @@ class ShotRun:
         self.executor = executor or Frames(workers=workers, scheduler=scheduler)
         self.publish = publish  # False for a wedge's variants: renders/ and published/ show the shot
         self.locked = locked  # the caller holds the shot's lock (a wedge, for all its variants)
+        # published/<name> and renders/<name>: the variant's own name, and with "default" the
+        # shot's own name as well (a variant then replaces the hand-off, as asked)
+        self.publish_names = [publish_name(shot)]
+        if publish_as == "default" and shot.shot.name not in self.publish_names:
+            self.publish_names.append(shot.shot.name)
         self.published: dict[str, Path] = {}  # what the last run() published: "usd", "renders"
 
     # -- keys ------------------------------------------------------------------------------
@@ -130,7 +139,8 @@ class ShotRun:
             if not self.locked:
                 self.cache.remove_orphans()
             if self.publish:
-                sweep(self.shot.shot.name)
+                for name in self.publish_names:
+                    sweep(name)
             try:
                 results = self._run_locked(until, force, frames)
             finally:
@@ -148,7 +158,8 @@ class ShotRun:
         """Refuse an unknown stage, a frame outside the shot (ShotError) or a shot whose publish
         would replace a folder mpmfx did not make (PathError): exit 2, before anything runs."""
         if self.publish:
-            check_publishable(self.shot.shot.name)
+            for name in self.publish_names:
+                check_publishable(name)
         if getattr(self.executor, "scheduler", None):
             self.executor.client()  # a farm that does not answer is said now, not after simulate
         for name in (until, *force):
@@ -166,10 +177,12 @@ class ShotRun:
         """Every run that reaches export / render publishes them at stable paths (`mpmfx.publish`)."""
         entries, out = self.entries(), {}
         done = {r.stage for r in results}
-        if "export" in done:
-            out["usd"] = publish_stage(self.shot, entries["export"])
-        if "render" in done:
-            out["renders"] = publish_renders(self.shot, entries["render"])
+        for i, name in enumerate(self.publish_names):
+            suffix = "" if i == 0 else f" {name}"  # "usd", "renders": the variant's own name
+            if "export" in done:
+                out["usd" + suffix] = publish_stage(self.shot, entries["export"], name=name)
+            if "render" in done:
+                out["renders" + suffix] = publish_renders(self.shot, entries["render"], name=name)
         if out:
             record(self.cache.shot_dir, out)
         return out
@@ -290,9 +303,11 @@ def load_shot(
     quiet: bool = False,
     workers: int | None = None,
     scheduler: str | None = None,
+    publish_as: str = "variant",
 ) -> ShotRun:
     """Load and validate a shot file; returns a ShotRun (see module docstring). workers /
-    scheduler: where independent frames run (`mpmfx.stages.parallel.Frames`)."""
+    scheduler: where independent frames run (`mpmfx.stages.parallel.Frames`); publish_as:
+    "variant" (a --set run publishes beside the plain shot's outputs) or "default" (also over them)."""
     return ShotRun(
         load_shot_config(path, list(overrides)),
         cache_root=cache_root,
@@ -300,4 +315,5 @@ def load_shot(
         quiet=quiet,
         workers=workers,
         scheduler=scheduler,
+        publish_as=publish_as,
     )

@@ -89,8 +89,8 @@ def test_stage_metadata(shot):
 def test_points_mesh_and_primvars_equal_at_every_time_code(shot):
     root, _ = shot
     stage = Usd.Stage.Open(str(root))
-    points = UsdGeom.Points(stage.GetPrimAtPath("/World/jelly/particles"))
-    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/jelly/mesh"))
+    points = UsdGeom.Points(stage.GetPrimAtPath("/World/particles/jelly"))
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/World/surfaces/jelly"))
     material = UsdGeom.PrimvarsAPI(points).GetPrimvar("material")
     assert material.GetInterpolation() == UsdGeom.Tokens.vertex
     for f in FRAMES:
@@ -119,8 +119,8 @@ def test_objects_that_come_and_go_have_no_points_when_absent(tmp_path):
     writer.write_frame(2, points={"a": PointsSample(one, widths=0.1), "b": PointsSample(one, widths=0.2)})
     writer.write_frame(3, points={"b": PointsSample(one, widths=0.2)})
     stage = Usd.Stage.Open(str(writer.finalize([1, 2, 3])))
-    a = UsdGeom.Points(stage.GetPrimAtPath("/World/a/particles"))
-    b = UsdGeom.Points(stage.GetPrimAtPath("/World/b/particles"))
+    a = UsdGeom.Points(stage.GetPrimAtPath("/World/particles/a"))
+    b = UsdGeom.Points(stage.GetPrimAtPath("/World/particles/b"))
     assert [a.GetPointsAttr().Get(t) is None for t in (1, 2, 3)] == [False, False, True]
     assert [b.GetPointsAttr().Get(t) is None for t in (1, 2, 3)] == [True, False, False]
     # A scalar width is one shared diameter: constant interpolation.
@@ -131,7 +131,7 @@ def test_objects_that_come_and_go_have_no_points_when_absent(tmp_path):
 def test_volume_fields_point_at_each_frames_vdb(shot):
     root, _ = shot
     stage = Usd.Stage.Open(str(root))
-    volume = UsdVol.Volume(stage.GetPrimAtPath("/World/jelly/volume"))
+    volume = UsdVol.Volume(stage.GetPrimAtPath("/World/volumes/jelly"))
     asset = UsdVol.OpenVDBAsset(stage.GetPrimAtPath(volume.GetFieldPath("surface")))
     assert asset.GetFieldNameAttr().Get() == "surface"
     assert asset.GetFieldClassAttr().Get() == UsdVol.Tokens.levelSet
@@ -182,7 +182,7 @@ def test_unit_and_axis_conversion_happen_once_at_world(tmp_path):
     writer.write_frame(1, points={"p": PointsSample(np.array([[0.0, 1.0, 0.0]], np.float32))})
     stage = Usd.Stage.Open(str(writer.finalize([1])))
     assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
-    xf = UsdGeom.Xformable(stage.GetPrimAtPath("/World/p/particles")).ComputeLocalToWorldTransform(1)
+    xf = UsdGeom.Xformable(stage.GetPrimAtPath("/World/particles/p")).ComputeLocalToWorldTransform(1)
     # 1 m up (Y) in the sim is 100 cm up (Z) in the stage.
     np.testing.assert_allclose(np.array(xf.Transform((0.0, 1.0, 0.0))), [0.0, 0.0, 100.0], atol=1e-6)
 
@@ -211,7 +211,6 @@ def test_failed_frame_write_keeps_the_old_frame_and_leaves_no_temp(shot, monkeyp
     "kwargs, message",
     [
         ({"points": {"my-jelly": PointsSample(np.zeros((1, 3), np.float32))}}, "valid USD prim name.*my_jelly"),
-        ({"points": {"camera": PointsSample(np.zeros((1, 3), np.float32))}}, "reserved"),
         ({"points": {"j": PointsSample(np.zeros((4, 2), np.float32))}}, r"positions: shape \(4, 2\)"),
         (
             {"meshes": {"j": MeshSample(np.zeros((3, 3), np.float32), np.array([[0, 1, 3]]))}},

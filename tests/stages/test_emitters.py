@@ -99,7 +99,7 @@ def test_ids_stay_with_their_particles_and_reach_the_usd_points(ran):
     assert water[0] == 0 and 0 < water[2] < water[-1]  # (none emitted yet at t = 0)
     stage = Usd.Stage.Open(str(results["export"].entry / "shot.usda"))
     last = run.shot.shot.frame_end
-    points = UsdGeom.Points(stage.GetPrimAtPath("/World/spout/particles"))
+    points = UsdGeom.Points(stage.GetPrimAtPath("/World/particles/spout_particles"))
     ids = np.asarray(points.GetIdsAttr().Get(last))
     np.testing.assert_array_equal(ids, frames[last].id[frames[last].body == 2])
     assert len(points.GetVelocitiesAttr().Get(last)) == len(ids) > 0

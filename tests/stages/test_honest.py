@@ -113,8 +113,8 @@ def test_usd_and_vdb_are_published_at_a_stable_path(tmp_path, monkeypatch, capsy
     variant = mpmfx.load_shot(shot, overrides=["surface.radius_scale=1.5"], cache_root=tmp_path / "c")
     assert stable.parent.resolve() == variant.entries()["export"].root.resolve() != plain
     stage = Usd.Stage.Open(str(stable))  # a DCC opens the stable path: frames and VDBs resolve through it
-    pts = UsdGeom.Mesh(stage.GetPrimAtPath("/World/Elastic/mesh")).GetPointsAttr().Get(3)
-    vol = UsdVol.Volume(stage.GetPrimAtPath("/World/Elastic/volume"))
+    pts = UsdGeom.Mesh(stage.GetPrimAtPath("/World/surfaces/cube")).GetPointsAttr().Get(3)
+    vol = UsdVol.Volume(stage.GetPrimAtPath("/World/volumes/cube_vdb"))
     asset = UsdVol.OpenVDBAsset(stage.GetPrimAtPath(vol.GetFieldPath("surface")))
     assert len(pts) > 0 and Path(asset.GetFilePathAttr().Get(3).resolvedPath).is_file()
     assert main(args) == 0  # the plain shot again: all cached, and published again

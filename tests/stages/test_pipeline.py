@@ -213,7 +213,7 @@ def test_exported_usd_matches_voxelised_plus_simulated(first_run):
     vox, sim, exp = results[0].entry, results[1].entry, results[3].entry
     stage = Usd.Stage.Open(str(exp / "shot.usda"))
     assert UsdGeom.GetStageUpAxis(stage) == "Y" and stage.GetTimeCodesPerSecond() == 24
-    points = UsdGeom.Points(stage.GetPrimAtPath("/World/cube/particles"))
+    points = UsdGeom.Points(stage.GetPrimAtPath("/World/particles/cube_particles"))
     x0 = read_arrays(vox / "particles.npz")["x"]
     usd1 = np.asarray(points.GetPointsAttr().Get(1))
     assert np.allclose(usd1, x0, atol=1e-6)  # frame 1 is the voxelised state, in metres
@@ -344,7 +344,7 @@ def test_density_grid_is_a_fog_volume_in_the_vdb_and_the_usd(density_run):
     assert fog["values"].min() >= 0.0 and fog["values"].max() == pytest.approx(1.0, abs=1e-3)
     assert 0.05 < fog["values"][(fog["values"] > 0) & (fog["values"] < 1)].mean() < 0.95  # a soft edge
     stage = Usd.Stage.Open(str(exp / "shot.usda"))
-    volume = UsdVol.Volume(stage.GetPrimAtPath("/World/Elastic/volume"))
+    volume = UsdVol.Volume(stage.GetPrimAtPath("/World/volumes/cube_vdb"))
     asset = UsdVol.OpenVDBAsset(stage.GetPrimAtPath(volume.GetFieldPath("density")))
     assert asset.GetFieldNameAttr().Get() == "density" and asset.GetFieldClassAttr().Get() == "fogVolume"
     assert Path(asset.GetFilePathAttr().Get(3).resolvedPath).resolve() == vdb.resolve()
@@ -362,7 +362,7 @@ def test_density_off_writes_no_density(first_run):
     assert not [k for k in read_arrays(surf / "frames" / "0003.npz") if "density" in k]
     assert set(read_vdb(exp / "vdb" / "Elastic" / "0003.vdb")["grids"]) == {"surface", "vel"}
     stage = Usd.Stage.Open(str(exp / "shot.usda"))
-    assert set(UsdVol.Volume(stage.GetPrimAtPath("/World/Elastic/volume")).GetFieldPaths()) == {"surface", "vel"}
+    assert set(UsdVol.Volume(stage.GetPrimAtPath("/World/volumes/cube_vdb")).GetFieldPaths()) == {"surface", "vel"}
 
 
 def test_a_surface_too_big_for_one_call_names_the_shot_key_and_keeps_the_cache(first_run, monkeypatch, capsys):
