@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -15,6 +16,7 @@ import pytest
 import mpmfx
 from mpmfx.blender import bpy_available
 from mpmfx.io.frames import SurfaceFrame
+from mpmfx.publish import publish_name
 from tests.conftest import write_tiny_shot
 
 # Two objects (two surface groups), a keyframed collider: every kind of prim the export writes.
@@ -93,53 +95,62 @@ def test_blender_sees_every_object_frame_and_volume(exported):
     )
     seen = json.loads(line.removeprefix("INSPECT "))
     assert seen["frame_range"] == [1, 4] and seen["fps"] == pytest.approx(24.0)
-    # surface groups (one per material), particles per object, the collider, the shot camera
-    assert seen["names"]["meshes"] == ["Elastic", "Water"]
-    assert seen["names"]["points"] == ["cube", "pool"]
-    assert seen["names"]["volumes"] == ["Elastic", "Water"]
+    # a surface per group (one per material), named after its object; particles per object,
+    # the level sets, the collider, the shot camera
+    assert seen["names"]["meshes"] == ["cube", "pool"]
+    assert seen["names"]["points"] == ["cube_particles", "pool_particles"]
+    assert seen["names"]["volumes"] == ["cube_vdb", "pool_vdb"]
     assert seen["names"]["colliders"] == ["paddle"]
     assert seen["names"]["cameras"] == ["camera"]
+    named = {"Elastic": "cube", "Water": "pool"}
     for f in frames:
         row = seen["frames"][str(f)]
         surf = SurfaceFrame.read(entries["surface"] / "frames" / f"{f:04d}.npz").groups
         for g, data in surf.items():
-            mesh = row[f"meshes/{g}"]
+            mesh = row[f"meshes/{named[g]}"]
             assert mesh["count"] == len(data.vertices) > 0, (f, g)
             assert mesh["has_velocity"] and mesh["max_speed"] > 0.0, (f, g)
-            vol = row[f"volumes/{g}"]
+            vol = row[f"volumes/{named[g]}_vdb"]
             assert vol["loaded"] and "surface" in vol["grids"] and "vel" in vol["grids"]
             assert Path(vol["file"]) == (entries["export"] / "vdb" / g / f"{f:04d}.vdb").resolve()
-        assert row["points/cube"]["count"] > 0 and row["points/cube"]["has_velocity"]
+        assert row["points/cube_particles"]["count"] > 0 and row["points/cube_particles"]["has_velocity"]
 
 
-def test_cycles_render_stage_draws_the_looks(exported):
-    """The render stage in Cycles: every frame written (frame_step holds the ones between), the
-    .blend saved, the jelly drawn red and in frame, through the glass of a tank (render.looks.basin)."""
-    import imageio.v2 as imageio
+CYCLES = [
+    "render.engine=cycles",
+    "render.samples=2",
+    "render.width=96",
+    "render.height=64",
+    "render.frame_step=2",
+    "render.movie=true",
+    "render.basin=0.05",
+    'render.looks={basin = "glass"}',
+]
 
+
+@pytest.fixture(scope="module")
+def cycles(exported):
+    """The render stage in Cycles on the exported shot (a variant: it publishes beside it)."""
     folder, shot, _ = exported
     cwd = os.getcwd()
     os.chdir(folder)  # renders/<shot>/ is published relative to the working directory
     try:
-        run = mpmfx.load_shot(
-            shot,
-            cache_root=folder / "cache",
-            quiet=True,
-            overrides=[
-                "render.engine=cycles",
-                "render.samples=2",
-                "render.width=96",
-                "render.height=64",
-                "render.frame_step=2",
-                "render.movie=true",
-                "render.basin=0.05",
-                'render.looks={basin = "glass"}',
-            ],
-        )
-        entry = {r.stage: r for r in run.run()}["render"].entry
+        run = mpmfx.load_shot(shot, cache_root=folder / "cache", quiet=True, overrides=CYCLES)
+        entries = {r.stage: r.entry for r in run.run()}
     finally:
         os.chdir(cwd)
-    published = folder / "renders" / "tiny"
+    return folder, run, entries
+
+
+def test_cycles_render_stage_draws_the_looks(cycles):
+    """The render stage in Cycles: every frame written (frame_step holds the ones between), the
+    .blend saved, the jelly drawn red and in frame, through the glass of a tank (render.looks.basin)."""
+    import imageio.v2 as imageio
+
+    folder, run, entries = cycles
+    entry = entries["render"]
+    published = folder / "renders" / publish_name(run.shot)
+    assert published.name.startswith("tiny@render.engine=cycles,")
     # (failed once in four full runs with no PNG published; say what was there, should it recur)
     seen = {
         "published": sorted(p.name for p in published.iterdir()) if published.exists() else None,
@@ -148,12 +159,51 @@ def test_cycles_render_stage_draws_the_looks(exported):
     }
     assert sorted(p.name for p in published.glob("[0-9]*.png")) == [f"{f:04d}.png" for f in range(1, 5)], seen
     assert (published / "tiny.blend").stat().st_size > 0 and (published / "tiny.mp4").is_file()
+    assert not (folder / "renders" / "tiny").exists()  # a variant never replaces the hand-off
     one, two = (imageio.imread(entry / "frames" / f"{f:04d}.png") for f in (1, 2))
     assert np.array_equal(one, two)  # frame 2 holds frame 1 (frame_step = 2)
-    assert json.loads((entry / "cycles_job.json").read_text())["looks"]["basin"] == "glass"
+    job = json.loads((entry / "cycles_job.json").read_text())
+    assert job["looks"]["basin"] == "glass"
+    # the render looks through the camera the USD carries
+    assert job["camera"] == json.loads((entries["export"] / "manifest.json").read_text())["camera"]
     rgb = imageio.imread(entry / "frames" / "0003.png")[..., :3].astype(int)
     jelly = (rgb[..., 0] > rgb[..., 1] + 40) & (rgb[..., 0] > rgb[..., 2] + 30)
     assert 0.01 < jelly.mean() < 0.6, "the jelly cube should be in the picture, red, and not fill it"
+
+
+# Runs inside Blender: open the hand-off .blend where it was published, count vertices per frame.
+PLAY = """
+import json, sys
+import bpy
+bpy.ops.wm.open_mainfile(filepath=sys.argv[1])
+scene = bpy.context.scene
+out = {"paths": [c.filepath for c in bpy.data.cache_files], "counts": {}}
+for f in json.loads(sys.argv[2]):
+    scene.frame_set(f)
+    dg = bpy.context.evaluated_depsgraph_get()
+    out["counts"][f] = {o.name: len(o.evaluated_get(dg).data.vertices) for o in bpy.data.objects if o.type == "MESH"}
+print("PLAY " + json.dumps(out))
+"""
+
+
+def test_the_published_blend_plays_the_published_usd(cycles, tmp_path):
+    """renders/<name>/<shot>.blend, opened from there, animates: its meshes have each frame's
+    vertex count; and it still does with the project folder moved."""
+    folder, run, entries = cycles
+    name = publish_name(run.shot)
+    moved = tmp_path / "project"
+    moved.mkdir()
+    for part in ("renders", "published", "cache"):
+        shutil.copytree(folder / part, moved / part, symlinks=True)
+    blend = moved / "renders" / name / "tiny.blend"
+    line = next(s for s in _blender(PLAY, str(blend), "[1, 4]").splitlines() if s.startswith("PLAY "))
+    got = json.loads(line.removeprefix("PLAY "))
+    assert got["paths"] == [f"//../../published/{name}/shot.usda"]
+    for f in (1, 4):
+        surf = SurfaceFrame.read(entries["surface"] / "frames" / f"{f:04d}.npz").groups
+        assert got["counts"][str(f)]["cube"] == len(surf["Elastic"].vertices) > 0, f
+        assert got["counts"][str(f)]["pool"] == len(surf["Water"].vertices) > 0, f
+    assert got["counts"]["1"]["cube"] != got["counts"]["4"]["cube"]  # it moves: not frozen at frame 1
 
 
 def test_material_lands_on_the_drawn_ground(exported):
@@ -184,5 +234,87 @@ def test_preview_engine_and_engine_switch_rerender_only(exported, tmp_path, monk
         "export": "cached",
         "render": "ran",
     }
-    pngs = sorted((tmp_path / "renders" / "tiny").glob("[0-9]*.png"))
+    pngs = sorted((tmp_path / "renders" / "tiny@render.engine=preview").glob("[0-9]*.png"))
     assert len(pngs) == 4 and all(p.stat().st_size > 1000 for p in pngs)
+
+
+@pytest.fixture(scope="module")
+def three_of_four(exported, tmp_path_factory):
+    """The same shot exported for frames 1-3 of its 1-4 (`--frames 1:3`), in a cache of its own."""
+    folder, shot, _ = exported
+    cache = tmp_path_factory.mktemp("three") / "cache"
+    run = mpmfx.load_shot(shot, cache_root=cache, quiet=True)
+    return run, {r.stage: r.entry for r in run.run(until="export", frames=[1, 2, 3])}
+
+
+def test_the_usd_is_ready_for_a_dcc(three_of_four):
+    """pxr reads the hand-off as a DCC would: surfaces visible and named after their objects, each
+    bound to a UsdPreviewSurface of its look with a displayColor; particles and level sets
+    hidden; the render camera; the frame range that was run."""
+    from pxr import Gf, Usd, UsdGeom, UsdShade
+
+    from mpmfx.render.camera import render_camera
+    from mpmfx.render.looks import preview_surface
+
+    run, entries = three_of_four
+    stage = Usd.Stage.Open(str(entries["export"] / "shot.usda"))
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (1, 3)
+    for name, look in (("cube", "jelly"), ("pool", "water")):
+        prim = stage.GetPrimAtPath(f"/World/surfaces/{name}")
+        assert prim.IsA(UsdGeom.Mesh) and UsdGeom.Imageable(prim).ComputeVisibility(2) == UsdGeom.Tokens.inherited
+        material, _ = UsdShade.MaterialBindingAPI(prim).ComputeBoundMaterial()
+        assert material.GetPrim().GetName() == look
+        shader = material.ComputeSurfaceSource()[0]
+        assert shader.GetIdAttr().Get() == "UsdPreviewSurface"
+        want = preview_surface(look)
+        assert shader.GetInput("diffuseColor").Get() == Gf.Vec3f(*want["colour"])
+        assert shader.GetInput("opacity").Get() == pytest.approx(want["opacity"])
+        assert shader.GetInput("ior").Get() == pytest.approx(want["ior"])
+        colour = UsdGeom.PrimvarsAPI(prim).GetPrimvar("displayColor").Get()
+        assert tuple(colour[0]) == pytest.approx(want["colour"])
+    assert preview_surface("water")["opacity"] < 0.5 and preview_surface("jelly")["opacity"] == 1.0
+    for path in ("/World/particles/cube_particles", "/World/particles/pool_particles", "/World/volumes/cube_vdb"):
+        assert UsdGeom.Imageable(stage.GetPrimAtPath(path)).ComputeVisibility(2) == UsdGeom.Tokens.invisible
+    cam = UsdGeom.Camera(stage.GetPrimAtPath("/World/camera"))
+    want = json.loads((entries["export"] / "manifest.json").read_text())["camera"]
+    assert want == json.loads(
+        json.dumps(render_camera(run.shot))
+    )  # the preview engine's 3/4 view: what the frames show
+    xf = cam.ComputeLocalToWorldTransform(1)
+    assert tuple(xf.ExtractTranslation()) == pytest.approx(want["position"])
+    assert cam.GetFocalLengthAttr().Get() == pytest.approx(want["focal_length"] / 100)
+    assert cam.GetHorizontalApertureAttr().Get() == pytest.approx(want["horizontal_aperture"] / 100)
+    assert cam.GetVerticalApertureAttr().Get() == pytest.approx(want["vertical_aperture"] / 100)
+
+
+# Runs inside Blender: a plain import (the importer's defaults), then one with hidden prims too.
+PLAIN = """
+import json, sys
+import bpy
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.wm.usd_import(filepath=sys.argv[1])
+scene = bpy.context.scene
+out = {"range": [scene.frame_start, scene.frame_end],
+       "objects": {o.name: [o.type, [m.name for m in o.data.materials] if o.type == "MESH" else []]
+                   for o in bpy.data.objects if o.type in ("MESH", "POINTCLOUD", "VOLUME", "CAMERA")}}
+cam = next(o for o in bpy.data.objects if o.type == "CAMERA")
+out["lens"] = [cam.data.lens, cam.data.sensor_width]
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.wm.usd_import(filepath=sys.argv[1], import_visible_only=False)
+out["hidden"] = {o.name: o.hide_render for o in bpy.data.objects if o.type == "POINTCLOUD"}
+print("PLAIN " + json.dumps(out))
+"""
+
+
+def test_a_plain_blender_import_gets_named_surfaces_with_materials_and_no_particles(three_of_four):
+    _, entries = three_of_four
+    line = next(s for s in _blender(PLAIN, str(entries["export"] / "shot.usda")).splitlines() if s.startswith("PLAIN "))
+    got = json.loads(line.removeprefix("PLAIN "))
+    assert got["range"] == [1, 3]
+    objects = got["objects"]
+    assert objects["cube"] == ["MESH", ["jelly"]] and objects["pool"] == ["MESH", ["water"]]
+    assert objects["paddle"][0] == "MESH" and objects["camera"][0] == "CAMERA"
+    assert not [n for n, (kind, _) in objects.items() if kind == "POINTCLOUD"]  # hidden: not imported
+    assert not [n for n in objects if "." in n]  # no mesh.001: every name is its own
+    assert got["lens"] == pytest.approx([35.0, 36.0])
+    assert sorted(got["hidden"]) == ["cube_particles", "pool_particles"]  # there as data, when asked for
