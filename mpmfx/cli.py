@@ -258,10 +258,17 @@ def _dispatch(args) -> int:
         return 0
     if args.cmd == "status":
         rows = [
-            [s.stage, s.state, s.why, human(tree_size(s.entry)) if s.entry.exists() else "", os.path.relpath(s.entry)]
+            [
+                s.stage,
+                s.state,
+                s.why,
+                human(tree_size(s.entry)) if s.entry.exists() else "",
+                os.path.relpath(s.entry),
+                " ".join(f"--set {o}" for o in run.entry_overrides(s.stage)) or "(plain shot)",
+            ]
             for s in run.status()
         ]
-        _print_table(["stage", "state", "why", "disk", "entry"], rows)
+        _print_table(["stage", "state", "why", "disk", "entry", "overrides"], rows)
         shot_dir = run.cache.shot_dir
         if shot_dir.is_dir():
             print(

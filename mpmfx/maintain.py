@@ -52,6 +52,18 @@ def human(n: float) -> str:
     raise AssertionError
 
 
+def variant(entry: Path) -> str:
+    """Which variant an entry holds, from its manifest: its --set overrides, "plain shot" (none),
+    or "partial" (no manifest yet)."""
+    man = read_manifest(entry)
+    if man is None:
+        return "(partial: no manifest)"
+    overrides = man.get("overrides")
+    if not isinstance(overrides, list):
+        return "(overrides not recorded)"
+    return " ".join(f"--set {o}" for o in overrides) if overrides else "(plain shot)"
+
+
 def clean_targets(run, *, stage: str | None, all_variants: bool) -> list[Path]:
     """This variant's entries (of `stage`, or of every stage), or every variant's with all_variants."""
     stages = [stage] if stage else list(STAGES)
@@ -69,7 +81,7 @@ def delete(targets: list[Path], *, root: Path, dry_run: bool, yes: bool, verb: s
     check_targets(targets, root=root)
     sizes = [tree_size(t) for t in targets]
     for t, n in zip(targets, sizes):
-        print(f"{'would ' + verb if dry_run else verb:>12}  {human(n):>9}  {os.path.relpath(t)}")
+        print(f"{'would ' + verb if dry_run else verb:>12}  {human(n):>9}  {os.path.relpath(t)}  {variant(t)}")
     print(f"{'':>12}  {human(sum(sizes)):>9}  in all")
     if dry_run:
         return 0

@@ -118,3 +118,51 @@ def test_a_shot_whose_renders_hold_only_its_wedges_may_publish(tmp_path):
     check_publishable("s", renders=renders, published=tmp_path / "published")
     publish_renders(_shot(), _render_entry(tmp_path), root=renders)
     assert (renders / "s" / "wedge-surface.radius_scale").is_dir() and (renders / "s" / "published.json").is_file()
+
+
+def test_a_variant_publishes_beside_the_hand_off_and_every_listing_names_its_overrides(tmp_path, monkeypatch, capsys):
+    shot = write_tiny_shot(tmp_path, frame_end=2)
+    monkeypatch.chdir(tmp_path)
+    cache = ["--cache", str(tmp_path / "cache")]
+    plain = tmp_path / "published" / "tiny"
+    assert main(["run", str(shot), "--until", "export", "-q", *cache]) == 0
+    handed_over = plain.resolve()
+    variant = ["--set", "surface.smooth_iters=2"]
+    assert main(["run", str(shot), "--until", "export", "-q", *variant, *cache]) == 0
+    beside = tmp_path / "published" / "tiny@surface.smooth_iters=2"
+    assert (beside / "shot.usda").is_file() and beside.resolve() != handed_over
+    assert plain.resolve() == handed_over  # the hand-off is untouched
+    capsys.readouterr()
+
+    assert main(["status", str(shot), *variant, *cache]) == 0
+    rows = {line.split()[0]: line for line in capsys.readouterr().out.splitlines()[2:7]}
+    assert rows["simulate"].endswith("(plain shot)")  # shared with the plain shot: it holds no override
+    assert rows["surface"].endswith("--set surface.smooth_iters=2")
+    assert rows["export"].endswith("--set surface.smooth_iters=2")
+    assert main(["clean", str(shot), *variant, "--stage", "surface", "--dry-run", *cache]) == 0
+    assert "would delete" in (out := capsys.readouterr().out) and "--set surface.smooth_iters=2" in out
+
+    # asked for: the variant replaces the hand-off (and is published beside it as well)
+    again = ["--set", "surface.smooth_iters=3", "--publish-as", "default"]
+    assert main(["run", str(shot), "--until", "export", "-q", *again, *cache]) == 0
+    assert plain.resolve() == (tmp_path / "published" / "tiny@surface.smooth_iters=3").resolve() != handed_over
+    capsys.readouterr()
+    assert main(["cache", "prune", "--keep", "1", "--dry-run", *cache]) == 0
+    listed = [line for line in capsys.readouterr().out.splitlines() if "would delete" in line]
+    assert listed and all(line.endswith(("(plain shot)", "--set surface.smooth_iters=2")) for line in listed)
+    assert any(line.endswith("(plain shot)") for line in listed)  # the former hand-off's entries
+
+
+def test_a_variant_name_is_readable_unique_and_a_valid_folder():
+    from mpmfx.publish import publish_name
+
+    def shot(*overrides):
+        return SimpleNamespace(shot=SimpleNamespace(name="s"), overrides=overrides)
+
+    assert publish_name(shot()) == "s"
+    assert publish_name(shot("shot.name=s")) == "s"  # a renamed shot, not a variant
+    assert publish_name(shot("domain.grid_n=48")) == "s@domain.grid_n=48"
+    a, b = publish_name(shot("render.looks={a = 'x'}")), publish_name(shot("render.looks={a = 'y'}"))
+    assert a != b and "/" not in a and " " not in a and a.startswith("s@render.looks=")
+    long = publish_name(shot(*(f"objects.{i}.overrides.youngs_modulus={i}000" for i in range(9))))
+    assert len(long) < 80 and long != publish_name(shot(*(f"objects.{i}.overrides.youngs_modulus=1" for i in range(9))))

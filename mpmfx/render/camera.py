@@ -56,6 +56,21 @@ def frame_bounds(lo, hi, *, direction, aspect: float, focal_mm: float = FOCAL_MM
     return tuple(float(x) for x in centre + back * dist), tuple(float(x) for x in centre)
 
 
+def frames_bounds(shot) -> bool:
+    """Whether the render camera frames what was simulated (Cycles, no `render.camera_position`)."""
+    r = shot.render
+    return r.camera_position is None and str(getattr(r.engine, "value", r.engine)) == "cycles"
+
+
+def camera_inputs(shot) -> dict:
+    """What `render_camera` depends on besides the frames' bounds (for a cache key)."""
+    r = shot.render
+    out = {"aspect": r.width / r.height}
+    if frames_bounds(shot):
+        return {**out, "mode": r.mode, "floor": solver_floor(shot), "domain": shot.domain.model_dump(mode="json")}
+    return {**out, "camera": default_camera(shot)}
+
+
 def render_camera(shot, bounds=None) -> dict:
     """The camera the render looks through, which the exported USD carries too: {position,
     look_at (m), focal_length, horizontal_aperture, vertical_aperture (mm)}. Cycles without
@@ -64,7 +79,7 @@ def render_camera(shot, bounds=None) -> dict:
     camera or the 3/4 view (`default_camera`)."""
     r = shot.render
     aspect = r.width / r.height
-    if r.camera_position is None and str(getattr(r.engine, "value", r.engine)) == "cycles":
+    if frames_bounds(shot):
         o, L = np.asarray(shot.domain.origin, float), float(shot.domain.size)
         lo, hi = (np.asarray(b, float) for b in (bounds or (o, o + L)))
         lo[1] = min(lo[1], solver_floor(shot))

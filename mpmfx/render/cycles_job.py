@@ -26,6 +26,7 @@ import bpy
 from mpmfx.blender import FRAME_LINE, temp_name
 from mpmfx.render import blender_scene as bs
 from mpmfx.render.blender_scene import assign, make_material
+from mpmfx.render.label import burn_label
 
 
 def import_stage(usd: str) -> dict[str, list]:
@@ -107,11 +108,7 @@ def set_render(job: dict) -> None:
     r.image_settings.file_format, r.image_settings.color_mode = "PNG", "RGB"
     scene.view_settings.view_transform = "AgX"
     scene.view_settings.look = "AgX - Medium High Contrast"
-    if job.get("label"):  # a variant (--set) says which one it is, burned into every frame
-        for flag in [a for a in dir(r) if a.startswith("use_stamp_")]:
-            setattr(r, flag, False)
-        r.use_stamp = r.use_stamp_frame = r.use_stamp_note = True
-        r.stamp_note_text = job["label"]
+    r.use_stamp = False  # a variant's label is burned in after the render (`burn_label`)
 
 
 def build_scene(job: dict) -> None:
@@ -147,6 +144,8 @@ def render_frames(job: dict) -> None:
         tmp = temp_name(path)
         scene.render.filepath = str(tmp)
         bpy.ops.render.render(write_still=True)
+        if job.get("label"):  # a variant (--set) says which one it is, and the frame, on every frame
+            burn_label(tmp, f"{job['label']}  frame {frame}")
         os.replace(tmp, path)
         print(f"{FRAME_LINE} {frame} {time.perf_counter() - t0:.3f} {time.process_time() - c0:.3f}", flush=True)
 

@@ -8,6 +8,7 @@ import imageio.v2 as imageio
 import numpy as np
 
 from mpmfx.render import import_pyvista
+from mpmfx.render.label import burn_label
 
 # Colour per material family, keyed by preset name (unknown names fall back to grey).
 COLOURS = {
@@ -93,11 +94,10 @@ class FrameRenderer:
         return self._shoot(path, label)
 
     def _shoot(self, path: Path, label: str) -> Path:
-        self.plotter.add_text(f"{self.title}  {label}", font_size=9, color="white", name="label")
-        self._names.append("label")
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.stem}.tmp.png")
         self.plotter.screenshot(str(tmp))
+        burn_label(tmp, f"{self.title}  {label}")  # light on a dark box: readable on any sky
         tmp.replace(path)
         return path
 

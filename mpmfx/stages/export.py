@@ -20,7 +20,7 @@ from mpmfx.io.usd import ColliderSample, MeshSample, PointsSample, UsdShotWriter
 from mpmfx.io.usd_view import PreviewLook
 from mpmfx.io.vdb import VdbGrid, write_vdb
 from mpmfx.mpm.colliders import pose_matrix
-from mpmfx.render.camera import render_camera, solver_floor
+from mpmfx.render.camera import camera_inputs, frames_bounds, render_camera
 from mpmfx.render.looks import preview_surface
 from mpmfx.stages.base import Context
 from mpmfx.stages.colliders import animated_collider, collider_geometry
@@ -53,14 +53,7 @@ def params(shot: Shot) -> dict:
         "objects": [o.name for o in shot.bodies],
         "names": usd_names(shot).__dict__,
         "looks": surface_looks(shot),
-        # what the render camera depends on (`render_camera`)
-        "view": {
-            **shot.render.model_dump(
-                mode="json", include={"engine", "mode", "width", "height", "camera_position", "camera_look_at"}
-            ),
-            "domain": shot.domain.model_dump(mode="json"),
-            "floor": solver_floor(shot),
-        },
+        "camera": camera_inputs(shot),  # what the render camera depends on (`render_camera`)
     }
 
 
@@ -112,6 +105,8 @@ def _bounds(ctx: Context, frames: list[int]):
     """(lo, hi) m of what the render shows (surfaces, or particles in render.mode particles, and
     the colliders) over up to CAMERA_SAMPLES of `frames`; None when nothing is there."""
     shot = ctx.shot
+    if not frames_bounds(shot):
+        return None  # the camera is the config's or the 3/4 view: no frame is read
     n = len(frames)
     picks = sorted({frames[round(i * (n - 1) / (CAMERA_SAMPLES - 1))] for i in range(CAMERA_SAMPLES)}) if n else []
     pts = []

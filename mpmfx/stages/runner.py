@@ -106,6 +106,25 @@ class ShotRun:
             return [f for f in all_frames if f <= max(frames)]
         return frames or all_frames
 
+    def entry_overrides(self, name: str) -> list[str]:
+        """The --set overrides this run's entry of stage `name` holds: those without which its key
+        would differ (a variant of a surfacing field shares the plain shot's simulation, whose
+        entry holds none). What `status`, `clean` and `cache prune` show beside an entry."""
+        overrides = list(self.shot.overrides)
+        if not overrides or self.shot.source is None:
+            return overrides
+        key, out = self.entries()[name].key, []
+        for i, o in enumerate(overrides):
+            try:
+                shot = load_shot_config(self.shot.source, overrides[:i] + overrides[i + 1 :])
+                other = ShotRun(shot, cache_root=self.cache.root, executor=self.executor, publish=False)
+                if other.entries()[name].key == key:
+                    continue
+            except ShotError:  # the others alone are no valid shot: this one counts
+                pass
+            out.append(o)
+        return out
+
     # -- status ----------------------------------------------------------------------------
     def status(self) -> list[StageStatus]:
         out = []
@@ -262,7 +281,12 @@ class ShotRun:
             frames=done,
             timings=timings,
             qa=extra.pop("qa", None),
-            extra={**extra, "notes": ctx.notes, "host": socket.gethostname()},
+            extra={
+                **extra,
+                "notes": ctx.notes,
+                "host": socket.gethostname(),
+                "overrides": self.entry_overrides(entry.stage),
+            },
         )
         n = len(ctx.frames) if mod.PER_FRAME else 1
         return StageResult(entry.stage, ctx.state, seconds, n, entry.root)

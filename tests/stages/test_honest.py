@@ -91,8 +91,12 @@ def test_publishing_follows_every_run_and_the_label_names_the_overrides(tmp_path
     first = {p.name: p.read_bytes() for p in out.glob("[0-9]*.png")}
     variant = ["surface.radius_scale=1.3"]
     mpmfx.load_shot(shot, overrides=variant, cache_root=cache, quiet=True).run()
-    assert json.loads((out / "published.json").read_text())["overrides"] == variant
+    beside = tmp_path / "renders" / "tiny@surface.radius_scale=1.3"
+    assert json.loads((beside / "published.json").read_text())["overrides"] == variant
+    assert json.loads((out / "published.json").read_text())["overrides"] == []  # the hand-off stays
     assert "surface.radius_scale=1.3" in titles[-1] and "radius_scale" not in titles[0]
+    mpmfx.load_shot(shot, overrides=variant, cache_root=cache, quiet=True, publish_as="default").run()
+    assert json.loads((out / "published.json").read_text())["overrides"] == variant  # asked for
     results = plain.run()  # all cached: the plain version is published again
     assert {r.state for r in results} == {"cached"}
     assert json.loads((out / "published.json").read_text())["overrides"] == []
@@ -110,6 +114,8 @@ def test_usd_and_vdb_are_published_at_a_stable_path(tmp_path, monkeypatch, capsy
     assert "published/tiny/shot.usda" in capsys.readouterr().out  # the closing table says where
     plain = mpmfx.load_shot(shot, cache_root=tmp_path / "c").entries()["export"].root.resolve()
     assert main([*args, "--set", "surface.radius_scale=1.5"]) == 0
+    assert stable.parent.resolve() == plain  # a variant publishes beside the hand-off
+    assert main([*args, "--set", "surface.radius_scale=1.5", "--publish-as", "default"]) == 0
     variant = mpmfx.load_shot(shot, overrides=["surface.radius_scale=1.5"], cache_root=tmp_path / "c")
     assert stable.parent.resolve() == variant.entries()["export"].root.resolve() != plain
     stage = Usd.Stage.Open(str(stable))  # a DCC opens the stable path: frames and VDBs resolve through it

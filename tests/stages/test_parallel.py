@@ -228,3 +228,44 @@ def test_a_scheduler_address_that_is_no_address_is_refused_before_any_stage(tmp_
     assert code == 2
     assert "--scheduler" in capsys.readouterr().err
     assert not cache.exists()
+
+
+def test_a_task_that_fails_on_a_worker_says_worker_frame_variant_and_cause_in_one_line(reference, cluster):
+    """What a wedge's failing Cycles frame reports: one line, not Dask's escaped traceback."""
+    from mpmfx.stages.parallel import FrameJob, TaskError
+
+    shot, _ = reference
+    variant = load_shot_config(shot, ["surface.smooth_iters=2"])
+    run = ShotRun(variant, cache_root=Path("unused"), quiet=True, workers=1)
+    job = FrameJob.of(variant, run.entries()["render"], {}, None)
+
+    def blender_fails(job, f):  # defined here: Dask ships it to the worker by value
+        raise RuntimeError(
+            "Blender (Cycles) exited with code 1; full log: /cache/render/cycles_0003.log\n"
+            'Traceback (most recent call last):\n  File "cycles_job.py", line 190, in main\n'
+            "FileNotFoundError: [Errno 2] No such file or directory: '.tiny.tmp.blend'"
+        )
+
+    with pytest.raises(TaskError) as err:
+        cluster.map(blender_fails, [(job, 3)], desc="render", quiet=True)
+    message = str(err.value)
+    assert "\n" not in message and "\\n" not in message
+    assert "render frame 3 of tiny@surface.smooth_iters=2 failed on worker tcp://" in message
+    assert "cycles_0003.log" in message and message.endswith("No such file or directory: '.tiny.tmp.blend'")
+
+
+def test_blender_temp_names_differ_per_call_and_per_process(tmp_path):
+    """Two Blender children (a wedge's frames on two workers) never write one temp file."""
+    import fnmatch
+    import subprocess
+    import sys
+
+    from mpmfx.blender import temp_name
+
+    blend = tmp_path / "tiny.blend"
+    here = {temp_name(blend), temp_name(blend)}
+    code = f"from mpmfx.blender import temp_name; print(temp_name({str(blend)!r}))"
+    there = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip()
+    names = here | {Path(there)}
+    assert len(names) == 3
+    assert all(p.parent == tmp_path and p.suffix == ".blend" and fnmatch.fnmatch(p.name, TEMP_GLOB) for p in names)
