@@ -304,7 +304,7 @@ def test_particle_debug_render_reuses_the_simulation(first_run, tmp_path, monkey
         "export": "cached",
         "render": "ran",
     }
-    pngs = sorted((tmp_path / "renders" / "tiny").glob("[0-9]*.png"))
+    pngs = sorted((tmp_path / "renders" / "tiny@render.mode=particles").glob("[0-9]*.png"))
     assert len(pngs) == 6 and all(p.stat().st_size > 1000 for p in pngs)
 
 
