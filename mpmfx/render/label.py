@@ -24,16 +24,24 @@ def _wrap(draw, text: str, font, width: int) -> list[str]:
 
 def burn_label(path: str | Path, text: str) -> None:
     """Draw `text` in the top-left corner of the PNG at `path`, in place: white on a box of
-    80 % black, the font sized to the frame (a 30th of its height, at least 12 px)."""
+    80 % black, the font sized to the frame (a 30th of its height, at least 12 px; 8 px on a thumbnail). The box
+    takes at most the top third of the frame: on a thumbnail too small for the whole text, its
+    last line ends in '...'."""
     if not text.strip():
         return
     img = Image.open(path).convert("RGB")
     draw = ImageDraw.Draw(img, "RGBA")
-    size = max(12, img.height // 30)
+    size = max(12, img.height // 30) if img.height >= 240 else max(8, img.height // 8)  # a thumbnail's own
     font = ImageFont.load_default(size=size)
     pad = max(3, size // 3)
     lines = _wrap(draw, text, font, img.width - 4 * pad)
     step = size + pad // 2
+    fit = max(1, (img.height // 3 - 2 * pad) // step)
+    if len(lines) > fit:
+        lines = lines[:fit]
+        while lines[-1] and draw.textlength(lines[-1] + " ...", font=font) > img.width - 4 * pad:
+            lines[-1] = lines[-1][:-1]
+        lines[-1] += " ..."
     width = max(draw.textlength(line, font=font) for line in lines)
     draw.rectangle((0, 0, min(img.width, width + 4 * pad), len(lines) * step + 2 * pad), fill=(0, 0, 0, 204))
     for i, line in enumerate(lines):

@@ -171,25 +171,6 @@ def test_cycles_render_stage_draws_the_looks(cycles):
     assert 0.01 < jelly.mean() < 0.6, "the jelly cube should be in the picture, red, and not fill it"
 
 
-def test_two_cycles_frames_of_one_entry_at_once_do_not_collide(cycles, tmp_path):
-    """What a wedge's two workers do: two Blender children render frames of one render entry at
-    the same time, each saving the .blend; both finish, every file complete, no temp left."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    from mpmfx.cache import TEMP_GLOB, Entry
-    from mpmfx.stages import render
-    from mpmfx.stages.parallel import FrameJob
-
-    _, run, entries = cycles
-    entry = Entry(tmp_path / "render-both", "render", "0" * 64, {})
-    job = FrameJob.of(run.shot, entry, {"export": Entry(entries["export"], "export", "1" * 64, {})}, None)
-    with ThreadPoolExecutor(2) as pool:
-        done = list(pool.map(lambda f: render.frame(job, f), [1, 3]))
-    assert all(set(d["cycles_seconds"]) for d in done)
-    assert entry.done_frames("png") == [1, 3] and (entry.root / "tiny.blend").stat().st_size > 0
-    assert not list(entry.root.rglob(TEMP_GLOB))
-
-
 # Runs inside Blender: open the hand-off .blend where it was published, count vertices per frame.
 PLAY = """
 import json, sys
