@@ -246,7 +246,8 @@ def test_status_reports_sizes_and_prune_keeps_the_newest_and_the_published(tmp_p
         surfaces.append(run.entries()["surface"].root)
         time.sleep(0.05)  # distinct manifest times
     published_variant = mpmfx.load_shot(shot, overrides=["surface.radius_scale=1.1"], cache_root=cache, quiet=True)
-    published_variant.run(until="export")  # cached, and now the published one: the oldest surface in use
+    published_variant.run(until="export")  # cached, and published again: the oldest surface in use
+    (tmp_path / "published" / "tiny@surface.radius_scale=1.2").unlink()  # each variant published beside; not 1.2
     capsys.readouterr()
     assert main(["status", str(shot), "--cache", str(cache)]) == 0
     out = capsys.readouterr().out
@@ -258,7 +259,7 @@ def test_status_reports_sizes_and_prune_keeps_the_newest_and_the_published(tmp_p
     assert not surfaces[1].exists()  # neither newest nor published
     assert surfaces[2].is_dir()  # the newest
     assert published_variant.entries()["simulate"].complete()  # one simulate variant: kept
-    assert (tmp_path / "published" / "tiny" / "shot.usda").is_file()
+    assert (tmp_path / "published" / "tiny@surface.radius_scale=1.1" / "shot.usda").is_file()
 
 
 def test_frames_are_stored_compactly_and_byte_deterministic(tmp_path):
