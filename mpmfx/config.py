@@ -198,6 +198,11 @@ class Solver(_Section):
         "its effect per second does not depend on dt; without it elastic bodies ring on.",
     )
     drag: Real = Field(_SOLVER.drag, description="PIC blend as a rate (1/s), never a per-substep fraction.")
+    flip: Real = Field(
+        _SOLVER.flip,
+        description="FLIP share of the particle velocity update, 0..1 (0: APIC; 0.9-0.99 keeps more motion, "
+        "less numerical damping, more noise).",
+    )
     time_scale: Real = Field(
         _SOLVER.time_scale,
         description="Playback speed: simulated seconds per shot "
