@@ -102,7 +102,7 @@ def _parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="speed and accuracy benchmarks (run them on the GPU)")
     b.add_argument(
         "what",
-        choices=("accuracy", "gpu", "surface", "surface-times", "solver", "voxelise", "shots"),
+        choices=("accuracy", "oscillation", "gpu", "surface", "surface-times", "solver", "voxelise", "shots"),
         help="which benchmark",
     )
     b.add_argument("--quick", action="store_true", help="small CPU-sized sweep")
