@@ -204,13 +204,16 @@ def test_thin_plate(cells, flip):
         assert e1 <= 1.05 * e0
 
 
+@pytest.mark.parametrize("flip", FLIPS)
 @pytest.mark.parametrize("mode", [OutOfDomain.CLAMP, OutOfDomain.REMOVE])
-def test_fast_toward_domain_edge(mode):
+def test_fast_toward_domain_edge(mode, flip):
     x = cube([0.6, 0.4, 0.4], [0.75, 0.55, 0.55])
-    solver, state = make([elastic(300.0)], [(x, (50.0, 0.0, 0.0), 0)], out_of_domain=mode, walls=("separate",) * 6)
+    solver, state = make(
+        [elastic(300.0)], [(x, (50.0, 0.0, 0.0), 0)], out_of_domain=mode, walls=("separate",) * 6, flip=flip
+    )
     verdict, reps, s = run(solver, state, 0.05)
     lost = sum(r.particles_lost for r in reps)
-    print(f"HARD fast toward edge ({mode.value}): {verdict}, lost={lost}, x_max={s['x'][:, 0].max():.4f}")
+    print(f"HARD fast toward edge ({mode.value}) flip={flip}: {verdict}, lost={lost}, x_max={s['x'][:, 0].max():.4f}")
     assert s["x"].max() <= 1.0 - 1 / 16 + 1e-6 and s["x"].min() >= 1 / 16 - 1e-6
     if mode == OutOfDomain.REMOVE:
         assert lost == int((s["alive"] == 0).sum())
