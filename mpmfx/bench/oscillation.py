@@ -103,11 +103,14 @@ def bar(grid_n: int, flip: float, *, periods: float = 3.0, cfl: float = 0.4, dev
     return _row("bar", solver, state, flip, t, ys, T, wall, len(ys) - 1, cells_across=2)
 
 
-def _slab_colliders(z0: float, z1: float) -> tuple:
-    """Two frictionless planes holding the material in z0 <= z <= z1 (quasi-2D)."""
+def _slab_colliders(z0: float, z1: float, dx: float) -> tuple:
+    """Two frictionless planes holding the material in z0 <= z <= z1 (quasi-2D), z0 and z1 on
+    nodes. A collider holds the nodes strictly inside it, so each plane sits half a cell inside
+    the slab: the nodes at z0 and z1 are held, and the material stops there, as it does at the
+    walls' inner band node (a plane on the node would let it spread a cell into each side)."""
     return (
-        Collider(ColliderKind.PLANE, normal=(0.0, 0.0, 1.0), point=(0.0, 0.0, z0)),
-        Collider(ColliderKind.PLANE, normal=(0.0, 0.0, -1.0), point=(0.0, 0.0, z1)),
+        Collider(ColliderKind.PLANE, normal=(0.0, 0.0, 1.0), point=(0.0, 0.0, z0 + 0.5 * dx)),
+        Collider(ColliderKind.PLANE, normal=(0.0, 0.0, -1.0), point=(0.0, 0.0, z1 - 0.5 * dx)),
     )
 
 
@@ -129,7 +132,7 @@ def slosh(
     x = x[x[:, 1] <= lo + depth + a * np.cos(k * (x[:, 0] - lo))]
     water = preset("Water")
     cfg = SolverConfig(grid_n=grid_n, gravity=(0.0, -g, 0.0), wall_friction=0.0, flip=flip)
-    solver = Solver([water], cfg, colliders=_slab_colliders(z0, z1), device=device)
+    solver = Solver([water], cfg, colliders=_slab_colliders(z0, z1, dx), device=device)
     n = len(x)
     parts = Particles(
         x=x,
