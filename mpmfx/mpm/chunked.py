@@ -207,6 +207,8 @@ class DeviceAdvance:
         s, cfg = self.s, self.s.config
         wall0 = time.perf_counter()
         s._last_bad = None
+        if self.p2g == "brick" and s.flags.flip > 0.0:
+            raise ValueError("DeviceAdvance.p2g: the brick P2G has no FLIP blend (SolverConfig.flip); use 'reference'")
         if self.p2g == "brick" and (self._brick is None or self._brick.n != state.n):
             self._brick = BrickP2G(s.flags, state.n, s.device, nodes=cfg.grid_n + 1)  # before any capture: it allocates
         if self.p2g == "brick":

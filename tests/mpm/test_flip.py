@@ -8,7 +8,7 @@ from mpmfx.bench.oscillation import bar, slosh
 from mpmfx.bench.reference_step import ReferenceSolver
 from mpmfx.mpm import Solver, SolverConfig, preset
 from mpmfx.mpm.config import SolverConfigError
-from tests.mpm.mpm_helpers import block
+from tests.mpm.mpm_helpers import block, concat
 
 FLIP = 0.95  # one share for the whole file: each share compiles kernels of its own
 
@@ -73,6 +73,31 @@ def test_flip_replays_and_resumes_bit_identically():
     for key in ("x", "v", "C", "J"):
         for other in (runs[1][0], runs[2][0], resumed):  # a replay, the host stepper, a resume
             assert np.array_equal(runs[0][0][key], other[key]), key
+
+
+def test_flip_with_one_field_per_body_keeps_fixed_point_and_float_runs_together():
+    """Multi-field contact keeps the mass gradients in fixed-point channels too: the blend's
+    momentum has channels of its own, so the deterministic run stays the float run's rounding."""
+    out = []
+    for det in (True, False):
+        cfg = SolverConfig(grid_n=16, flip=FLIP, deterministic=det, multi_field=True, gravity=(0.0, 0.0, 0.0))
+        solver = Solver([preset("Water")], cfg, device="cpu")
+        a = block((0.25, 0.4, 0.4), (0.45, 0.6, 0.6), grid_n=16, body=0, v=(2.0, 0.0, 0.0))
+        b = block((0.55, 0.4, 0.4), (0.75, 0.6, 0.6), grid_n=16, body=1, v=(-2.0, 0.0, 0.0))
+        state = solver.init_state(concat(a, b))
+        solver.advance(state, 0.0, 0.06)
+        out.append(solver.state_to_numpy(state))
+    assert np.abs(out[0]["v"][:, 0]).mean() < 1.9  # they have met: the contact slowed them
+    np.testing.assert_allclose(out[0]["x"], out[1]["x"], atol=1e-4)
+    np.testing.assert_allclose(out[0]["v"], out[1]["v"], atol=2e-2)
+
+
+def test_the_brick_scatter_refuses_a_flip_scene():
+    solver = Solver([preset("Water")], SolverConfig(grid_n=16, flip=FLIP), device="cpu")
+    assert solver._device_advance.p2g == "reference"  # chosen for a FLIP scene on any device
+    solver._device_advance.p2g = "brick"  # (forced, as the GPU measurements do)
+    with pytest.raises(ValueError, match="brick P2G has no FLIP blend"):
+        solver.advance(_drop(solver), 0.0, 0.01)
 
 
 @pytest.mark.parametrize("flip", [-0.1, 1.5, float("nan")])
