@@ -1,12 +1,15 @@
 """Where the first run's kernel compiles go: a shot at a small size (voxelise, simulate, surface)
 with an empty Warp kernel cache, every Warp module's load timed, split into Python code
-generation and the compiler (NVRTC on a GPU, clang on the CPU). One table, worst first.
+generation and the compiler (NVRTC on a GPU, clang on the CPU), and each stage's time (on a GPU
+the surfacer's modules compile on threads while the shot simulates: mpmfx/stages/kernels.py, so
+their loads overlap the stages). One table, worst first.
 
     python lab/first_use.py [hero_castle] [--device cuda:0] [--grid 32] [--frames 2]
 """
 
 import argparse
 import tempfile
+import threading
 import time
 from collections import defaultdict
 from pathlib import Path
@@ -20,7 +23,7 @@ from mpmfx.bench.shots import run_shot, smoke_overrides
 
 LOADS: dict[str, float] = defaultdict(float)
 COMPILES: dict[str, float] = defaultdict(float)
-_current: list[str] = []
+_current = threading.local()  # the module a thread is loading (the surfacer's load on threads of their own)
 
 
 def _timed(fn, book, name_of):
@@ -47,19 +50,19 @@ def main():
     load = Module.load
 
     def load_named(self, *args, **kw):
-        _current.append(self.name)
-        try:
-            return _timed(load, LOADS, lambda _a: self.name)(self, *args, **kw)
-        finally:
-            _current.pop()
+        _current.name = self.name
+        return _timed(load, LOADS, lambda _a: self.name)(self, *args, **kw)
 
     Module.load = load_named
     for fn in ("build_cuda", "build_cpu"):
-        setattr(wp_build, fn, _timed(getattr(wp_build, fn), COMPILES, lambda _a: _current[-1] if _current else "?"))
+        setattr(wp_build, fn, _timed(getattr(wp_build, fn), COMPILES, lambda _a: getattr(_current, "name", "?")))
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as cache:
-        run_shot(a.shot, [a.frames], overrides=smoke_overrides(a.grid, a.frames), cache=Path(cache), device=a.device)
+        row = run_shot(
+            a.shot, [a.frames], overrides=smoke_overrides(a.grid, a.frames), cache=Path(cache), device=a.device
+        )
     wall = time.perf_counter() - t0
+    stages = {k: v["seconds"] for k, v in row["stages"].items()}
     rows = [
         {
             "module": n,
@@ -73,7 +76,8 @@ def main():
     print_table(rows, ["module", "load_s", "compiler_s", "codegen_etc_s"])
     print(
         f"{a.shot} grid {a.grid}, {a.frames} frames on {a.device}: wall {wall:.1f} s, module loads "
-        f"{sum(LOADS.values()):.1f} s ({len(LOADS)} modules), of which the compiler {sum(COMPILES.values()):.1f} s"
+        f"{sum(LOADS.values()):.1f} s ({len(LOADS)} modules, the surfacer's compiled ahead on threads on a GPU), "
+        f"of which the compiler {sum(COMPILES.values()):.1f} s; stage seconds {stages}"
     )
 
 

@@ -17,14 +17,18 @@ stepper's chunk):
    with the winding number the refit also updates the BVH's solid-angle data, one more kernel).
 
 The grid update (`make_mesh_contact`) then finds, at each node holding mass, the closest point
-within `band` of the surface, and whether the node is inside from the mesh's generalised winding
-number (`wp.mesh_query_point_sign_winding_number`; the angle-weighted pseudo-normal sign,
-`..._sign_normal`, takes points just outside a booleaned mesh's finely split faces for inside,
-where the winding number does not); at a node inside the mesh the
+within `band` of the surface, and which side of the mesh the node is on (`INSIDE_TEST`): where
+the closest point lies inside a face, the side of that face, exact there for a closed surface
+(the node lies on the face's normal line); where it lies on an edge or a vertex, the generalised
+winding number (`wp.mesh_query_point_sign_winding_number`; Warp's angle-weighted pseudo-normal
+sign, `..._sign_normal`, takes points just outside a booleaned mesh's finely split faces for
+inside). Asking the winding number everywhere costs about four times as much
+(`lab/collider_cost.py`). At a node inside the mesh the
 velocity relative to the surface velocity there (barycentric interpolation of the vertex
 velocities, `wp.mesh_eval_velocity`: the collider's own deformation, not a rigid pose) loses
 its approaching normal part and Coulomb friction, as the rigid colliders do (`apply_collider`).
-The meshes must be closed (small gaps are tolerated by the winding number) and wound outward.
+The meshes must be closed and wound outward; a node near a face buried inside another closed
+shell of the same mesh is taken for outside (material does not reach there).
 """
 
 from __future__ import annotations
@@ -298,5 +302,5 @@ def make_mesh_contact(inside_test: str):
     return mesh_contact
 
 
-INSIDE_TESTS = ("winding", "parity", "faces")
-INSIDE_TEST = "winding"
+INSIDE_TESTS = ("winding", "parity", "faces")  # lab/collider_cost.py times each (docs/benchmarks.md)
+INSIDE_TEST = "faces"  # the one Solvers build their grid update with
