@@ -317,6 +317,11 @@ class Render(_Section):
     engine: RenderEngine = Field(
         RenderEngine.CYCLES, description="cycles (Blender, the look) or preview (PyVista, seconds a frame)."
     )
+    device: Literal["cpu", "gpu"] = Field(
+        "cpu",
+        description="cycles: where Cycles renders; gpu: the first of OptiX, CUDA, HIP, oneAPI, Metal that "
+        "Blender finds here, else the CPU, said in the run's output.",
+    )
     width: Int = Field(960, ge=16, le=8192, description="Picture width (pixels).")
     height: Int = Field(540, ge=16, le=8192, description="Picture height (pixels).")
     samples: Int = Field(16, ge=1, le=65536, description="cycles: path-tracing samples per pixel.")

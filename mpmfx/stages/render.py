@@ -138,6 +138,7 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
         height=r.height,
         samples=r.samples,
         denoise=r.denoise,
+        device=r.device,
         shutter=r.shutter,
         fps=shot.shot.fps,
         mode=r.mode,
