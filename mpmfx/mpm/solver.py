@@ -560,17 +560,19 @@ class Solver:
         """Host copy of the particles, in particle order (readback.state_to_numpy)."""
         return readback.state_to_numpy(self, state)
 
-    def host_arrays(self, state: State, names=None) -> dict[str, np.ndarray]:
-        """Host copies of the particle arrays as stored (readback.host_arrays)."""
-        return readback.host_arrays(self, state, names)
+    def host_arrays(self, state: State, names=None, staging=None) -> dict[str, np.ndarray]:
+        """Host copies of the particle arrays as stored (readback.host_arrays; staging: a
+        readback.HostStaging whose buffers they land in)."""
+        return readback.host_arrays(self, state, names, staging)
 
     def volume_ratios(self, state: State) -> np.ndarray:
         """J (n,) float32 in particle order, computed on the device (readback.volume_ratios)."""
         return readback.volume_ratios(self, state)
 
-    def checkpoint(self, state: State, t: float) -> dict[str, np.ndarray]:
-        """Full state and stepper clock at shot time t, s, as numpy arrays (readback.checkpoint)."""
-        return readback.checkpoint(self, state, t)
+    def checkpoint(self, state: State, t: float, staging=None) -> dict[str, np.ndarray]:
+        """Full state and stepper clock at shot time t, s, as numpy arrays (readback.checkpoint;
+        staging: a readback.HostStaging whose buffers they land in)."""
+        return readback.checkpoint(self, state, t, staging)
 
     def restore(self, data: dict[str, np.ndarray]) -> tuple[State, float]:
         """State and shot time t from `checkpoint` output (readback.restore)."""

@@ -29,6 +29,7 @@ from mpmfx.io.frames import ParticleFrame, SeedParticles, read_arrays, write_arr
 from mpmfx.mpm import AnimatedMesh, Collider, ColliderKind, Particles, SimulationError, Solver
 from mpmfx.mpm.emission import device_bytes
 from mpmfx.mpm.materials import VARIED_FIELDS, preset
+from mpmfx.mpm.readback import HostStaging
 from mpmfx.stages.base import Context, StageError, quiet_warp
 from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
 from mpmfx.stages.writer import FrameWriter
@@ -189,6 +190,7 @@ def run(ctx: Context) -> dict:
     start, fps = shot.shot.frame_start, shot.shot.fps
     last = max(ctx.frames)
     ckpt = _latest_checkpoint(entry.root / "checkpoints", entry.done_frames(FRAME_EXT), start)
+    staging = HostStaging(solver.device)  # two sets of host buffers: the frame written, the frame made
     with FrameWriter() as writer:
         if ckpt is None:
             p = SeedParticles.read(ctx.upstream["voxelise"].root)
@@ -209,13 +211,15 @@ def run(ctx: Context) -> dict:
             here = slice(None) if p.birth is None else p.birth <= 0  # (late ones are not there yet)
             qa0["max_speed"] = float(np.linalg.norm(p.v[here], axis=1).max(initial=0.0))  # m/s; no substep measured it
             consts = _consts(solver, state)  # material and body: the same every frame, copied once
-            writer.submit(_write_frame, entry, frame, qa0, None, _host(solver, state, consts), origin, size)
+            writer.submit(_write_frame, entry, frame, qa0, None, _host(solver, state, consts, staging), origin, size)
         else:
             frame = ckpt
             state, _ = solver.restore(read_arrays(entry.root / "checkpoints" / f"{ckpt:04d}.npz"))
             consts = _consts(solver, state)
             if not entry.frame_path(frame, FRAME_EXT).exists():  # killed between checkpoint and frame
-                writer.submit(_write_frame, entry, frame, None, None, _host(solver, state, consts), origin, size)
+                writer.submit(
+                    _write_frame, entry, frame, None, None, _host(solver, state, consts, staging), origin, size
+                )
         split = dict.fromkeys(("advance", "host_copy", "writer_wait"), 0.0)  # s, summed over the frames
         for f in ctx.progress(range(frame + 1, last + 1), total=last - frame, desc="simulate"):
             t0 = time.perf_counter()
@@ -226,9 +230,9 @@ def run(ctx: Context) -> dict:
             t1 = time.perf_counter()
             ckpt_data = None
             if (f - start) % shot.solver.checkpoint_every == 0 or f == last:
-                ckpt_data = _host_copy(solver.checkpoint(state, (f - start) / fps), solver)
+                ckpt_data = solver.checkpoint(state, (f - start) / fps, staging)
             # the frame's arrays are the checkpoint's where there is one (one copy off the device)
-            host = _host(solver, state, consts, ckpt_data)
+            host = _host(solver, state, consts, staging, ckpt_data)
             t2 = time.perf_counter()
             qa = _qa(report, size) | _entered(solver, state)
             writer.submit(_write_frame, entry, f, qa, ckpt_data, host, origin, size)
@@ -297,24 +301,20 @@ FRAME_ARRAYS = ("x", "v", "Jp", "alive")  # what a frame file is made of, beside
 
 def _consts(solver, state) -> dict:
     """material and body, host copies in particle order (which no substep changes)."""
-    return _host_copy(solver.host_arrays(state, ("material", "body")), solver)
+    # (copies: on the CPU device numpy() views the solver's own memory)
+    return {k: np.array(a) for k, a in solver.host_arrays(state, ("material", "body")).items()}
 
 
-def _host(solver, state, consts: dict, checkpoint: dict | None = None) -> dict:
+def _host(solver, state, consts: dict, staging: HostStaging, checkpoint: dict | None = None) -> dict:
     """The particles' host copy for the frame file (a checkpoint's arrays where there is one: one
-    copy off the device), with J, the volume ratio, computed on the device; the rest of its
-    making (masks, checks) is the writer thread's."""
+    copy off the device), in `staging`'s buffers (the writer thread reads them while the next
+    frame is made: FrameWriter(1) and two sets), with J, the volume ratio, computed on the
+    device; the rest of its making (masks, checks) is the writer thread's."""
     if checkpoint:
         arrays = {k: checkpoint[k] for k in FRAME_ARRAYS}
     else:
-        arrays = _host_copy(solver.host_arrays(state, FRAME_ARRAYS), solver)
+        arrays = solver.host_arrays(state, FRAME_ARRAYS, staging)
     return {**arrays, **consts, "J": solver.volume_ratios(state)}
-
-
-def _host_copy(arrays: dict, solver) -> dict:
-    """On the CPU device `numpy()` views the solver's memory, which the next frame overwrites
-    while the writer thread is still busy: copy it (on a GPU it is a fresh host copy already)."""
-    return {k: np.array(a) for k, a in arrays.items()} if solver.device.is_cpu else arrays
 
 
 def _particles(s: dict, frame: int, origin, size: float) -> ParticleFrame:
