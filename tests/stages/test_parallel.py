@@ -130,6 +130,22 @@ def test_killed_worker_is_retried_and_the_cache_holds_nothing_partial(reference,
     assert run.run(until="surface")[-1].state == "cached"
 
 
+def test_a_changed_frame_met_on_a_worker_is_redone_by_its_stage(reference, cluster, tmp_path):
+    """A simulate frame flipped at equal size: the worker surfacing it finds it by its checksum,
+    the client has simulate redo it, and the surfaces equal the serial run's."""
+    shot, ref = reference
+    cache = _cache_with_simulation(reference, tmp_path / "cache")
+    run = ShotRun(load_shot_config(shot), cache_root=cache, quiet=True, executor=cluster)
+    frame = run.entries()["simulate"].frame_path(4, "npz")
+    written = bytearray(frame.read_bytes())
+    written[len(written) // 2] ^= 0xFF
+    frame.write_bytes(bytes(written))
+    results = {r.stage: r.state for r in run.run(until="surface")}
+    assert results["simulate"] == "resumed" and results["surface"] in ("ran", "resumed")
+    assert frame.read_bytes() == (ref["simulate"] / "frames" / "0004.npz").read_bytes()
+    assert _files(ref["surface"]) == _files(run.entries()["surface"].root)
+
+
 def test_wedge_of_a_surfacing_field_shares_one_simulation(reference, cluster, tmp_path):
     shot, _ = reference
     cache = _cache_with_simulation(reference, tmp_path / "cache")
