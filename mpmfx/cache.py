@@ -223,7 +223,7 @@ class Entry:
         """Files the manifest lists that are missing or changed size since it was written, and
         those a check found changed (`mark_damaged`)."""
         man = man or self.manifest() or {}
-        bad = [rel for rel in man.get("damaged", []) if rel in man.get("files", {})]
+        bad = [rel for rel in man.get("damaged", []) if not rel.startswith("checkpoints/")]  # (frames intact)
         for rel, size in man.get("files", {}).items():
             try:
                 if (self.root / rel).stat().st_size != size and rel not in bad:
