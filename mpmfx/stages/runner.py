@@ -122,16 +122,15 @@ class ShotRun:
         return out
 
     def verify(self) -> tuple[list[tuple[str, Path, str]], int]:
-        """Read every file and checkpoint of this shot's stage entries and compare each with the
-        digest recorded when it was written (`status --verify`), under the shot's lock. A damaged
-        file is marked, so its entry turns partial and the next run redoes it; a damaged
-        checkpoint is deleted (a resume uses an earlier one). Returns ([(stage, path, why)],
-        the number of files with no recorded digest, checked by size only)."""
+        """Read every file and checkpoint of every entry of this shot (every variant's) and
+        compare each with the digest recorded when it was written (`status --verify`), under the
+        shot's lock. A damaged file is marked, so its entry turns partial and the next run redoes
+        it; a damaged checkpoint is deleted (a resume uses an earlier one). Returns
+        ([(stage, path, why)], the number of files with no recorded digest: checked by size)."""
         out, unverified = [], 0
         with contextlib.nullcontext() if self.locked else self.cache.lock():
-            for name, entry in self.entries().items():
-                if not entry.root.is_dir():
-                    continue
+            for name, root in ((n, r) for n in STAGES for r in self.cache.entries(n) if _real_dir(r)):
+                entry = Entry(root, name, root.name.rpartition("-")[2], {})
                 man = entry.manifest() or {}
                 changed, unknown = entry.verify()
                 unverified += len(unknown)
@@ -311,6 +310,10 @@ class ShotRun:
         )
         n = len(ctx.frames) if mod.PER_FRAME else 1
         return StageResult(entry.stage, ctx.state, seconds, n, entry.root)
+
+
+def _real_dir(path: Path) -> bool:
+    return path.is_dir() and not path.is_symlink()  # (a link would send the marks outside the cache)
 
 
 def _why_damaged(entry: Entry, man: dict, rel: str) -> str:

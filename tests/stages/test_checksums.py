@@ -42,20 +42,31 @@ def test_a_surface_frame_changed_at_equal_size_is_redone_when_export_reads_it(tm
 
 
 def test_status_verify_names_a_changed_surface_frame_and_the_next_run_redoes_it(tmp_path, monkeypatch, capsys):
+    """status --verify reads every entry of the shot, another variant's too."""
     monkeypatch.chdir(tmp_path)
     shot, cache = write_tiny_shot(tmp_path, frame_end=3), str(tmp_path / "c")
     assert main(["run", str(shot), "--until", "export", "--cache", cache, "-q"]) == 0
+    variant = ["--set", "surface.smooth_iters=0"]
+    assert main(["run", str(shot), "--until", "surface", "--cache", cache, "-q", *variant]) == 0
     surface = mpmfx.load_shot(shot, cache_root=cache).entries()["surface"]
+    other = mpmfx.load_shot(shot, overrides=variant[1:], cache_root=cache).entries()["surface"]
     written = surface.frame_path(2, "npz").read_bytes()
     _flip(surface.frame_path(2, "npz"))
+    _flip(other.frame_path(3, "npz"))
     capsys.readouterr()
     assert main(["status", str(shot), "--cache", cache, "--verify"]) == 1
     out = capsys.readouterr().out
-    damaged = [line for line in out.splitlines() if "checksum" in line]
-    assert len(damaged) == 1 and "surface" in damaged[0] and "frames/0002.npz" in damaged[0]
+    damaged = sorted(line for line in out.splitlines() if "checksum" in line)
+    assert len(damaged) == 2 and all(line.split()[0] == "surface" for line in damaged)
+    assert {(surface.root.name in line, "frames/0002.npz" in line) for line in damaged} == {
+        (True, True),
+        (False, False),
+    }
+    assert any(other.root.name in line and "frames/0003.npz" in line for line in damaged)
     assert _states(shot, cache)["surface"] == "partial"
     assert main(["run", str(shot), "--until", "export", "--cache", cache, "-q"]) == 0
     assert surface.frame_path(2, "npz").read_bytes() == written
+    assert main(["run", str(shot), "--until", "surface", "--cache", cache, "-q", *variant]) == 0
     assert main(["status", str(shot), "--cache", cache, "--verify"]) == 0
     assert "every cached file holds the bytes written" in capsys.readouterr().out
 
