@@ -165,3 +165,47 @@ def test_an_entry_without_checksums_is_checked_by_size_not_called_damaged(tmp_pa
     out = capsys.readouterr().out
     assert "checked by size only" in out and "damaged" not in out
     assert set(_states(shot, cache).values()) == {"cached", "missing"}
+
+
+def test_a_damaged_file_that_escapes_a_command_is_marked_and_named_not_a_traceback(tmp_path, monkeypatch, capsys):
+    """(A wedge's variants run without the runner's redo: the file is marked for the next run.)"""
+    import mpmfx.cli as cli
+    from mpmfx.cache import Cache, DamagedError, atomic_path
+
+    e = Cache(tmp_path, "shot").entry("surface", 1, {}, {}, {})
+    with atomic_path(e.frame_path(1, "npz"), checksum=True) as tmp:
+        tmp.write_bytes(b"a frame")
+    e.write_manifest(frames=[1], timings={})
+
+    def damaged(args):
+        raise DamagedError(str(e.root), "frames/0001.npz", "its bytes differ from those written (checksum)")
+
+    monkeypatch.setattr(cli, "_dispatch", damaged)
+    assert main(["status", "any.toml"]) == 1
+    err = capsys.readouterr().err
+    assert "frames/0001.npz" in err and "run again" in err and "Traceback" not in err
+    assert not e.complete([1]) and e.damaged() == ["frames/0001.npz"]
+
+
+def test_a_file_damaged_again_after_its_redo_stops_the_run_naming_the_disk(tmp_path, monkeypatch, capsys):
+    """Redone once, unreadable again: no endless redo, exit 1 with the path and the likely cause."""
+    import zlib
+
+    from mpmfx.io.frames import SurfaceFrame
+
+    monkeypatch.chdir(tmp_path)
+    shot, cache = write_tiny_shot(tmp_path, frame_end=2), str(tmp_path / "c")
+    assert main(["run", str(shot), "--until", "surface", "--cache", cache, "-q"]) == 0
+    real = SurfaceFrame.read.__func__
+
+    def failing(cls, path):
+        if path.name == "0002.npz":
+            raise zlib.error("Error -3 while decompressing data: invalid distance too far back")
+        return real(cls, path)
+
+    monkeypatch.setattr(SurfaceFrame, "read", classmethod(failing))
+    capsys.readouterr()
+    assert main(["run", str(shot), "--until", "export", "--cache", cache, "-q"]) == 1
+    err = capsys.readouterr().err
+    assert "frames/0002.npz" in err and "again after it was redone" in err and "disk" in err
+    assert "Traceback" not in err
