@@ -130,8 +130,8 @@ def test_a_damaged_checkpoint_is_passed_over_and_the_extension_resumes(tmp_path,
 
 
 def test_a_frame_its_manifest_no_longer_lists_is_redone_not_asked_for_again(tmp_path, monkeypatch, capsys):
-    """A simulate frame deleted and taken out of the manifest's files by hand: the next run makes
-    it again (it said "No such file ... run again to resume" at every run)."""
+    """A simulate frame deleted and taken out of the manifest's files by hand: the entry is
+    partial, and the next run makes the frame again rather than stop on the missing file."""
     monkeypatch.chdir(tmp_path)
     shot, cache = write_tiny_shot(tmp_path, frame_end=3), str(tmp_path / "c")
     assert main(["run", str(shot), "--until", "simulate", "--cache", cache, "-q"]) == 0
