@@ -19,6 +19,7 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
+from . import animated as animated_mod
 from . import readback
 from .animated import AnimatedMesh, AnimatedMeshes
 from .bricks import BRICK
@@ -92,7 +93,7 @@ class Solver:
             dc: (
                 make_p2g(self.flags, device_clock=dc),
                 make_g2p(self.flags, device_clock=dc),
-                make_grid_update(device_clock=dc, meshes=bool(animated)),
+                make_grid_update(device_clock=dc, meshes=animated_mod.INSIDE_TEST if animated else ""),
             )
             for dc in (False, True)
         }
@@ -371,7 +372,10 @@ class Solver:
         max_blocks = 0
         if brick is not None:
             grid = make_grid_update(
-                device_clock=device_clock, sparse=True, clears=self._grid_cleared, meshes=bool(self._meshes)
+                device_clock=device_clock,
+                sparse=True,
+                clears=self._grid_cleared,
+                meshes=animated_mod.INSIDE_TEST if self._meshes else "",
             )
             dim = brick.marks.shape[0] * BRICK**3
             # a grid-stride loop over a few blocks a multiprocessor: one thread per node brick slot

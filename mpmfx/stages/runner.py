@@ -20,6 +20,7 @@ from mpmfx.publish import check_publishable, publish_renders, publish_stage, rec
 from mpmfx.shotfile import load_shot_config
 from mpmfx.stages import STAGES, export, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage, StageError
+from mpmfx.stages.kernels import SurfacerKernels
 from mpmfx.stages.parallel import Frames
 from mpmfx.stages.qa import shot_flags, warn_flags
 
@@ -233,13 +234,20 @@ class ShotRun:
     def _stages(self, until: str, force, frames: list[int] | None):
         """Each stage up to `until`: its result, as it finishes."""
         entries = self.entries()
-        for name in STAGES[: STAGES.index(until) + 1]:
+        names = STAGES[: STAGES.index(until) + 1]
+        surfacing = "surface" in names and (
+            "surface" in force or not entries["surface"].complete(self._wanted("surface", frames))
+        )
+        kernels = SurfacerKernels(self.device).start() if surfacing else None
+        for name in names:
             if name in force:
                 entries[name].remove()
             ctx = self.begin(name, entries, frames)
             if isinstance(ctx, StageResult):
                 yield ctx
                 continue
+            if name == "surface" and kernels:
+                kernels.wait()
             t0 = time.perf_counter()
             with self.failing(ctx):
                 extra = stage_module(name).run(ctx) or {}

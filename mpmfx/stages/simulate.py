@@ -66,27 +66,37 @@ def params(shot: Shot) -> dict:
         "colliders": [collider_key(c) for c in shot.colliders],
         "time": {"fps": shot.shot.fps, "frame_start": shot.shot.frame_start},
         # (only where an object has one: a shot without variation keeps its key's inputs)
-        **({"variation": [o.variation and o.variation.model_dump() for o in shot.objects]} if _varied(shot) else {}),
+        **({"variation": [o.variation and o.variation.model_dump() for o in shot.bodies]} if _varied(shot) else {}),
     }
 
 
 def _varied(shot: Shot) -> bool:
-    return any(o.variation is not None for o in shot.objects)
+    return any(o.variation is not None for o in shot.bodies)
 
 
-def variation(shot: Shot, x: np.ndarray, body: np.ndarray) -> np.ndarray:
+STREAM_SPEED = 1.0  # m/s: the stream an emitter without a velocity is taken to pour down at
+
+
+def variation(shot: Shot, x: np.ndarray, body: np.ndarray, birth: np.ndarray | None = None) -> np.ndarray:
     """(n, 5) float32 multipliers of VARIED_FIELDS at rest positions x (n, 3), m, of the
-    particles of objects `body` (n,): exp(amplitude * noise), one seeded noise per object and
-    field (mpmfx.geometry.noise); 1 for objects without variation."""
+    particles of bodies `body` (n,; objects, then emitters): exp(amplitude * noise), one seeded
+    noise per body and field (mpmfx.geometry.noise); 1 for bodies without variation. An emitter's
+    particles, born at birth (n,) s at its source, sample the noise at their stream position x -
+    velocity * birth (STREAM_SPEED down with no velocity): successive puffs differ and a steady
+    pour varies smoothly along its length."""
     out = np.ones((len(x), len(VARIED_FIELDS)), np.float32)
-    for b, obj in enumerate(shot.objects):
+    for b, obj in enumerate(shot.bodies):
         var, rows = obj.variation, body == b
         if var is None or not rows.any():
             continue
+        at = x[rows]
+        if b >= len(shot.objects) and birth is not None:
+            v = np.asarray(obj.velocity, np.float64)
+            v = v if np.any(v) else np.array([0.0, -STREAM_SPEED, 0.0])
+            at = at - v * birth[rows, None]
         for j, name in enumerate(VARIED_FIELDS):
             if getattr(var, name) > 0:
-                n = fourier_noise(x[rows], var.feature_size, (var.seed, j))
-                out[rows, j] = np.exp(getattr(var, name) * n)
+                out[rows, j] = np.exp(getattr(var, name) * fourier_noise(at, var.feature_size, (var.seed, j)))
     return out
 
 
@@ -192,7 +202,7 @@ def run(ctx: Context) -> dict:
                 material=np.asarray(obj_mat, np.int32)[body],
                 body=body,
                 birth=None if p.birth is None else p.birth.astype(np.float32),
-                variation=variation(shot, p.x, body) if _varied(shot) else None,
+                variation=variation(shot, p.x, body, p.birth) if _varied(shot) else None,
             )
             _budget(ctx, solver, p)
             state, frame = solver.init_state(parts), start
