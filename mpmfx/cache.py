@@ -310,6 +310,8 @@ class Entry:
         rel = path.relative_to(self.root).as_posix()
         if not path.is_file():
             raise DamagedError(str(self.root), rel, "missing (deleted since it was written)")
+        if (rec := sums.written(path)) and rec[0] != (size := path.stat().st_size):  # sizes first: no read
+            raise DamagedError(str(self.root), rel, f"{size} bytes, {rec[0]} when written")
         if (want := self.expected(rel)) is not None and sums.digest(path) != want:
             raise DamagedError(str(self.root), rel, "its bytes differ from those written (checksum)")
         return path

@@ -89,13 +89,22 @@ def record(path: str | Path, written: str | Path | None = None) -> str:
     return line.split()[1]
 
 
+def written(path: str | Path) -> tuple[int, str] | None:
+    """(bytes, digest) that `path`'s sidecar recorded when it was written; None without one."""
+    try:
+        size, hexdigest = sidecar(path).read_text().split()
+        return (int(size), hexdigest) if len(hexdigest) == 32 else None
+    except (OSError, ValueError):
+        return None
+
+
 def recorded(path: str | Path) -> str | None:
     """The digest recorded when `path` was written, or None: no sidecar, an unreadable one, or
     one of another size than the file (which then cannot be the bytes it describes)."""
     try:
-        size, hexdigest = sidecar(path).read_text().split()
-        return hexdigest if int(size) == Path(path).stat().st_size and len(hexdigest) == 32 else None
-    except (OSError, ValueError):
+        rec = written(path)
+        return rec[1] if rec is not None and rec[0] == Path(path).stat().st_size else None
+    except OSError:
         return None
 
 
