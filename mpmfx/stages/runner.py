@@ -129,6 +129,8 @@ class ShotRun:
         it; a damaged checkpoint is deleted (a resume uses an earlier one). Returns
         ([(stage, path, why)], the number of files with no recorded digest: checked by size)."""
         out, unverified = [], 0
+        if not self.cache.shot_dir.is_dir():
+            return out, unverified  # nothing cached (and no shot folder made for its lock)
         with contextlib.nullcontext() if self.locked else self.cache.lock():
             for name, root in ((n, r) for n in STAGES for r in self.cache.entries(n) if _real_dir(r)):
                 entry = Entry(root, name, root.name.rpartition("-")[2], {})
