@@ -9,8 +9,8 @@ copies every digest (`Entry.write_manifest`); readers and the publish compare ag
 
 The digest: blake2b-128 (`b2sum -l 128`) of the bytes for a file of one PIECE or less; for a
 larger file, blake2b-128 over the blake2b-128 digests of its PIECE-sized pieces in order, so the
-pieces hash on several threads (hashlib releases the GIL): a 300 MB frame costs a fraction of a
-second on a many-core host, not the ~0.4 s of one stream. Standard library only.
+pieces hash on up to MAX_THREADS threads where there are cores for them (hashlib releases the
+GIL); one stream on one core takes ~0.25 s for 100 MB (docs/benchmarks.md). Standard library only.
 """
 
 from __future__ import annotations
