@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mpmfx.cache import file_hash, write_json
+from mpmfx import checksum
+from mpmfx.cache import DamagedError, file_hash, write_json
 from mpmfx.config import ColliderShape, Shot, ShotError
 from mpmfx.geometry import MESH_LOADING
 from mpmfx.geometry.colliders import collider_mesh, keyframes, mesh_sdf
@@ -189,11 +190,12 @@ def run(ctx: Context) -> dict:
     )
     start, fps = shot.shot.frame_start, shot.shot.fps
     last = max(ctx.frames)
-    ckpt = _latest_checkpoint(entry.root / "checkpoints", entry.done_frames(FRAME_EXT), start)
+    ckpt, restored = _restore(ctx, solver)
     staging = HostStaging(solver.device)  # two sets of host buffers: the frame written, the frame made
     with FrameWriter() as writer:
         if ckpt is None:
-            p = SeedParticles.read(ctx.upstream["voxelise"].root)
+            vox = ctx.upstream["voxelise"]
+            p = vox.read(vox.root / SeedParticles.FILE, lambda path: SeedParticles.read(path.parent))
             body = p.body.astype(np.int32)
             parts = Particles(
                 x=((p.x - origin) / size).astype(np.float32),
@@ -213,8 +215,7 @@ def run(ctx: Context) -> dict:
             consts = _consts(solver, state)  # material and body: the same every frame, copied once
             writer.submit(_write_frame, entry, frame, qa0, None, _host(solver, state, consts, staging), origin, size)
         else:
-            frame = ckpt
-            state, _ = solver.restore(read_arrays(entry.root / "checkpoints" / f"{ckpt:04d}.npz"))
+            frame, state = ckpt, restored
             consts = _consts(solver, state)
             if not entry.frame_path(frame, FRAME_EXT).exists():  # killed between checkpoint and frame
                 writer.submit(
@@ -370,14 +371,30 @@ def _entered(solver, state) -> dict:
     return {"mass_entered": float(mass[np.isinf(state.birth.numpy())].sum(dtype=np.float64))}
 
 
-def _latest_checkpoint(folder: Path, done: list[int], start: int) -> int | None:
-    """The newest checkpoint c with every frame file before it present (c's own frame may be
-    missing: a checkpoint is written just before its frame, and resuming writes it; a frame lost
-    later must be redone, so resume before it)."""
+def _restore(ctx: Context, solver) -> tuple[int | None, object]:
+    """(frame, solver state) of the newest checkpoint to resume from that holds what was written,
+    or (None, None): start from the voxelised particles. A damaged checkpoint (changed, cut short
+    or unreadable) is deleted, said in one line, and an earlier one (or the start) is used."""
+    entry, start = ctx.entry, ctx.shot.shot.frame_start
+    candidates = _checkpoints(entry.root / "checkpoints", entry.done_frames(FRAME_EXT), start)
+    for i, c in enumerate(candidates):
+        path = entry.root / "checkpoints" / f"{c:04d}.npz"
+        try:
+            return c, solver.restore(entry.read(path, read_arrays))[0]
+        except DamagedError as exc:
+            checksum.forget(path)
+            then = f"an earlier one (frame {candidates[i + 1]})" if i + 1 < len(candidates) else "the start"
+            ctx.warn(f"checkpoint {path.name}: {exc.why}; deleted, resuming from {then}")
+    return None, None
+
+
+def _checkpoints(folder: Path, done: list[int], start: int) -> list[int]:
+    """The checkpoints c to resume from, newest first: those with every frame file before them
+    present (c's own frame may be missing: a checkpoint is written just before its frame, and
+    resuming writes it; a frame lost later must be redone, so resume before it)."""
     have, f = set(done), start - 1
     if not folder.is_dir():
-        return None
+        return []
     while f + 1 in have:
         f += 1  # start..f: the unbroken run of frames from the first
-    ok = [c for c in sorted(int(p.stem) for p in folder.glob("[0-9]*.npz")) if start < c <= f + 1]
-    return ok[-1] if ok else None
+    return sorted((c for c in (int(p.stem) for p in folder.glob("[0-9]*.npz")) if start < c <= f + 1), reverse=True)
