@@ -19,6 +19,7 @@ from typing import Sequence
 import numpy as np
 import warp as wp
 
+from . import animated as animated_mod
 from . import readback
 from .animated import AnimatedMesh, AnimatedMeshes
 from .bricks import BRICK
@@ -92,7 +93,7 @@ class Solver:
             dc: (
                 make_p2g(self.flags, device_clock=dc),
                 make_g2p(self.flags, device_clock=dc),
-                make_grid_update(device_clock=dc, meshes=bool(animated)),
+                make_grid_update(device_clock=dc, meshes=animated_mod.INSIDE_TEST if animated else ""),
             )
             for dc in (False, True)
         }
@@ -376,7 +377,10 @@ class Solver:
         max_blocks = 0
         if brick is not None:
             grid = make_grid_update(
-                device_clock=device_clock, sparse=True, clears=self._grid_cleared, meshes=bool(self._meshes)
+                device_clock=device_clock,
+                sparse=True,
+                clears=self._grid_cleared,
+                meshes=animated_mod.INSIDE_TEST if self._meshes else "",
             )
             dim = brick.marks.shape[0] * BRICK**3
             # a grid-stride loop over a few blocks a multiprocessor: one thread per node brick slot
@@ -562,17 +566,19 @@ class Solver:
         """Host copy of the particles, in particle order (readback.state_to_numpy)."""
         return readback.state_to_numpy(self, state)
 
-    def host_arrays(self, state: State, names=None) -> dict[str, np.ndarray]:
-        """Host copies of the particle arrays as stored (readback.host_arrays)."""
-        return readback.host_arrays(self, state, names)
+    def host_arrays(self, state: State, names=None, staging=None) -> dict[str, np.ndarray]:
+        """Host copies of the particle arrays as stored (readback.host_arrays; staging: a
+        readback.HostStaging whose buffers they land in)."""
+        return readback.host_arrays(self, state, names, staging)
 
     def volume_ratios(self, state: State) -> np.ndarray:
         """J (n,) float32 in particle order, computed on the device (readback.volume_ratios)."""
         return readback.volume_ratios(self, state)
 
-    def checkpoint(self, state: State, t: float) -> dict[str, np.ndarray]:
-        """Full state and stepper clock at shot time t, s, as numpy arrays (readback.checkpoint)."""
-        return readback.checkpoint(self, state, t)
+    def checkpoint(self, state: State, t: float, staging=None) -> dict[str, np.ndarray]:
+        """Full state and stepper clock at shot time t, s, as numpy arrays (readback.checkpoint;
+        staging: a readback.HostStaging whose buffers they land in)."""
+        return readback.checkpoint(self, state, t, staging)
 
     def restore(self, data: dict[str, np.ndarray]) -> tuple[State, float]:
         """State and shot time t from `checkpoint` output (readback.restore)."""
