@@ -21,8 +21,9 @@ from mpmfx.io.frames import ParticleFrame, SurfaceFrame
 from mpmfx.mpm.colliders import pose_matrix
 from mpmfx.render.camera import VIEW_DIRECTION, default_camera, solver_box, solver_floor
 from mpmfx.render.cycles import CyclesError, blender_version, run_job, write_job
-from mpmfx.render.frames import FrameRenderer, colour_for, contact_sheet, write_movie
+from mpmfx.render.frames import FrameRenderer, colour_for, write_movie
 from mpmfx.render.looks import PROP_LOOKS, look_for
+from mpmfx.render.sheets import contact_sheet
 from mpmfx.stages.base import Context, StageError
 from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
 from mpmfx.stages.parallel import FrameJob
@@ -103,9 +104,9 @@ def finish(ctx: Context, results: list[dict]) -> dict:
     pngs = [entry.frame_path(f, FRAME_EXT) for f in entry.done_frames(FRAME_EXT)]
     if shot.render.movie and len(pngs) > 1:
         extras.append(write_movie(pngs, entry.root / f"{shot.shot.name}.mp4", fps=shot.shot.fps))
-    shown = [entry.frame_path(f, FRAME_EXT) for f in entry.done_frames(FRAME_EXT) if (f - start) % step == 0]
+    shown = {f: entry.frame_path(f, FRAME_EXT) for f in entry.done_frames(FRAME_EXT) if (f - start) % step == 0}
     if shown:
-        extras.append(contact_sheet(shown, entry.root / "contact.png", scale=2 if shot.render.width > 640 else 1))
+        extras.append(contact_sheet(shown, entry.root / "contact.png"))
     seconds = {f: t for r in results for f, t in r.get("cycles_seconds", {}).items()}
     return {
         "outputs": [str(p) for p in extras if p is not None and p.exists()],
