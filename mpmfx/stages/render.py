@@ -53,6 +53,8 @@ def params(shot: Shot) -> dict:
     }
     if shot.render.engine is RenderEngine.CYCLES:
         out["blender"] = blender_version()  # another Blender may shade differently
+    elif shot.render.frame_step > 1:
+        out["every_frame"] = True  # not an entry whose held frames carry another frame's label
     return out
 
 
@@ -65,9 +67,15 @@ def inputs(shot: Shot) -> dict[str, str]:
     return {}
 
 
+def frame_step(shot: Shot) -> int:
+    """Every how many frames one is drawn: `render.frame_step` in Cycles; the preview draws
+    every frame (under a second each), so each frame's burned-in label is its own."""
+    return shot.render.frame_step if shot.render.engine is RenderEngine.CYCLES else 1
+
+
 def todo(ctx: Context) -> list[int]:
-    """The frames to draw: of the missing ones, those `render.frame_step` shows (the others hold)."""
-    step, start = ctx.shot.render.frame_step, ctx.shot.shot.frame_start
+    """The frames to draw: of the missing ones, those `frame_step` shows (the others hold)."""
+    step, start = frame_step(ctx.shot), ctx.shot.shot.frame_start
     shown = {start + (f - start) // step * step for f in ctx.frames}
     return sorted(f for f in shown if not ctx.entry.frame_path(f, FRAME_EXT).exists())
 
@@ -95,7 +103,7 @@ def finish(ctx: Context, results: list[dict]) -> dict:
     """In the client, after every frame's task: held frames, the movie, the contact sheet; the
     runner publishes them (and the .blend) to renders/<shot>/."""
     shot, entry = ctx.shot, ctx.entry
-    step, start = shot.render.frame_step, shot.shot.frame_start
+    step, start = frame_step(shot), shot.shot.frame_start
     for f in ctx.frames:
         src = start + (f - start) // step * step
         if f != src and not entry.frame_path(f, FRAME_EXT).exists():
