@@ -29,11 +29,12 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from PIL import Image
 
 from mpmfx.cache import Cache, atomic_path, default_root
 from mpmfx.cli_args import frame_range
-from mpmfx.config import ShotError
+from mpmfx.config import RenderEngine, ShotError
 from mpmfx.render.frames import write_movie
 from mpmfx.render.sheets import columns_for, evenly_spaced, read_tile
 from mpmfx.render.sheets import grid as sheets_grid
@@ -41,6 +42,7 @@ from mpmfx.shotfile import apply_override, load_shot_config
 from mpmfx.stages import STAGES
 from mpmfx.stages.base import Context
 from mpmfx.stages.parallel import Frames, task_key
+from mpmfx.stages.render import framing_camera, shown_bounds
 from mpmfx.stages.runner import ShotRun, stage_module
 
 CONTACT_FRAMES = 4  # columns of contact.png
@@ -156,13 +158,21 @@ def run_wedge(
     # (their runs and tasks write under it and never take it themselves).
     with cache.lock():
         cache.remove_orphans()
-        runs = [
-            ShotRun(s, cache_root=root, device=device, quiet=quiet, executor=ex, publish=False, locked=True)
-            for s in shots
-        ]
+
+        def bind(shots):
+            return [
+                ShotRun(s, cache_root=root, device=device, quiet=quiet, executor=ex, publish=False, locked=True)
+                for s in shots
+            ]
+
+        runs = bind(shots)
         runs[0].check(frames=frames)
         entries = [r.entries() for r in runs]
         for name in STAGES:
+            if name == "render" and len(shots) > 1:
+                shots = one_camera(shots, entries, frames)
+                runs = bind(shots)
+                entries = [r.entries() for r in runs]
             first: dict[str, int] = {}  # distinct entry key -> first variant that has it
             for i, e in enumerate(entries):
                 first.setdefault(e[name].key, i)
@@ -180,6 +190,23 @@ def run_wedge(
                 quiet=quiet or not in_tasks,
             )
         return [{name: e[name].root for name in STAGES} for e in entries]
+
+
+def one_camera(shots: list, entries: list[dict], frames: list[int] | None) -> list:
+    """Cycles variants, each with the render camera that frames all of them (the union of what
+    each shows over `frames`), so the tiles of a sheet share one view; a shot that sets its
+    own camera, or the preview (a view of the domain), keeps it."""
+    if any(s.render.engine is not RenderEngine.CYCLES or s.render.camera_position is not None for s in shots):
+        return shots
+    boxes = []
+    for s, e in zip(shots, entries):
+        wanted = frames or list(s.frames)
+        boxes.append(shown_bounds(s, {n: e[n].root for n in ("simulate", "surface")}, wanted))
+    boxes = [b for b in boxes if b is not None]
+    if not boxes:
+        return shots
+    lo, hi = np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+    return [framing_camera(s, lo, hi) for s in shots]
 
 
 def _run_stage(shot, cache_root: Path, name: str, frames, device, quiet: bool):

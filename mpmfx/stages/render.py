@@ -14,16 +14,18 @@ import os
 import shutil
 from pathlib import Path
 
+import numpy as np
+
 from mpmfx.cache import atomic_path
 from mpmfx.config import RenderEngine, Shot
 from mpmfx.geometry.colliders import collider_mesh, keyframes
 from mpmfx.io.frames import ParticleFrame, SurfaceFrame
 from mpmfx.mpm.colliders import pose_matrix
-from mpmfx.render.camera import VIEW_DIRECTION, default_camera, solver_box, solver_floor
+from mpmfx.render.camera import VIEW_DIRECTION, default_camera, frame_box, solver_box, solver_floor
 from mpmfx.render.cycles import CyclesError, blender_version, run_job, write_job
 from mpmfx.render.frames import FrameRenderer, colour_for, write_movie
 from mpmfx.render.looks import PROP_LOOKS, look_for
-from mpmfx.render.sheets import contact_sheet
+from mpmfx.render.sheets import contact_sheet, evenly_spaced
 from mpmfx.stages.base import Context, StageError
 from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
 from mpmfx.stages.parallel import FrameJob
@@ -120,6 +122,36 @@ def finish(ctx: Context, results: list[dict]) -> dict:
         "outputs": [str(p) for p in extras if p is not None and p.exists()],
         **({"cycles_seconds": seconds} if seconds else {}),
     }
+
+
+def shown_bounds(shot: Shot, upstream: dict[str, Path], frames: list[int]):
+    """(lo, hi) world corners (m, (3,) each) of what a render of `frames` shows: the surfaces
+    (the particles in particles mode) and the colliders, down to the floor, over at most 12 of
+    the frames, as Cycles frames its own camera. upstream: stage name -> entry folder. None
+    where nothing is shown."""
+    boxes = []
+    for f in evenly_spaced(sorted(frames), 12):
+        if shot.render.mode == "particles":
+            boxes.append(ParticleFrame.read(upstream["simulate"] / "frames" / f"{f:04d}.npz").x)
+        else:
+            groups = SurfaceFrame.read(upstream["surface"] / "frames" / f"{f:04d}.npz").groups
+            boxes += [g.vertices for g in groups.values()]
+        boxes += [v for v, _, _ in _collider_meshes(shot, f).values()]
+    boxes = [np.asarray(b, float).reshape(-1, 3) for b in boxes if len(b)]
+    if not boxes:
+        return None
+    lo, hi = np.min([b.min(0) for b in boxes], axis=0), np.max([b.max(0) for b in boxes], axis=0)
+    lo[1] = min(lo[1], solver_floor(shot))  # keep the ground contact in the picture
+    return lo, hi
+
+
+def framing_camera(shot: Shot, lo, hi) -> Shot:
+    """`shot` with a render camera that frames the box [lo, hi] (m) as Cycles' automatic camera
+    would: a wedge frames every variant through one camera, so framing does not shift."""
+    pos, look = frame_box(lo, hi, direction=VIEW_DIRECTION, aspect=shot.render.width / shot.render.height)
+    return shot.model_copy(
+        update={"render": shot.render.model_copy(update={"camera_position": pos, "camera_look_at": look})}
+    )
 
 
 def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -> dict:
