@@ -256,6 +256,7 @@ def _dispatch(args) -> int:
                 for r in results
             ],
         )
+        _print_warnings(results)
         _print_outputs(run, results)
         flagged = sum(r.flagged for r in results)
         if flagged and args.strict:
@@ -308,6 +309,16 @@ def _prune(args) -> int:
             locks.enter_context(Cache(root, shot_dir.name).lock())
         targets = prune_targets(root, keep=args.keep, in_use=published_entries(root))
         return delete(targets, root=root, dry_run=args.dry_run, yes=args.yes)
+
+
+def _print_warnings(results) -> None:
+    """Below the closing table, what the stages warned about while their bars ran (or, for a
+    cached stage, when it ran): the warnings a user must not miss in the scroll."""
+    said = [(r.stage, w) for r in results for w in r.warnings]
+    if said:
+        print("\nwarnings:")
+        for stage, w in said:
+            print(f"  [{stage}] {w}")
 
 
 def _print_outputs(run, results) -> None:

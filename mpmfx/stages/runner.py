@@ -9,7 +9,7 @@ from __future__ import annotations
 import contextlib
 import socket
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from mpmfx.cache import Cache, Entry, code_hash, default_root, read_manifest, remove_temps
@@ -37,6 +37,7 @@ class StageResult:
     frames: int
     entry: Path
     flagged: int = 0  # frames the QA flags (simulate only)
+    warnings: list[str] = field(default_factory=list)  # what the stage warned about (cached: when it ran)
 
 
 @dataclass
@@ -195,7 +196,8 @@ class ShotRun:
         frames are redone; the entry folder made). Call with the shot's lock held."""
         entry, mod, wanted = entries[name], stage_module(name), self._wanted(name, frames)
         if entry.complete(wanted):
-            return StageResult(name, "cached", 0.0, len(wanted) if wanted is not None else 1, entry.root)
+            said = list((entry.manifest() or {}).get("warnings", []))
+            return StageResult(name, "cached", 0.0, len(wanted) if wanted is not None else 1, entry.root, warnings=said)
         for rel in entry.damaged():  # lost or truncated since the manifest: redo, never trust
             (entry.root / rel).unlink(missing_ok=True)
             if mod.PER_FRAME and Path(rel).stem.isdigit():  # e.g. vdb/g/0003.vdb: redo frame 3
@@ -249,10 +251,10 @@ class ShotRun:
             frames=done,
             timings=timings,
             qa=extra.pop("qa", None),
-            extra={**extra, "notes": ctx.notes, "host": socket.gethostname()},
+            extra={**extra, "notes": ctx.notes, "warnings": ctx.warnings, "host": socket.gethostname()},
         )
         n = len(ctx.frames) if mod.PER_FRAME else 1
-        return StageResult(entry.stage, ctx.state, seconds, n, entry.root)
+        return StageResult(entry.stage, ctx.state, seconds, n, entry.root, warnings=list(ctx.warnings))
 
 
 def _ranges(frames: list[int]) -> str:

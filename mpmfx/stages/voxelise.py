@@ -167,9 +167,9 @@ def _thickness(ctx, obj, mesh, check_thickness, Verdict):
     if report.verdict is not Verdict.PASS and mode is not Thickness.IGNORE:
         msg = (
             f"objects.{obj.name}: thinnest feature {report.min_thickness_cells:.1f} cells at grid_n "
-            f"{dom.grid_n} ({len(report.regions)} thin regions; under ~5 cells a feature cannot hold its "
+            f"{dom.grid_n} ({sum(not r.ignored for r in report.regions)} thin regions; under ~5 cells a feature cannot hold its "
             f"shape). Thicken the mesh, raise its scale, or set domain.grid_n >= "
-            f"{report.min_grid_n_to_pass}; see `mpmfx check {obj.mesh}`"
+            f"{report.min_grid_n_to_pass}; see `mpmfx check {ctx.shot.source or obj.mesh}`"
         )
         if mode is Thickness.ERROR and report.verdict is Verdict.FAIL:
             raise StageError(msg + ' (or set voxelise.thickness = "warn")')

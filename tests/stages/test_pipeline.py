@@ -286,6 +286,18 @@ def test_an_object_starting_below_the_solvers_floor_is_bad_input_naming_it(tmp_p
     assert not list((tmp_path / "c").rglob("voxelise-*"))
 
 
+def test_a_thickness_warning_reaches_the_closing_table_cached_or_not(tmp_path, capsys):
+    from mpmfx.cli import main
+
+    shot = write_tiny_shot(tmp_path)
+    args = ["run", str(shot), "--set", "objects.0.scale=0.7", "--until", "voxelise"]
+    for state in ("ran", "cached"):  # the cube at 4.2 cells across: a warning
+        assert main([*args, "--cache", str(tmp_path / "c")]) == 0
+        out = capsys.readouterr().out
+        table, _, below = out.partition("voxelise  " + state)
+        assert "warnings:" in below and "objects.cube: thinnest feature 4." in below, out
+
+
 def _cuda_available() -> bool:
     import warp as wp
 
