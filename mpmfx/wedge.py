@@ -169,9 +169,9 @@ def run_wedge(
         runs[0].check(frames=frames)
         entries = [r.entries() for r in runs]
         for name in STAGES:
-            if name == "render" and len(shots) > 1:
-                shots = one_camera(shots, entries, frames)
-                runs = bind(shots)
+            framed = one_camera(shots, entries, frames) if name == "render" and len(shots) > 1 else shots
+            if framed is not shots:  # the render entries of the variants framed by one camera
+                shots, runs = framed, bind(framed)
                 entries = [r.entries() for r in runs]
             first: dict[str, int] = {}  # distinct entry key -> first variant that has it
             for i, e in enumerate(entries):
