@@ -88,9 +88,18 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--check", action="store_true", help="write nothing; exit 1 when docs/shots.md is stale")
     d.add_argument("--write", action="store_true", help="write it (the default)")
 
-    k = sub.add_parser("check", help="five-cell thickness check of an asset (exit 0 pass/warn, 1 fail, 2 bad input)")
-    k.add_argument("asset", help="mesh file (obj, ply, stl, glb, gltf, usd, usda, usdc, usdz, blend, fbx)")
-    k.add_argument("--grid-n", type=int, default=64, help="grid cells per axis of the domain")
+    k = sub.add_parser(
+        "check",
+        help="five-cell thickness check of an asset or a shot's objects (exit 0 pass/warn, 1 fail, 2 bad input)",
+    )
+    k.add_argument(
+        "asset",
+        help="a shot (.toml: each of its objects, placed and at the shot's grid) or a mesh file "
+        "(obj, ply, stl, glb, gltf, usd, usda, usdc, usdz, blend, fbx)",
+    )
+    k.add_argument(
+        "--grid-n", type=int, default=None, help="grid cells per axis of the domain (default: the shot's, or 64)"
+    )
     k.add_argument(
         "--domain",
         default=None,
@@ -180,8 +189,17 @@ def _os_message(exc: OSError) -> str:
 
 def _dispatch(args) -> int:
     if args.cmd == "check":
-        from mpmfx.check import run_check  # backend: trimesh (keeps --help light)
+        from mpmfx.check import run_check, run_shot_check  # backend: trimesh (keeps --help light)
 
+        if args.asset.endswith(".toml"):
+            if args.domain or args.prim_path:
+                print(
+                    f"error: {args.asset} is a shot: its domain and its objects' parts come from it; "
+                    "leave out --domain and --prim-path (or check one asset: mpmfx check MESH)",
+                    file=sys.stderr,
+                )
+                return 2
+            return run_shot_check(args.asset, grid_n=args.grid_n, as_json=args.json)
         origin = size = None
         if args.domain:
             try:
@@ -196,7 +214,12 @@ def _dispatch(args) -> int:
                 return 2
             origin, size = tuple(o), s
         return run_check(
-            args.asset, grid_n=args.grid_n, origin=origin, size=size, as_json=args.json, prim_path=args.prim_path
+            args.asset,
+            grid_n=64 if args.grid_n is None else args.grid_n,
+            origin=origin,
+            size=size,
+            as_json=args.json,
+            prim_path=args.prim_path,
         )
     if args.cmd == "bench":
         from mpmfx.stages.base import quiet_warp  # backend: warp (keeps --help light)
@@ -243,6 +266,7 @@ def _dispatch(args) -> int:
                 for r in results
             ],
         )
+        _print_warnings(results)
         _print_outputs(run, results)
         flagged = sum(r.flagged for r in results)
         if flagged and args.strict:
@@ -314,6 +338,16 @@ def _print_verified(damaged: list, unverified: int) -> None:
             f"verify: {unverified} file{'s' * (unverified != 1)} without a checksum (cached by an older "
             f"mpmfx): checked by size only"
         )
+
+
+def _print_warnings(results) -> None:
+    """Below the closing table, what the stages warned about while their bars ran (or, for a
+    cached stage, when it ran): the warnings a user must not miss in the scroll."""
+    said = [(r.stage, w) for r in results for w in r.warnings]
+    if said:
+        print("\nwarnings:")
+        for stage, w in said:
+            print(f"  [{stage}] {w}")
 
 
 def _print_outputs(run, results) -> None:

@@ -341,8 +341,8 @@ class Render(_Section):
     frame_step: Int = Field(
         1,
         ge=1,
-        description="Render every n-th frame; the frames between hold the last "
-        "rendered one, so the movie keeps the shot's timing.",
+        description="cycles: render every n-th frame; the frames between hold the last "
+        "rendered one, so the movie keeps the shot's timing (preview draws every frame).",
     )
     looks: dict[str, str] = Field(
         default_factory=dict,

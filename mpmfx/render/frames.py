@@ -114,17 +114,3 @@ def write_movie(frames: list[Path], path: Path, *, fps: float) -> Path:
             w.append_data(imageio.imread(f))
     tmp.replace(path)
     return path
-
-
-def contact_sheet(frames: list[Path], path: Path, *, count: int = 4, scale: int = 1) -> Path:
-    """`count` evenly spaced frames in a grid of two columns, each downsampled by `scale`: one
-    picture of a shot, read left to right, top to bottom."""
-    picks = [frames[round(i * (len(frames) - 1) / max(count - 1, 1))] for i in range(min(count, len(frames)))]
-    images = [np.asarray(imageio.imread(p))[::scale, ::scale, :3] for p in picks]
-    if len(images) % 2:
-        images.append(np.zeros_like(images[0]))
-    rows = [np.concatenate(images[i : i + 2], axis=1) for i in range(0, len(images), 2)]
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    imageio.imwrite(tmp, np.concatenate(rows, axis=0))
-    tmp.replace(path)
-    return path

@@ -10,7 +10,7 @@ import contextlib
 import socket
 import sys
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from mpmfx import checksum
@@ -41,6 +41,7 @@ class StageResult:
     frames: int
     entry: Path
     flagged: int = 0  # frames the QA flags (simulate only)
+    warnings: list[str] = field(default_factory=list)  # what the stage warned about (cached: when it ran)
 
 
 @dataclass
@@ -264,7 +265,8 @@ class ShotRun:
             if bad := entry.verify(list(entry.files()))[0]:
                 self._mark(str(entry.root), bad, "its bytes differ from those written (checksum)")
         if entry.complete(wanted):
-            return StageResult(name, "cached", 0.0, len(wanted) if wanted is not None else 1, entry.root)
+            said = list((entry.manifest() or {}).get("warnings", []))
+            return StageResult(name, "cached", 0.0, len(wanted) if wanted is not None else 1, entry.root, warnings=said)
         for rel in entry.damaged():  # lost, truncated or changed since written: redo, never trust
             _forget(entry, rel)
         state = "resumed" if entry.root.exists() else "ran"
@@ -316,10 +318,10 @@ class ShotRun:
             frames=done,
             timings=timings,
             qa=extra.pop("qa", None),
-            extra={**extra, "notes": ctx.notes, "host": socket.gethostname()},
+            extra={**extra, "notes": ctx.notes, "warnings": ctx.warnings, "host": socket.gethostname()},
         )
         n = len(ctx.frames) if mod.PER_FRAME else 1
-        return StageResult(entry.stage, ctx.state, seconds, n, entry.root)
+        return StageResult(entry.stage, ctx.state, seconds, n, entry.root, warnings=list(ctx.warnings))
 
 
 def _real_dir(path: Path) -> bool:
