@@ -33,6 +33,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
+from mpmfx.diskspace import diagnosed
+
 MANIFEST_SCHEMA = 1
 
 
@@ -115,6 +117,12 @@ def atomic_path(path: str | Path, *, verify: Callable[[Path], object] | None = N
         yield tmp_path
         _verify(tmp_path, path, verify)
         os.replace(tmp_path, path)
+    except Exception as exc:
+        # Said as the destination and the cause (a full disk, a folder not writable) while the
+        # partial temp file still holds the space it got: see mpmfx.diskspace.
+        if (said := diagnosed(exc, path, tmp_path)) is None:
+            raise
+        raise said from exc
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
@@ -124,7 +132,8 @@ def _verify(tmp: Path, path: Path, verify: Callable[[Path], object] | None) -> N
     try:
         ok = tmp.stat().st_size > 0 and (verify is None or verify(tmp) is not False)
     except Exception as exc:  # noqa: BLE001 - any failure to read it back means a bad file
-        ok, why = False, f" ({type(exc).__name__}: {exc})"
+        # the reader's own text can be huge (pyopenvdb echoed a cut file's bytes): one short line
+        ok, why = False, f" ({type(exc).__name__}: {' '.join(str(exc)[:400].split())[:160]})"
     else:
         why = ""
     if not ok:

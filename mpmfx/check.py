@@ -9,6 +9,7 @@ import json
 import sys
 from pathlib import Path
 
+from mpmfx.diskspace import diagnosed, message
 from mpmfx.geometry.check import check_asset, topology_line
 from mpmfx.geometry.thickness import Verdict
 from mpmfx.render.thickness import render_thickness_heatmap
@@ -39,12 +40,18 @@ def run_check(
         return 2
     report = checked.report
     out = Path(out_dir) if out_dir is not None else Path("renders/check") / Path(asset).stem
-    out.mkdir(parents=True, exist_ok=True)
     data = checked.to_dict()
-    (out / "report.json").write_text(json.dumps(data, indent=2) + "\n")
-    png = render_thickness_heatmap(
-        checked.mesh, report.vertex_thickness_cells, out / "thickness.png", warn_cells=report.warn_cells
-    )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "report.json").write_text(json.dumps(data, indent=2) + "\n")
+        png = render_thickness_heatmap(
+            checked.mesh, report.vertex_thickness_cells, out / "thickness.png", warn_cells=report.warn_cells
+        )
+    except Exception as exc:
+        if (said := diagnosed(exc, out)) is None:  # said as the output folder
+            raise
+        print(f"mpmfx check: {message(said, cache_root=None)}", file=sys.stderr)
+        return 2
     if as_json:
         print(json.dumps(data, indent=2))
     else:
