@@ -16,7 +16,7 @@ from mpmfx.cache import Cache, Entry, code_hash, default_root, read_manifest, re
 from mpmfx.config import Shot, ShotError
 from mpmfx.publish import check_publishable, publish_renders, publish_stage, record, sweep
 from mpmfx.shotfile import load_shot_config
-from mpmfx.stages import STAGES, export, render, simulate, surface, voxelise
+from mpmfx.stages import STAGES, export, memory, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage, StageError
 from mpmfx.stages.parallel import Frames
 from mpmfx.stages.qa import shot_flags, warn_flags
@@ -161,6 +161,18 @@ class ShotRun:
                     f"--frames: {bad[0]} is outside the shot's frames "
                     f"{self.shot.shot.frame_start}..{self.shot.shot.frame_end}"
                 )
+        self.memory()
+
+    def memory(self) -> None:
+        """State the memory the shot needs and refuse it (ShotError) over what the machine has
+        (`mpmfx.stages.memory`): particles as voxelised when that is cached, else bounded from
+        the objects' boxes."""
+        vox = self.entries()["voxelise"]
+        if vox.complete():
+            particles, candidates = int((vox.manifest() or {}).get("particles", 0)), 0
+        else:
+            particles, candidates = memory.counts(self.shot)
+        memory.check(self.shot, particles=particles, candidates=candidates, device=self.device, quiet=self.quiet)
 
     def _publish(self, results: list[StageResult]) -> dict[str, Path]:
         """Every run that reaches export / render publishes them at stable paths (`mpmfx.publish`)."""
