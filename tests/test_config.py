@@ -232,3 +232,38 @@ def test_check_refuses_a_domain_that_is_not_finite_naming_the_option(capsys, dom
     asset = Path(__file__).resolve().parents[1] / "assets" / "snowball.obj"
     assert main(["check", str(asset), f"--domain={domain}"]) == 2
     assert "--domain" in capsys.readouterr().err
+
+
+FAR = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1e30\nf 1 2 3\nf 1 2 4\nf 2 3 4\nf 1 3 4\n"  # a vertex at 1e30 m
+COLLIDER = '\n[[colliders]]\nname = "rock"\nshape = "mesh"\nmesh = "{mesh}"\n'
+
+
+@pytest.mark.parametrize(
+    "where, mesh, words",
+    [
+        ("object", FAR, ["objects.cube", "absurdly far out"]),
+        ("collider", FAR, ["colliders[0].mesh (rock)", "absurdly far out"]),
+        ("collider", "garbage", ["colliders[0].mesh (rock)", "no triangles"]),
+    ],
+)
+def test_a_broken_asset_is_bad_input_naming_the_key_before_anything_runs(tmp_path, capsys, where, mesh, words):
+    from mpmfx.cli import main
+    from tests.conftest import write_tiny_shot
+
+    (tmp_path / "bad.obj").write_text(mesh)
+    shot = write_tiny_shot(tmp_path, frame_end=2, extra=COLLIDER.format(mesh="bad.obj") if where == "collider" else "")
+    if where == "object":
+        shot.write_text(shot.read_text().replace('mesh = "cube.obj"', 'mesh = "bad.obj"'))
+    assert main(["run", str(shot), "--cache", str(tmp_path / "c"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert all(w in err for w in words) and "flat" not in err and "Traceback" not in err, err
+    assert not (tmp_path / "c").exists()
+
+
+def test_check_calls_a_far_vertex_broken_not_flat(tmp_path, capsys):
+    from mpmfx.cli import main
+
+    (tmp_path / "far.obj").write_text(FAR)
+    assert main(["check", str(tmp_path / "far.obj")]) == 2
+    err = capsys.readouterr().err
+    assert "absurdly far out" in err and "flat" not in err

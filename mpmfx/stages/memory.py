@@ -116,8 +116,8 @@ def counts(shot: Shot) -> tuple[int, int]:
                 rotate_deg=obj.rotate,
                 scale=obj.scale,
             )
-        except MeshError:
-            continue  # voxelise says what is wrong with it, naming the key
+        except MeshError as exc:  # the asset: bad input, refused before anything is written
+            raise ShotError(f"objects.{obj.name}: {exc}") from None
         lo, hi = np.clip(mesh.bounds[0], lo_dom, hi_dom), np.clip(mesh.bounds[1], lo_dom, hi_dom)
         if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)):
             candidates += int(np.prod(np.ceil((hi - lo) / dx) + 1)) * ppc

@@ -18,6 +18,7 @@ from mpmfx.publish import check_publishable, publish_renders, publish_stage, rec
 from mpmfx.shotfile import load_shot_config
 from mpmfx.stages import STAGES, export, memory, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage, StageError
+from mpmfx.stages.colliders import check_collider_meshes
 from mpmfx.stages.parallel import Frames
 from mpmfx.stages.qa import shot_flags, warn_flags
 
@@ -167,7 +168,10 @@ class ShotRun:
         """State the memory the shot needs and refuse it (ShotError) over what the machine has
         (`mpmfx.stages.memory`): particles as voxelised when that is cached, else bounded from
         the objects' boxes."""
-        vox = self.entries()["voxelise"]
+        entries = self.entries()
+        if not entries["simulate"].complete():
+            check_collider_meshes(self.shot)  # a bad collider asset: refused before voxelise runs
+        vox = entries["voxelise"]
         if vox.complete():
             particles, candidates = int((vox.manifest() or {}).get("particles", 0)), 0
         else:
