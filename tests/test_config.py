@@ -218,9 +218,22 @@ def test_a_step_set_by_speed_names_the_velocity_not_the_stiffness(tmp_path, caps
 
     shot = write_tiny_shot(tmp_path, frame_end=2)
     args = ["run", str(shot), "--until", "simulate", "--cache", str(tmp_path / "c"), "-q"]
-    assert main([*args, "--set", "objects.0.velocity=[0,-1e6,0]"]) == 1
+    assert main([*args, "--set", "objects.0.angular_velocity=[0,0,1e7]"]) == 1  # 1.7e6 m/s at its corners
     err = capsys.readouterr().err
-    assert "objects[0].velocity" in err and "soften" not in err
+    assert "objects[0].angular_velocity" in err and "soften" not in err
+
+
+@pytest.mark.parametrize("key", ["objects.0.velocity", "emitters.0.velocity"])
+def test_a_speed_no_step_can_follow_is_bad_input_naming_the_key(tmp_path, capsys, key):
+    from mpmfx.cli import main
+    from tests.conftest import write_tiny_shot
+
+    emitter = '[[emitters]]\nname = "hose"\nrate = 0.001\nend_time = 0.1\ntranslate = [0.5, 0.8, 0.5]\n'
+    shot = write_tiny_shot(tmp_path, frame_end=2, extra=emitter)
+    assert main(["run", str(shot), "--cache", str(tmp_path / "c"), "--set", f"{key}=[0,-1e6,0]"]) == 2
+    err = capsys.readouterr().err
+    assert key.replace(".0.", "[0].") in err and "solver.dt_min" in err and "at most" in err
+    assert not (tmp_path / "c").exists()
 
 
 @pytest.mark.parametrize("domain", ["nan,0,0,1", "0,0,0,inf", "0,0,0,-1"])

@@ -261,7 +261,12 @@ def _advice(shot: Shot, exc) -> str:
     what = str(exc).split(". Lower", 1)[0].split(". Raise", 1)[0]
     stiff = " or ".join(f"objects[{i}].overrides.youngs_modulus" for i in range(len(shot.objects)))
     if exc.field == "dt_min" and getattr(exc, "speed_bound", False):
-        moving = " or ".join(f"objects[{i}].velocity" for i in range(len(shot.objects)))
+        moving = " or ".join(
+            f"objects[{i}].{k}"
+            for i, o in enumerate(shot.objects)
+            for k in ("velocity", "angular_velocity")
+            if k == "velocity" or any(o.angular_velocity)
+        )
         return (
             f"{what}. The particles' own speed sets this step, not a stiffness: check {moving} "
             f"(m/s; the domain is {shot.domain.size:g} m across) and solver.gravity"
