@@ -17,6 +17,7 @@ import warp as wp
 
 from mpmfx.config import Shot, ShotError
 from mpmfx.geometry.mesh import MeshError, load_mesh, transform_mesh
+from mpmfx.geometry.thickness import measuring_lattice
 from mpmfx.meminfo import host_available
 from mpmfx.mpm.emission import device_bytes
 from mpmfx.mpm.state import SceneFlags
@@ -40,6 +41,16 @@ WRITER_BYTES_PER_PARTICLE = 68 + 2 * 44 + 132
 SURFACE_BYTES_PER_PARTICLE = 4 * 12 + 8
 SURFACE_BYTES_PER_VOXEL = 20 + 8 + 8 + 8
 SURFACE_BYTES_PER_BLOCK = 16  # the block map over the particles' box: index, class, counts (8^3 voxels)
+# Voxelise's five-cell thickness check (per solid object, one at a time) on its raster of at
+# most MAX_RASTER_VOXELS: distance transforms, labels and the subdivided mesh. Not counted from
+# arrays but measured (peak RSS over the imports, 2-core CPU, assets/sand_column.obj at
+# grid_n 40, 60, 80, 160: 118k, 368k, 759k, 1.5M raster voxels took 211, 303, 795, 951 MB);
+# this bound is over each of them.
+THICKNESS_BYTES = 100_000_000
+THICKNESS_BYTES_PER_VOXEL = 1_100
+# The process before any array: Python, Warp, trimesh, SciPy, PyVista imported and Warp started
+# (measured peak RSS, 2-core CPU: 322 MB).
+PROCESS_BYTES = 330_000_000
 
 
 @dataclass
@@ -67,23 +78,24 @@ def _gb(b: int) -> str:
     return f"{b / 1e9:.1f} GB" if b >= 1e8 else f"{b / 1e6:.0f} MB"
 
 
-def need(shot: Shot, particles: int, *, candidates: int, cuda: bool) -> Need:
-    """The estimate for `particles` simulated ones and `candidates` lattice points voxelise tests
-    (bytes; see the figures above). cuda: the solver and surfacer run on a GPU."""
+def need(shot: Shot, counted: Counts, *, cuda: bool) -> Need:
+    """The estimate for what `counted` says (bytes; see the figures above), each stage's peak
+    with the process's own PROCESS_BYTES on the host. cuda: the solver and surfacer run on a GPU."""
+    n = counted.particles
     flags = SceneFlags(snow=True, sand=True, water=True)  # every branch's arrays: an upper bound
-    solver = device_bytes(
-        particles, flags, shot.domain.grid_n, deterministic=shot.solver.deterministic, births=True, gpu=cuda
-    )
-    surface = surface_bytes(shot, particles)
-    out = Need(particles)
-    if candidates:  # (voxelise cached: nothing to voxelise)
-        out.host["voxelise"] = candidates * VOXELISE_BYTES_PER_POINT
-    writer = particles * WRITER_BYTES_PER_PARTICLE
+    solver = device_bytes(n, flags, shot.domain.grid_n, deterministic=shot.solver.deterministic, births=True, gpu=cuda)
+    surface = surface_bytes(shot, n)
+    out = Need(n)
+    if counted.candidates or counted.raster:  # (voxelise cached: nothing to voxelise)
+        thickness = THICKNESS_BYTES + counted.raster * THICKNESS_BYTES_PER_VOXEL if counted.raster else 0
+        out.host["voxelise"] = PROCESS_BYTES + counted.candidates * VOXELISE_BYTES_PER_POINT + thickness
+    writer = n * WRITER_BYTES_PER_PARTICLE
     if cuda:
-        out.host["simulate"], out.device["simulate"], out.device["surface"] = writer, solver, surface
-        out.host["surface"] = particles * SURFACE_BYTES_PER_PARTICLE
+        out.device["simulate"], out.device["surface"] = solver, surface
+        out.host["simulate"] = PROCESS_BYTES + writer
+        out.host["surface"] = PROCESS_BYTES + n * SURFACE_BYTES_PER_PARTICLE
     else:
-        out.host["simulate"], out.host["surface"] = solver + writer, surface
+        out.host["simulate"], out.host["surface"] = PROCESS_BYTES + solver + writer, PROCESS_BYTES + surface
     return out
 
 
@@ -100,15 +112,26 @@ def surface_bytes(shot: Shot, particles: int) -> int:
     )
 
 
-def counts(shot: Shot) -> tuple[int, int]:
-    """(particles, candidate points) before voxelising: each object's lattice is its bounding
-    box (inside the domain) at ppc points a cell, which bounds the particles it keeps; each
-    emitter's particles are its volume emitted over the particle volume."""
+@dataclass
+class Counts:
+    """What a shot's memory follows: particles (simulated), candidates (lattice points voxelise
+    tests) and raster (the largest thickness-check raster of a solid object, voxels)."""
+
+    particles: int
+    candidates: int = 0
+    raster: int = 0
+
+
+def counts(shot: Shot) -> Counts:
+    """Counts before voxelising: each object's lattice is its bounding box (inside the domain) at
+    ppc points a cell, which bounds the particles it keeps; each emitter's particles are its
+    volume emitted over the particle volume. ShotError naming the object for a mesh that cannot
+    be loaded (bad input, before anything is written)."""
     dom, ppc = shot.domain, shot.voxelise.ppc
     dx = dom.size / dom.grid_n
     lo_dom, hi_dom = np.asarray(dom.origin, float), np.asarray(dom.origin, float) + dom.size
-    candidates = 0
-    for obj in shot.objects:
+    out = Counts(0)
+    for obj, fluid in zip(shot.objects, shot.fluid_objects()):
         try:
             mesh = transform_mesh(
                 load_mesh(shot.resolve(obj.mesh), prim_path=obj.prim_path),
@@ -119,10 +142,12 @@ def counts(shot: Shot) -> tuple[int, int]:
         except MeshError as exc:  # the asset: bad input, refused before anything is written
             raise ShotError(f"objects.{obj.name}: {exc}") from None
         lo, hi = np.clip(mesh.bounds[0], lo_dom, hi_dom), np.clip(mesh.bounds[1], lo_dom, hi_dom)
-        if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)):
-            candidates += int(np.prod(np.ceil((hi - lo) / dx) + 1)) * ppc
+        out.candidates += int(np.prod(np.ceil((hi - lo) / dx) + 1)) * ppc
+        if not fluid:  # the thickness check is for solids (stages/voxelise.py)
+            out.raster = max(out.raster, math.prod(measuring_lattice(mesh, dx).shape))
     emitted = sum(e.rate * (e.end_time - e.start_time) for e in shot.emitters) / (dx**3 / ppc)
-    return candidates + int(emitted), candidates
+    out.particles = out.candidates + int(emitted)
+    return out
 
 
 def device_free(device: str | None) -> int | None:
@@ -135,11 +160,11 @@ def device_free(device: str | None) -> int | None:
         return None
 
 
-def check(shot: Shot, *, particles: int, candidates: int, device: str | None, quiet: bool = False) -> Need:
+def check(shot: Shot, counted: Counts, *, device: str | None, quiet: bool = False) -> Need:
     """Print the estimate in one line; raise ShotError (exit 2) naming the keys to change when
     it exceeds the host's available memory or the device's free memory."""
     free_dev = device_free(device) if device != "cpu" else None
-    est = need(shot, particles, candidates=candidates, cuda=free_dev is not None)
+    est = need(shot, counted, cuda=free_dev is not None)
     free_host = host_available()
     if not quiet:
         print(f"[run] {est.line(host_free=free_host, device_free=free_dev)}", file=sys.stderr)
@@ -153,7 +178,7 @@ def check(shot: Shot, *, particles: int, candidates: int, device: str | None, qu
         raise ShotError(
             f"{shot.source or shot.base_dir}: this shot needs ~{_gb(b)} of {where} memory in {stage} "
             f"(domain.grid_n = {shot.domain.grid_n}: {(shot.domain.grid_n + 1) ** 3:,} grid nodes; "
-            f"{particles:,} particles at voxelise.ppc = {shot.voxelise.ppc}; surface.voxel_size = "
+            f"{counted.particles:,} particles at voxelise.ppc = {shot.voxelise.ppc}; surface.voxel_size = "
             f"{shot.surface.voxel_size or 'default'}), over the {_gb(free)} available: lower domain.grid_n, "
             f"voxelise.ppc or the emitters' rates, or raise surface.voxel_size"
         )

@@ -173,10 +173,10 @@ class ShotRun:
             check_collider_meshes(self.shot)  # a bad collider asset: refused before voxelise runs
         vox = entries["voxelise"]
         if vox.complete():
-            particles, candidates = int((vox.manifest() or {}).get("particles", 0)), 0
+            counted = memory.Counts(int((vox.manifest() or {}).get("particles", 0)))
         else:
-            particles, candidates = memory.counts(self.shot)
-        memory.check(self.shot, particles=particles, candidates=candidates, device=self.device, quiet=self.quiet)
+            counted = memory.counts(self.shot)
+        memory.check(self.shot, counted, device=self.device, quiet=self.quiet)
 
     def _publish(self, results: list[StageResult]) -> dict[str, Path]:
         """Every run that reaches export / render publishes them at stable paths (`mpmfx.publish`)."""

@@ -47,7 +47,7 @@ def test_the_estimate_bounds_the_particles_voxelise_makes(tmp_path):
 
     shot = write_tiny_shot(tmp_path, frame_end=2)
     run = mpmfx.load_shot(shot, cache_root=tmp_path / "c", quiet=True)
-    bound, _ = memory.counts(run.shot)
+    bound = memory.counts(run.shot).particles
     run.run(until="voxelise")
     made = run.entries()["voxelise"].manifest()["particles"]
     assert made <= bound <= 2 * made
