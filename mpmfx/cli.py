@@ -146,7 +146,7 @@ def main(argv: list[str] | None = None) -> int:
         if isinstance(exc, (StageError, BusyError)):
             print(f"error: {exc}", file=sys.stderr)
             return 1
-        if isinstance(exc, OSError) and exc.filename:
+        if isinstance(exc, OSError) and (exc.filename or exc.errno in (*FULL, *DENIED)):
             # a full disk or a folder not writable is the user's to fix (exit 2), said as the
             # path being written and the fix; another file system error is a failed stage
             cache_root = getattr(args, "cache", None) or default_root()

@@ -98,6 +98,12 @@ def _other(name, path, tmp) -> bool:
 def message(exc: OSError, *, cache_root: str | Path | None) -> str:
     """One line: what failed on which path, and the fix (free space or move the cache / the
     output folder). Complete cached frames are kept by every writer (atomic temp + rename)."""
+    if not exc.filename:  # a writer outside the write layer that did not say which file
+        what = "no space left on the device" if exc.errno in FULL else os.strerror(exc.errno or errno.EIO).lower()
+        return (
+            f"{what} (the writer named no file): free space, or point --cache (or $MPMFX_CACHE) and the "
+            f"working folder (renders/, published/: here {Path.cwd()}) at a disk you may write to"
+        )
     path = Path(exc.filename)
     folder = path.parent
     where = _where(path, cache_root, "on a larger disk" if exc.errno in FULL else "you may write to")

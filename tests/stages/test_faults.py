@@ -238,3 +238,17 @@ def test_the_check_reports_a_full_disk_under_its_output(tmp_path, monkeypatch, c
     assert run_check(str(tmp_path / "box.obj"), grid_n=16) == 2
     err = capsys.readouterr().err
     assert "renders/check/box" in err and "free space" in err and "Traceback" not in err
+
+
+def test_a_full_disk_met_by_a_writer_that_names_no_file_is_still_one_line(tmp_path, monkeypatch, capsys):
+    import mpmfx.stages.runner as runner
+
+    shot = write_tiny_shot(tmp_path, frame_end=2)
+
+    def full(*a, **k):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(runner.ShotRun, "run", full)
+    assert main(["run", str(shot), "--cache", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert "no space left" in err and "--cache" in err and "Traceback" not in err
