@@ -16,10 +16,12 @@ from mpmfx.meminfo import host_available
 from mpmfx.render.thickness import render_thickness_heatmap
 
 GRID_N = (8, 4096)  # the range domain.grid_n takes
-# The check's lattice at --grid-n over the mesh's box: its signed distance, inside flags and
-# distance transform. Measured: peak RSS of `mpmfx check` on a cube at --grid-n 96 and 192
-# differs by 287 MB over 6.3M more nodes, 45 bytes a node (2-core CPU).
-CHECK_BYTES_PER_NODE = 48
+# The check's peak memory, measured (peak RSS of `mpmfx check` on a cube, 2-core CPU): 944 MB
+# at --grid-n 96 (its raster already at its cap, geometry.thickness.MAX_RASTER_VOXELS), 1.23 GB
+# at 192, 9.48 GB at 1024 (459 s): what grows is the mesh refined to the cell and its samples,
+# as grid_n^2 (10.4 and 8.0 kB per grid_n^2 between those points). This bound is over each.
+CHECK_BYTES = 1_000_000_000
+CHECK_BYTES_PER_GRID2 = 10_500
 
 
 def _too_big(grid_n: int) -> str | None:
@@ -27,7 +29,7 @@ def _too_big(grid_n: int) -> str | None:
     lo, hi = GRID_N
     if not lo <= grid_n <= hi:
         return f"--grid-n {grid_n}: give {lo} to {hi} cells per axis (as domain.grid_n), e.g. --grid-n 64"
-    need, free = (grid_n + 1) ** 3 * CHECK_BYTES_PER_NODE, host_available()
+    need, free = CHECK_BYTES + grid_n**2 * CHECK_BYTES_PER_GRID2, host_available()
     if free is not None and need > free:
         return (
             f"--grid-n {grid_n}: the check needs ~{need / 1e9:.1f} GB, over the {free / 1e9:.1f} GB of "
