@@ -167,6 +167,20 @@ def test_a_full_disk_under_a_preview_frame_names_the_frame(copy, monkeypatch, ca
     assert not list(cache.rglob(".*.tmp*"))
 
 
+def test_a_full_disk_under_the_thickness_heatmap_names_it(copy, monkeypatch, capsys):
+    from PIL import Image
+
+    shot, cache = copy
+
+    def full(self, fp, *a, **k):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(Image.Image, "save", full)
+    assert main(["run", str(shot), "--until", "voxelise", "--force", "voxelise", "--cache", str(cache), "-q"]) == 2
+    _said(capsys, "/voxelise/", "thickness_cube.png", "--cache")
+    assert not list(cache.rglob("voxelise/*/thickness_cube.png"))
+
+
 def test_a_full_disk_under_renders_names_renders_not_the_cache(copy, monkeypatch, capsys):
     shot, cache = copy
     assert main(["run", str(shot), "--cache", str(cache), "-q"]) == 0  # published here once
