@@ -133,8 +133,9 @@ def _atomic_target(path: Path) -> Iterator[Path]:
     from pxr import Sdf, Tf  # backend: pxr
 
     ensure_room(path)  # USD on a full disk fails only after a page of its own errors
+    readable = lambda tmp: Sdf.Layer.OpenAsAnonymous(str(tmp)) is not None  # noqa: E731
     try:
-        with atomic_path(path, verify=lambda tmp: Sdf.Layer.OpenAsAnonymous(str(tmp)) is not None) as tmp:
+        with atomic_path(path, verify=readable, checksum=True) as tmp:
             yield tmp
     except Tf.ErrorException as exc:  # not the disk (atomic_path says that): USD's first line only
         raise OSError(errno.EIO, f"USD could not write the layer: {_usd_reason(exc)}", str(path)) from None
