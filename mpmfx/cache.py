@@ -41,7 +41,7 @@ from typing import Any, Callable, Iterator
 
 from mpmfx import checksum as sums
 from mpmfx.checksum import DamagedError
-from mpmfx.diskspace import diagnosed
+from mpmfx.diskspace import diagnosed, named
 
 MANIFEST_SCHEMA = 1
 # What a reader may meet in a cache file changed after it was written, when no digest says so
@@ -420,8 +420,11 @@ class Cache:
                 "argv": sys.argv,
                 "since": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC"),
             }
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, json.dumps(info).encode(), 0)
+            try:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, json.dumps(info).encode(), 0)
+            except OSError as exc:  # a full disk: said as the lock file (os.pwrite names none)
+                raise named(exc, self.shot_dir / ".lock") from exc
             yield
         finally:
             os.close(fd)  # releases the flock

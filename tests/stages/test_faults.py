@@ -266,3 +266,17 @@ def test_a_full_disk_met_by_a_writer_that_names_no_file_is_still_one_line(tmp_pa
     assert main(["run", str(shot), "--cache", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err
     assert "no space left" in err and "--cache" in err and "Traceback" not in err
+
+
+def test_a_disk_too_full_for_the_lock_names_the_lock(tmp_path, monkeypatch, capsys):
+    import mpmfx.cache as cache
+
+    shot = write_tiny_shot(tmp_path, frame_end=2)
+
+    def full(*a):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(cache.os, "pwrite", full)
+    assert main(["run", str(shot), "--cache", str(tmp_path / "c"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "tiny/.lock" in err and "free space" in err and "Traceback" not in err
