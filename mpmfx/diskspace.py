@@ -108,9 +108,13 @@ def message(exc: OSError, *, cache_root: str | Path | None) -> str:
     folder = path.parent
     where = _where(path, cache_root, "on a larger disk" if exc.errno in FULL else "you may write to")
     if exc.errno in FULL:
+        try:
+            free = f" ({free_bytes(folder) / 2**20:.1f} MiB free there)"
+        except OSError:  # (the message must not fail in its turn)
+            free = ""
         return (
-            f"no space left on the device writing {path} ({free_bytes(folder) / 2**20:.1f} MiB free there): "
-            f"free space, or {where}; nothing cached was damaged: run again to resume"
+            f"no space left on the device writing {path}{free}: free space, or {where}; nothing cached "
+            f"was damaged: run again to resume"
         )
     if exc.errno == errno.EROFS:
         return f"{folder} is on a read-only file system, so {path.name} cannot be written: {where}"
