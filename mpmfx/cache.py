@@ -41,6 +41,7 @@ from typing import Any, Callable, Iterator
 
 from mpmfx import checksum as sums
 from mpmfx.checksum import DamagedError
+from mpmfx.diskspace import diagnosed, named
 
 MANIFEST_SCHEMA = 1
 # What a reader may meet in a cache file changed after it was written, when no digest says so
@@ -133,6 +134,12 @@ def atomic_path(
         if checksum:
             sums.record(path, tmp_path)
         os.replace(tmp_path, path)
+    except Exception as exc:
+        # Said as the destination and the cause (a full disk, a folder not writable) while the
+        # partial temp file still holds the space it got: see mpmfx.diskspace.
+        if (said := diagnosed(exc, path, tmp_path)) is None:
+            raise
+        raise said from exc
     finally:
         if tmp_path.exists():
             tmp_path.unlink()
@@ -142,7 +149,8 @@ def _verify(tmp: Path, path: Path, verify: Callable[[Path], object] | None) -> N
     try:
         ok = tmp.stat().st_size > 0 and (verify is None or verify(tmp) is not False)
     except Exception as exc:  # noqa: BLE001 - any failure to read it back means a bad file
-        ok, why = False, f" ({type(exc).__name__}: {exc})"
+        # the reader's own text can be huge (pyopenvdb echoed a cut file's bytes): one short line
+        ok, why = False, f" ({type(exc).__name__}: {' '.join(str(exc)[:400].split())[:160]})"
     else:
         why = ""
     if not ok:
@@ -412,8 +420,11 @@ class Cache:
                 "argv": sys.argv,
                 "since": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M:%S UTC"),
             }
-            os.ftruncate(fd, 0)
-            os.pwrite(fd, json.dumps(info).encode(), 0)
+            try:
+                os.ftruncate(fd, 0)
+                os.pwrite(fd, json.dumps(info).encode(), 0)
+            except OSError as exc:  # a full disk: said as the lock file (os.pwrite names none)
+                raise named(exc, self.shot_dir / ".lock") from exc
             yield
         finally:
             os.close(fd)  # releases the flock

@@ -13,12 +13,36 @@ import sys
 from pathlib import Path
 
 from mpmfx.config import ShotError
+from mpmfx.diskspace import diagnosed, message
 from mpmfx.geometry.check import check_asset, check_placed, topology_line
 from mpmfx.geometry.mesh import MeshError, check_in_domain, load_mesh, transform_mesh
 from mpmfx.geometry.thickness import Verdict
+from mpmfx.meminfo import host_available
 from mpmfx.render.camera import solver_floor
 from mpmfx.render.thickness import render_thickness_heatmap
 from mpmfx.shotfile import load_shot_config
+
+GRID_N = (8, 4096)  # the range domain.grid_n takes
+# The check's peak memory, measured (peak RSS of `mpmfx check` on a cube, 2-core CPU): 944 MB
+# at --grid-n 96 (its raster already at its cap, geometry.thickness.MAX_RASTER_VOXELS), 1.23 GB
+# at 192, 9.48 GB at 1024 (459 s): what grows is the mesh refined to the cell and its samples,
+# as grid_n^2 (10.4 and 8.0 kB per grid_n^2 between those points). This bound is over each.
+CHECK_BYTES = 1_000_000_000
+CHECK_BYTES_PER_GRID2 = 10_500
+
+
+def _too_big(grid_n: int) -> str | None:
+    """Why --grid-n is refused (outside GRID_N, or more memory than the host has), or None."""
+    lo, hi = GRID_N
+    if not lo <= grid_n <= hi:
+        return f"--grid-n {grid_n}: give {lo} to {hi} cells per axis (as domain.grid_n), e.g. --grid-n 64"
+    need, free = CHECK_BYTES + grid_n**2 * CHECK_BYTES_PER_GRID2, host_available()
+    if free is not None and need > free:
+        return (
+            f"--grid-n {grid_n}: the check needs ~{need / 1e9:.1f} GB, over the {free / 1e9:.1f} GB of "
+            f"memory available; lower --grid-n"
+        )
+    return None
 
 
 def run_check(
@@ -39,6 +63,9 @@ def run_check(
     ``thickness.png`` to ``out_dir`` (default ./renders/check/<asset stem>/).
     Returns 0 on PASS or WARN, 1 on FAIL, 2 on bad input (message on stderr).
     """
+    if (refused := _too_big(grid_n)) is not None:
+        print(f"mpmfx check: {refused}", file=sys.stderr)
+        return 2
     try:
         checked = check_asset(asset, grid_n=grid_n, origin=origin, size=size, prim_path=prim_path)
     except ValueError as exc:  # MeshError included
@@ -46,12 +73,18 @@ def run_check(
         return 2
     report = checked.report
     out = Path(out_dir) if out_dir is not None else Path("renders/check") / Path(asset).stem
-    out.mkdir(parents=True, exist_ok=True)
     data = checked.to_dict()
-    (out / "report.json").write_text(json.dumps(data, indent=2) + "\n")
-    png = render_thickness_heatmap(
-        checked.mesh, report.vertex_thickness_cells, out / "thickness.png", warn_cells=report.warn_cells
-    )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "report.json").write_text(json.dumps(data, indent=2) + "\n")
+        png = render_thickness_heatmap(
+            checked.mesh, report.vertex_thickness_cells, out / "thickness.png", warn_cells=report.warn_cells
+        )
+    except Exception as exc:
+        if (said := diagnosed(exc, out)) is None:  # said as the output folder
+            raise
+        print(f"mpmfx check: {message(said, cache_root=None)}", file=sys.stderr)
+        return 2
     if as_json:
         print(json.dumps(data, indent=2))
     else:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import errno
 import math
 import os
 import sys
@@ -18,6 +17,7 @@ from mpmfx import __version__
 from mpmfx.bench import main as bench_main
 from mpmfx.cache import BusyError, Cache, DamagedError, Entry, PathError, default_root
 from mpmfx.cli_args import add_parallel_args, add_wedge_parser, frame_range
+from mpmfx.diskspace import DENIED, FULL, message
 from mpmfx.maintain import clean_targets, delete, human, prune_targets, tree_size
 from mpmfx.publish import drop_dangling, published_entries
 from mpmfx.stages import STAGES
@@ -165,26 +165,13 @@ def main(argv: list[str] | None = None) -> int:
             Entry(Path(exc.root), "", "", {}).mark_damaged([exc.rel])
             print(f"error: {exc}; marked as damaged: run again to redo it", file=sys.stderr)
             return 1
-        if isinstance(exc, OSError) and exc.filename:
-            print(f"error: {_os_message(exc)}", file=sys.stderr)
-            return 1
+        if isinstance(exc, OSError) and (exc.filename or exc.errno in (*FULL, *DENIED)):
+            # a full disk or a folder not writable is the user's to fix (exit 2), said as the
+            # path being written and the fix; another file system error is a failed stage
+            cache_root = getattr(args, "cache", None) or default_root()
+            print(f"error: {message(exc, cache_root=cache_root)}", file=sys.stderr)
+            return 2 if exc.errno in (*FULL, *DENIED) else 1
         raise
-
-
-def _os_message(exc: OSError) -> str:
-    """A file system error as the path and what to do (no traceback)."""
-    keep = "complete frames are kept: run again to resume"
-    if exc.errno == errno.ENOSPC:
-        return (
-            f"no space left on the device writing {exc.filename}: free space, or point --cache "
-            f"(or $MPMFX_CACHE) at a larger disk; {keep}"
-        )
-    if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
-        return (
-            f"permission denied writing {exc.filename}: make it writable for this user, or point "
-            f"--cache (or $MPMFX_CACHE) at a folder you own; {keep}"
-        )
-    return f"{exc.filename}: {exc.strerror}; {keep}"
 
 
 def _dispatch(args) -> int:

@@ -29,6 +29,10 @@ BLENDER_SUFFIXES = (".blend", ".fbx")
 # A mesh whose smallest bounding-box side is below this fraction of its largest is flat:
 # it has no interior to fill with particles.
 _FLAT_RATIO = 1e-6
+# A coordinate beyond this, in the file's units, is no asset's: a planet in millimetres is
+# 1.3e10, a city block in millimetres 1e6. Such a vertex (an exporter's garbage, an unapplied
+# 1e30 "infinity") would otherwise make the mesh read as flat or as larger than any domain.
+_ABSURD = 1e9
 
 
 def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Trimesh":
@@ -66,6 +70,14 @@ def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Tri
         raise MeshError(
             f"{path}: {len(bad)} vertices are NaN or inf (the first is vertex {bad[0]}); "
             "clean up the asset in your DCC and re-export it"
+        )
+    far = np.flatnonzero(np.abs(vertices).max(axis=1, initial=0.0) > _ABSURD)
+    if len(far):  # before trimesh too: its vertex merge overflows on them
+        raise MeshError(
+            f"{path}: {len(far)} vertices lie absurdly far out (vertex {far[0]} at "
+            f"{np.array2string(np.asarray(vertices[far[0]]), precision=3)}; no asset's coordinate "
+            f"exceeds {_ABSURD:g} in its file's units): a broken export; clean up the asset in your DCC "
+            f"and re-export it"
         )
     mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=True)
     _validate(mesh, path)
@@ -141,9 +153,9 @@ def _load_blender(path: Path, part: str | None) -> tuple[np.ndarray, np.ndarray]
 def _validate(mesh: "trimesh.Trimesh", path: Path | str) -> None:
     if len(mesh.faces) == 0:
         raise MeshError(f"{path}: no non-degenerate triangles; export the surface as a polygon mesh")
-    extents = mesh.extents
     if not np.all(np.isfinite(mesh.vertices)):
         raise MeshError(f"{path}: vertices contain NaN or inf; clean up the asset in your DCC")
+    extents = mesh.extents
     if extents.max() <= 0 or extents.min() <= _FLAT_RATIO * extents.max():
         raise MeshError(
             f"{path}: the mesh is flat (bounding box {np.round(extents, 6)} m); "

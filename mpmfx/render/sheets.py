@@ -12,6 +12,8 @@ from pathlib import Path
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from mpmfx.cache import atomic_path
+
 SHEET_MIN_WIDTH = 960  # px: a sheet narrower than this is scaled up (legible tiles and labels)
 SHEET_MAX_WIDTH = 1920  # px: a sheet wider than this is scaled down
 LABEL_BOX = (16, 18, 24, 170)  # RGBA: a dark translucent box, so light text reads on sky or snow
@@ -89,10 +91,10 @@ def _fit(image: np.ndarray | None, size: tuple[int, int]) -> np.ndarray:
 
 
 def save(image: np.ndarray, path: Path) -> Path:
-    """Write a PNG through a temp name: complete or absent."""
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    Image.fromarray(image).save(tmp, format="PNG")
-    tmp.replace(path)
+    """Write a PNG through a temp name (`cache.atomic_path`): complete or absent, and a full
+    disk is said with the path and the fix."""
+    with atomic_path(path) as tmp:
+        Image.fromarray(image).save(tmp, format="PNG")
     return path
 
 

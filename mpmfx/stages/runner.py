@@ -18,8 +18,9 @@ from mpmfx.cache import Cache, DamagedError, Entry, code_hash, default_root, rea
 from mpmfx.config import Shot, ShotError
 from mpmfx.publish import check_publishable, publish_renders, publish_stage, record, sweep
 from mpmfx.shotfile import load_shot_config
-from mpmfx.stages import STAGES, export, render, simulate, surface, voxelise
+from mpmfx.stages import STAGES, export, memory, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage, StageError
+from mpmfx.stages.colliders import check_collider_meshes
 from mpmfx.stages.kernels import SurfacerKernels
 from mpmfx.stages.parallel import Frames
 from mpmfx.stages.qa import shot_flags, warn_flags
@@ -189,6 +190,21 @@ class ShotRun:
                     f"--frames: {bad[0]} is outside the shot's frames "
                     f"{self.shot.shot.frame_start}..{self.shot.shot.frame_end}"
                 )
+        self.memory()
+
+    def memory(self) -> None:
+        """State the memory the shot needs and refuse it (ShotError) over what the machine has
+        (`mpmfx.stages.memory`): particles as voxelised when that is cached, else bounded from
+        the objects' boxes."""
+        entries = self.entries()
+        if not entries["simulate"].complete():
+            check_collider_meshes(self.shot)  # a bad collider asset: refused before voxelise runs
+        vox = entries["voxelise"]
+        if vox.complete():
+            counted = memory.Counts(int((vox.manifest() or {}).get("particles", 0)))
+        else:
+            counted = memory.counts(self.shot)
+        memory.check(self.shot, counted, device=self.device, quiet=self.quiet)
 
     def _publish(self, results: list[StageResult]) -> dict[str, Path]:
         """Every run that reaches export / render publishes them at stable paths (`mpmfx.publish`)."""

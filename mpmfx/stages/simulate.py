@@ -24,7 +24,7 @@ from mpmfx import checksum
 from mpmfx.cache import DamagedError, file_hash, write_json
 from mpmfx.config import ColliderShape, Shot, ShotError
 from mpmfx.geometry import MESH_LOADING
-from mpmfx.geometry.colliders import collider_mesh, keyframes, mesh_sdf
+from mpmfx.geometry.colliders import keyframes, mesh_sdf
 from mpmfx.geometry.noise import fourier_noise
 from mpmfx.io.frames import ParticleFrame, SeedParticles, read_arrays, write_arrays
 from mpmfx.mpm import AnimatedMesh, Collider, ColliderKind, Particles, SimulationError, Solver
@@ -32,7 +32,7 @@ from mpmfx.mpm.emission import device_bytes
 from mpmfx.mpm.materials import VARIED_FIELDS, preset
 from mpmfx.mpm.readback import HostStaging
 from mpmfx.stages.base import Context, StageError, quiet_warp
-from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
+from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key, static_collider_mesh
 from mpmfx.stages.writer import FrameWriter
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "simulate", 1, True, ParticleFrame.EXT
@@ -131,7 +131,7 @@ def colliders(shot: Shot) -> list:
     about domain.origin); keyframe times stay on the shot clock, as the solver expects."""
     origin, L = np.asarray(shot.domain.origin, float), shot.domain.size
     out = []
-    for col in shot.colliders:
+    for i, col in enumerate(shot.colliders):
         if col.animated:
             continue  # animated_meshes
         geom = collider_geometry(col)
@@ -149,7 +149,7 @@ def colliders(shot: Shot) -> list:
         elif col.shape is ColliderShape.SPHERE:
             out.append(Collider(kind=ColliderKind.SPHERE, radius=col.radius / L, **common))
         else:
-            mesh = collider_mesh(geom, resolve=shot.resolve, plane_size=2 * L)
+            mesh = static_collider_mesh(shot, i)
             sdf, sdf_origin, voxel = mesh_sdf(mesh, dx=L / shot.domain.grid_n)
             out.append(
                 Collider(
@@ -276,7 +276,12 @@ def _advice(shot: Shot, exc) -> str:
     what = str(exc).split(". Lower", 1)[0].split(". Raise", 1)[0]
     stiff = " or ".join(f"objects[{i}].overrides.youngs_modulus" for i in range(len(shot.objects)))
     if exc.field == "dt_min" and getattr(exc, "speed_bound", False):
-        moving = " or ".join(f"objects[{i}].velocity" for i in range(len(shot.objects)))
+        moving = " or ".join(
+            f"objects[{i}].{k}"
+            for i, o in enumerate(shot.objects)
+            for k in ("velocity", "angular_velocity")
+            if k == "velocity" or any(o.angular_velocity)
+        )
         return (
             f"{what}. The particles' own speed sets this step, not a stiffness: check {moving} "
             f"(m/s; the domain is {shot.domain.size:g} m across) and solver.gravity"

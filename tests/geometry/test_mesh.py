@@ -96,6 +96,12 @@ def test_warp_bunny_loads_from_usd():
         (lambda d: _text(d / "points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n"), "no triangles"),
         (lambda d: _text(d / "flat.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n"), "flat"),
         (lambda d: _text(d / "mesh.xyz", "1 2 3"), "unsupported format"),
+        (
+            lambda d: _text(
+                d / "far.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1e30\nf 1 2 3\nf 1 2 4\nf 2 3 4\nf 1 3 4\n"
+            ),
+            "absurdly far out",
+        ),
     ],
 )
 def test_bad_files_raise_mesh_error_naming_file(tmp_path, make, match):
