@@ -108,13 +108,18 @@ class HostStaging:
         return {k: bufs[k].numpy() for k in arrays}
 
 
-def to_host(state: State, arrays: dict, staging: HostStaging | None = None) -> dict[str, np.ndarray]:
+def to_host(
+    state: State, arrays: dict, staging: HostStaging | None = None, raw: dict | None = None
+) -> dict[str, np.ndarray]:
     """Host copies of device arrays, in particle order (see State: storage order); matrices
-    (n, 3, 3). staging: copy into its reused buffers (views returned), else fresh arrays."""
+    (n, 3, 3); `raw` arrays copied as they are stored (e.g. pid, in slot order). staging: copy
+    into its reused buffers (views returned), else fresh arrays."""
+    raw = raw or {}
     if staging is None:
         if state.permuted:
             arrays = {k: in_particle_order(a, state.pid) for k, a in arrays.items()}
-        return {k: m33_to_host(a) if k in ParticleBuffers.MATRICES else a.numpy() for k, a in arrays.items()}
+        out = {k: m33_to_host(a) if k in ParticleBuffers.MATRICES else a.numpy() for k, a in arrays.items()}
+        return out | {k: a.numpy() for k, a in raw.items()}
     ordered, planes = {}, set()
     for k, a in arrays.items():
         if k in ParticleBuffers.MATRICES and a.shape[-1] == state.n:
@@ -124,7 +129,7 @@ def to_host(state: State, arrays: dict, staging: HostStaging | None = None) -> d
             ordered[k] = in_particle_order(a, state.pid) if state.permuted else a
             if k in ParticleBuffers.MATRICES:
                 planes.add(k)
-    host = staging.take(ordered)
+    host = staging.take(ordered | raw)  # (one take: one set of buffers a frame)
     return {k: np.ascontiguousarray(h.transpose(1, 0, 2)) if k in planes else h for k, h in host.items()}
 
 
@@ -164,12 +169,12 @@ def checkpoint(solver, state: State, t: float, staging: HostStaging | None = Non
             "body": state.body,
         },
         staging,
+        # pid as stored (slot order); pending births (+inf: born), by particle. Through staging
+        # on the CPU too: there numpy() views the solver's memory, which the next frame changes
+        raw={"pid": state.pid, **({"birth": state.birth} if state.birth is not None else {})},
     )
     if state.variation is not None:  # a varied scene's multipliers (particle order): the factors and dt follow
         data["variation"] = state.variation
-    data["pid"] = state.pid.numpy()
-    if state.birth is not None:  # pending births (+inf: born), by particle
-        data["birth"] = state.birth.numpy()
     data["clock"] = state.clock.to_array()
     data["t"] = np.array([t], np.float64)
     data["meta"] = np.array([CHECKPOINT_VERSION, solver.config.grid_n, state.n], np.int64)
