@@ -34,23 +34,25 @@ def solver_floor(shot) -> float:
 FOCAL_MM, FILM_MM = 35.0, 36.0  # the render camera's lens and film width (horizontal fit)
 
 
-def frame_bounds(lo, hi, *, direction, aspect: float, focal_mm: float = FOCAL_MM, margin: float = 1.08):
-    """(position, look_at) in metres (Y up) for a camera looking along -`direction` that fits the
-    box [lo, hi] (m) in a picture of width / height `aspect`.
+def frame_box(lo, hi, *, direction, aspect: float, focal_mm: float = 35.0, margin: float = 1.08):
+    """(position, look_at) in metres for a camera looking along -`direction` (from the camera
+    towards the scene is -direction) that fits the box [lo, hi] (m, (3,) each) in a picture of
+    width / height `aspect` on 36 mm film.
 
-    Each box corner must project inside the film: with the view axes fixed, the nearest camera
-    distance that keeps every corner in frame is solved per corner and the largest wins."""
+    Each box corner must project inside the film: with the view axes fixed, the nearest
+    camera distance that keeps every corner in frame is solved per corner and the largest wins.
+    """
     lo, hi = np.asarray(lo, float), np.asarray(hi, float)
     centre = (lo + hi) / 2
     back = np.asarray(direction, float) / np.linalg.norm(direction)
     right = np.cross((0.0, 1.0, 0.0), back)
     right /= np.linalg.norm(right)
     up = np.cross(back, right)
-    tan_h = FILM_MM / 2 / focal_mm / margin
+    tan_h = 18.0 / focal_mm / margin
     tan_v = tan_h / aspect
     dist = 0.0
     for i in range(8):
-        c = np.array([hi[0] if i & 1 else lo[0], hi[1] if i & 2 else lo[1], hi[2] if i & 4 else lo[2]]) - centre
+        c = np.where([i & 1, i & 2, i & 4], hi, lo) - centre
         depth = c @ back  # towards the camera
         dist = max(dist, abs(c @ right) / tan_h + depth, abs(c @ up) / tan_v + depth)
     return tuple(float(x) for x in centre + back * dist), tuple(float(x) for x in centre)
@@ -83,7 +85,7 @@ def render_camera(shot, bounds=None) -> dict:
         o, L = np.asarray(shot.domain.origin, float), float(shot.domain.size)
         lo, hi = (np.asarray(b, float) for b in (bounds or (o, o + L)))
         lo[1] = min(lo[1], solver_floor(shot))
-        pos, look = frame_bounds(lo, hi, direction=VIEW_DIRECTION, aspect=aspect)
+        pos, look = frame_box(lo, hi, direction=VIEW_DIRECTION, aspect=aspect, focal_mm=FOCAL_MM)
     else:
         pos, look = default_camera(shot)
     return {

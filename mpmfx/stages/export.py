@@ -72,11 +72,12 @@ def run(ctx: Context) -> dict:
 def frame(job: FrameJob, f: int) -> None:
     """Frame `f`'s .vdb files, then its USD layer (its existence marks the frame done): a task."""
     shot, entry = job.shot, job.entry
-    groups = SurfaceFrame.read(job.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
+    surf, sim = job.upstream["surface"], job.upstream["simulate"]  # verified reads: a changed frame is redone
+    groups = surf.read(surf.frame_path(f, SurfaceFrame.EXT), SurfaceFrame.read).groups
     volumes = _write_vdbs(shot, entry, f, groups) if shot.export.vdb else {}
     points = {}
     if shot.export.points:
-        points = _points(shot, ParticleFrame.read(job.upstream["simulate"].frame_path(f, ParticleFrame.EXT)))
+        points = _points(shot, sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read))
     names = usd_names(shot)
     _writer(shot, entry).write_frame(
         f,
@@ -112,9 +113,11 @@ def _bounds(ctx: Context, frames: list[int]):
     pts = []
     for f in picks:
         if shot.render.mode == "particles":
-            pts.append(ParticleFrame.read(ctx.upstream["simulate"].frame_path(f, ParticleFrame.EXT)).x)
+            sim = ctx.upstream["simulate"]
+            pts.append(sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read).x)
         else:
-            groups = SurfaceFrame.read(ctx.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
+            up = ctx.upstream["surface"]
+            groups = up.read(up.frame_path(f, SurfaceFrame.EXT), SurfaceFrame.read).groups
             pts += [d.vertices for d in groups.values()]
         pts += [c.points @ c.xform[:3, :3].T + c.xform[:3, 3] for c in _colliders(shot, f)]
     pts = [np.asarray(p, np.float64).reshape(-1, 3) for p in pts if len(p)]

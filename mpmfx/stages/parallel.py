@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from tqdm import tqdm
 
-from mpmfx.cache import Entry
+from mpmfx.cache import DamagedError, Entry
 from mpmfx.config import ShotError
 from mpmfx.publish import publish_name
 from mpmfx.threads import THREADS_ENV, cpu_threads, usable_cores
@@ -281,9 +281,13 @@ def _worker_name() -> str:
 
 def _task(fn: Callable[[FrameJob, int], Any], job: FrameJob, f: int, desc: str) -> Any:
     """fn(job, f) on a worker; a failure comes back as one TaskError line (not the task's
-    traceback, which Dask would carry to the client escaped into one long string)."""
+    traceback, which Dask would carry to the client escaped into one long string). A damaged
+    upstream file comes back as a value, raised in the client (which has the frame redone), so
+    the worker does not log it as a failed task with its traceback."""
     try:
         return fn(job, f)
+    except DamagedError as exc:
+        return exc
     except ShotError:  # bad input: its own message, exit 2
         raise
     except Exception as exc:  # noqa: BLE001 - every failure is reported as one line
@@ -318,7 +322,9 @@ def _gather(client, futures: list, bar) -> list[Any]:
 
     try:
         for fut in as_completed(futures):
-            fut.result()  # raises the task's exception here, in the client
+            result = fut.result()  # raises the task's exception here, in the client
+            if isinstance(result, DamagedError):  # (returned by _task)
+                raise result
             bar.update()
         return [f.result() for f in futures]
     except BaseException:
