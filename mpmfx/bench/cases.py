@@ -336,7 +336,7 @@ def hydrostatic_column(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, devi
     dx = 1.0 / grid_n
     g, H, rho = 4.9, 0.4, 1.0
     E = rho * g * H / 0.02  # 2 % strain at the foot
-    y0 = 3 * dx  # first node above the wall layer
+    y0 = 3 * dx  # the floor plane (SolverConfig.wall_planes)
     x0 = lattice([0.5 - dx, y0, 0.5 - dx], [0.5 + dx, y0 + H, 0.5 + dx], dx / ppa)
     solver, state = _setup(
         _elastic(E, 0.0, rho),
@@ -354,7 +354,7 @@ def hydrostatic_column(*, grid_n: int = 32, cfl: float = 0.4, ppa: int = 2, devi
     s = solver.state_to_numpy(state)
     sig = fc_cauchy(s["F"].astype(np.float64), solver.materials[0].mu0, solver.materials[0].lambda0)[:, 1, 1]
     exact = -rho * g * (y0 + H - x0[:, 1].astype(np.float64))
-    # the bottom 2 cells share nodes with the floor's wall layer: a boundary artefact, not
+    # the bottom 2 cells share nodes with the floor and its guard: a boundary artefact, not
     # the bulk stress the reference describes (CB-Geo also reads the bulk)
     bulk = x0[:, 1] > y0 + 2 * dx
     sig, exact = sig[bulk], exact[bulk]
