@@ -4,7 +4,7 @@ friction is a law that does not depend on the grid (docs/physics.md, "Boundaries
 import numpy as np
 import pytest
 
-from mpmfx.mpm import Solver, SolverConfig, preset
+from mpmfx.mpm import Collider, ColliderKind, Solver, SolverConfig, preset
 from tests.mpm.mpm_helpers import block
 
 
@@ -53,14 +53,34 @@ def test_a_pool_at_rest_neither_climbs_nor_enters_the_walls(walls):
     assert j_min > 0.95
 
 
-def _slide_deceleration(n: int, mu: float, t: float = 0.06) -> float:
+def _plane(y: float, mu: float) -> Collider:
+    return Collider(kind=ColliderKind.PLANE, friction=mu, point=(0.0, y, 0.0), normal=(0.0, 1.0, 0.0))
+
+
+def test_a_block_at_rest_sits_on_a_collider_plane_through_nodes():
+    """A collider's surface holds the nodes on it too: a block on a plane collider that passes
+    through a row of nodes rests on it (it sank a tenth of a cell when only the nodes inside
+    were held), as it does on a plane between two rows."""
+    n = 16
+    for y0 in (0.25, 0.25 + 0.5 / n):
+        p = block((0.3, y0, 0.3), (0.7, y0 + 0.25, 0.7), grid_n=n)
+        solver = Solver([preset("Elastic")], SolverConfig(grid_n=n), colliders=[_plane(y0, 0.5)], device="cpu")
+        state = solver.init_state(p)
+        solver.advance(state, 0.0, 0.3)
+        bottom = solver.state_to_numpy(state)["x"][:, 1].min() - 0.25 / n
+        assert abs(bottom - y0) < 0.05 / n, y0
+
+
+def _slide_deceleration(n: int, mu: float, t: float = 0.06, collider: bool = False) -> float:
     """Mean deceleration of an elastic slab (2 cells thick in z) launched at 1 domain/s along the
-    floor, over its first t seconds, in units of mu g."""
+    floor (or along a plane collider at y = 0.25 with the walls frictionless), over its first t
+    seconds, in units of mu g."""
     dx = 1 / n
-    floor, _ = SolverConfig(grid_n=n).wall_planes
+    floor = 0.25 if collider else SolverConfig(grid_n=n).wall_planes[0]
     p = block((0.2, floor, 0.5 - dx), (0.45, floor + 0.125, 0.5 + dx), grid_n=n, v=(1.0, 0.0, 0.0))
-    cfg = SolverConfig(grid_n=n, wall_friction=mu)
-    solver = Solver([preset("Elastic")], cfg, device="cpu")
+    cfg = SolverConfig(grid_n=n, wall_friction=0.0 if collider else mu)
+    colliders = [_plane(floor, mu)] if collider else []
+    solver = Solver([preset("Elastic")], cfg, colliders=colliders, device="cpu")
     state = solver.init_state(p)
     solver.advance(state, 0.0, t)
     out = solver.state_to_numpy(state)
@@ -75,3 +95,8 @@ def test_wall_friction_decelerates_a_sliding_block_at_mu_g_on_every_grid():
     a block slides to rest at mu g whatever the cell size (grid 16, 32 and 48)."""
     for n in (16, 32, 48):
         assert _slide_deceleration(n, 0.5) == pytest.approx(1.0, abs=0.05), n
+
+
+def test_collider_friction_decelerates_a_sliding_block_at_mu_g_on_every_grid():
+    for n in (16, 24, 32):
+        assert _slide_deceleration(n, 0.5, collider=True) == pytest.approx(1.0, abs=0.05), n
