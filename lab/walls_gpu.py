@@ -109,7 +109,7 @@ def pool_period(n: int, depth_cells: int, device: str, periods: float = 2.3) -> 
         ts.append(f * frame)
         eta.append(float(np.percentile(p[near, 1], 99)) - (lo + h))
     t, e = np.array(ts), np.array(eta)
-    e = e - e.mean()
+    e = e - np.polyval(np.polyfit(t, e, 1), t)  # about the level, which may settle a little
     up = np.flatnonzero((e[:-1] > 0) & (e[1:] <= 0))  # downward zero crossings, one a period
     cross = t[up] + (t[up + 1] - t[up]) * e[up] / (e[up] - e[up + 1])
     T = float(np.mean(np.diff(cross))) if len(cross) > 1 else float("nan")
@@ -119,7 +119,8 @@ def pool_period(n: int, depth_cells: int, device: str, periods: float = 2.3) -> 
     for j in range(2):
         win = (t >= j * T) & (t < (j + 1) * T) if np.isfinite(T) else np.zeros(len(t), bool)
         if win.sum() > 8:
-            amps.append(abs(np.mean(e[win] * np.exp(-2j * math.pi * t[win] / T))) * 2)
+            ew = e[win] - np.polyval(np.polyfit(t[win], e[win], 1), t[win])  # a drift would read as amplitude
+            amps.append(abs(np.mean(ew * np.exp(-2j * math.pi * t[win] / T))) * 2)
     decay = 1 - amps[1] / amps[0] if len(amps) == 2 and amps[0] > 0 else float("nan")
     return T, T_lin, decay
 
