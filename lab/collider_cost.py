@@ -19,7 +19,7 @@ import trimesh
 import warp as wp
 
 from mpmfx.bench.report import print_table
-from mpmfx.mpm import AnimatedMesh, Particles, Solver, SolverConfig, preset
+from mpmfx.mpm import AnimatedMesh, Particles, Solver, SolverConfig, animated, preset
 
 OUT = os.environ.get("OUT", "renders/bench")
 FPS = 24.0
@@ -85,6 +85,9 @@ def main():
     ap.add_argument("--subdiv", type=int, default=3, help="icosphere subdivisions (3: 642 vertices, 5: 10242)")
     ap.add_argument("--frames", type=int, default=3)
     ap.add_argument("--no-graphs", action="store_true", help="launch the substeps' kernels one by one (no CUDA graphs)")
+    ap.add_argument(
+        "--inside", nargs="+", default=["faces"], choices=animated.INSIDE_TESTS, help="inside tests to time"
+    )
     ap.add_argument("--out", default=OUT)
     a = ap.parse_args()
     wp.config.quiet = True
@@ -94,24 +97,36 @@ def main():
         top = float(parts.x[:, 1].max())
         mesh = squashing_ball(top, 0.15, a.subdiv, a.frames + 1)
         step, subs, _ = run(a.device, a.grid, parts, None, a.frames, not a.no_graphs)
-        step_c, subs_c, s = run(a.device, a.grid, parts, mesh, a.frames, not a.no_graphs)
-        pose = pose_alone(s)
-        rows.append(
-            {
-                "device": a.device,
-                "grid": a.grid,
-                "particles": len(parts.x),
-                "vertices": mesh.points.shape[1],
-                "step_ms": 1e3 * step,
-                "step_with_collider_ms": 1e3 * step_c,
-                "collider_ms": 1e3 * (step_c - step),
-                "pose_refit_ms": 1e3 * pose,
-                "substeps": [subs, subs_c],
-            }
-        )
+        for inside in a.inside:
+            animated.INSIDE_TEST = inside
+            step_c, subs_c, s = run(a.device, a.grid, parts, mesh, a.frames, not a.no_graphs)
+            pose = pose_alone(s)
+            rows.append(
+                {
+                    "device": a.device,
+                    "inside": inside,
+                    "grid": a.grid,
+                    "particles": len(parts.x),
+                    "vertices": mesh.points.shape[1],
+                    "step_ms": 1e3 * step,
+                    "step_with_collider_ms": 1e3 * step_c,
+                    "collider_ms": 1e3 * (step_c - step),
+                    "pose_refit_ms": 1e3 * pose,
+                    "substeps": [subs, subs_c],
+                }
+            )
     print_table(
         rows,
-        ["particles", "vertices", "step_ms", "step_with_collider_ms", "collider_ms", "pose_refit_ms", "substeps"],
+        [
+            "inside",
+            "particles",
+            "vertices",
+            "step_ms",
+            "step_with_collider_ms",
+            "collider_ms",
+            "pose_refit_ms",
+            "substeps",
+        ],
     )
     os.makedirs(a.out, exist_ok=True)
     with open(os.path.join(a.out, f"collider_cost_{a.device.replace(':', '')}.json"), "w") as fh:

@@ -4,6 +4,7 @@ trip back from a remote GPU machine (hero_codec.py: lossy-compact meshes, split 
 be exported and rendered by hero_render.py.
 
     python lab/hero_gpu.py --out DIR                   # on the GPU: both hero shots
+    python lab/hero_gpu.py --shots stomp water_pour    # example shots at production size (EXAMPLES)
     python lab/hero_gpu.py --smoke --device cpu        # CPU size (grid 32, few frames): tests the path
 
 Imports numpy, warp and mpmfx only (and what the stages import: pydantic, tqdm, trimesh). Writes
@@ -24,8 +25,12 @@ from pathlib import Path
 
 import hero_codec
 
-from mpmfx.bench.shots import SHOTS, SMOKE_GRID, device_name, public, run_shot, smoke_overrides, warm_up
+from mpmfx.bench.shots import SHOT_DIR, SHOTS, SMOKE_GRID, device_name, public, run_shot, smoke_overrides, warm_up
 from mpmfx.bench.shots import table as shots_table
+
+EXAMPLES = {"stomp": (256, [34]), "tyre_mud": (256, [36]), "water_pour": (256, [24]), "sand_pour": (192, [60])}
+"""Example shot -> (its production grid, the frames to surface): a grid four to five times the
+CPU size's 48, the domain's floor kept 3 cells below y = 0 as the shots place it."""
 
 RETURN_BYTES = 58 * 2**20  # what the packed frames may take of a 64 MiB return; the JSON and log need little
 RETURN_FILES = 7  # of 8 returned files: one is hero_times.json
@@ -70,6 +75,16 @@ def pack_frame(row: dict, frame: int, out: Path, *, budget: dict) -> dict:
     budget["bytes"] -= size
     budget["files"] -= len(files)
     return info
+
+
+def production(name: str, grid: int | None = None) -> list[str]:
+    """The overrides of an example shot at its production grid (or at `grid`)."""
+    from mpmfx.shotfile import load_shot_config
+
+    grid = grid or EXAMPLES[name][0]
+    dom = load_shot_config(SHOT_DIR / f"{name}.toml").domain
+    ox, _, oz = dom.origin
+    return [f"domain.grid_n={grid}", f"domain.origin=[{ox}, {-3 * dom.size / grid}, {oz}]"]
 
 
 def table(rows: list[dict], warm: dict | None, dev: str) -> str:
@@ -139,8 +154,11 @@ def main(argv=None) -> int:
         if elapsed > args.budget_s:
             print(f"{name}: skipped, {elapsed:.0f} s used of the {args.budget_s} s budget", flush=True)
             continue
-        frames = SHOTS[name]
-        over = smoke_overrides(SMOKE_GRID, max(frames)) if args.smoke else []
+        frames = SHOTS[name] if name in SHOTS else EXAMPLES[name][1]
+        if name in EXAMPLES:
+            over = production(name, SMOKE_GRID if args.smoke else None)
+        else:
+            over = smoke_overrides(SMOKE_GRID, max(frames)) if args.smoke else []
         print(f"{name}: running voxelise, simulate, surface (frames {frames}) ...", flush=True)
         row = run_shot(name, frames, overrides=over, cache=cache, device=args.device)
         print(f"{name}: {row['stages']}", flush=True)

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import errno
 import math
 import os
 import sys
@@ -16,8 +15,9 @@ from pathlib import Path
 
 from mpmfx import __version__
 from mpmfx.bench import main as bench_main
-from mpmfx.cache import BusyError, Cache, PathError, default_root
+from mpmfx.cache import BusyError, Cache, DamagedError, Entry, PathError, default_root
 from mpmfx.cli_args import add_parallel_args, add_wedge_parser, frame_range
+from mpmfx.diskspace import DENIED, FULL, message
 from mpmfx.maintain import clean_targets, delete, human, prune_targets, tree_size
 from mpmfx.publish import drop_dangling, published_entries
 from mpmfx.stages import STAGES
@@ -59,6 +59,12 @@ def _parser() -> argparse.ArgumentParser:
     add_wedge_parser(shot_cmd("wedge", "side-by-side variants of a shot that differ in one field"))
     s = shot_cmd("status", "each stage: cached, partial, stale or missing, and why")
     s.add_argument("--qa", action="store_true", help="per-frame observables of the simulation")
+    s.add_argument(
+        "--verify",
+        action="store_true",
+        help="read every cached file and compare it with its checksum; exit 1 naming the damaged "
+        "ones (marked: the next run redoes them)",
+    )
     c = shot_cmd("clean", "delete this variant's cached results (listed with sizes first)")
     c.add_argument("--stage", choices=STAGES, default=None, help="only this stage (default: every stage)")
     c.add_argument("--all-variants", action="store_true", help="every variant's entries, not only this one's")
@@ -82,9 +88,18 @@ def _parser() -> argparse.ArgumentParser:
     d.add_argument("--check", action="store_true", help="write nothing; exit 1 when docs/shots.md is stale")
     d.add_argument("--write", action="store_true", help="write it (the default)")
 
-    k = sub.add_parser("check", help="five-cell thickness check of an asset (exit 0 pass/warn, 1 fail, 2 bad input)")
-    k.add_argument("asset", help="mesh file (obj, ply, stl, glb, gltf, usd, usda, usdc, usdz, blend, fbx)")
-    k.add_argument("--grid-n", type=int, default=64, help="grid cells per axis of the domain")
+    k = sub.add_parser(
+        "check",
+        help="five-cell thickness check of an asset or a shot's objects (exit 0 pass/warn, 1 fail, 2 bad input)",
+    )
+    k.add_argument(
+        "asset",
+        help="a shot (.toml: each of its objects, placed and at the shot's grid) or a mesh file "
+        "(obj, ply, stl, glb, gltf, usd, usda, usdc, usdz, blend, fbx)",
+    )
+    k.add_argument(
+        "--grid-n", type=int, default=None, help="grid cells per axis of the domain (default: the shot's, or 64)"
+    )
     k.add_argument(
         "--domain",
         default=None,
@@ -102,7 +117,7 @@ def _parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="speed and accuracy benchmarks (run them on the GPU)")
     b.add_argument(
         "what",
-        choices=("accuracy", "gpu", "surface", "surface-times", "solver", "voxelise", "shots"),
+        choices=("accuracy", "oscillation", "gpu", "surface", "surface-times", "solver", "voxelise", "shots"),
         help="which benchmark",
     )
     b.add_argument("--quick", action="store_true", help="small CPU-sized sweep")
@@ -146,32 +161,32 @@ def main(argv: list[str] | None = None) -> int:
         if isinstance(exc, (StageError, BusyError)):
             print(f"error: {exc}", file=sys.stderr)
             return 1
-        if isinstance(exc, OSError) and exc.filename:
-            print(f"error: {_os_message(exc)}", file=sys.stderr)
+        if isinstance(exc, DamagedError):  # (a run redoes it at once; here from a wedge's variants)
+            Entry(Path(exc.root), "", "", {}).mark_damaged([exc.rel])
+            print(f"error: {exc}; marked as damaged: run again to redo it", file=sys.stderr)
             return 1
+        if isinstance(exc, OSError) and (exc.filename or exc.errno in (*FULL, *DENIED)):
+            # a full disk or a folder not writable is the user's to fix (exit 2), said as the
+            # path being written and the fix; another file system error is a failed stage
+            cache_root = getattr(args, "cache", None) or default_root()
+            print(f"error: {message(exc, cache_root=cache_root)}", file=sys.stderr)
+            return 2 if exc.errno in (*FULL, *DENIED) else 1
         raise
-
-
-def _os_message(exc: OSError) -> str:
-    """A file system error as the path and what to do (no traceback)."""
-    keep = "complete frames are kept: run again to resume"
-    if exc.errno == errno.ENOSPC:
-        return (
-            f"no space left on the device writing {exc.filename}: free space, or point --cache "
-            f"(or $MPMFX_CACHE) at a larger disk; {keep}"
-        )
-    if exc.errno in (errno.EACCES, errno.EPERM, errno.EROFS):
-        return (
-            f"permission denied writing {exc.filename}: make it writable for this user, or point "
-            f"--cache (or $MPMFX_CACHE) at a folder you own; {keep}"
-        )
-    return f"{exc.filename}: {exc.strerror}; {keep}"
 
 
 def _dispatch(args) -> int:
     if args.cmd == "check":
-        from mpmfx.check import run_check  # backend: trimesh (keeps --help light)
+        from mpmfx.check import run_check, run_shot_check  # backend: trimesh (keeps --help light)
 
+        if args.asset.endswith(".toml"):
+            if args.domain or args.prim_path:
+                print(
+                    f"error: {args.asset} is a shot: its domain and its objects' parts come from it; "
+                    "leave out --domain and --prim-path (or check one asset: mpmfx check MESH)",
+                    file=sys.stderr,
+                )
+                return 2
+            return run_shot_check(args.asset, grid_n=args.grid_n, as_json=args.json)
         origin = size = None
         if args.domain:
             try:
@@ -186,7 +201,12 @@ def _dispatch(args) -> int:
                 return 2
             origin, size = tuple(o), s
         return run_check(
-            args.asset, grid_n=args.grid_n, origin=origin, size=size, as_json=args.json, prim_path=args.prim_path
+            args.asset,
+            grid_n=64 if args.grid_n is None else args.grid_n,
+            origin=origin,
+            size=size,
+            as_json=args.json,
+            prim_path=args.prim_path,
         )
     if args.cmd == "bench":
         from mpmfx.stages.base import quiet_warp  # backend: warp (keeps --help light)
@@ -233,6 +253,7 @@ def _dispatch(args) -> int:
                 for r in results
             ],
         )
+        _print_warnings(results)
         _print_outputs(run, results)
         flagged = sum(r.flagged for r in results)
         if flagged and args.strict:
@@ -247,6 +268,7 @@ def _dispatch(args) -> int:
         _print_outputs(run, results)
         return 0
     if args.cmd == "status":
+        damaged, unverified = run.verify() if args.verify else ([], 0)
         rows = [
             [s.stage, s.state, s.why, human(tree_size(s.entry)) if s.entry.exists() else "", os.path.relpath(s.entry)]
             for s in run.status()
@@ -258,9 +280,11 @@ def _dispatch(args) -> int:
                 f"\nall variants of this shot: {human(tree_size(shot_dir))} in {os.path.relpath(shot_dir)} "
                 f"(`mpmfx clean SHOT --all-variants` or `mpmfx cache prune` to free it)"
             )
-        if args.qa:
-            return print_qa(run)
-        return 0
+        if args.verify:
+            _print_verified(damaged, unverified)
+        if args.qa and print_qa(run):
+            return 1
+        return 1 if damaged else 0
     if args.cmd == "clean":
         with run.cache.lock():
             targets = clean_targets(run, stage=args.stage, all_variants=args.all_variants)
@@ -285,6 +309,32 @@ def _prune(args) -> int:
             locks.enter_context(Cache(root, shot_dir.name).lock())
         targets = prune_targets(root, keep=args.keep, in_use=published_entries(root))
         return delete(targets, root=root, dry_run=args.dry_run, yes=args.yes)
+
+
+def _print_verified(damaged: list, unverified: int) -> None:
+    """`status --verify`: each damaged file and why, or that every file checked out."""
+    print()
+    if damaged:
+        print(f"verify: {len(damaged)} damaged file{'s' * (len(damaged) != 1)}:")
+        for stage, path, why in damaged:
+            print(f"  {stage:<9} {os.path.relpath(path)}: {why}")
+    else:
+        print("verify: every cached file holds the bytes written")
+    if unverified:
+        print(
+            f"verify: {unverified} file{'s' * (unverified != 1)} without a checksum (cached by an older "
+            f"mpmfx): checked by size only"
+        )
+
+
+def _print_warnings(results) -> None:
+    """Below the closing table, what the stages warned about while their bars ran (or, for a
+    cached stage, when it ran): the warnings a user must not miss in the scroll."""
+    said = [(r.stage, w) for r in results for w in r.warnings]
+    if said:
+        print("\nwarnings:")
+        for stage, w in said:
+            print(f"  [{stage}] {w}")
 
 
 def _print_outputs(run, results) -> None:

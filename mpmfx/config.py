@@ -131,6 +131,12 @@ class Emitter(_Section):
     start_time: Real = Field(0.0, ge=0, description="Seconds from frame_start at which emission starts.")
     end_time: Real = Field(gt=0, description="Seconds from frame_start at which emission stops.")
     seed: Int = Field(0, ge=0, description="Jitter seed of the emitted particles.")
+    variation: Variation | None = Field(
+        None,
+        description="Per-particle noise on the emitted material, as for objects; sampled where a particle "
+        "would be had the source moved back along the stream (its position less velocity x birth time, "
+        "1 m/s down with no velocity), so a pour is not the same puff repeated; default: none.",
+    )
 
 
 class Thickness(str, enum.Enum):
@@ -198,6 +204,11 @@ class Solver(_Section):
         "its effect per second does not depend on dt; without it elastic bodies ring on.",
     )
     drag: Real = Field(_SOLVER.drag, description="PIC blend as a rate (1/s), never a per-substep fraction.")
+    flip: Real = Field(
+        _SOLVER.flip,
+        description="FLIP share of the particle velocity update, 0..1 (0: APIC; 0.9-0.99 keeps more motion, "
+        "less numerical damping, more noise).",
+    )
     time_scale: Real = Field(
         _SOLVER.time_scale,
         description="Playback speed: simulated seconds per shot "
@@ -311,6 +322,11 @@ class Render(_Section):
     engine: RenderEngine = Field(
         RenderEngine.CYCLES, description="cycles (Blender, the look) or preview (PyVista, seconds a frame)."
     )
+    device: Literal["cpu", "gpu"] = Field(
+        "cpu",
+        description="cycles: where Cycles renders; gpu: the first of OptiX, CUDA, HIP, oneAPI, Metal that "
+        "Blender finds here, else the CPU, said in the run's output.",
+    )
     width: Int = Field(960, ge=16, le=8192, description="Picture width (pixels).")
     height: Int = Field(540, ge=16, le=8192, description="Picture height (pixels).")
     samples: Int = Field(16, ge=1, le=65536, description="cycles: path-tracing samples per pixel.")
@@ -325,8 +341,8 @@ class Render(_Section):
     frame_step: Int = Field(
         1,
         ge=1,
-        description="Render every n-th frame; the frames between hold the last "
-        "rendered one, so the movie keeps the shot's timing.",
+        description="cycles: render every n-th frame; the frames between hold the last "
+        "rendered one, so the movie keeps the shot's timing (preview draws every frame).",
     )
     looks: dict[str, str] = Field(
         default_factory=dict,

@@ -26,6 +26,7 @@ import uuid
 from pathlib import Path
 
 from mpmfx.cache import PathError, child, write_json
+from mpmfx.diskspace import ensure_room, named
 
 RENDERS = Path("renders")
 PUBLISHED = Path("published")
@@ -79,23 +80,30 @@ def publish_renders(shot, entry, *, root: Path = RENDERS) -> Path:
     """Replace `renders/<shot>/` with the render entry's frames, movie and contact sheet."""
     out = child(root, shot.shot.name)
     tmp = out.with_name(f".{out.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
-    tmp.mkdir(parents=True)
     extras = (entry.root / f"{shot.shot.name}.mp4", entry.root / "contact.png", entry.root / f"{shot.shot.name}.blend")
     files = sorted(entry.frames_dir.glob("[0-9]*.png")) + [p for p in extras if p.is_file()]
-    for p in files:
-        shutil.copyfile(p, tmp / p.name)
+    # A full or unwritable renders/ is said as renders/<shot> (not the cache file copied) before
+    # a byte is copied; a copy that still fails leaves renders/<shot> as it was.
+    ensure_room(out, sum(p.stat().st_size for p in files))
+    try:
+        tmp.mkdir(parents=True)
+        for p in files:
+            shutil.copyfile(p, tmp / p.name)
+        write_json(
+            tmp / "published.json",
+            {
+                "shot": shot.shot.name,
+                "overrides": list(shot.overrides),
+                "render_entry": str(entry.root.resolve()),
+                "files": [p.name for p in files],
+            },
+        )
+    except OSError as exc:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise named(exc, out) from exc
     if out.is_dir() and not out.is_symlink():
         for wedge in sorted(out.glob("wedge-*")):  # a wedge's sheets outlive the shot's next run
             os.replace(wedge, tmp / wedge.name)
-    write_json(
-        tmp / "published.json",
-        {
-            "shot": shot.shot.name,
-            "overrides": list(shot.overrides),
-            "render_entry": str(entry.root.resolve()),
-            "files": [p.name for p in files],
-        },
-    )
     old = out.with_name(f".{out.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.old")
     if out.exists():
         os.replace(out, old)
@@ -109,10 +117,14 @@ def publish_stage(shot, entry, *, root: Path = PUBLISHED) -> Path:
     link = child(root, shot.shot.name)
     link.parent.mkdir(parents=True, exist_ok=True)
     if link.exists() and not link.is_symlink():
-        raise FileExistsError(f"{link} exists and is not a link mpmfx made: move it away")
+        raise PathError(f"{link} exists and is not the link mpmfx publishes: move it away, or choose another shot name")
     tmp = link.with_name(f".{link.name}.{os.getpid()}-{uuid.uuid4().hex[:8]}.tmp")
-    os.symlink(os.path.relpath(entry.root.resolve(), link.parent.resolve()), tmp)
-    os.replace(tmp, link)
+    try:
+        os.symlink(os.path.relpath(entry.root.resolve(), link.parent.resolve()), tmp)
+        os.replace(tmp, link)
+    except OSError as exc:  # a full or read-only published/: said as published/<shot>
+        tmp.unlink(missing_ok=True)
+        raise named(exc, link) from exc
     return link / "shot.usda"
 
 

@@ -147,6 +147,24 @@ def load_shot_config(path: str | Path, overrides: list[str] = ()) -> Shot:
 MAX_GRAVITY = 1000.0  # m/s^2: 100 g, far past any stylised shot, far below a typo's 1e30
 
 
+def _too_fast(shot: Shot, source: str, dx: float) -> list[str]:
+    """Initial velocities no time step can follow: the CFL step at that speed alone (cfl * dx /
+    |v|; the material's sound speed only shortens it) under solver.dt_min."""
+    fastest = shot.solver.cfl * dx / shot.solver.dt_min  # m/s
+    out = []
+    for what, items in (("objects", shot.objects), ("emitters", shot.emitters)):
+        for i, item in enumerate(items):
+            speed = sum(v * v for v in item.velocity) ** 0.5
+            if speed > fastest:
+                out.append(
+                    f"{source}: {what}[{i}].velocity = {list(item.velocity)}: {speed:.3g} m/s, faster than "
+                    f"any substep can follow (a cell of {dx:.3g} m at solver.cfl = {shot.solver.cfl:g} needs "
+                    f"{shot.solver.cfl * dx / speed:.2g} s, under solver.dt_min = {shot.solver.dt_min:g} s); "
+                    f"give at most {fastest:.3g} m/s"
+                )
+    return out
+
+
 def _check_semantics(shot: Shot, source: str) -> None:
     """Checks that need more than one field: frame order, file existence, time step bounds."""
     problems = []
@@ -156,6 +174,7 @@ def _check_semantics(shot: Shot, source: str) -> None:
             f"no step can follow it; Earth's is [0, -9.81, 0]"
         )
     dx = shot.domain.size / shot.domain.grid_n
+    problems += _too_fast(shot, source, dx)
     if shot.surface.voxel_size is not None and shot.surface.voxel_size > dx:
         problems.append(
             f"{source}: surface.voxel_size = {shot.surface.voxel_size:g} m: over one simulation cell "

@@ -30,19 +30,21 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from PIL import Image, ImageDraw, ImageFont
+from PIL import Image
 
 from mpmfx.cache import Cache, atomic_path, default_root
 from mpmfx.cli_args import frame_range
-from mpmfx.config import ShotError
+from mpmfx.config import RenderEngine, ShotError
 from mpmfx.render.frames import write_movie
+from mpmfx.render.sheets import columns_for, evenly_spaced, read_tile
+from mpmfx.render.sheets import grid as sheets_grid
 from mpmfx.shotfile import apply_override, load_shot_config
 from mpmfx.stages import STAGES
 from mpmfx.stages.base import Context
 from mpmfx.stages.parallel import Frames, task_key
+from mpmfx.stages.render import framing_camera, shown_bounds
 from mpmfx.stages.runner import ShotRun, stage_module
 
-SHEET_WIDTH = 1920  # px: a frame's sheet is scaled to at most this width
 CONTACT_FRAMES = 4  # columns of contact.png
 
 
@@ -156,13 +158,21 @@ def run_wedge(
     # (their runs and tasks write under it and never take it themselves).
     with cache.lock():
         cache.remove_orphans()
-        runs = [
-            ShotRun(s, cache_root=root, device=device, quiet=quiet, executor=ex, publish=False, locked=True)
-            for s in shots
-        ]
+
+        def bind(shots):
+            return [
+                ShotRun(s, cache_root=root, device=device, quiet=quiet, executor=ex, publish=False, locked=True)
+                for s in shots
+            ]
+
+        runs = bind(shots)
         runs[0].check(frames=frames)
         entries = [r.entries() for r in runs]
         for name in STAGES:
+            framed = one_camera(shots, entries, frames) if name == "render" and len(shots) > 1 else shots
+            if framed is not shots:  # the render entries of the variants framed by one camera
+                shots, runs = framed, bind(framed)
+                entries = [r.entries() for r in runs]
             first: dict[str, int] = {}  # distinct entry key -> first variant that has it
             for i, e in enumerate(entries):
                 first.setdefault(e[name].key, i)
@@ -180,6 +190,23 @@ def run_wedge(
                 quiet=quiet or not in_tasks,
             )
         return [{name: e[name].root for name in STAGES} for e in entries]
+
+
+def one_camera(shots: list, entries: list[dict], frames: list[int] | None) -> list:
+    """Cycles variants, each with the render camera that frames all of them (the union of what
+    each shows over `frames`), so the tiles of a sheet share one view; a shot that sets its
+    own camera, or the preview (a view of the domain), keeps it."""
+    if any(s.render.engine is not RenderEngine.CYCLES or s.render.camera_position is not None for s in shots):
+        return shots
+    boxes = []
+    for s, e in zip(shots, entries):
+        wanted = frames or list(s.frames)
+        boxes.append(shown_bounds(s, {n: e[n].root for n in ("simulate", "surface")}, wanted))
+    boxes = [b for b in boxes if b is not None]
+    if not boxes:
+        return shots
+    lo, hi = np.min([b[0] for b in boxes], axis=0), np.max([b[1] for b in boxes], axis=0)
+    return [framing_camera(s, lo, hi) for s in shots]
 
 
 def _run_stage(shot, cache_root: Path, name: str, frames, device, quiet: bool):
@@ -224,64 +251,27 @@ def _frame_stage(mod, runs: list, entries: list[dict], frames: list[int] | None)
 def write_sheets(
     out: Path, tiles: list[tuple[str, dict[int, Path]]], frames: list[int], *, fps: float, movie: bool = True
 ) -> dict[str, Path]:
-    """Per frame, the tiles side by side (a grid of up to 3 columns) with their labels; then a
-    movie of the sheets and `contact.png` (a row per tile, CONTACT_FRAMES frames each)."""
+    """Per frame, the tiles side by side (`mpmfx.render.sheets.columns_for`) with their labels;
+    then a movie of the sheets and `contact.png` (a row per tile, CONTACT_FRAMES distinct
+    frames each). Every sheet is 960 to 1920 px wide (`mpmfx.render.sheets.grid`)."""
     out.mkdir(parents=True, exist_ok=True)
-    cols = min(len(tiles), 3 if len(tiles) != 4 else 2)
+    cols = columns_for(len(tiles))
     sheets = []
     for f in frames:
-        images = [_labelled(paths.get(f), text) for text, paths in tiles]
-        sheet = _grid(images, cols, max_width=SHEET_WIDTH)
+        sheet = sheets_grid([read_tile(paths.get(f)) for _, paths in tiles], cols, [text for text, _ in tiles])
         with atomic_path(out / f"{f:04d}.png") as tmp:
             _save(sheet, tmp)
         sheets.append(out / f"{f:04d}.png")
     result = {"sheets": out}
     if movie and len(sheets) > 1:
         result["movie"] = write_movie(sheets, out / "wedge.mp4", fps=fps)
-    picks = [
-        frames[round(i * (len(frames) - 1) / max(CONTACT_FRAMES - 1, 1))]
-        for i in range(min(CONTACT_FRAMES, len(frames)))
-    ]
-    rows = [
-        np.concatenate([_labelled(paths.get(f), text if j == 0 else "", scale=4) for j, f in enumerate(picks)], axis=1)
-        for text, paths in tiles
-    ]
+    picks = evenly_spaced(frames, CONTACT_FRAMES)
+    images = [read_tile(paths.get(f)) for _, paths in tiles for f in picks]
+    labels = [f"{text}  frame {f}" if j == 0 else f"frame {f}" for text, _ in tiles for j, f in enumerate(picks)]
     with atomic_path(out / "contact.png") as tmp:
-        _save(np.concatenate(rows, axis=0), tmp)
+        _save(sheets_grid(images, len(picks), labels), tmp)
     result["contact"] = out / "contact.png"
     return result
-
-
-def _labelled(path: Path | None, text: str, *, scale: int = 1):
-    """The image at `path` (or a grey 'missing' tile), downscaled by `scale`, `text` in its corner."""
-    img = Image.open(path).convert("RGB") if path and Path(path).is_file() else Image.new("RGB", (960, 540), "#404040")
-    if scale > 1:
-        img = img.resize((img.width // scale, img.height // scale), Image.LANCZOS)
-    if text or not (path and Path(path).is_file()):
-        text = text or "missing"
-        draw = ImageDraw.Draw(img)
-        font = ImageFont.load_default(size=max(12, img.height // 14))
-        box = draw.textbbox((0, 0), text, font=font)
-        pad = max(4, img.height // 60)
-        draw.rectangle((0, img.height - box[3] - 3 * pad, box[2] + 2 * pad, img.height), fill="#000000")
-        draw.text((pad, img.height - box[3] - 2 * pad), text, fill="#ffffff", font=font)
-    return np.asarray(img)
-
-
-def _grid(images: list, cols: int, *, max_width: int):
-    h, w = images[0].shape[:2]
-    images = [np.asarray(Image.fromarray(a).resize((w, h))) if a.shape[:2] != (h, w) else a for a in images]
-    blank = np.zeros_like(images[0])
-    rows = [
-        np.concatenate([*images[i : i + cols], *[blank] * (cols - len(images[i : i + cols]))], axis=1)
-        for i in range(0, len(images), cols)
-    ]
-    sheet = np.concatenate(rows, axis=0)
-    if sheet.shape[1] > max_width:
-        k = max_width / sheet.shape[1]
-        size = (int(sheet.shape[1] * k) // 2 * 2, int(sheet.shape[0] * k) // 2 * 2)  # even: H.264
-        sheet = np.asarray(Image.fromarray(sheet).resize(size, Image.LANCZOS))
-    return sheet
 
 
 def _save(image, path: Path) -> None:

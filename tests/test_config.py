@@ -101,6 +101,7 @@ def test_solver_ranges_are_checked_once_and_named_as_shot_keys(tiny_shot):
     for override, key in (
         ("solver.cfl=1.5", "solver.cfl"),
         ("solver.damping=-1.0", "solver.damping"),
+        ("solver.flip=1.5", "solver.flip"),
         ("solver.dt_min=0.5", "solver.dt_min"),
         ("domain.grid_n=4", "domain.grid_n"),
     ):
@@ -218,9 +219,22 @@ def test_a_step_set_by_speed_names_the_velocity_not_the_stiffness(tmp_path, caps
 
     shot = write_tiny_shot(tmp_path, frame_end=2)
     args = ["run", str(shot), "--until", "simulate", "--cache", str(tmp_path / "c"), "-q"]
-    assert main([*args, "--set", "objects.0.velocity=[0,-1e6,0]"]) == 1
+    assert main([*args, "--set", "objects.0.angular_velocity=[0,0,1e7]"]) == 1  # 1.7e6 m/s at its corners
     err = capsys.readouterr().err
-    assert "objects[0].velocity" in err and "soften" not in err
+    assert "objects[0].angular_velocity" in err and "soften" not in err
+
+
+@pytest.mark.parametrize("key", ["objects.0.velocity", "emitters.0.velocity"])
+def test_a_speed_no_step_can_follow_is_bad_input_naming_the_key(tmp_path, capsys, key):
+    from mpmfx.cli import main
+    from tests.conftest import write_tiny_shot
+
+    emitter = '[[emitters]]\nname = "hose"\nrate = 0.001\nend_time = 0.1\ntranslate = [0.5, 0.8, 0.5]\n'
+    shot = write_tiny_shot(tmp_path, frame_end=2, extra=emitter)
+    assert main(["run", str(shot), "--cache", str(tmp_path / "c"), "--set", f"{key}=[0,-1e6,0]"]) == 2
+    err = capsys.readouterr().err
+    assert key.replace(".0.", "[0].") in err and "solver.dt_min" in err and "at most" in err
+    assert not (tmp_path / "c").exists()
 
 
 @pytest.mark.parametrize("domain", ["nan,0,0,1", "0,0,0,inf", "0,0,0,-1"])
@@ -232,3 +246,38 @@ def test_check_refuses_a_domain_that_is_not_finite_naming_the_option(capsys, dom
     asset = Path(__file__).resolve().parents[1] / "assets" / "snowball.obj"
     assert main(["check", str(asset), f"--domain={domain}"]) == 2
     assert "--domain" in capsys.readouterr().err
+
+
+FAR = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1e30\nf 1 2 3\nf 1 2 4\nf 2 3 4\nf 1 3 4\n"  # a vertex at 1e30 m
+COLLIDER = '\n[[colliders]]\nname = "rock"\nshape = "mesh"\nmesh = "{mesh}"\n'
+
+
+@pytest.mark.parametrize(
+    "where, mesh, words",
+    [
+        ("object", FAR, ["objects.cube", "absurdly far out"]),
+        ("collider", FAR, ["colliders[0].mesh (rock)", "absurdly far out"]),
+        ("collider", "garbage", ["colliders[0].mesh (rock)", "no triangles"]),
+    ],
+)
+def test_a_broken_asset_is_bad_input_naming_the_key_before_anything_runs(tmp_path, capsys, where, mesh, words):
+    from mpmfx.cli import main
+    from tests.conftest import write_tiny_shot
+
+    (tmp_path / "bad.obj").write_text(mesh)
+    shot = write_tiny_shot(tmp_path, frame_end=2, extra=COLLIDER.format(mesh="bad.obj") if where == "collider" else "")
+    if where == "object":
+        shot.write_text(shot.read_text().replace('mesh = "cube.obj"', 'mesh = "bad.obj"'))
+    assert main(["run", str(shot), "--cache", str(tmp_path / "c"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert all(w in err for w in words) and "flat" not in err and "Traceback" not in err, err
+    assert not (tmp_path / "c").exists()
+
+
+def test_check_calls_a_far_vertex_broken_not_flat(tmp_path, capsys):
+    from mpmfx.cli import main
+
+    (tmp_path / "far.obj").write_text(FAR)
+    assert main(["check", str(tmp_path / "far.obj")]) == 2
+    err = capsys.readouterr().err
+    assert "absurdly far out" in err and "flat" not in err

@@ -53,6 +53,14 @@ def test_a_real_folder_at_the_published_link_is_refused(tmp_path):
         check_publishable("s", renders=tmp_path / "renders", published=tmp_path / "published")
 
 
+def test_a_real_folder_met_at_publish_time_is_bad_input_not_a_traceback(tmp_path):
+    from mpmfx.publish import publish_stage
+
+    (tmp_path / "published" / "s").mkdir(parents=True)  # made after the run's own check
+    with pytest.raises(PathError, match="published/s exists"):
+        publish_stage(_shot(), _render_entry(tmp_path), root=tmp_path / "published")
+
+
 def test_a_wedge_outlives_the_shots_next_publish(tmp_path):
     renders = tmp_path / "renders"
     publish_renders(_shot(), _render_entry(tmp_path), root=renders)

@@ -42,6 +42,11 @@ def open_file(path: str) -> None:
         bpy.ops.import_scene.gltf(filepath=path)
     else:
         bpy.ops.import_scene.fbx(filepath=path)
+    keyed = [a.frame_range for a in bpy.data.actions]
+    if keyed:  # an imported file's animation spans its actions' keys (the empty scene's range is 1..250)
+        scene = bpy.context.scene
+        scene.frame_start = int(np.floor(min(r[0] for r in keyed)))
+        scene.frame_end = int(np.ceil(max(r[1] for r in keyed)))
 
 
 def as_rendered() -> None:

@@ -75,7 +75,12 @@ def check_asset(asset: str, *, grid_n: int, origin=None, size=None, prim_path: s
         origin, size = default_domain(mesh)
     elif size <= 0:
         raise MeshError(f"--domain size {size}: must be positive")
+    return check_placed(mesh, grid_n=grid_n, origin=origin, size=size, name=Path(asset).name)
+
+
+def check_placed(mesh, *, grid_n: int, origin, size: float, name: str) -> AssetCheck:
+    """The check of a mesh already in place (m): a shot's object, or a whole asset."""
     topology = mesh_topology(mesh)
     mesh = refine_for_heatmap(mesh, grid_n=grid_n, size=size)
-    report = check_thickness(mesh, grid_n=grid_n, origin=origin, size=size, name=Path(asset).name)
-    return AssetCheck(mesh, origin, size, topology, report)
+    report = check_thickness(mesh, grid_n=grid_n, origin=origin, size=size, name=name)
+    return AssetCheck(mesh, np.asarray(origin, float), size, topology, report)

@@ -29,6 +29,10 @@ BLENDER_SUFFIXES = (".blend", ".fbx")
 # A mesh whose smallest bounding-box side is below this fraction of its largest is flat:
 # it has no interior to fill with particles.
 _FLAT_RATIO = 1e-6
+# A coordinate beyond this, in the file's units, is no asset's: a planet in millimetres is
+# 1.3e10, a city block in millimetres 1e6. Such a vertex (an exporter's garbage, an unapplied
+# 1e30 "infinity") would otherwise make the mesh read as flat or as larger than any domain.
+_ABSURD = 1e9
 
 
 def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Trimesh":
@@ -66,6 +70,14 @@ def load_mesh(path: str | Path, *, prim_path: str | None = None) -> "trimesh.Tri
         raise MeshError(
             f"{path}: {len(bad)} vertices are NaN or inf (the first is vertex {bad[0]}); "
             "clean up the asset in your DCC and re-export it"
+        )
+    far = np.flatnonzero(np.abs(vertices).max(axis=1, initial=0.0) > _ABSURD)
+    if len(far):  # before trimesh too: its vertex merge overflows on them
+        raise MeshError(
+            f"{path}: {len(far)} vertices lie absurdly far out (vertex {far[0]} at "
+            f"{np.array2string(np.asarray(vertices[far[0]]), precision=3)}; no asset's coordinate "
+            f"exceeds {_ABSURD:g} in its file's units): a broken export; clean up the asset in your DCC "
+            f"and re-export it"
         )
     mesh = trimesh.Trimesh(vertices=vertices, faces=faces, process=True)
     _validate(mesh, path)
@@ -141,9 +153,9 @@ def _load_blender(path: Path, part: str | None) -> tuple[np.ndarray, np.ndarray]
 def _validate(mesh: "trimesh.Trimesh", path: Path | str) -> None:
     if len(mesh.faces) == 0:
         raise MeshError(f"{path}: no non-degenerate triangles; export the surface as a polygon mesh")
-    extents = mesh.extents
     if not np.all(np.isfinite(mesh.vertices)):
         raise MeshError(f"{path}: vertices contain NaN or inf; clean up the asset in your DCC")
+    extents = mesh.extents
     if extents.max() <= 0 or extents.min() <= _FLAT_RATIO * extents.max():
         raise MeshError(
             f"{path}: the mesh is flat (bounding box {np.round(extents, 6)} m); "
@@ -176,14 +188,20 @@ def transform_mesh(
     return out
 
 
-def check_in_domain(mesh: "trimesh.Trimesh", *, origin, size: float, name: str) -> None:
-    """Raise ``MeshError`` unless ``mesh`` lies inside the cube [origin, origin + size].
+def check_in_domain(mesh: "trimesh.Trimesh", *, origin, size: float, name: str, floor: float | None = None) -> None:
+    """Raise ``MeshError`` unless ``mesh`` lies inside the cube [origin, origin + size], and
+    above ``floor`` where given.
 
-    origin: (3,) metres, min corner of the domain. size: edge length in metres.
-    name: the asset's name for the message. The message says what to change.
+    origin: (3,) metres, min corner of the domain. size: edge length in metres. floor: world
+    height (m) of the solver's floor, the plane of its lowest wall (material below it starts inside
+    the wall). name: the asset's name for the message. The message says what to change; a
+    translation it advises puts the mesh inside, above the floor.
     """
     lo, hi = np.asarray(mesh.bounds[0], float), np.asarray(mesh.bounds[1], float)
     o = np.asarray(origin, float)
+    room_lo, room_hi = o.copy(), o + size
+    if floor is not None:
+        room_lo[1] = max(room_lo[1], float(floor))
     extent = hi - lo
     if np.any(extent > size):
         factor = size / extent.max()
@@ -191,15 +209,43 @@ def check_in_domain(mesh: "trimesh.Trimesh", *, origin, size: float, name: str) 
             f"{name}: mesh is {_fmt(extent)} m, larger than the domain (size {size:g} m); "
             f"scale it by at most {factor:.3g} or set domain.size >= {extent.max():.4g}"
         )
-    below = np.clip(o - lo, 0, None)
-    above = np.clip(hi - (o + size), 0, None)
-    if np.any(below > 0) or np.any(above > 0):
-        shift = below - above
+    if extent[1] > room_hi[1] - room_lo[1]:
         raise MeshError(
-            f"{name}: mesh bounds {_fmt(lo)}..{_fmt(hi)} m extend outside the domain "
-            f"{_fmt(o)}..{_fmt(o + size)} m; translate it by {_fmt(shift)} m or move "
-            "domain.origin"
+            f"{name}: mesh is {extent[1]:.4g} m tall, taller than the {room_hi[1] - room_lo[1]:.4g} m from "
+            f"the solver's floor (y = {room_lo[1]:.4g} m) to the domain's top; scale it by at most "
+            f"{(room_hi[1] - room_lo[1]) / extent[1]:.3g}, or lower domain.origin or raise domain.size"
         )
+    slack = 1e-6 * size  # a mesh resting on the floor or a face, up to rounding, is inside
+    if np.any(lo < room_lo - slack) or np.any(hi > room_hi + slack):
+        if floor is not None and lo[1] < room_lo[1] - slack and np.all(lo >= o) and np.all(hi <= room_hi):
+            where = (
+                f"starts below the solver's floor: its lowest point is y = {lo[1]:.4g} m, the floor "
+                f"y = {room_lo[1]:.4g} m (its plane, 3 cells above domain.origin)"
+            )
+        else:
+            where = f"mesh bounds {_fmt(lo)}..{_fmt(hi)} m extend outside the domain {_fmt(o)}..{_fmt(o + size)} m" + (
+                f" above the solver's floor (y = {room_lo[1]:.4g} m)" if floor is not None else ""
+            )
+        raise MeshError(f"{name}: {where}; translate it by {_shift(lo, hi, room_lo, room_hi)} m or move domain.origin")
+
+
+def _shift(lo: np.ndarray, hi: np.ndarray, room_lo: np.ndarray, room_hi: np.ndarray) -> str:
+    """The smallest translation (m) that puts [lo, hi] inside [room_lo, room_hi], as text with
+    as few digits as keep it inside: a rounded shift never leaves the mesh short of the room,
+    nor past its other side."""
+    out = []
+    for a, b in zip(room_lo - lo, room_hi - hi):  # the shifts that fit on this axis: a..b
+        want = a if a > 0 else (b if b < 0 else 0.0)
+        if want == 0.0:
+            out.append("0")
+            continue
+        text = "0"
+        for digits in range(4, 12):
+            text = f"{want:.{digits}g}"
+            if a - 1e-12 <= float(text) <= b + 1e-12:
+                break
+        out.append(text)
+    return "(" + ", ".join(out) + ")"
 
 
 def _fmt(v) -> str:

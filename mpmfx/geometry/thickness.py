@@ -37,6 +37,11 @@ _CORE_RATIO = 1.2
 # are at most one step low, and exact for slabs, rods and balls).
 _FINE_UP_TO = 1.1
 _COARSE_STEP = 1.06
+# Thin features with less than this fraction of the object's volume (slivers at an ear tip, a
+# fin of negligible volume) are listed but ignored by the verdict and by "grid_n to pass": they
+# would otherwise set the grid for the whole object, and what the simulation loses there is
+# a speck.
+IGNORE_BELOW = 0.01
 
 
 class Verdict(enum.Enum):
@@ -63,6 +68,8 @@ class ThinRegion:
     # Lower quartile along the core, cells: what min_grid_n_to_pass scales, as the median
     # reads high where a thin part widens into a thick one over a long fillet (fin on a ball).
     lower_quartile_cells: float = 0.0
+    # Under IGNORE_BELOW of the object's volume: listed, but no part of the verdict.
+    ignored: bool = False
 
 
 @dataclass
@@ -71,9 +78,11 @@ class ThicknessReport:
 
     asset: name. grid_n: sim cells per domain edge. dx: cell size (m).
     min_thickness_cells: thinnest feature, in cells. fraction_under: volume fraction of the
-    asset in thin features under ``fail_cells``. regions: thin features (thickness <
-    ``warn_cells``), thinnest first. min_grid_n_to_pass: smallest grid_n at which the thinnest
-    feature is ``warn_cells`` across. verdict: PASS/WARN/FAIL (rule: check_thickness).
+    asset in thin features under ``fail_cells``; fraction_thin: under ``warn_cells``;
+    fraction_ignored: in features too small to count (``ignore_below``, a fraction of the
+    asset's volume). regions: thin features (thickness < ``warn_cells``), thinnest first.
+    min_grid_n_to_pass: smallest grid_n at which the thinnest feature that counts is
+    ``warn_cells`` across. verdict: PASS/WARN/FAIL (rule: check_thickness).
     vertex_thickness_cells: (v,) float64 thickness at each mesh vertex, cells (heatmap).
     """
 
@@ -87,6 +96,9 @@ class ThicknessReport:
     verdict: Verdict
     warn_cells: float = 5.0
     fail_cells: float = 3.0
+    fraction_thin: float = 0.0
+    fraction_ignored: float = 0.0
+    ignore_below: float = IGNORE_BELOW
     vertex_thickness_cells: np.ndarray = field(default_factory=lambda: np.zeros(0), repr=False)
 
     def to_dict(self) -> dict:
@@ -99,6 +111,9 @@ class ThicknessReport:
             "fail_cells": float(self.fail_cells),
             "min_thickness_cells": float(self.min_thickness_cells),
             "fraction_under": float(self.fraction_under),
+            "fraction_thin": float(self.fraction_thin),
+            "fraction_ignored": float(self.fraction_ignored),
+            "ignore_below": float(self.ignore_below),
             "min_grid_n_to_pass": int(self.min_grid_n_to_pass),
             "verdict": self.verdict.value,
             "regions": [
@@ -107,6 +122,7 @@ class ThicknessReport:
                     "bbox_max": [float(x) for x in r.bbox_max],
                     "volume": float(r.volume),
                     "thickness_cells": float(r.thickness_cells),
+                    "ignored": bool(r.ignored),
                 }
                 for r in self.regions
             ],
@@ -118,15 +134,24 @@ class ThicknessReport:
             f"asset {self.asset or '-'}: grid_n {self.grid_n}, dx {self.dx:.4g} m -> {self.verdict.name}",
             f"  thinnest feature   {self.min_thickness_cells:.2f} cells "
             f"(warn < {self.warn_cells:g}, fail < {self.fail_cells:g})",
+            f"  volume under warn  {self.fraction_thin:.1%}",
             f"  volume under fail  {self.fraction_under:.1%}",
             f"  grid_n to pass     {self.min_grid_n_to_pass}",
         ]
+        ignored = [r for r in self.regions if r.ignored]
+        if ignored:
+            lines.append(
+                f"  ignored            {len(ignored)} feature{'s' * (len(ignored) != 1)} under "
+                f"{self.ignore_below:.0%} of the volume each ({self.fraction_ignored:.2%} in all): too small "
+                "to set the grid; the simulation may lose them"
+            )
         if self.regions:
             lines.append(f"  {'region':>6}  {'cells':>6}  {'volume m^3':>11}  bbox min .. max (m)")
             for i, r in enumerate(self.regions):
                 lo = ", ".join(f"{x:.3g}" for x in r.bbox_min)
                 hi = ", ".join(f"{x:.3g}" for x in r.bbox_max)
-                lines.append(f"  {i:>6}  {r.thickness_cells:6.2f}  {r.volume:11.3g}  ({lo}) .. ({hi})")
+                note = "  (ignored)" if r.ignored else ""
+                lines.append(f"  {i:>6}  {r.thickness_cells:6.2f}  {r.volume:11.3g}  ({lo}) .. ({hi}){note}")
         return "\n".join(lines)
 
 
@@ -235,7 +260,15 @@ def measuring_lattice(mesh, dx: float) -> Lattice:
 
 
 def check_thickness(
-    mesh, *, grid_n: int, origin, size: float, warn_cells: float = 5.0, fail_cells: float = 3.0, name: str = ""
+    mesh,
+    *,
+    grid_n: int,
+    origin,
+    size: float,
+    warn_cells: float = 5.0,
+    fail_cells: float = 3.0,
+    name: str = "",
+    ignore_below: float = IGNORE_BELOW,
 ) -> ThicknessReport:
     """Measure how many sim cells thick each part of ``mesh`` is.
 
@@ -245,13 +278,14 @@ def check_thickness(
     connected groups of voxels thinner than ``warn_cells`` that contain a core (a voxel near
     the centre of its own inscribed ball: slivers along the convex edges of thick parts are
     not features). Parts thinner than the raster are found from mesh vertices with no inside
-    voxel nearby and get thickness 0.
+    voxel nearby and get thickness 0 (and at most one raster voxel times half their faces'
+    area of volume). A region with under ``ignore_below`` of the asset's volume is ignored.
 
-    Verdict rule: FAIL if any thin region is under ``fail_cells``; WARN if any region is
-    under ``warn_cells``; else PASS. min_grid_n_to_pass =
-    ceil(warn_cells * size / (t - h / 2)), t: the smallest lower quartile of a region's
-    thickness along its core (else t_min), h: the raster voxel (it reads faces up to h / 2
-    out), so that grid passes.
+    Verdict rule, over the regions not ignored: FAIL if any thin region is under
+    ``fail_cells``; WARN if any region is under ``warn_cells``; else PASS.
+    min_grid_n_to_pass = ceil(warn_cells * size / (t - h / 2)), t: the smallest lower quartile
+    of a region's thickness along its core (else t_min), h: the raster voxel (it reads faces
+    up to h / 2 out), so that grid passes.
     """
     if grid_n < 1 or size <= 0 or not 0 < fail_cells <= warn_cells:
         raise ValueError(
@@ -294,8 +328,15 @@ def check_thickness(
     shown = np.where(thin & ~in_feature, warn_cells * dx, thick)
     vertex_cells, lost = _vertex_thickness(mesh, inside, shown, lat)
     vertex_cells /= dx
-    regions += _lost_regions(mesh, lost, min_extent=dx)
+    lost_regions = _lost_regions(mesh, lost, min_extent=dx, depth=h)
+    regions += lost_regions
     regions.sort(key=lambda r: r.thickness_cells)
+    volume = max(1, int(inside.sum())) * h**3
+    for r in regions:
+        r.ignored = r.volume < ignore_below * volume
+    ignored = sum(r.volume for r in regions if r.ignored) / volume
+    thin_volume = float(in_feature.sum()) * h**3 + sum(r.volume for r in lost_regions)
+    all_regions, regions = regions, [r for r in regions if not r.ignored]
 
     if regions:
         t_min = regions[0].thickness_cells * dx
@@ -326,11 +367,14 @@ def check_thickness(
         dx=dx,
         min_thickness_cells=t_min / dx,
         fraction_under=under,
-        regions=regions,
+        regions=all_regions,
         min_grid_n_to_pass=need,
         verdict=verdict,
         warn_cells=warn_cells,
         fail_cells=fail_cells,
+        fraction_thin=min(1.0, thin_volume / volume),
+        fraction_ignored=ignored,
+        ignore_below=ignore_below,
         vertex_thickness_cells=vertex_cells,
     )
 
@@ -420,12 +464,14 @@ def _vertex_thickness(mesh, inside, shown, lat: Lattice):
     return np.where(lost, 0.0, values), lost
 
 
-def _lost_regions(mesh, lost: np.ndarray, *, min_extent: float) -> list[ThinRegion]:
+def _lost_regions(mesh, lost: np.ndarray, *, min_extent: float, depth: float) -> list[ThinRegion]:
     """Group unresolved vertices along mesh edges into regions of thickness 0.
 
     Groups spanning less than ``min_extent`` (m; one sim cell) are left out: they are the
     points of cones and pinched joints (vertices that meet within a raster voxel), whose
-    neighbourhood the raster resolves, not sheets or wires thinner than the raster.
+    neighbourhood the raster resolves, not sheets or wires thinner than the raster. A region's
+    volume is at most half the area of its faces (a sheet has two sides) times ``depth`` (m,
+    the raster voxel it is thinner than).
     """
     if not lost.any():
         return []
@@ -436,12 +482,16 @@ def _lost_regions(mesh, lost: np.ndarray, *, min_extent: float) -> list[ThinRegi
     graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
     _, comp = connected_components(graph, directed=False)
     verts = np.asarray(mesh.vertices, float)
+    faces = np.asarray(mesh.faces)
+    lost_faces = lost[faces].all(axis=1)
+    face_comp, face_area = comp[faces[lost_faces, 0]], np.asarray(mesh.area_faces)[lost_faces]
     out = []
     for c in np.unique(comp[lost]):
         v = verts[(comp == c) & lost]
         if np.linalg.norm(v.max(0) - v.min(0)) < min_extent:
             continue
-        out.append(ThinRegion(bbox_min=v.min(0), bbox_max=v.max(0), volume=0.0, thickness_cells=0.0))
+        volume = 0.5 * float(face_area[face_comp == c].sum()) * depth
+        out.append(ThinRegion(bbox_min=v.min(0), bbox_max=v.max(0), volume=volume, thickness_cells=0.0))
     return out
 
 

@@ -25,8 +25,10 @@ pxr (usd-core) is imported only inside the functions that need it.
 from __future__ import annotations
 
 import contextlib
+import errno
 import math
 import os
+import re
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +37,7 @@ from typing import Any
 import numpy as np
 
 from mpmfx.cache import atomic_path
+from mpmfx.diskspace import ensure_room
 
 INSTALL_HINT = (
     "pxr (usd-core) is not importable: run `bash setup.sh`, or "
@@ -127,11 +130,23 @@ class ColliderSample:
 def _atomic_target(path: Path) -> Iterator[Path]:
     """`mpmfx.cache.atomic_path` (the layer is read back before the rename), then reload a
     layer this process already holds for `path`."""
-    from pxr import Sdf  # backend: pxr
+    from pxr import Sdf, Tf  # backend: pxr
 
-    with atomic_path(path, verify=lambda tmp: Sdf.Layer.OpenAsAnonymous(str(tmp)) is not None) as tmp:
-        yield tmp
+    ensure_room(path)  # USD on a full disk fails only after a page of its own errors
+    readable = lambda tmp: Sdf.Layer.OpenAsAnonymous(str(tmp)) is not None  # noqa: E731
+    try:
+        with atomic_path(path, verify=readable, checksum=True) as tmp:
+            yield tmp
+    except Tf.ErrorException as exc:  # not the disk (atomic_path says that): USD's first line only
+        raise OSError(errno.EIO, f"USD could not write the layer: {_usd_reason(exc)}", str(path)) from None
     _reload_if_open(path)
+
+
+def _usd_reason(exc: Exception) -> str:
+    """The first of USD's errors, without its C++ function and source line."""
+    first = next((line.strip() for line in str(exc).splitlines() if line.strip()), "no reason given")
+    said = re.search(r" : '(.*)'$", first)
+    return (said.group(1) if said else first)[:200]
 
 
 def _reload_if_open(path: Path) -> None:
@@ -146,7 +161,7 @@ def _reload_if_open(path: Path) -> None:
 def _export_layer(layer: Any, path: Path) -> None:
     with _atomic_target(path) as tmp:
         if not layer.Export(str(tmp)):
-            raise OSError(f"{path}: USD could not write the layer (disk full or no permission?)")
+            raise OSError(errno.EIO, "USD could not write the layer (disk full or no permission?)", str(tmp))
 
 
 def _array(value: Any, where: str, *, shape: tuple[int | None, ...], dtype: type) -> np.ndarray:

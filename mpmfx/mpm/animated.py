@@ -16,15 +16,19 @@ stepper's chunk):
    allocator: legal inside a CUDA graph capture where the device has a memory pool, Warp's default;
    with the winding number the refit also updates the BVH's solid-angle data, one more kernel).
 
-The grid update (`apply_mesh_colliders`) then finds, at each node holding mass, the closest point
-within `band` of the surface, and whether the node is inside from the mesh's generalised winding
-number (`wp.mesh_query_point_sign_winding_number`; the angle-weighted pseudo-normal sign,
-`..._sign_normal`, takes points just outside a booleaned mesh's finely split faces for inside,
-where the winding number does not); at a node inside the mesh the
+The grid update (`make_mesh_contact`) then finds, at each node holding mass, the closest point
+within `band` of the surface, and which side of the mesh the node is on (`INSIDE_TEST`): where
+the closest point lies inside a face, the side of that face, exact there for a closed surface
+(the node lies on the face's normal line); where it lies on an edge or a vertex, the generalised
+winding number (`wp.mesh_query_point_sign_winding_number`; Warp's angle-weighted pseudo-normal
+sign, `..._sign_normal`, takes points just outside a booleaned mesh's finely split faces for
+inside). Asking the winding number everywhere costs about four times as much
+(`lab/collider_cost.py`). At a node inside the mesh the
 velocity relative to the surface velocity there (barycentric interpolation of the vertex
 velocities, `wp.mesh_eval_velocity`: the collider's own deformation, not a rigid pose) loses
 its approaching normal part and Coulomb friction, as the rigid colliders do (`apply_collider`).
-The meshes must be closed (small gaps are tolerated by the winding number) and wound outward.
+The meshes must be closed and wound outward; a node near a face buried inside another closed
+shell of the same mesh is taken for outside (material does not reach there).
 """
 
 from __future__ import annotations
@@ -38,7 +42,7 @@ import warp as wp
 from .slots import Clock, Status
 from .stepper import StepperParams
 
-__all__ = ["AnimatedMesh", "AnimatedMeshes", "MeshColliders", "apply_mesh_colliders", "BAND_CELLS"]
+__all__ = ["AnimatedMesh", "AnimatedMeshes", "MeshColliders", "BAND_CELLS"]
 
 BAND_CELLS = 2.0  # grid cells: how deep inside its surface a node still meets an animated mesh
 
@@ -216,27 +220,87 @@ def _no_meshes() -> MeshColliders:
     return p
 
 
+FACE_EPS = 1.0e-3  # barycentric: a closest point nearer a face's edge than this is on the edge
+
+
 @wp.func
-def apply_mesh_colliders(mc: MeshColliders, xn: wp.vec3, v: wp.vec3, dx: float) -> wp.vec3:
-    """Grid-node velocity after contact with every animated mesh. xn: node position, v its
-    velocity (domain units, /s); dx: cell size, for the normal where the node is on the surface."""
-    for c in range(mc.count):
-        mid = mc.ids[c]
-        q = wp.mesh_query_point_sign_winding_number(mid, xn, mc.band)
-        if q.result and q.sign < 0.0:
-            cp = wp.mesh_eval_position(mid, q.face, q.u, q.v)
-            d = cp - xn  # inside: from the node out to the surface
-            dl = wp.length(d)
-            n = wp.mesh_eval_face_normal(mid, q.face)
-            if dl > 1.0e-4 * dx:
-                n = d / dl
-            v_col = wp.mesh_eval_velocity(mid, q.face, q.u, q.v)
-            v_rel = v - v_col
-            vn = wp.dot(v_rel, n)
-            if vn < 0.0:  # approaching: else separating, passes
-                vt = v_rel - vn * n
-                vt_len = wp.length(vt)
-                if vt_len > 0.0:
-                    vt = vt * wp.max(0.0, 1.0 + mc.friction[c] * vn / vt_len)  # Coulomb: lose mu*|vn|
-                v = v_col + vt
+def _inside_winding(mid: wp.uint64, xn: wp.vec3, band: float, dx: float):
+    """(inside 0/1, face, u, v) of the node xn against mesh mid within band (domain units):
+    the closest point, and the generalised winding number for the side."""
+    q = wp.mesh_query_point_sign_winding_number(mid, xn, band)
+    inside = int(0)
+    if q.result and q.sign < 0.0:
+        inside = 1
+    return inside, q.face, q.u, q.v
+
+
+@wp.func
+def _inside_parity(mid: wp.uint64, xn: wp.vec3, band: float, dx: float):
+    """As _inside_winding, the side from the parity of ray crossings."""
+    q = wp.mesh_query_point_sign_parity(mid, xn, band)
+    inside = int(0)
+    if q.result and q.sign < 0.0:
+        inside = 1
+    return inside, q.face, q.u, q.v
+
+
+@wp.func
+def _inside_faces(mid: wp.uint64, xn: wp.vec3, band: float, dx: float):
+    """As _inside_winding, the side from the face normal where the closest point lies inside a
+    face (exact there for a closed, outward-wound surface: the node lies on that face's normal
+    line), the winding number only where it lies on an edge or a vertex, or on the face itself."""
+    q = wp.mesh_query_point_no_sign(mid, xn, band)
+    if not q.result:
+        return int(0), int(0), 0.0, 0.0
+    w = 1.0 - q.u - q.v
+    if wp.min(wp.min(q.u, q.v), w) > FACE_EPS:
+        s = wp.dot(wp.mesh_eval_face_normal(mid, q.face), xn - wp.mesh_eval_position(mid, q.face, q.u, q.v))
+        if s > 1.0e-4 * dx:
+            return int(0), q.face, q.u, q.v
+        if s < -1.0e-4 * dx:
+            return int(1), q.face, q.u, q.v
+    return _inside_winding(mid, xn, band, dx)  # (its closest point again: Warp has no winding number alone)
+
+
+@wp.func
+def _meet_mesh(mid: wp.uint64, face: int, u: float, w: float, xn: wp.vec3, v: wp.vec3, dx: float, mu: float) -> wp.vec3:
+    """The velocity v of node xn, inside mesh mid, after meeting its surface at the closest point
+    (face, u, w): the approaching normal part of the velocity relative to the surface's own goes,
+    and Coulomb friction mu takes mu |vn| of the tangential part."""
+    cp = wp.mesh_eval_position(mid, face, u, w)
+    d = cp - xn  # inside: from the node out to the surface
+    dl = wp.length(d)
+    n = wp.mesh_eval_face_normal(mid, face)
+    if dl > 1.0e-4 * dx:
+        n = d / dl
+    v_col = wp.mesh_eval_velocity(mid, face, u, w)
+    v_rel = v - v_col
+    vn = wp.dot(v_rel, n)
+    if vn < 0.0:  # approaching: else separating, passes
+        vt = v_rel - vn * n
+        vt_len = wp.length(vt)
+        if vt_len > 0.0:
+            vt = vt * wp.max(0.0, 1.0 + mu * vn / vt_len)  # Coulomb: lose mu*|vn|
+        v = v_col + vt
     return v
+
+
+def make_mesh_contact(inside_test: str):
+    """The grid update's wp.func (mc, xn, v, dx) -> v for every animated mesh, the side decided
+    by `inside_test` (INSIDE_TESTS)."""
+    query = {"winding": _inside_winding, "parity": _inside_parity, "faces": _inside_faces}[inside_test]
+
+    @wp.func
+    def mesh_contact(mc: MeshColliders, xn: wp.vec3, v: wp.vec3, dx: float) -> wp.vec3:
+        for c in range(mc.count):
+            mid = mc.ids[c]
+            inside, face, u, w = wp.static(query)(mid, xn, mc.band, dx)
+            if inside == 1:
+                v = _meet_mesh(mid, face, u, w, xn, v, dx, mc.friction[c])
+        return v
+
+    return mesh_contact
+
+
+INSIDE_TESTS = ("winding", "parity", "faces")  # lab/collider_cost.py times each (docs/benchmarks.md)
+INSIDE_TEST = "faces"  # the one Solvers build their grid update with

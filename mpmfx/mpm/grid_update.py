@@ -17,7 +17,7 @@ import functools
 
 import warp as wp
 
-from .animated import MeshColliders, apply_mesh_colliders
+from .animated import MeshColliders, make_mesh_contact
 from .bricks import BRICK, marked_node
 from .clear_grid import zero_node
 from .colliders import ColliderParams, apply_collider
@@ -215,31 +215,40 @@ def update_node(
         grid_v[fi, j, k] = v
 
 
-@wp.func
-def mesh_boundaries(gp: GridParams, mc: MeshColliders, v: wp.vec3, i: int, j: int, k: int) -> wp.vec3:
-    """A node's velocity after the animated meshes, then the walls again (each wall is a
+@functools.lru_cache(maxsize=None)
+def make_mesh_boundaries(inside_test: str):
+    """wp.func (gp, mc, v, i, j, k) -> v: a node's velocity after the animated meshes (their
+    side decided by `inside_test`, animated.INSIDE_TESTS), then the walls again (each wall is a
     projection, so a node no mesh touched keeps what `boundaries` gave it)."""
-    xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
-    v = apply_mesh_colliders(mc, xn, v, gp.dx)
-    return apply_walls(v, xn, gp)
+    contact = make_mesh_contact(inside_test)
+
+    @wp.func
+    def mesh_boundaries(gp: GridParams, mc: MeshColliders, v: wp.vec3, i: int, j: int, k: int) -> wp.vec3:
+        xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
+        v = wp.static(contact)(mc, xn, v, gp.dx)
+        return apply_walls(v, xn, gp)
+
+    return mesh_boundaries
 
 
 @functools.lru_cache(maxsize=None)
-def make_grid_update(*, device_clock: bool = False, sparse: bool = False, clears: bool = False, meshes: bool = False):
+def make_grid_update(*, device_clock: bool = False, sparse: bool = False, clears: bool = False, meshes: str = ""):
     """The grid-update kernel; device_clock as in p2g.make_p2g. sparse: launched over the
     node bricks (BRICK^3 threads each, `marks` order), it updates only those `marks` flags
     (the brick P2G's, p2g_brick.py): G2P reads no other node, and the others' velocities are
     left as they were. Otherwise launched over the nodes (3D). clears (sparse only): each node's
     mass and momentum are zeroed once read, which is the next substep's clear (the same marked
     bricks), so that substep launches none; only where G2P reads no node mass (water volume
-    recovery does). meshes: the scene has animated mesh colliders (animated.py), met after the
-    rigid ones; without, the `mesh_cols` argument is never read."""
+    recovery does). meshes: the scene's animated mesh colliders' inside test (animated.py
+    INSIDE_TESTS), met after the rigid ones; "" without any, and `mesh_cols` is never read."""
     module = (
         ("mpmfx_mpm_grid_dev" if device_clock else __name__)
         + ("_sparse" if sparse else "")
         + ("_clears" if clears else "")
-        + ("_meshes" if meshes else "")
+        + (f"_meshes_{meshes}" if meshes else "")
     )
+
+    mesh_boundaries = make_mesh_boundaries(meshes) if meshes else None
 
     @wp.kernel(enable_backward=False, module=module)
     def grid_update(
@@ -267,20 +276,20 @@ def make_grid_update(*, device_clock: bool = False, sparse: bool = False, clears
                 m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, node[0], node[1], node[2])
                 if m > 0.0:
                     v = boundaries(gp, colliders, sdf, counts, v, node[0], node[1], node[2])
-                    if wp.static(meshes):
-                        v = mesh_boundaries(gp, mesh_cols, v, node[0], node[1], node[2])
+                    if wp.static(bool(meshes)):
+                        v = wp.static(mesh_boundaries)(gp, mesh_cols, v, node[0], node[1], node[2])
                 grid_v[node[0], node[1], node[2]] = v
                 if wp.static(clears):
                     zero_node(gp.deterministic, grid_m, grid_mv, grid_fixed, node[0], node[1], node[2])
         else:
             i, j, k = wp.tid()
             update_node(gp, grid_m, grid_mv, grid_normal, grid_fixed, colliders, sdf, grid_v, counts, i, j, k)
-            if wp.static(meshes):
+            if wp.static(bool(meshes)):
                 for f in range(gp.n_fields):
                     fi = f * gp.nodes + i
                     m, _v = node_velocity(gp, grid_m, grid_mv, grid_fixed, fi, j, k)
                     if m > 0.0:
-                        grid_v[fi, j, k] = mesh_boundaries(gp, mesh_cols, grid_v[fi, j, k], i, j, k)
+                        grid_v[fi, j, k] = wp.static(mesh_boundaries)(gp, mesh_cols, grid_v[fi, j, k], i, j, k)
 
     return grid_update
 

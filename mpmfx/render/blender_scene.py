@@ -14,6 +14,7 @@ import bmesh
 import bpy
 from mathutils import Matrix, Vector
 
+from mpmfx.render.camera import frame_box
 from mpmfx.render.looks import LOOKS
 
 # USD (x, y, z), Y up  ->  Blender (x, -z, y), Z up: what the importer does for a Y-up stage.
@@ -186,23 +187,7 @@ def add_camera(position, look_at, *, focal_mm: float = 35.0) -> bpy.types.Object
     return obj
 
 
-def frame_bounds(lo, hi, *, direction, aspect: float, focal_mm: float = 35.0, margin: float = 1.08):
-    """(position, look_at) in stage metres for a camera looking along -`direction` (from the
-    camera towards the scene is -direction) that fits the box [lo, hi] in the picture.
-
-    Each box corner must project inside the film: with the view axes fixed, the nearest
-    camera distance that keeps every corner in frame is solved per corner and the largest wins.
-    """
-    lo, hi = Vector(lo), Vector(hi)
-    centre = (lo + hi) / 2
-    back = Vector(direction).normalized()
-    right = Vector((0, 1, 0)).cross(back).normalized()
-    up = back.cross(right)
-    tan_h = 18.0 / focal_mm / margin
-    tan_v = tan_h / aspect
-    dist = 0.0
-    for i in range(8):
-        c = Vector((hi.x if i & 1 else lo.x, hi.y if i & 2 else lo.y, hi.z if i & 4 else lo.z)) - centre
-        depth = c.dot(back)  # towards the camera
-        dist = max(dist, abs(c.dot(right)) / tan_h + depth, abs(c.dot(up)) / tan_v + depth)
-    return tuple(centre + back * dist), tuple(centre)
+def frame_bounds(lo, hi, *, direction, aspect: float):
+    """(position, look_at) in stage metres that fit the box [lo, hi] in the picture: the same
+    framing as a wedge's shared camera (`mpmfx.render.camera.frame_box`)."""
+    return frame_box(lo, hi, direction=direction, aspect=aspect)

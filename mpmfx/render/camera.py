@@ -26,3 +26,27 @@ def solver_box(shot) -> tuple[tuple[float, ...], tuple[float, ...]]:
 def solver_floor(shot) -> float:
     """World height (m) of the solver's floor: renders draw the ground here."""
     return solver_box(shot)[0][1]
+
+
+def frame_box(lo, hi, *, direction, aspect: float, focal_mm: float = 35.0, margin: float = 1.08):
+    """(position, look_at) in metres for a camera looking along -`direction` (from the camera
+    towards the scene is -direction) that fits the box [lo, hi] (m, (3,) each) in a picture of
+    width / height `aspect` on 36 mm film.
+
+    Each box corner must project inside the film: with the view axes fixed, the nearest
+    camera distance that keeps every corner in frame is solved per corner and the largest wins.
+    """
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    centre = (lo + hi) / 2
+    back = np.asarray(direction, float) / np.linalg.norm(direction)
+    right = np.cross((0.0, 1.0, 0.0), back)
+    right /= np.linalg.norm(right)
+    up = np.cross(back, right)
+    tan_h = 18.0 / focal_mm / margin
+    tan_v = tan_h / aspect
+    dist = 0.0
+    for i in range(8):
+        c = np.where([i & 1, i & 2, i & 4], hi, lo) - centre
+        depth = c @ back  # towards the camera
+        dist = max(dist, abs(c @ right) / tan_h + depth, abs(c @ up) / tan_v + depth)
+    return tuple(float(x) for x in centre + back * dist), tuple(float(x) for x in centre)

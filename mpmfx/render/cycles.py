@@ -7,18 +7,29 @@ in its own process (both bundle USD libraries), and reports each finished frame 
 from __future__ import annotations
 
 import json
+import math
+import os
+import queue
 import subprocess
+import sys
+import threading
+import time
 from collections.abc import Iterator
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-from mpmfx.blender import FRAME_LINE, bpy_available, child_command, child_env
+from mpmfx.blender import FRAME_LINE, NOTE_LINE, bpy_available, child_command, child_env
 
 INSTALL_HINT = (
     'render.engine = "cycles" needs Blender as a Python module (bpy 4.5, Python 3.11; '
     "pinned in pyproject.toml): run `bash setup.sh`, or `pip install -e '.[render]'`, or render "
     "the fast preview with --set render.engine=preview"
 )
+
+
+STALL_ENV = "MPMFX_RENDER_STALL"
+STALL_S = 3600.0  # a CPU frame of a heavy shot can take many minutes; an hour without one is a hang
+EXIT_S = 120.0  # after its last frame a child only has to exit
 
 
 class CyclesError(RuntimeError):
@@ -58,13 +69,15 @@ def write_job(
     walls: tuple | None = None,
     basin: float | None = None,
     label: str = "",
+    device: str = "cpu",
 ) -> Path:
     """Write the JSON job the child reads. Units: metres and degrees, in the USD stage's frame
     (Y up). looks: USD prim name (surface group or object) -> `mpmfx.render.looks.LOOKS` key;
     camera: {"position", "look_at"} or None to frame the simulated bounds, seen along
     -view_direction; outputs: one PNG path per frame; blend: where the lit scene is saved;
     walls: (lo, hi) of the box the solver's walls hold, basin: height of the basin drawn there;
-    label: text burned into every frame (empty: none)."""
+    label: text burned into every frame (empty: none); device: "cpu", or "gpu" for Cycles' GPU
+    devices where Blender has one."""
     job = {
         "usd": str(usd),
         "frames": [int(f) for f in frames],
@@ -88,27 +101,64 @@ def write_job(
         "walls": walls,
         "basin": basin,
         "label": label,
+        "device": device,
     }
     path.write_text(json.dumps(job, indent=1))
     return path
+
+
+def stall_limit() -> float:
+    """Seconds a Cycles child may go without finishing a frame: $MPMFX_RENDER_STALL, else STALL_S."""
+    raw = os.environ.get(STALL_ENV)
+    try:
+        limit = float(raw) if raw is not None else STALL_S
+        assert math.isfinite(limit) and limit > 0
+    except (ValueError, AssertionError):
+        raise CyclesError(f"${STALL_ENV} = {raw!r}: give seconds above 0, e.g. {STALL_S:g}, or unset it") from None
+    return limit
 
 
 def run_job(job_path: Path, *, log: Path) -> Iterator[tuple[int, float, float]]:
     """Run the Blender child on `job_path`; yield (frame, wall s, CPU s of all its threads) as
     each frame lands.
 
-    The child's full output goes to `log`; a failure raises CyclesError with its last lines."""
+    The child's full output goes to `log`; a failure raises CyclesError with its last lines. A
+    child that finishes no frame for `stall_limit()` seconds (from its start, or its last frame)
+    is killed, its temp files deleted, and CyclesError names the frame it was on; one that
+    hangs after its last frame is killed after EXIT_S with a warning (its frames are complete)."""
     if not bpy_available():
         raise CyclesError(INSTALL_HINT)
+    limit = stall_limit()
+    job = json.loads(job_path.read_text())
     cmd = child_command("mpmfx.render.cycles_job", str(job_path))
     with open(log, "w") as out:
         proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=child_env())
+        lines = _lines(proc)
+        done, deadline = 0, time.monotonic() + limit
         try:
-            for line in proc.stdout:
+            while (line := _next(lines, deadline)) is not None:
                 out.write(line)
                 if line.startswith(FRAME_LINE):
                     _, frame, wall, cpu = line.split()
+                    done += 1
                     yield int(frame), float(wall), float(cpu)
+                    left = limit if done < len(job["frames"]) else min(limit, EXIT_S)
+                    deadline = time.monotonic() + left
+                elif line.startswith(NOTE_LINE):
+                    print(f"[render] {line.removeprefix(NOTE_LINE).strip()}", file=sys.stderr, flush=True)
+        except _Stalled:
+            proc.kill()
+            proc.wait()
+            out.flush()
+            _remove_child_temps(job)
+            if done < len(job["frames"]):
+                raise CyclesError(_stalled(job, done, limit, log)) from None
+            print(
+                f"warning: Blender (Cycles) rendered every frame but did not exit within "
+                f"{min(limit, EXIT_S):g} s and was stopped (a scripted driver in the scene?); full log: {log}",
+                file=sys.stderr,
+            )
+            return
         finally:
             if proc.poll() is None:  # the consumer stopped early (Ctrl-C): do not leave Blender running
                 proc.kill()
@@ -116,3 +166,45 @@ def run_job(job_path: Path, *, log: Path) -> Iterator[tuple[int, float, float]]:
     if proc.returncode != 0:
         tail = "".join(log.read_text().splitlines(keepends=True)[-15:])
         raise CyclesError(f"Blender (Cycles) exited with code {proc.returncode}; full log: {log}\n{tail}")
+
+
+class _Stalled(Exception):
+    """No line from the child before the deadline."""
+
+
+def _lines(proc: subprocess.Popen) -> queue.Queue:
+    """The child's output lines, read on a thread (a read blocks, the watchdog must not); None at
+    the end of its output."""
+    lines: queue.Queue = queue.Queue()
+
+    def read() -> None:
+        for line in proc.stdout:
+            lines.put(line)
+        lines.put(None)
+
+    threading.Thread(target=read, daemon=True, name="cycles-output").start()
+    return lines
+
+
+def _next(lines: queue.Queue, deadline: float) -> str | None:
+    try:
+        return lines.get(timeout=max(deadline - time.monotonic(), 0.0))
+    except queue.Empty:
+        raise _Stalled from None
+
+
+def _stalled(job: dict, done: int, limit: float, log: Path) -> str:
+    frame, output = job["frames"][done], job["outputs"][done]
+    doing = "loading the scene" if done == 0 else f"frame {frame}"
+    return (
+        f"Blender (Cycles) finished no frame in {limit:g} s, {doing} (frame {frame} -> {output}), "
+        f"and was stopped. A scripted (Python) driver in the scene, a stage too heavy for this "
+        f"machine, or a frame that really takes this long: check the log {log}; "
+        f"${STALL_ENV} sets the limit in seconds (default {STALL_S:g}); complete frames are kept"
+    )
+
+
+def _remove_child_temps(job: dict) -> None:
+    """The temp files a killed child leaves (mpmfx.render.cycles_job writes these names)."""
+    for p in [Path(o) for o in job["outputs"]] + ([Path(job["blend"])] if job.get("blend") else []):
+        p.with_name(f".{p.stem}.tmp{p.suffix}").unlink(missing_ok=True)

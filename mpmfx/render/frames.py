@@ -7,6 +7,7 @@ from pathlib import Path
 import imageio.v2 as imageio
 import numpy as np
 
+from mpmfx.cache import atomic_path
 from mpmfx.render import import_pyvista
 
 # Colour per material family, keyed by preset name (unknown names fall back to grey).
@@ -97,7 +98,11 @@ class FrameRenderer:
         self._names.append("label")
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(f".{path.stem}.tmp.png")
-        self.plotter.screenshot(str(tmp))
+        try:
+            self.plotter.screenshot(str(tmp))
+        except BaseException:
+            tmp.unlink(missing_ok=True)  # PIL leaves its partial file on a full disk
+            raise
         tmp.replace(path)
         return path
 
@@ -107,24 +112,11 @@ class FrameRenderer:
 
 def write_movie(frames: list[Path], path: Path, *, fps: float) -> Path:
     """H.264 mp4 of the PNGs (imageio-ffmpeg ships its own ffmpeg binary), written atomically."""
-    tmp = path.with_name(f".{path.stem}.tmp.mp4")
     # H.264 needs even sizes only; 8 would resize 540-high frames
-    with imageio.get_writer(tmp, fps=fps, codec="libx264", quality=8, macro_block_size=2) as w:
+    with (
+        atomic_path(path) as tmp,
+        imageio.get_writer(tmp, fps=fps, codec="libx264", quality=8, macro_block_size=2) as w,
+    ):
         for f in frames:
             w.append_data(imageio.imread(f))
-    tmp.replace(path)
-    return path
-
-
-def contact_sheet(frames: list[Path], path: Path, *, count: int = 4, scale: int = 1) -> Path:
-    """`count` evenly spaced frames in a grid of two columns, each downsampled by `scale`: one
-    picture of a shot, read left to right, top to bottom."""
-    picks = [frames[round(i * (len(frames) - 1) / max(count - 1, 1))] for i in range(min(count, len(frames)))]
-    images = [np.asarray(imageio.imread(p))[::scale, ::scale, :3] for p in picks]
-    if len(images) % 2:
-        images.append(np.zeros_like(images[0]))
-    rows = [np.concatenate(images[i : i + 2], axis=1) for i in range(0, len(images), 2)]
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    imageio.imwrite(tmp, np.concatenate(rows, axis=0))
-    tmp.replace(path)
     return path

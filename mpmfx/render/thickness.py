@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from mpmfx.cache import atomic_path
 from mpmfx.render import import_pyvista
 
 
@@ -38,6 +39,9 @@ def render_thickness_heatmap(
     # our world is Y-up (a DCC's view): from the front right, above ("iso" keeps Z up and laid
     # Y-up assets on their side)
     plotter.view_vector((0.7, 0.6, 1.0), viewup=(0.0, 1.0, 0.0))
-    plotter.screenshot(str(path))
-    plotter.close()
+    try:
+        with atomic_path(path) as tmp:  # complete or absent; a full disk names this file
+            plotter.screenshot(str(tmp))
+    finally:
+        plotter.close()
     return path

@@ -32,6 +32,7 @@ class Context:
     device: str | None = None
     quiet: bool = False
     notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)  # `warn`'s: the closing table repeats them
     executor: Frames | None = None  # where independent frames run (None: here, one by one)
     state: str = "ran"  # "ran" (a new entry) or "resumed" (complete frames were there)
 
@@ -62,8 +63,11 @@ class Context:
         )
 
     def warn(self, message: str) -> None:
+        """Say `message` now, on a line of its own above any progress bar, and keep it for the
+        run's closing table (and the entry's manifest, so a cached run says it again)."""
         self.notes.append(message)
-        print(f"[{self.entry.stage}] warning: {message}", file=sys.stderr)
+        self.warnings.append(message)
+        tqdm.write(f"[{self.entry.stage}] warning: {message}", file=sys.stderr)
 
 
 class Stage(Protocol):

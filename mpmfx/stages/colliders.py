@@ -9,7 +9,7 @@ import numpy as np
 
 from mpmfx.config import ColliderCfg, Shot, ShotError
 from mpmfx.geometry.animated import load_animation
-from mpmfx.geometry.colliders import ColliderGeometry, keyframes
+from mpmfx.geometry.colliders import ColliderGeometry, collider_mesh, keyframes
 from mpmfx.geometry.common import MeshError
 from mpmfx.mpm.colliders import pose_matrix
 
@@ -36,6 +36,24 @@ def collider_key(col: ColliderCfg) -> dict:
     if not col.animated:
         d.pop("animated")
     return d
+
+
+def static_collider_mesh(shot: Shot, index: int):
+    """Collider `index`'s surface in its local frame (m), a trimesh (`collider_mesh`); an asset
+    that cannot be loaded is a ShotError naming the file and the key (exit 2)."""
+    col = shot.colliders[index]
+    try:
+        return collider_mesh(collider_geometry(col), resolve=shot.resolve, plane_size=2 * shot.domain.size)
+    except MeshError as exc:
+        raise ShotError(f"{shot.source or shot.base_dir}: colliders[{index}].mesh ({col.name}): {exc}") from None
+
+
+def check_collider_meshes(shot: Shot) -> None:
+    """Load every mesh collider that is not animated (the animated ones are read when sampled),
+    so a bad asset is refused before any stage runs."""
+    for i, col in enumerate(shot.colliders):
+        if col.shape.value == "mesh" and not col.animated:
+            static_collider_mesh(shot, i)
 
 
 def animated_collider(shot: Shot, index: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -14,15 +14,19 @@ import os
 import shutil
 from pathlib import Path
 
+import numpy as np
+
+from mpmfx import checksum
 from mpmfx.cache import atomic_path
 from mpmfx.config import RenderEngine, Shot
 from mpmfx.geometry.colliders import collider_mesh, keyframes
 from mpmfx.io.frames import ParticleFrame, SurfaceFrame
 from mpmfx.mpm.colliders import pose_matrix
-from mpmfx.render.camera import VIEW_DIRECTION, default_camera, solver_box, solver_floor
+from mpmfx.render.camera import VIEW_DIRECTION, default_camera, frame_box, solver_box, solver_floor
 from mpmfx.render.cycles import CyclesError, blender_version, run_job, write_job
-from mpmfx.render.frames import FrameRenderer, colour_for, contact_sheet, write_movie
+from mpmfx.render.frames import FrameRenderer, colour_for, write_movie
 from mpmfx.render.looks import PROP_LOOKS, look_for
+from mpmfx.render.sheets import contact_sheet, evenly_spaced
 from mpmfx.stages.base import Context, StageError
 from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
 from mpmfx.stages.parallel import FrameJob
@@ -52,6 +56,8 @@ def params(shot: Shot) -> dict:
     }
     if shot.render.engine is RenderEngine.CYCLES:
         out["blender"] = blender_version()  # another Blender may shade differently
+    elif shot.render.frame_step > 1:
+        out["every_frame"] = True  # not an entry whose held frames carry another frame's label
     return out
 
 
@@ -64,9 +70,15 @@ def inputs(shot: Shot) -> dict[str, str]:
     return {}
 
 
+def frame_step(shot: Shot) -> int:
+    """Every how many frames one is drawn: `render.frame_step` in Cycles; the preview draws
+    every frame (under a second each), so each frame's burned-in label is its own."""
+    return shot.render.frame_step if shot.render.engine is RenderEngine.CYCLES else 1
+
+
 def todo(ctx: Context) -> list[int]:
-    """The frames to draw: of the missing ones, those `render.frame_step` shows (the others hold)."""
-    step, start = ctx.shot.render.frame_step, ctx.shot.shot.frame_start
+    """The frames to draw: of the missing ones, those `frame_step` shows (the others hold)."""
+    step, start = frame_step(ctx.shot), ctx.shot.shot.frame_start
     shown = {start + (f - start) // step * step for f in ctx.frames}
     return sorted(f for f in shown if not ctx.entry.frame_path(f, FRAME_EXT).exists())
 
@@ -94,7 +106,7 @@ def finish(ctx: Context, results: list[dict]) -> dict:
     """In the client, after every frame's task: held frames, the movie, the contact sheet; the
     runner publishes them (and the .blend) to renders/<shot>/."""
     shot, entry = ctx.shot, ctx.entry
-    step, start = shot.render.frame_step, shot.shot.frame_start
+    step, start = frame_step(shot), shot.shot.frame_start
     for f in ctx.frames:
         src = start + (f - start) // step * step
         if f != src and not entry.frame_path(f, FRAME_EXT).exists():
@@ -103,14 +115,44 @@ def finish(ctx: Context, results: list[dict]) -> dict:
     pngs = [entry.frame_path(f, FRAME_EXT) for f in entry.done_frames(FRAME_EXT)]
     if shot.render.movie and len(pngs) > 1:
         extras.append(write_movie(pngs, entry.root / f"{shot.shot.name}.mp4", fps=shot.shot.fps))
-    shown = [entry.frame_path(f, FRAME_EXT) for f in entry.done_frames(FRAME_EXT) if (f - start) % step == 0]
+    shown = {f: entry.frame_path(f, FRAME_EXT) for f in entry.done_frames(FRAME_EXT) if (f - start) % step == 0}
     if shown:
-        extras.append(contact_sheet(shown, entry.root / "contact.png", scale=2 if shot.render.width > 640 else 1))
+        extras.append(contact_sheet(shown, entry.root / "contact.png"))
     seconds = {f: t for r in results for f, t in r.get("cycles_seconds", {}).items()}
     return {
         "outputs": [str(p) for p in extras if p is not None and p.exists()],
         **({"cycles_seconds": seconds} if seconds else {}),
     }
+
+
+def shown_bounds(shot: Shot, upstream: dict[str, Path], frames: list[int]):
+    """(lo, hi) world corners (m, (3,) each) of what a render of `frames` shows: the surfaces
+    (the particles in particles mode) and the colliders, down to the floor, over at most 12 of
+    the frames, as Cycles frames its own camera. upstream: stage name -> entry folder. None
+    where nothing is shown."""
+    boxes = []
+    for f in evenly_spaced(sorted(frames), 12):
+        if shot.render.mode == "particles":
+            boxes.append(ParticleFrame.read(upstream["simulate"] / "frames" / f"{f:04d}.npz").x)
+        else:
+            groups = SurfaceFrame.read(upstream["surface"] / "frames" / f"{f:04d}.npz").groups
+            boxes += [g.vertices for g in groups.values()]
+        boxes += [v for v, _, _ in _collider_meshes(shot, f).values()]
+    boxes = [np.asarray(b, float).reshape(-1, 3) for b in boxes if len(b)]
+    if not boxes:
+        return None
+    lo, hi = np.min([b.min(0) for b in boxes], axis=0), np.max([b.max(0) for b in boxes], axis=0)
+    lo[1] = min(lo[1], solver_floor(shot))  # keep the ground contact in the picture
+    return lo, hi
+
+
+def framing_camera(shot: Shot, lo, hi) -> Shot:
+    """`shot` with a render camera that frames the box [lo, hi] (m) as Cycles' automatic camera
+    would: a wedge frames every variant through one camera, so framing does not shift."""
+    pos, look = frame_box(lo, hi, direction=VIEW_DIRECTION, aspect=shot.render.width / shot.render.height)
+    return shot.model_copy(
+        update={"render": shot.render.model_copy(update={"camera_position": pos, "camera_look_at": look})}
+    )
 
 
 def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -> dict:
@@ -138,6 +180,7 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
         height=r.height,
         samples=r.samples,
         denoise=r.denoise,
+        device=r.device,
         shutter=r.shutter,
         fps=shot.shot.fps,
         mode=r.mode,
@@ -157,6 +200,7 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
     times = {}
     try:
         for f, wall, cpu in progress(run_job(spec, log=entry.root / f"{name}.log"), total=len(frames), desc="render"):
+            checksum.record(entry.frame_path(f, FRAME_EXT))  # Blender wrote it: its digest, as written
             times[f] = [wall, cpu]
     except CyclesError as exc:
         raise StageError(f"render (cycles): {exc}") from None
@@ -186,15 +230,16 @@ def _preview(job: FrameJob, f: int) -> None:
     label = f"frame {f}  t={(f - shot.shot.frame_start) / shot.shot.fps:.2f}s"
     # The renderer writes through its own temp name; this one is unique per writer, so two
     # workers drawing one frame never share a temp file, and the frame is complete or absent.
-    with atomic_path(job.entry.frame_path(f, FRAME_EXT)) as out:
+    sim, surf = job.upstream["simulate"], job.upstream["surface"]  # verified reads: a changed frame is redone
+    with atomic_path(job.entry.frame_path(f, FRAME_EXT), checksum=True) as out:
         if r.mode == "particles":
-            p = ParticleFrame.read(job.upstream["simulate"].frame_path(f, ParticleFrame.EXT))
+            p = sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read)
             pts = {o.name: (p.x[p.body == i], colour_for(o.material, i)) for i, o in enumerate(shot.bodies)}
             px = r.height * shot.particle_spacing / shot.domain.size * 1.5
             renderer.particles(pts, px, out, label=label)
         else:
             material_of = {g: o.material for g, o in zip(shot.surface_groups(), shot.bodies)}
-            groups = SurfaceFrame.read(job.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
+            groups = surf.read(surf.frame_path(f, SurfaceFrame.EXT), SurfaceFrame.read).groups
             meshes = {
                 g: (d.vertices, d.faces, colour_for(material_of.get(g, g), i))
                 for i, (g, d) in enumerate(groups.items())
@@ -218,6 +263,7 @@ def _hold(src: Path, dst: Path) -> None:
     except OSError:
         shutil.copyfile(src, tmp)
     tmp.replace(dst)
+    checksum.record(dst)
 
 
 def _collider_meshes(shot: Shot, frame: int) -> dict:

@@ -18,6 +18,7 @@ from mpmfx.geometry.mesh import MeshError, check_in_domain, load_mesh, transform
 from mpmfx.geometry.thickness import Verdict, check_thickness, refine_for_heatmap
 from mpmfx.geometry.voxelise import voxelise
 from mpmfx.io.frames import SeedParticles, write_arrays
+from mpmfx.render.camera import solver_floor
 from mpmfx.render.thickness import render_thickness_heatmap
 from mpmfx.stages.base import Context, StageError, quiet_warp
 
@@ -73,7 +74,9 @@ def run(ctx: Context) -> dict:
                 rotate_deg=obj.rotate,
                 scale=obj.scale,
             )
-            check_in_domain(mesh, origin=dom.origin, size=dom.size, name=f"objects.{obj.name} ({path})")
+            check_in_domain(
+                mesh, origin=dom.origin, size=dom.size, name=f"objects.{obj.name} ({path})", floor=solver_floor(shot)
+            )
         except MeshError as exc:  # the asset or its placement: bad input, exit 2 like the README says
             raise ShotError(f"objects.{obj.name}: {exc}") from None
         if fluid[body]:
@@ -153,7 +156,7 @@ def _emit(shot: Shot, i: int, em):
         else:
             mesh = shape_mesh(em.shape, size=em.size, radius=em.radius)
         mesh = transform_mesh(mesh, translate=em.translate, rotate_deg=em.rotate, scale=em.scale)
-        check_in_domain(mesh, origin=dom.origin, size=dom.size, name=f"emitters.{em.name}")
+        check_in_domain(mesh, origin=dom.origin, size=dom.size, name=f"emitters.{em.name}", floor=solver_floor(shot))
         points, h = source_points(mesh, origin=dom.origin, size=dom.size, grid_n=dom.grid_n, ppc=shot.voxelise.ppc)
     except (MeshError, EmitterError) as exc:
         raise ShotError(f"{key}.{'mesh' if em.shape == 'mesh' else 'shape'} ({em.name}): {exc}") from None
@@ -183,9 +186,9 @@ def _thickness(ctx, obj, mesh, check_thickness, Verdict):
     if report.verdict is not Verdict.PASS and mode is not Thickness.IGNORE:
         msg = (
             f"objects.{obj.name}: thinnest feature {report.min_thickness_cells:.1f} cells at grid_n "
-            f"{dom.grid_n} ({len(report.regions)} thin regions; under ~5 cells a feature cannot hold its "
+            f"{dom.grid_n} ({sum(not r.ignored for r in report.regions)} thin regions; under ~5 cells a feature cannot hold its "
             f"shape). Thicken the mesh, raise its scale, or set domain.grid_n >= "
-            f"{report.min_grid_n_to_pass}; see `mpmfx check {obj.mesh}`"
+            f"{report.min_grid_n_to_pass}; see `mpmfx check {ctx.shot.source or obj.mesh}`"
         )
         if mode is Thickness.ERROR and report.verdict is Verdict.FAIL:
             raise StageError(msg + ' (or set voxelise.thickness = "warn")')

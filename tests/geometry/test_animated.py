@@ -46,7 +46,9 @@ print("VERTS " + json.dumps(out))
 """
 
 # Runs inside Blender: a cube skinned to one bone that turns 90 degrees about x over frames
-# 1..11; saves the .blend and prints Blender's evaluated world vertices at two frames (Y-up).
+# 1..11; saves the .blend (and, given a second path, exports it as FBX with its animation baked,
+# as a rig leaves Maya or Houdini) and prints Blender's evaluated world vertices at two frames
+# (Y-up).
 ARMATURE = """
 import json, math, sys
 import bpy
@@ -75,6 +77,8 @@ for f, angle in ((1, 0.0), (11, 90.0)):
     pb.rotation_euler = (math.radians(angle), 0.0, 0.0)
     pb.keyframe_insert("rotation_euler", frame=f)
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[1])
+if len(sys.argv) > 2:
+    bpy.ops.export_scene.fbx(filepath=sys.argv[2], bake_anim=True, add_leaf_bones=False)
 out = {}
 for f in (3, 8):
     scene.frame_set(f)
@@ -123,16 +127,24 @@ def test_a_time_sampled_usd_loads_with_its_motion(tmp_path, moving):
 
 
 @needs_bpy
-def test_a_blend_with_an_armature_loads_as_blender_evaluates_it(tmp_path):
-    blend = tmp_path / "rig.blend"
-    seen = _blender(ARMATURE, str(blend))
-    anim = load_animation(blend, [3, 8], 24.0)
+@pytest.mark.parametrize("suffix", [".blend", ".fbx"])
+def test_a_rig_with_an_armature_loads_as_blender_evaluates_it(tmp_path, suffix):
+    """The .blend, or the FBX exported from it with its animation baked, loads with the skinned
+    cube where Blender's own evaluation of the .blend puts it, at two frames."""
+    blend, fbx = tmp_path / "rig.blend", tmp_path / "rig.fbx"
+    seen = _blender(ARMATURE, str(blend), str(fbx))
+    path = blend if suffix == ".blend" else fbx
+    anim = load_animation(path, [3, 8], 24.0)
     assert anim.points.shape[0] == 2 and len(anim.faces) == 12
     for i, f in enumerate((3, 8)):
-        assert np.abs(anim.points[i] - seen[f]).max() < 1e-5
+        assert (
+            _same_points(anim.points[i], seen[f], tol=1e-4)
+            if suffix == ".fbx"
+            else (np.abs(anim.points[i] - seen[f]).max() < 1e-5)
+        )
     assert np.abs(anim.points[1] - anim.points[0]).max() > 0.05  # it moved
-    with pytest.raises(MeshError, match=r"rig\.blend.*frame range 1\.\.11"):
-        load_animation(blend, list(range(1, 14)), 24.0)
+    with pytest.raises(MeshError, match=rf"rig\{suffix}.*frame range 1\.\.11"):
+        load_animation(path, list(range(1, 14)), 24.0)
 
 
 def test_an_animation_short_of_the_shot_names_the_file(tmp_path):

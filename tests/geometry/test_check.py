@@ -96,3 +96,63 @@ def test_check_prim_path_checks_one_part_of_a_usd_file(tmp_path, capsys, monkeyp
     assert verdicts == {"/set/block": (0, "pass"), "/set/plate": (1, "fail")}
     assert main(["check", str(path), "--prim-path", "/nope"]) == 2
     assert "'/nope' not found" in capsys.readouterr().err
+
+
+def _shot_with_plate(folder, plate_y: float):
+    """A shot (grid 24 on a 1 m domain from y = 0: the floor is y = 0.125) with a 30 x 30 x 4 cm
+    plate modelled in centimetres (scale 0.01), a cube, and a pool of water."""
+    from tests.conftest import write_tiny_shot
+
+    trimesh.creation.box(extents=(30, 4, 30)).export(folder / "plate_cm.obj")
+    shot = write_tiny_shot(folder)
+    shot.write_text(
+        shot.read_text()
+        + f"""
+[[objects]]
+name = "plate"
+mesh = "plate_cm.obj"
+material = "Soft"
+scale = 0.01
+translate = [0.5, {plate_y}, 0.5]
+
+[[objects]]
+name = "pool"
+mesh = "cube.obj"
+material = "Water"
+translate = [0.5, 0.7, 0.5]
+"""
+    )
+    return shot
+
+
+def test_check_a_shot_checks_each_object_where_and_at_the_grid_the_shot_puts_it(tmp_path, capsys, monkeypatch):
+    from mpmfx.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    shot = _shot_with_plate(tmp_path, plate_y=0.2)
+    assert main(["check", str(shot)]) == 1  # the plate is 4 cm: ~1 cell at grid 24
+    out = capsys.readouterr().out
+    assert "objects.plate" in out and "objects.cube" in out and "pool" in out
+    report = json.loads((tmp_path / "renders" / "check" / "tiny" / "report.json").read_text())
+    plate, cube = report["objects"]["plate"], report["objects"]["cube"]
+    assert plate["grid_n"] == cube["grid_n"] == 24 and plate["dx"] == pytest.approx(1 / 24)
+    assert plate["verdict"] == "fail" and cube["verdict"] == "pass"
+    assert plate["regions"][0]["thickness_cells"] == pytest.approx(0.04 * 24, abs=0.3)  # metres, not cm
+    assert plate["regions"][0]["bbox_min"][1] == pytest.approx(0.18, abs=0.01)  # where the shot places it
+    assert "skipped" in report["objects"]["pool"]
+    assert (tmp_path / "renders" / "check" / "tiny" / "thickness_plate.png").is_file()
+    # another grid on the command line, the shot's domain kept
+    assert main(["check", str(shot), "--grid-n", "30", "--json"]) == 1
+    assert json.loads(capsys.readouterr().out)["objects"]["plate"]["dx"] == pytest.approx(1 / 30)
+
+
+def test_check_a_shot_refuses_an_object_below_the_floor_and_writes_nothing(tmp_path, capsys, monkeypatch):
+    from mpmfx.cli import main
+
+    monkeypatch.chdir(tmp_path)
+    shot = _shot_with_plate(tmp_path, plate_y=0.1)  # its bottom at y = 0.08, below the floor's plane
+    assert main(["check", str(shot)]) == 2
+    err = capsys.readouterr().err
+    assert "objects.plate" in err and "below the solver's floor" in err and "translate it by (0, 0.045, 0)" in err
+    assert not (tmp_path / "renders").exists()
+    assert main(["check", str(shot), "--domain=0,0,0,1"]) == 2

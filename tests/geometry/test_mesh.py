@@ -96,6 +96,12 @@ def test_warp_bunny_loads_from_usd():
         (lambda d: _text(d / "points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n"), "no triangles"),
         (lambda d: _text(d / "flat.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\nf 2 4 3\n"), "flat"),
         (lambda d: _text(d / "mesh.xyz", "1 2 3"), "unsupported format"),
+        (
+            lambda d: _text(
+                d / "far.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1e30\nf 1 2 3\nf 1 2 4\nf 2 3 4\nf 1 3 4\n"
+            ),
+            "absurdly far out",
+        ),
     ],
 )
 def test_bad_files_raise_mesh_error_naming_file(tmp_path, make, match):
@@ -352,3 +358,33 @@ def test_a_blender_child_that_hangs_is_stopped_with_a_message(tmp_path, monkeypa
     with pytest.raises(MeshError, match=r"rig\.blend: Blender did not finish within 1 s.*driver"):
         load_mesh(asset)
     assert time.monotonic() - t0 < 20
+
+
+def test_a_mesh_below_the_solvers_floor_is_refused_and_every_advised_shift_lands_inside():
+    import re
+
+    origin, size, floor = (-0.5, -0.5, -0.5), 1.0, -0.375  # 3 cells of grid 24 above the bottom
+    rest = trimesh.creation.box(extents=(0.2, 0.2, 0.2))
+    rest.apply_translation((0, floor + 0.1, 0))  # resting on the floor: fine
+    check_in_domain(rest, origin=origin, size=size, name="box", floor=floor)
+    sunk = rest.copy()
+    sunk.apply_translation((0, -0.05, 0))  # in the domain, but below the floor's plane
+    with pytest.raises(MeshError, match=r"box: starts below the solver's floor.*translate it by \(0, 0.05, 0\)"):
+        check_in_domain(sunk, origin=origin, size=size, name="box", floor=floor)
+    rng = np.random.default_rng(7)
+    advised = 0
+    for _ in range(300):
+        box = trimesh.creation.box(extents=rng.uniform(0.01, 0.95, 3))
+        box.apply_translation(rng.uniform(-0.9, 0.9, 3))
+        try:
+            check_in_domain(box, origin=origin, size=size, name="box", floor=floor)
+            continue
+        except MeshError as exc:
+            found = re.search(r"translate it by \(([^)]*)\)", str(exc))
+        if found is None:  # too big: the advice is to scale it
+            continue
+        box.apply_translation([float(x) for x in found.group(1).split(",")])
+        check_in_domain(box, origin=origin, size=size, name="box", floor=floor)  # the advice works
+        assert box.bounds[0][1] >= floor - 1e-6 * size
+        advised += 1
+    assert advised > 100

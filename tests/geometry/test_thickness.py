@@ -217,3 +217,21 @@ def test_convex_edges_and_corners_of_a_box_are_no_feature(extents):
     dom = _cube_domain(mesh)
     report = check_thickness(mesh, grid_n=48, **dom)
     assert report.verdict is Verdict.PASS and not report.regions, report.format_table()
+
+
+@pytest.mark.parametrize("fin_t", [0.002, 0.006], ids=["thinner-than-raster", "measured"])
+def test_grid_n_to_pass_is_stable_under_a_sliver_of_negligible_volume(domain, fin_t):
+    # A sliver (an ear tip) once set "grid_n to pass" for the whole object: from 13 to ~640.
+    box = trimesh.creation.box(extents=(0.4,) * 3)
+    fin = _moved(trimesh.creation.box(extents=(0.06, 0.06, fin_t)), (0.0, 0.225, 0.0))  # 5 mm into the box
+    alone = check_thickness(box, grid_n=32, **domain)
+    report = check_thickness(trimesh.util.concatenate([box, fin]), grid_n=32, **domain)
+    assert report.min_grid_n_to_pass <= alone.min_grid_n_to_pass * 1.1, report.format_table()
+    assert report.verdict is Verdict.PASS
+    (sliver,) = report.regions
+    assert sliver.ignored and sliver.bbox_min[1] > 0.19
+    assert 0 < report.fraction_ignored < 0.01 and report.fraction_thin >= report.fraction_ignored
+    assert "ignored" in report.format_table() and report.to_dict()["regions"][0]["ignored"]
+    # a fin of real volume still counts
+    big = _moved(trimesh.creation.box(extents=(0.3, 0.3, fin_t)), (0.0, 0.345, 0.0))
+    assert check_thickness(trimesh.util.concatenate([box, big]), grid_n=32, **domain).verdict is Verdict.FAIL

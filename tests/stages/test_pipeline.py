@@ -275,6 +275,29 @@ def test_mesh_outside_domain_fails_clearly_and_caches_nothing(tmp_path, capsys):
     assert not list((tmp_path / "c").rglob("voxelise-*"))  # no half-made entry
 
 
+def test_an_object_starting_below_the_solvers_floor_is_bad_input_naming_it(tmp_path, capsys):
+    from mpmfx.cli import main
+
+    shot = write_tiny_shot(tmp_path)  # grid 24 from y = 0: the floor is 3 cells up, y = 0.125
+    code = main(["run", str(shot), "--set", "objects.0.translate=[0.5, 0.2, 0.5]", "--cache", str(tmp_path / "c")])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "objects.cube" in err and "below the solver's floor" in err and "translate it by (0, 0.05, 0)" in err
+    assert not list((tmp_path / "c").rglob("voxelise-*"))
+
+
+def test_a_thickness_warning_reaches_the_closing_table_cached_or_not(tmp_path, capsys):
+    from mpmfx.cli import main
+
+    shot = write_tiny_shot(tmp_path)
+    args = ["run", str(shot), "--set", "objects.0.scale=0.7", "--until", "voxelise"]
+    for state in ("ran", "cached"):  # the cube at 4.2 cells across: a warning
+        assert main([*args, "--cache", str(tmp_path / "c")]) == 0
+        out = capsys.readouterr().out
+        table, _, below = out.partition("voxelise  " + state)
+        assert "warnings:" in below and "objects.cube: thinnest feature 4." in below, out
+
+
 def _cuda_available() -> bool:
     import warp as wp
 

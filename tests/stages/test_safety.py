@@ -202,7 +202,7 @@ def test_disk_full_and_permission_errors_name_the_path_and_the_fix(tmp_path, mon
         return real(path, arrays, **kw)
 
     monkeypatch.setattr(frames, "write_arrays", failing)
-    assert main(["run", str(shot), "--until", "simulate", "--cache", str(tmp_path / "c"), "-q"]) == 1
+    assert main(["run", str(shot), "--until", "simulate", "--cache", str(tmp_path / "c"), "-q"]) == 2
     err = capsys.readouterr().err
     assert "0001.npz" in err and words in err.lower() and "Traceback" not in err
 

@@ -89,3 +89,27 @@ def test_a_varied_run_continues_from_its_checkpoint_byte_for_byte(snow, tmp_path
     assert len(frames[0]) == len(frames[1]) == 4
     for a, b in zip(*frames):
         assert a.read_bytes() == b.read_bytes(), a.name
+
+
+def test_an_emitter_varies_along_its_stream_not_puff_by_puff_the_same(tmp_path):
+    """An emitter's particles sample the noise at their stream position (source position less
+    velocity x birth): two puffs 0.1 s apart at 1 m/s, five feature sizes along the stream,
+    are uncorrelated at the same source points; puffs 1 ms apart, 1/20 of a feature, nearly
+    equal; and the object without variation stays uniform."""
+    from mpmfx.stages.simulate import variation
+
+    extra = (
+        '\n[[emitters]]\nname = "hose"\nshape = "box"\nsize = [0.1, 0.1, 0.1]\ntranslate = [0.5, 0.7, 0.5]\n'
+        'material = "Mushy"\nrate = 0.01\nvelocity = [0.0, -1.0, 0.0]\nend_time = 0.5\n'
+        "variation = {youngs_modulus = 0.3, feature_size = 0.02, seed = 3}\n"
+    )
+    shot = load_shot_config(write_tiny_shot(tmp_path, material="Soft", frame_end=3, extra=extra))
+    src = np.random.default_rng(0).uniform([0.45, 0.65, 0.45], [0.55, 0.75, 0.55], (2000, 3))
+    x = np.concatenate([src, src, src, src])
+    body = np.repeat([1, 1, 1, 0], len(src))  # three puffs of the emitter (body 1), then the object
+    birth = np.repeat([0.2, 0.3, 0.201, 0.0], len(src))
+    log_e = np.log(variation(shot, x, body, birth)[:, 0]).reshape(4, -1)
+    assert log_e[0].std() == pytest.approx(0.3, rel=0.3)  # the amplitude
+    assert abs(np.corrcoef(log_e[0], log_e[1])[0, 1]) < 0.2  # another puff, another part of the noise
+    assert np.corrcoef(log_e[0], log_e[2])[0, 1] > 0.95  # a steady stream varies smoothly
+    assert np.all(log_e[3] == 0.0)

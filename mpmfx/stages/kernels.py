@@ -1,0 +1,69 @@
+"""The surfacer's Warp kernels, compiled ahead on threads while the shot simulates.
+
+On a machine that has not run mpmfx, every Warp module is compiled when a kernel of it is first
+launched, one module after another. On one H200 a small hero_castle run spends about 99 s so, 88 s
+of it in the surfacer's modules (the largest 32 s), none of which the solver needs
+(`lab/first_use.py`, docs/benchmarks.md). A GPU run that will surface starts compiling all of them
+at once when it starts, on threads (NVRTC runs outside the GIL; Warp generates each module's code
+under its own lock), so they are ready, or nearly, when the surface stage starts. Compiled
+modules stay in Warp's kernel cache: a later run loads them in well under a second. CPU runs keep
+Warp's lazy compiles: their cores are busy with the solver.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import threading
+import time
+
+import warp as wp
+
+import mpmfx.surface  # noqa: F401  (registers the surfacer's Warp modules)
+from mpmfx.stages.base import quiet_warp
+
+__all__ = ["SurfacerKernels"]
+
+WORKERS = 16  # compiler threads at most (one module each; the surfacer has about twenty)
+
+
+class SurfacerKernels:
+    """Compiles the surfacer's modules for `device` on a background thread from `start()`;
+    `wait()` blocks until they are ready and says how long it waited (first use only)."""
+
+    def __init__(self, device: str | None):
+        self.device = device
+        self._thread: threading.Thread | None = None
+        self._error: BaseException | None = None
+        self.seconds = 0.0
+
+    def start(self) -> "SurfacerKernels":
+        quiet_warp(self.device)
+        if not wp.get_device(self.device).is_cuda:
+            return self
+        self._thread = threading.Thread(target=self._load, name="mpmfx-kernels", daemon=True)
+        self._thread.start()
+        return self
+
+    def _load(self) -> None:
+        t0 = time.perf_counter()
+        try:
+            workers = min(WORKERS, os.cpu_count() or 1)
+            wp.load_module("mpmfx.surface", device=wp.get_device(self.device), recursive=True, max_workers=workers)
+        except BaseException as exc:  # said by wait(): the surface stage then compiles as it goes
+            self._error = exc
+        self.seconds = time.perf_counter() - t0
+
+    def wait(self) -> None:
+        if self._thread is None:
+            return
+        t0 = time.perf_counter()
+        if self._thread.is_alive():
+            print("[surface] waiting for its GPU kernels to finish compiling (first use on this machine) ...")
+        self._thread.join()
+        waited = time.perf_counter() - t0
+        if waited > 1.0:
+            print(f"[surface] kernels ready after {waited:.0f} s more; later runs load them from Warp's cache")
+        if self._error is not None:
+            print(f"[surface] compiling ahead failed ({self._error}); compiling as frames need them", file=sys.stderr)
+        self._thread = None
