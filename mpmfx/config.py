@@ -384,7 +384,7 @@ class Shot(_Section):
     domain: Domain = Field(
         Domain(),
         description="The simulated box: a cube of `size` metres from `origin`, cut "
-        "into grid_n cells per axis; the solver's walls are its faces.",
+        "into grid_n cells per axis; the solver's walls (and floor) are planes 3 cells inside its faces.",
     )
     objects: list[SceneObject] = Field(default_factory=list, description="Meshes that become material, one table each.")
     emitters: list[Emitter] = Field(default_factory=list, description="Sources that emit material during the shot.")
@@ -422,6 +422,14 @@ class Shot(_Section):
             "walls": (s.walls,) * 6 if isinstance(s.walls, str) else tuple(s.walls),
         }
         return SolverConfig(**knobs)
+
+    def wall_box(self) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(lo, hi) world corners (m) of the box the solver's walls hold material in: its walls
+        are these planes (`SolverConfig.wall_planes`), the floor is y = lo[1]. Material rests on
+        them; voxelise checks placements and renders draw the ground and the tank here."""
+        lo, hi = self.solver_config().wall_planes
+        o, size = self.domain.origin, self.domain.size
+        return tuple(float(c + lo * size) for c in o), tuple(float(c + hi * size) for c in o)
 
     @property
     def bodies(self) -> list[SceneObject | Emitter]:

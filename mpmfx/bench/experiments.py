@@ -5,8 +5,9 @@ domain), is quasi-2D where the experiment is (a channel that fills the domain de
 walls `separate` and frictionless) and runs at a fixed dt on either the production solver
 (`engine="warp"`) or the numpy reference step (`engine="reference"`,
 `mpmfx.bench.reference_step`) with identical particles, grid, walls and dt, so the two can
-be compared directly. The wall band is `boundary_cells` nodes thick: the material starts
-at x = y = 3 dx, which is where the channel's back wall and floor are.
+be compared directly. The walls are planes `boundary_cells` cells inside the domain's faces
+(`SolverConfig.wall_planes`): the material starts at x = y = 3 dx, on the channel's back wall
+and floor.
 
 Observables (rest volume of the particles binned in one-cell columns, so a few splashed
 particles do not count):
@@ -193,7 +194,7 @@ def dam_break(
 
 def _quasi2d_block(dx, length, height, ppa, ppz=None, bc=3):
     """Particles filling [b, b+length] x [b, b+height] x (the channel depth between the z
-    wall bands), b = bc dx the wall band's edge, ppa per cell in x, y and ppz (default ppa)
+    walls), b = bc dx the walls' planes, ppa per cell in x, y and ppz (default ppa)
     in z. Returns (x, spacing, depth); volume per particle = spacing^3 with the z spacing
     folded into the depth."""
     lo = bc * dx

@@ -3,8 +3,8 @@
 Read it line by line against docs/physics.md ("The method", "Materials", "Boundaries") or
 the tutorial "Material Point Method: Step by Step": the four phases, the stencil and B-spline
 weights, the fused MLS stress, fixed-corotated elasticity, the snow clamp and the sand cone, the Tait fluid, and the
-walls of `mpmfx.mpm.config.SolverConfig` (a band of `boundary_cells` nodes on each face,
-sticky / slip / separate, Coulomb `wall_friction`). It is the reference the production
+walls of `mpmfx.mpm.config.SolverConfig` (planes `wall_planes`, holding the nodes on and beyond
+them, sticky / slip / separate, Coulomb `wall_friction`). It is the reference the production
 Warp solver (`mpmfx.mpm.Solver`) must match on the same particles, grid and dt; it is
 slow (vectorised numpy, thousands of particles) and has the FLIP blend (`SolverConfig.flip`)
 but no colliders, multi-field contact,
@@ -252,14 +252,15 @@ class ReferenceSolver:
 
     def _grid_update(self, grid_m, grid_mv, dt) -> np.ndarray:
         cfg = self.config
-        n_nodes, bc = cfg.grid_n + 1, cfg.boundary_cells
+        n_nodes, (lo, hi) = cfg.grid_n + 1, cfg.wall_planes
         has = grid_m > 0
         v = np.zeros_like(grid_mv)
         v[has] = grid_mv[has] / grid_m[has, None]
         v[has] = (v[has] + dt * np.asarray(cfg.gravity)) * max(0.0, 1.0 - cfg.damping * dt)
-        idx = np.stack(np.unravel_index(np.flatnonzero(has), (n_nodes,) * 3), -1)
+        xn = np.stack(np.unravel_index(np.flatnonzero(has), (n_nodes,) * 3), -1) * cfg.dx
+        reach = 0.5 * cfg.dx  # the planes lie on nodes: the half cell only absorbs rounding
         for a in range(3):  # same face order as grid_update.apply_walls: -a then +a
-            for side, band in ((-1.0, idx[:, a] < bc), (1.0, idx[:, a] > cfg.grid_n - bc)):
+            for side, band in ((-1.0, xn[:, a] < lo + reach), (1.0, xn[:, a] > hi - reach)):
                 sel = np.flatnonzero(has)[band]
                 n_out = np.zeros(3)
                 n_out[a] = side

@@ -193,7 +193,7 @@ def check_in_domain(mesh: "trimesh.Trimesh", *, origin, size: float, name: str, 
     above ``floor`` where given.
 
     origin: (3,) metres, min corner of the domain. size: edge length in metres. floor: world
-    height (m) of the solver's floor, the top of its wall band (material below it starts inside
+    height (m) of the solver's floor, the plane of its lowest wall (material below it starts inside
     the wall). name: the asset's name for the message. The message says what to change; a
     translation it advises puts the mesh inside, above the floor.
     """
@@ -220,7 +220,7 @@ def check_in_domain(mesh: "trimesh.Trimesh", *, origin, size: float, name: str, 
         if floor is not None and lo[1] < room_lo[1] - slack and np.all(lo >= o) and np.all(hi <= room_hi):
             where = (
                 f"starts below the solver's floor: its lowest point is y = {lo[1]:.4g} m, the floor "
-                f"y = {room_lo[1]:.4g} m (the top of the wall band above domain.origin)"
+                f"y = {room_lo[1]:.4g} m (its plane, 3 cells above domain.origin)"
             )
         else:
             where = f"mesh bounds {_fmt(lo)}..{_fmt(hi)} m extend outside the domain {_fmt(o)}..{_fmt(o + size)} m" + (

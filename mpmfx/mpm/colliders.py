@@ -1,7 +1,7 @@
 """Kinematic colliders: analytic shapes or a signed-distance grid, moved by keyframes.
 
 A collider acts in the grid update (where all contact happens): at every node
-inside it (signed distance < 0) the velocity relative to the collider loses its
+inside it or on its surface (signed distance <= 0) the velocity relative to the collider loses its
 approaching normal part, and its tangential part loses Coulomb friction, mu * |vn|.
 Poses are keyframed on the shot clock and interpolated per substep (translation linear,
 rotation slerp); the collider's own velocity comes from the pose change over the substep.
@@ -376,7 +376,7 @@ def apply_collider(c: ColliderParams, sdf: wp.array(dtype=float), xn: wp.vec3, v
     h: finite-difference step for the normal, domain units."""
     xl = wp.quat_rotate_inv(c.rot, xn - c.pos)
     phi = collider_phi(c, sdf, xl)
-    if phi >= 0.0:
+    if phi > 0.0:  # a node on the surface is held too, so material rests on the surface
         return v
     gl = wp.vec3(
         collider_phi(c, sdf, xl + wp.vec3(h, 0.0, 0.0)) - collider_phi(c, sdf, xl - wp.vec3(h, 0.0, 0.0)),

@@ -74,8 +74,9 @@ class SolverConfig:
         wall_friction: Coulomb coefficient mu at the walls: tangential speed drops by
             mu * |removed normal speed|, an impulse ratio independent of dt (a fraction
             kept per substep would make creep on a slope depend on dt).
-        boundary_cells: thickness of the wall layer, in cells (>= 2 keeps the 3-cell
-            stencil inside the grid).
+        boundary_cells: how far inside each face of the domain its wall's plane lies, in cells
+            (`wall_planes`). The nodes between the face and the plane are a guard that keeps the
+            3-node stencil on the grid (>= 2).
         dt_max, dt_min: bounds on the substep, seconds. A substep that has to go below
             dt_min raises SimulationError.
         max_substeps_per_frame: SimulationError past this many substeps in one advance().
@@ -165,3 +166,11 @@ class SolverConfig:
     def dx(self) -> float:
         """Cell width, domain units."""
         return 1.0 / self.grid_n
+
+    @property
+    def wall_planes(self) -> tuple[float, float]:
+        """(lo, hi), domain units: the walls are the planes x = lo and x = hi on every axis
+        (the floor is y = lo). Material rests on them; shots place material and renders draw
+        the ground and the tank here."""
+        inset = self.boundary_cells / self.grid_n
+        return inset, 1.0 - inset

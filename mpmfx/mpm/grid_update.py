@@ -31,7 +31,8 @@ class GridParams:
 
     dt: s; dx: domain units; gravity: domain/s^2; damping_factor: 1 - damping*dt (>= 0);
     walls_lo / walls_hi: wall codes of the -x,-y,-z / +x,+y,+z faces; wall_friction: mu;
-    boundary_cells: wall layer thickness, cells; n_cells: grid_n; deterministic: 1 when
+    plane_lo / plane_hi: the walls' planes on every axis, domain units (SolverConfig.wall_planes);
+    deterministic: 1 when
     P2G accumulated in fixed point; q_mass / q_mom: fixed-point quanta (mass, momentum);
     num_colliders: entries used in the collider array; nodes: grid_n + 1; n_fields: velocity
     fields (1 unless multi-field); contact_friction: Coulomb mu between fields.
@@ -44,8 +45,8 @@ class GridParams:
     walls_lo: wp.vec3i
     walls_hi: wp.vec3i
     wall_friction: float
-    boundary_cells: int
-    n_cells: int
+    plane_lo: float
+    plane_hi: float
     deterministic: int
     q_mass: float
     q_mom: float
@@ -73,14 +74,19 @@ def apply_wall(v: wp.vec3, n_out: wp.vec3, wall: int, mu: float) -> wp.vec3:
 
 
 @wp.func
-def apply_walls(v: wp.vec3, node: wp.vec3i, gp: GridParams) -> wp.vec3:
+def apply_walls(v: wp.vec3, xn: wp.vec3, gp: GridParams) -> wp.vec3:
+    """The walls at a node at xn (domain units). A node on a wall's plane or beyond it gets the
+    wall's condition: the last node held is the one on the plane, so material rests on the plane
+    itself (the nodes beyond it are the guard that keeps the stencil on the grid). The half cell
+    only absorbs rounding: the planes lie on nodes."""
     out = v
+    reach = 0.5 * gp.dx
     for a in range(3):
         n_out = wp.vec3(0.0)
-        if node[a] < gp.boundary_cells:
+        if xn[a] < gp.plane_lo + reach:
             n_out[a] = -1.0
             out = apply_wall(out, n_out, gp.walls_lo[a], gp.wall_friction)
-        if node[a] > gp.n_cells - gp.boundary_cells:
+        if xn[a] > gp.plane_hi - reach:
             n_out[a] = 1.0
             out = apply_wall(out, n_out, gp.walls_hi[a], gp.wall_friction)
     return out
@@ -163,7 +169,7 @@ def boundaries(
     xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
     for c in range(gp.num_colliders):
         v = apply_collider(colliders[c], sdf, xn, v, 0.5 * gp.dx)
-    v = apply_walls(v, wp.vec3i(i, j, k), gp)
+    v = apply_walls(v, xn, gp)
     if not wp.isfinite(v):
         wp.atomic_add(counts, Count.GRID_NONFINITE, 1)
         v = wp.vec3(0.0)  # the substep is rejected anyway; keep G2P finite
@@ -218,8 +224,9 @@ def make_mesh_boundaries(inside_test: str):
 
     @wp.func
     def mesh_boundaries(gp: GridParams, mc: MeshColliders, v: wp.vec3, i: int, j: int, k: int) -> wp.vec3:
-        v = wp.static(contact)(mc, wp.vec3(float(i), float(j), float(k)) * gp.dx, v, gp.dx)
-        return apply_walls(v, wp.vec3i(i, j, k), gp)
+        xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
+        v = wp.static(contact)(mc, xn, v, gp.dx)
+        return apply_walls(v, xn, gp)
 
     return mesh_boundaries
 

@@ -463,8 +463,7 @@ class Solver:
         gp.walls_lo = wp.vec3i(codes[0], codes[2], codes[4])
         gp.walls_hi = wp.vec3i(codes[1], codes[3], codes[5])
         gp.wall_friction = cfg.wall_friction
-        gp.boundary_cells = cfg.boundary_cells
-        gp.n_cells = cfg.grid_n
+        gp.plane_lo, gp.plane_hi = cfg.wall_planes
         gp.deterministic = int(cfg.deterministic)
         gp.q_mass, gp.q_mom = self._q_mass, self._q_mom
         gp.num_colliders = len(self.colliders)

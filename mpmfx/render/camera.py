@@ -18,12 +18,9 @@ def default_camera(shot) -> tuple[tuple[float, ...], tuple[float, ...]]:
 
 
 def solver_box(shot) -> tuple[tuple[float, ...], tuple[float, ...]]:
-    """(lo, hi) world corners (m) of the box the solver's walls hold material in: each wall acts
-    on the grid nodes of its band (`SolverConfig.boundary_cells` cells), so material stops at
-    the band's inner edge, not at the domain's faces."""
-    inset = shot.solver_config().boundary_cells * shot.domain.size / shot.domain.grid_n
-    o = shot.domain.origin
-    return (tuple(float(c + inset) for c in o), tuple(float(c + shot.domain.size - inset) for c in o))
+    """(lo, hi) world corners (m) of the box the solver's walls hold material in (`Shot.wall_box`):
+    the walls are planes inside the domain's faces, and material rests on them."""
+    return shot.wall_box()
 
 
 def solver_floor(shot) -> float:

@@ -100,6 +100,7 @@ def run(ctx: Context) -> dict:
                 f"objects.{obj.name}: {path} produced no particles at domain.grid_n = {dom.grid_n}: "
                 f"the mesh is thinner than a cell; raise domain.grid_n or the object's scale"
             )
+        _check_walls(ctx, f"objects.{obj.name}", vox.points)
         centroid = vox.points.mean(axis=0)
         v = np.asarray(obj.velocity) + np.cross(np.asarray(obj.angular_velocity), vox.points - centroid)
         xs.append(vox.points), vs.append(v), vols.append(vox.volume)
@@ -126,6 +127,24 @@ def run(ctx: Context) -> dict:
     n = sum(len(x) for x in xs)
     extra = {"entering_later": int(np.count_nonzero(birth > 0))} if np.any(birth > 0) else {}
     return {"particles": n, **extra, "thickness": {k: r.get("verdict", "skipped") for k, r in reports.items()}}
+
+
+def _check_walls(ctx: Context, key: str, points: np.ndarray) -> None:
+    """Warn when particles (m, (n, 3)) start beyond the solver's walls (`Shot.wall_box`): they
+    start inside a wall, which pushes them out in the first substeps."""
+    lo, hi = map(np.asarray, ctx.shot.wall_box())
+    below, above = np.clip(lo - points, 0, None).max(axis=0), np.clip(points - hi, 0, None).max(axis=0)
+    if not (below.any() or above.any()):
+        return
+    n = int(np.count_nonzero(np.any((points < lo) | (points > hi), axis=1)))
+    dx = ctx.shot.domain.size / ctx.shot.domain.grid_n
+    shift = ", ".join(f"{d:.4g}" for d in below - above)
+    ctx.warn(
+        f"{key}: {n} of {len(points)} particles start beyond the solver's walls, up to "
+        f"{max(below.max(), above.max()) / dx:.2g} cells (the walls are the planes of the box "
+        f"{tuple(round(c, 4) for c in lo)}..{tuple(round(c, 4) for c in hi)} m; the floor is y = {lo[1]:.4g} m); "
+        f"translate it by ({shift}) m"
+    )
 
 
 def _emit(shot: Shot, i: int, em):

@@ -30,7 +30,8 @@ def test_sand_collapse_runout_agrees():
     prod, ref = _both(ex.column_collapse, grid_n=16, a=2.0, ppz=1, t_scale=3.0)  # the default fit
     L0 = prod.extra["L0"]
     fp, fr = (1 + prod.extra["runout_q"]) * L0, (1 + ref.extra["runout_q"]) * L0
-    assert prod.extra["runout_q"] > 0.2  # it has collapsed
+    # it has collapsed (at 1.7 cells across, the sticky floor's plane holds the base's first layer)
+    assert prod.extra["runout_q"] > 0.1
     assert abs(fp - fr) <= 0.01 * fr, (fp, fr)
     assert abs(prod.extra["height"] - ref.extra["height"]) <= 0.01 * ref.extra["height"]
 

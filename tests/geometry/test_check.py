@@ -150,7 +150,7 @@ def test_check_a_shot_refuses_an_object_below_the_floor_and_writes_nothing(tmp_p
     from mpmfx.cli import main
 
     monkeypatch.chdir(tmp_path)
-    shot = _shot_with_plate(tmp_path, plate_y=0.1)  # its bottom at y = 0.08, in the floor's wall band
+    shot = _shot_with_plate(tmp_path, plate_y=0.1)  # its bottom at y = 0.08, below the floor's plane
     assert main(["check", str(shot)]) == 2
     err = capsys.readouterr().err
     assert "objects.plate" in err and "below the solver's floor" in err and "translate it by (0, 0.045, 0)" in err

@@ -368,7 +368,7 @@ def test_a_mesh_below_the_solvers_floor_is_refused_and_every_advised_shift_lands
     rest.apply_translation((0, floor + 0.1, 0))  # resting on the floor: fine
     check_in_domain(rest, origin=origin, size=size, name="box", floor=floor)
     sunk = rest.copy()
-    sunk.apply_translation((0, -0.05, 0))  # in the domain, but inside the wall band
+    sunk.apply_translation((0, -0.05, 0))  # in the domain, but below the floor's plane
     with pytest.raises(MeshError, match=r"box: starts below the solver's floor.*translate it by \(0, 0.05, 0\)"):
         check_in_domain(sunk, origin=origin, size=size, name="box", floor=floor)
     rng = np.random.default_rng(7)

@@ -160,7 +160,8 @@ def test_multi_field_bodies_slide_past_each_other_instead_of_fusing():
     """One velocity field per node makes bodies fuse; with one field per
     body a block slides over another (frictionless contact) and rests on it."""
     v_top, v_bottom, _ = _slide(False)
-    assert v_top < 0.3 and v_bottom > 0.1  # single field: the top drags the bottom along
+    # single field: the two fuse and move as one, which the floor's grip (mu = 1) then stops
+    assert v_top < 0.3 and abs(v_top - v_bottom) < 0.1
     v_top, v_bottom, y_top = _slide(True)
     assert v_top > 0.7 and abs(v_bottom) < 0.05
     assert y_top > 0.3 - 1.0 / 24  # resting on the lower body, not sunk into it
@@ -169,7 +170,7 @@ def test_multi_field_bodies_slide_past_each_other_instead_of_fusing():
 
 
 def test_multi_field_head_on_collision_conserves_momentum_and_parts():
-    grid_n = 16
+    grid_n = 24  # the walls (3 cells in) stay out of reach of the bodies bouncing back
     a = block((0.25, 0.4, 0.4), (0.45, 0.6, 0.6), grid_n=grid_n, body=0, v=(1.0, 0.0, 0.0))
     b = block((0.55, 0.4, 0.4), (0.75, 0.6, 0.6), grid_n=grid_n, body=1, v=(-1.0, 0.0, 0.0))
     cfg = SolverConfig(grid_n=grid_n, gravity=ZERO_G, multi_field=True, deterministic=True)

@@ -229,7 +229,7 @@ def test_a_gpu_render_on_a_machine_without_one_says_so_and_renders_on_the_cpu(ex
 
 
 def test_material_lands_on_the_drawn_ground(exported):
-    """The renders' ground is the solver's floor (the top of its wall band), where material stops."""
+    """The renders' ground is the solver's floor (its plane), where material stops."""
     from mpmfx.io.frames import ParticleFrame
     from mpmfx.render.camera import solver_floor
     from mpmfx.shotfile import load_shot_config
