@@ -123,25 +123,34 @@ def _cells(tree, coords, size: float):
 
 
 def _sparkle(tree, surface, size: float, fraction: float, weight: float):
-    """`surface` with sparse glints: in `fraction` of the surface (the cores of Voronoi cells of
-    `size` m) a near-mirror glossy facet, tilted at random per cell, mixed in at `weight`."""
+    """`surface` plus sparse glints: in `fraction` of the surface (the cores of Voronoi cells of
+    `size` m) a near-mirror glossy facet, tilted at random per cell, added at `weight` (added,
+    not mixed: a facet that mirrors something darker than the surface must not show as a dark
+    speck)."""
     cells = tree.nodes.new("ShaderNodeTexVoronoi")
     cells.inputs["Scale"].default_value = 1.0 / size
     _link(tree, tree.nodes.new("ShaderNodeTexCoord").outputs["Object"], cells.inputs["Vector"])
     # a cell's core within radius r of its point covers (4/3) pi r^3 of a unit cell
     core = (3.0 * fraction / (4.0 * math.pi)) ** (1.0 / 3.0)
     mask = _math(tree, "LESS_THAN", cells.outputs["Distance"], core)
+    # tilts up to about 30 degrees each way: a spread of facets, so that some of them mirror the
+    # sun towards the camera wherever the surface is lit
     tilt = _math(tree, "SUBTRACT", cells.outputs["Color"], (0.5, 0.5, 0.5), vector=True)
+    tilt = _math(tree, "SCALE", tilt, vector=True)
+    tilt.node.inputs["Scale"].default_value = 1.2
     normal = tree.nodes.new("ShaderNodeNewGeometry").outputs["Normal"]
     facet = _math(tree, "NORMALIZE", _math(tree, "ADD", normal, tilt, vector=True), vector=True)
     glossy = tree.nodes.new("ShaderNodeBsdfAnisotropic")  # Blender 4.x's Glossy BSDF
-    glossy.inputs["Roughness"].default_value = 0.03
+    glossy.inputs["Roughness"].default_value = 0.15
     _link(tree, facet, glossy.inputs["Normal"])
-    mix = tree.nodes.new("ShaderNodeMixShader")
-    _link(tree, _math(tree, "MULTIPLY", mask, weight), mix.inputs["Fac"])
-    _link(tree, surface, mix.inputs[1])
-    _link(tree, glossy.outputs[0], mix.inputs[2])
-    return mix.outputs["Shader"]
+    grey = tree.nodes.new("ShaderNodeCombineColor")
+    for channel in ("Red", "Green", "Blue"):
+        _link(tree, _math(tree, "MULTIPLY", mask, weight), grey.inputs[channel])
+    _link(tree, grey.outputs["Color"], glossy.inputs["Color"])
+    add = tree.nodes.new("ShaderNodeAddShader")
+    _link(tree, surface, add.inputs[0])
+    _link(tree, glossy.outputs[0], add.inputs[1])
+    return add.outputs["Shader"]
 
 
 def _clear_shadow(tree, surface):

@@ -48,22 +48,24 @@ LOOKS: dict[str, dict] = {
         "grain": None,
         "clear_shadow": True,
     },
-    # White, bright, light scattering under the surface over about a centimetre (bluer deeper in),
-    # a crumbly bump, and sparse glints: about 3 % of the surface is crystal facets at random tilts
-    # that catch the sun or the sky as points of light.
+    # White, bright, light scattering under the surface over millimetres (bluer deeper in),
+    # a crumbly bump, and sparse glints: 2 % of the surface is crystal facets about 4 mm across
+    # (two pixels at 480 px across a metre: the denoiser erases finer ones), tilted at random,
+    # that mirror the sun and sky as points of light (at four times a mirror's weight: under the
+    # view transform's highlight roll-off, weaker glints vanish into the white snow).
     "snow": {
         "bsdf": {
-            "Base Color": (0.93, 0.95, 0.98),
+            "Base Color": (0.86, 0.89, 0.94),
             "Roughness": 0.6,
             "Subsurface Weight": 1.0,
             "Subsurface Radius": (0.8, 0.95, 1.3),
-            "Subsurface Scale": 0.012,
+            "Subsurface Scale": 0.006,
             "Specular IOR Level": 0.3,
         },
-        "bump": (0.004, 0.35, 0.002),
+        "bump": (0.02, 0.7, 0.006),
         "absorb": None,
         "grain": None,
-        "sparkle": (0.002, 0.03, 1.0),
+        "sparkle": (0.012, 0.02, 4.0),
     },
     "slush": {
         "bsdf": {
@@ -104,11 +106,11 @@ LOOKS: dict[str, dict] = {
     # Translucent and coloured: gummy-bear red, light travelling centimetres inside, glossy skin.
     "jelly": {
         "bsdf": {
-            "Base Color": (0.95, 0.16, 0.24),
+            "Base Color": (0.85, 0.06, 0.10),
             "Roughness": 0.12,
             "Subsurface Weight": 1.0,
-            "Subsurface Radius": (1.0, 0.25, 0.3),
-            "Subsurface Scale": 0.06,
+            "Subsurface Radius": (1.0, 0.15, 0.18),
+            "Subsurface Scale": 0.05,
             "Coat Weight": 1.0,
             "Coat Roughness": 0.04,
             "IOR": 1.45,
