@@ -207,6 +207,9 @@ def add_ground(floor_y: float, centre, *, size: float, fade: tuple[float, float]
     _link(tree, stone, mix.inputs[1])
     _link(tree, haze.outputs["Emission"], mix.inputs[2])
     _link(tree, mix.outputs["Shader"], out.inputs["Surface"])
+    # the haze is the world's colour, already lit: not a light for Cycles to sample (a lamp
+    # kilometres wide would take samples from the sun and the sky)
+    mat.cycles.emission_sampling = "NONE"
     assign(obj, mat)
     return obj
 
