@@ -91,6 +91,7 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", nargs="*", type=int, default=None, help="frames to render (default: the README still)")
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="extra overrides (render.* only)")
     ap.add_argument("--readme", default="docs/images", help="folder the README stills are copied to")
+    ap.add_argument("--suffix", default="", help="appended to the still's name: docs/images/<shot><suffix>.png")
     args = ap.parse_args(argv)
     import mpmfx
     from mpmfx.config import Export
@@ -116,7 +117,8 @@ def main(argv=None) -> int:
         t_exp = run_stage(run, "export", frames)
         t_ren = run_stage(run, "render", frames)
         png = run.entries()["render"].frame_path(frames[0], "png")
-        dst = Path(args.readme) / f"{name}.png"
+        dst = Path(args.readme) / f"{name}{args.suffix}.png"
+        dst.parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(png, dst)
         secs = (run.entries()["render"].manifest() or {}).get("cycles_seconds", {})
         print(

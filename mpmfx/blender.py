@@ -18,6 +18,7 @@ from pathlib import Path
 TIMEOUT_ENV = "MPMFX_BLENDER_TIMEOUT"  # seconds a Blender child that reads a file may take
 TIMEOUT_S = 600.0
 FRAME_LINE = "MPMFX_FRAME"  # a Cycles child's line per finished frame: FRAME_LINE frame wall_s cpu_s
+NOTE_LINE = "MPMFX_NOTE"  # a Cycles child's line for the user: NOTE_LINE text (the parent prints the text)
 ERROR = "mpmfx-blender-error: "  # a child's line the parent reads the reason of a failure from
 
 

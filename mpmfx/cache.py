@@ -3,15 +3,19 @@
 Layout (docs/architecture.md, "The cache and its keys")::
 
     <root>/<shot>/<stage>/<stage>-<key12>/
-        manifest.json      written last: schema version, key inputs, frames, timings, QA
+        manifest.json      written last: schema version, key inputs, frames, timings, QA,
+                           each file's size and digest
         frames/NNNN.*      one file per frame, written to a temp name and renamed
+        frames/.NNNN.*.b2  its digest, recorded as it was written (`mpmfx.checksum`)
         checkpoints/       full solver state every K frames (exact resume)
 
 A stage key is the sha256 of canonical JSON of {stage, stage format version, the stage's own
 parameters, upstream keys, input file hashes and the hash of the code modules the stage
 declares (`code_hash`)}. A frame file exists only when it is complete
 (temp name + os.replace), so a killed run leaves complete frames or none; the manifest is written
-only when a run finishes, so an entry without one is "partial" and resumes.
+only when a run finishes, so an entry without one is "partial" and resumes. Sizes say whether
+an entry is complete (`complete`, fast); digests say whether a file holds what was written
+(`verified` where a stage reads it, `verify` before a publish and for `status --verify`).
 """
 
 from __future__ import annotations
@@ -29,11 +33,19 @@ import stat
 import sys
 import time
 import uuid
+import zipfile
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
+from mpmfx import checksum as sums
+from mpmfx.checksum import DamagedError
+
 MANIFEST_SCHEMA = 1
+# What a reader may meet in a cache file changed after it was written, when no digest says so
+# (an entry written before digests were recorded): the file is then redone, like a damaged one.
+UNREADABLE = (zipfile.BadZipFile, zlib.error, EOFError)
 
 
 class BusyError(RuntimeError):
@@ -101,11 +113,15 @@ class WriteError(OSError):
 
 
 @contextlib.contextmanager
-def atomic_path(path: str | Path, *, verify: Callable[[Path], object] | None = None) -> Iterator[Path]:
+def atomic_path(
+    path: str | Path, *, verify: Callable[[Path], object] | None = None, checksum: bool = False
+) -> Iterator[Path]:
     """Yield a fresh temp path beside `path` with the same suffix (writers such as USD pick the
     format from it); rename it over `path` on success, delete it on failure, so `path` is
     complete or untouched. Before the rename the temp file must exist, be non-empty and pass
     `verify(tmp)` (which raises or returns False for a bad file): else WriteError.
+    checksum: a cache file: its digest is recorded beside it before the rename
+    (`mpmfx.checksum`), for the manifest and every later read.
     The writer creates the temp file itself, so it gets the usual (umask) permissions that a
     farm user reading the cache needs."""
     path = Path(path)
@@ -114,6 +130,8 @@ def atomic_path(path: str | Path, *, verify: Callable[[Path], object] | None = N
     try:
         yield tmp_path
         _verify(tmp_path, path, verify)
+        if checksum:
+            sums.record(path, tmp_path)
         os.replace(tmp_path, path)
     finally:
         if tmp_path.exists():
@@ -187,29 +205,37 @@ class Entry:
         return sorted(int(p.stem) for p in self.frames_dir.glob(f"[0-9]*.{ext}"))
 
     def complete(self, frames: list[int] | None = None) -> bool:
-        """True when a manifest exists, covers `frames` (all of its own frames if None) and every
-        file it lists is still there with its size (a lost or truncated file makes it partial)."""
+        """True when a manifest exists, covers `frames` (all of its own frames if None), lists a
+        file for each of those frames, and every file it lists is still there with its size (a
+        lost or truncated file makes it partial; sizes only: `verify` reads the bytes)."""
         man = self.manifest()
         if man is None or man.get("schema") != MANIFEST_SCHEMA:
             return False
-        if frames is not None and not set(frames) <= set(man.get("frames", [])):
+        want = set(man["frames"] if frames is None else frames)
+        if not want <= set(man["frames"]):
+            return False
+        listed = {int(Path(rel).stem) for rel in man["files"] if rel.startswith("frames/") and Path(rel).stem.isdigit()}
+        if not want <= listed:  # a frame it claims but no longer lists a file for (a hand edit)
             return False
         return not self.damaged(man)
 
     def damaged(self, man: dict | None = None) -> list[str]:
-        """Files the manifest lists that are missing or changed size since it was written."""
+        """Files the manifest lists that are missing or changed size since it was written, and
+        those a check found changed (`mark_damaged`)."""
         man = man or self.manifest() or {}
-        bad = []
+        bad = [rel for rel in man.get("damaged", []) if not rel.startswith("checkpoints/")]  # (frames intact)
         for rel, size in man.get("files", {}).items():
             try:
-                if (self.root / rel).stat().st_size != size:
+                if (self.root / rel).stat().st_size != size and rel not in bad:
                     bad.append(rel)
             except OSError:
-                bad.append(rel)
+                if rel not in bad:
+                    bad.append(rel)
         return bad
 
     def files(self) -> dict[str, int]:
-        """Every output file of the entry -> bytes (not the manifest, temp files, checkpoints, QA)."""
+        """Every output file of the entry -> bytes (not the manifest, hidden files (temp files,
+        sidecars), checkpoints, QA)."""
         out = {}
         for p in sorted(self.root.rglob("*")):
             rel = p.relative_to(self.root)
@@ -222,8 +248,13 @@ class Entry:
                 out[rel.as_posix()] = p.stat().st_size
         return out
 
+    def checkpoints(self) -> dict[str, int]:
+        """The simulation's checkpoints/NNNN.npz -> bytes."""
+        folder = self.root / "checkpoints"
+        return {f"checkpoints/{p.name}": p.stat().st_size for p in sorted(folder.glob("[0-9]*.npz"))}
+
     def write_manifest(self, *, frames: list[int], timings: dict, qa: dict | None = None, extra: dict | None = None):
-        files = self.files()
+        files, ckpts = self.files(), self.checkpoints()
         write_json(
             self.manifest_path,
             {
@@ -237,9 +268,73 @@ class Entry:
                 "written": time.time(),
                 "files": files,
                 "bytes": sum(files.values()),
+                "checkpoints": ckpts,
+                "checksum": sums.ALGORITHM,
+                "digests": self._digests([*files, *ckpts]),
                 **(extra or {}),
             },
         )
+
+    def _digests(self, rels: list[str]) -> dict[str, str]:
+        """rel -> digest: the one recorded when the file was written, else (a file a child
+        process wrote, or one from before digests were recorded) the file's bytes now."""
+        out = {rel: sums.recorded(self.root / rel) for rel in rels}
+        todo = [rel for rel, d in out.items() if d is None]
+        out.update(zip(todo, sums.digests([self.root / rel for rel in todo])))
+        return out
+
+    def expected(self, rel: str, man: dict | None = None) -> str | None:
+        """The digest `rel` had when written: its sidecar's, else the manifest's; None when
+        neither knows it (an entry written before digests were recorded: sizes only)."""
+        return sums.recorded(self.root / rel) or ((man or self.manifest() or {}).get("digests") or {}).get(rel)
+
+    def verify(self, rels: list[str] | None = None) -> tuple[list[str], list[str]]:
+        """(damaged, unverified): of `rels` (default: every file and checkpoint of the entry),
+        those whose bytes or size differ from what was written, and those with no digest.
+        Reads every byte of them (several files at once)."""
+        man = self.manifest() or {}
+        rels = [*self.files(), *self.checkpoints()] if rels is None else rels
+        want = {rel: self.expected(rel, man) for rel in rels}
+        unverified = [rel for rel, d in want.items() if d is None]
+        known = [rel for rel, d in want.items() if d is not None]
+        bad = [rel for rel in rels if not (self.root / rel).is_file()]
+        known = [rel for rel in known if rel not in bad]
+        bad += [rel for rel, d in zip(known, sums.digests([self.root / r for r in known])) if d != want[rel]]
+        return sorted(bad), unverified
+
+    def verified(self, path: str | Path) -> Path:
+        """`path` (a file of this entry) once its bytes match its recorded digest; DamagedError
+        when it is gone or differs, so the stage that wrote it redoes it. Reads it once (the
+        reader that follows reads it again from the page cache)."""
+        path = Path(path)
+        rel = path.relative_to(self.root).as_posix()
+        if not path.is_file():
+            raise DamagedError(str(self.root), rel, "missing (deleted since it was written)")
+        if (rec := sums.written(path)) and rec[0] != (size := path.stat().st_size):  # sizes first: no read
+            raise DamagedError(str(self.root), rel, f"{size} bytes, {rec[0]} when written")
+        if (want := self.expected(rel)) is not None and sums.digest(path) != want:
+            raise DamagedError(str(self.root), rel, "its bytes differ from those written (checksum)")
+        return path
+
+    def read(self, path: str | Path, reader: Callable[[Path], Any]) -> Any:
+        """reader(path) of a verified file of this entry; a file it cannot parse is damaged too."""
+        try:
+            return reader(self.verified(path))
+        except UNREADABLE as exc:
+            raise DamagedError(str(self.root), Path(path).relative_to(self.root).as_posix(), str(exc)) from None
+
+    def mark_damaged(self, rels: list[str]) -> bool:
+        """Record in the manifest that `rels` were found changed: the entry is partial, and the
+        next run deletes and redoes them (`damaged`). False when there is no manifest to mark
+        (the files are then deleted here: nothing else would notice them)."""
+        man = self.manifest()
+        if man is None:
+            for rel in rels:
+                sums.forget(self.root / rel)
+            return False
+        known = set(man.get("damaged", []))
+        write_json(self.manifest_path, {**man, "damaged": sorted(known | set(rels))})
+        return True
 
     def invalidate(self) -> None:
         """Drop the manifest so the entry counts as partial (its complete frames stay)."""
@@ -269,7 +364,18 @@ def valid_manifest(man: Any) -> bool:
         isinstance(k, str) and isinstance(v, int) and not isinstance(v, bool) and v >= 0 for k, v in files.items()
     ):
         return False
-    return all(isinstance(man.get(k), dict) for k in ("timings", "qa", "key_inputs"))
+    if not all(isinstance(man.get(k), dict) for k in ("timings", "qa", "key_inputs")):
+        return False
+    # written by newer code (absent from older manifests: then sizes only)
+    optional = {"digests": str, "checkpoints": int}
+    for key, kind in optional.items():
+        value = man.get(key, {})
+        if not isinstance(value, dict) or not all(
+            isinstance(v, kind) and not isinstance(v, bool) for v in value.values()
+        ):
+            return False
+    damaged = man.get("damaged", [])
+    return isinstance(damaged, list) and all(isinstance(r, str) for r in damaged)
 
 
 class Cache:

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from mpmfx import __version__
 from mpmfx.bench import main as bench_main
-from mpmfx.cache import BusyError, Cache, PathError, default_root
+from mpmfx.cache import BusyError, Cache, DamagedError, Entry, PathError, default_root
 from mpmfx.cli_args import add_parallel_args, add_wedge_parser, frame_range
 from mpmfx.maintain import clean_targets, delete, human, prune_targets, tree_size
 from mpmfx.publish import drop_dangling, published_entries
@@ -59,6 +59,12 @@ def _parser() -> argparse.ArgumentParser:
     add_wedge_parser(shot_cmd("wedge", "side-by-side variants of a shot that differ in one field"))
     s = shot_cmd("status", "each stage: cached, partial, stale or missing, and why")
     s.add_argument("--qa", action="store_true", help="per-frame observables of the simulation")
+    s.add_argument(
+        "--verify",
+        action="store_true",
+        help="read every cached file and compare it with its checksum; exit 1 naming the damaged "
+        "ones (marked: the next run redoes them)",
+    )
     c = shot_cmd("clean", "delete this variant's cached results (listed with sizes first)")
     c.add_argument("--stage", choices=STAGES, default=None, help="only this stage (default: every stage)")
     c.add_argument("--all-variants", action="store_true", help="every variant's entries, not only this one's")
@@ -102,7 +108,7 @@ def _parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="speed and accuracy benchmarks (run them on the GPU)")
     b.add_argument(
         "what",
-        choices=("accuracy", "gpu", "surface", "surface-times", "solver", "voxelise", "shots"),
+        choices=("accuracy", "oscillation", "gpu", "surface", "surface-times", "solver", "voxelise", "shots"),
         help="which benchmark",
     )
     b.add_argument("--quick", action="store_true", help="small CPU-sized sweep")
@@ -145,6 +151,10 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         if isinstance(exc, (StageError, BusyError)):
             print(f"error: {exc}", file=sys.stderr)
+            return 1
+        if isinstance(exc, DamagedError):  # (a run redoes it at once; here from a wedge's variants)
+            Entry(Path(exc.root), "", "", {}).mark_damaged([exc.rel])
+            print(f"error: {exc}; marked as damaged: run again to redo it", file=sys.stderr)
             return 1
         if isinstance(exc, OSError) and exc.filename:
             print(f"error: {_os_message(exc)}", file=sys.stderr)
@@ -247,6 +257,7 @@ def _dispatch(args) -> int:
         _print_outputs(run, results)
         return 0
     if args.cmd == "status":
+        damaged, unverified = run.verify() if args.verify else ([], 0)
         rows = [
             [s.stage, s.state, s.why, human(tree_size(s.entry)) if s.entry.exists() else "", os.path.relpath(s.entry)]
             for s in run.status()
@@ -258,9 +269,11 @@ def _dispatch(args) -> int:
                 f"\nall variants of this shot: {human(tree_size(shot_dir))} in {os.path.relpath(shot_dir)} "
                 f"(`mpmfx clean SHOT --all-variants` or `mpmfx cache prune` to free it)"
             )
-        if args.qa:
-            return print_qa(run)
-        return 0
+        if args.verify:
+            _print_verified(damaged, unverified)
+        if args.qa and print_qa(run):
+            return 1
+        return 1 if damaged else 0
     if args.cmd == "clean":
         with run.cache.lock():
             targets = clean_targets(run, stage=args.stage, all_variants=args.all_variants)
@@ -285,6 +298,22 @@ def _prune(args) -> int:
             locks.enter_context(Cache(root, shot_dir.name).lock())
         targets = prune_targets(root, keep=args.keep, in_use=published_entries(root))
         return delete(targets, root=root, dry_run=args.dry_run, yes=args.yes)
+
+
+def _print_verified(damaged: list, unverified: int) -> None:
+    """`status --verify`: each damaged file and why, or that every file checked out."""
+    print()
+    if damaged:
+        print(f"verify: {len(damaged)} damaged file{'s' * (len(damaged) != 1)}:")
+        for stage, path, why in damaged:
+            print(f"  {stage:<9} {os.path.relpath(path)}: {why}")
+    else:
+        print("verify: every cached file holds the bytes written")
+    if unverified:
+        print(
+            f"verify: {unverified} file{'s' * (unverified != 1)} without a checksum (cached by an older "
+            f"mpmfx): checked by size only"
+        )
 
 
 def _print_outputs(run, results) -> None:

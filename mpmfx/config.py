@@ -204,6 +204,11 @@ class Solver(_Section):
         "its effect per second does not depend on dt; without it elastic bodies ring on.",
     )
     drag: Real = Field(_SOLVER.drag, description="PIC blend as a rate (1/s), never a per-substep fraction.")
+    flip: Real = Field(
+        _SOLVER.flip,
+        description="FLIP share of the particle velocity update, 0..1 (0: APIC; 0.9-0.99 keeps more motion, "
+        "less numerical damping, more noise).",
+    )
     time_scale: Real = Field(
         _SOLVER.time_scale,
         description="Playback speed: simulated seconds per shot "
@@ -316,6 +321,11 @@ class Render(_Section):
 
     engine: RenderEngine = Field(
         RenderEngine.CYCLES, description="cycles (Blender, the look) or preview (PyVista, seconds a frame)."
+    )
+    device: Literal["cpu", "gpu"] = Field(
+        "cpu",
+        description="cycles: where Cycles renders; gpu: the first of OptiX, CUDA, HIP, oneAPI, Metal that "
+        "Blender finds here, else the CPU, said in the run's output.",
     )
     width: Int = Field(960, ge=16, le=8192, description="Picture width (pixels).")
     height: Int = Field(540, ge=16, le=8192, description="Picture height (pixels).")

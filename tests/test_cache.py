@@ -130,3 +130,46 @@ def test_a_manifest_of_the_wrong_shape_makes_the_entry_partial_not_a_crash(tmp_p
     e.manifest_path.write_text(text)
     assert e.manifest() is None and not e.complete([1]) and e.damaged() == []
     assert e.done_frames("npz") == [1]  # the complete frame stays: a run resumes, then rewrites the manifest
+
+
+def test_a_digest_is_b2sum_for_one_piece_and_the_same_on_any_number_of_threads(tmp_path, monkeypatch):
+    import hashlib
+
+    from mpmfx import checksum
+
+    path = tmp_path / "f.bin"
+    path.write_bytes(os.urandom(10_000))
+    assert checksum.digest(path) == hashlib.blake2b(path.read_bytes(), digest_size=16).hexdigest()  # b2sum -l 128
+    monkeypatch.setattr(checksum, "PIECE", 1000)  # ten pieces
+    one = checksum.digest(path)
+    monkeypatch.setattr(checksum, "MAX_THREADS", 1)
+    assert checksum.digest(path) == one
+    data = bytearray(path.read_bytes())
+    data[5555] ^= 1
+    path.write_bytes(bytes(data))
+    assert checksum.digest(path) != one
+
+
+def test_a_written_file_is_verified_against_what_was_written(tmp_path):
+    import pickle
+
+    from mpmfx import checksum
+    from mpmfx.cache import DamagedError
+
+    e = Cache(tmp_path, "shot").entry("surface", 1, {"a": 1}, {}, {})
+    with atomic_path(e.frame_path(1, "npz"), checksum=True) as tmp:
+        tmp.write_bytes(b"a frame")
+    e.write_manifest(frames=[1], timings={})
+    man = e.manifest()
+    assert man["digests"] == {"frames/0001.npz": checksum.digest(e.frame_path(1, "npz"))}
+    assert e.verified(e.frame_path(1, "npz")) and e.verify() == ([], [])
+    e.frame_path(1, "npz").write_bytes(b"a frAme")  # same size: sizes alone trust it
+    assert e.complete([1])
+    with pytest.raises(DamagedError) as caught:
+        e.verified(e.frame_path(1, "npz"))
+    again = pickle.loads(pickle.dumps(caught.value))  # as it crosses from a Dask worker
+    assert (again.root, again.rel) == (str(e.root), "frames/0001.npz") and "checksum" in str(again)
+    assert e.verify() == (["frames/0001.npz"], [])
+    assert e.mark_damaged(["frames/0001.npz"]) and not e.complete([1]) and e.damaged() == ["frames/0001.npz"]
+    checksum.sidecar(e.frame_path(1, "npz")).unlink()  # the manifest's copy still knows it
+    assert e.verify()[0] == ["frames/0001.npz"]

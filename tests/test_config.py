@@ -101,6 +101,7 @@ def test_solver_ranges_are_checked_once_and_named_as_shot_keys(tiny_shot):
     for override, key in (
         ("solver.cfl=1.5", "solver.cfl"),
         ("solver.damping=-1.0", "solver.damping"),
+        ("solver.flip=1.5", "solver.flip"),
         ("solver.dt_min=0.5", "solver.dt_min"),
         ("domain.grid_n=4", "domain.grid_n"),
     ):

@@ -23,6 +23,7 @@ def main(
     (None: their defaults)."""
     module = {
         "accuracy": "mpmfx.bench.accuracy",
+        "oscillation": "mpmfx.bench.oscillation",
         "surface": "mpmfx.bench.surface",
         "solver": "mpmfx.bench.solver",
         "gpu": "mpmfx.bench.gpu",

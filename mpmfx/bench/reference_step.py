@@ -6,7 +6,8 @@ weights, the fused MLS stress, fixed-corotated elasticity, the snow clamp and th
 walls of `mpmfx.mpm.config.SolverConfig` (a band of `boundary_cells` nodes on each face,
 sticky / slip / separate, Coulomb `wall_friction`). It is the reference the production
 Warp solver (`mpmfx.mpm.Solver`) must match on the same particles, grid and dt; it is
-slow (vectorised numpy, thousands of particles) and has no colliders, multi-field contact,
+slow (vectorised numpy, thousands of particles) and has the FLIP blend (`SolverConfig.flip`)
+but no colliders, multi-field contact,
 tracers, water volume recovery or adaptive stepping.
 
     ref = ReferenceSolver([preset("Water")], SolverConfig(grid_n=24))
@@ -204,14 +205,23 @@ class ReferenceSolver:
         grid_mv = np.stack([np.bincount(flat, mom[..., a].ravel(), minlength=n_nodes**3) for a in range(3)], -1)
         # 3 · grid update: v = mv / m, gravity, damping, walls
         grid_v = self._grid_update(grid_m, grid_mv, dt)
+        if cfg.flip > 0:  # the grid's velocity before the update: the momentum without the stress
+            mom0 = wk[..., None] * (
+                m[:, None] * s["v"][live] + np.matmul(s["C"][live][None], dpos[..., None])[..., 0] * m[:, None]
+            )
+            mv0 = np.stack([np.bincount(flat, mom0[..., a].ravel(), minlength=n_nodes**3) for a in range(3)], -1)
+            v_old = (wk[..., None] * (mv0 / np.where(grid_m > 0, grid_m, 1.0)[:, None])[nid]).sum(0)
         # 4 · G2P: gather v and C = B D^-1 (D^-1 = 4 / dx^2), update F / J, advect
         wg = wk[..., None] * grid_v[nid]  # (27, n, 3)
         v = wg.sum(0)
         B = np.matmul(wg.transpose(1, 2, 0), dpos.transpose(1, 0, 2))  # sum_k wg dpos^T
         C = (4.0 * inv_dx**2) * B * max(0.0, 1.0 - cfg.drag * dt)
         self._update_deformation(s, live, C, dt)
+        v_move = v  # the grid's velocity advects; FLIP: v = flip (v_p + v - v_old) + (1 - flip) v
+        if cfg.flip > 0:
+            v = v + cfg.flip * (s["v"][live] - v_old)
         s["v"][live], s["C"][live] = v, C
-        x_new = x + dt * v
+        x_new = x + dt * v_move
         lo, hi = dx, 1.0 - dx
         if cfg.out_of_domain == OutOfDomain.REMOVE:
             out = np.any((x_new < lo) | (x_new > hi), axis=1)

@@ -40,7 +40,7 @@ def write_arrays(path: str | Path, arrays: dict[str, np.ndarray], *, compress: b
         (name, np.asanyarray(value), name in squeeze)
         for name, value in {"_format": np.int32(FRAME_FORMAT), **arrays}.items()
     ]
-    with atomic_path(path, verify=readable) as tmp, open(tmp, "wb") as f:
+    with atomic_path(path, verify=readable, checksum=True) as tmp, open(tmp, "wb") as f:
         write_npz(f, entries)  # big entries deflated on several threads (mpmfx.io.npz)
     return path
 

@@ -129,7 +129,8 @@ def _atomic_target(path: Path) -> Iterator[Path]:
     layer this process already holds for `path`."""
     from pxr import Sdf  # backend: pxr
 
-    with atomic_path(path, verify=lambda tmp: Sdf.Layer.OpenAsAnonymous(str(tmp)) is not None) as tmp:
+    readable = lambda tmp: Sdf.Layer.OpenAsAnonymous(str(tmp)) is not None  # noqa: E731
+    with atomic_path(path, verify=readable, checksum=True) as tmp:
         yield tmp
     _reload_if_open(path)
 

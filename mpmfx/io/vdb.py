@@ -184,7 +184,7 @@ def write_vdb(path: str | Path, grids: Sequence[VdbGrid], *, metadata: dict[str,
     def readable(tmp: Path) -> bool:  # pyopenvdb reports no error when a write fails: read it back
         return sorted(g.name for g in vdb.readAllGridMetadata(str(tmp))) == sorted(names)
 
-    with atomic_path(path, verify=readable) as tmp:
+    with atomic_path(path, verify=readable, checksum=True) as tmp:
         vdb.write(str(tmp), grids=vdb_grids, metadata=file_metadata)
     return path
 

@@ -56,9 +56,11 @@ class DeviceAdvance:
         # P2G: "brick" (p2g_brick.py) on a GPU, several times faster there than the reference;
         # "reference" (p2g.py) everywhere else: on the CPU a sorted P2G's extra passes cost
         # more than the atomics it saves, and multi-field
-        # scenes scatter mass gradients the brick P2G does not; grids past ~1286 cells an axis
+        # scenes scatter mass gradients the brick P2G does not, FLIP scenes (SolverConfig.flip)
+        # the momentum without the stress; grids past ~1286 cells an axis
         # would overflow its int32 sort keys
-        brick = not solver.flags.multi_field and solver.device.is_cuda and fits_brick_keys(cfg.grid_n + 1)
+        brick = not solver.flags.multi_field and solver.flags.flip == 0.0
+        brick = brick and solver.device.is_cuda and fits_brick_keys(cfg.grid_n + 1)
         self.p2g = "brick" if brick else "reference"
         self._brick = None
         self.sort_every = 0  # 0: re-sort as the order wears (sort_cadence); k > 0: every k substeps (measuring)
@@ -205,6 +207,8 @@ class DeviceAdvance:
         s, cfg = self.s, self.s.config
         wall0 = time.perf_counter()
         s._last_bad = None
+        if self.p2g == "brick" and s.flags.flip > 0.0:
+            raise ValueError("DeviceAdvance.p2g: the brick P2G has no FLIP blend (SolverConfig.flip); use 'reference'")
         if self.p2g == "brick" and (self._brick is None or self._brick.n != state.n):
             self._brick = BrickP2G(s.flags, state.n, s.device, nodes=cfg.grid_n + 1)  # before any capture: it allocates
         if self.p2g == "brick":

@@ -62,6 +62,11 @@ class SolverConfig:
         drag: 1/s rate at which the affine velocity C is blended toward PIC,
             C *= 1 - drag * dt. A rate, never a per-substep fraction (one would depend on dt):
             it damps sub-cell rotation and noise, not bulk motion.
+        flip: FLIP share of the particle velocity update, in [0, 1]: the particle keeps
+            flip * (v_p + grid velocity change) + (1 - flip) * grid velocity, with the APIC
+            affine velocity C kept (Fei et al. 2021; docs/physics.md, "The method"). 0 is APIC
+            alone; higher keeps more of the particle's own motion (less numerical damping,
+            more noise). Compiled only into scenes that set it.
         time_scale: simulated seconds per shot second (playback speed).
             `Solver.advance(t0, t1)` simulates (t1 - t0) * time_scale seconds.
             Collider keyframes stay on the shot clock.
@@ -89,6 +94,7 @@ class SolverConfig:
     gravity: tuple[float, float, float] = (0.0, -STANDARD_GRAVITY, 0.0)
     damping: float = 0.0
     drag: float = 0.0
+    flip: float = 0.0
     time_scale: float = 1.0
     walls: tuple[WallType, ...] = (WallType.SEPARATE,) * 6
     wall_friction: float = 0.3
@@ -120,7 +126,17 @@ class SolverConfig:
         if len(gravity) != 3 or not all(math.isfinite(g) for g in gravity):
             raise SolverConfigError("gravity", f"{self.gravity!r}: give 3 finite numbers")
         set_("gravity", gravity)
-        for name in ("cfl", "damping", "drag", "time_scale", "wall_friction", "contact_friction", "dt_max", "dt_min"):
+        for name in (
+            "cfl",
+            "damping",
+            "drag",
+            "flip",
+            "time_scale",
+            "wall_friction",
+            "contact_friction",
+            "dt_max",
+            "dt_min",
+        ):
             if not math.isfinite(getattr(self, name)):
                 raise SolverConfigError(name, f"{getattr(self, name)!r}: give a finite number")
         checks = [
@@ -133,6 +149,7 @@ class SolverConfig:
             ),
             ("damping", self.damping >= 0, "must be >= 0 (a rate, 1/s)"),
             ("drag", self.drag >= 0, "must be >= 0 (a rate, 1/s)"),
+            ("flip", 0 <= self.flip <= 1, "must be in [0, 1] (0: APIC; 0.9-0.99: FLIP blends)"),
             ("time_scale", self.time_scale > 0, "must be > 0"),
             ("wall_friction", self.wall_friction >= 0, "must be >= 0"),
             ("contact_friction", self.contact_friction >= 0, "must be >= 0"),

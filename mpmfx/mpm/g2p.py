@@ -124,6 +124,44 @@ def gather(grid_v: wp.array3d(dtype=wp.vec3), x: wp.vec3, inv_dx: float, field_o
 
 
 @wp.func
+def gather_old(
+    gp: G2PParams,
+    grid_m: wp.array3d(dtype=float),
+    grid_fixed: wp.array4d(dtype=wp.int64),
+    grid_mv0: wp.array3d(dtype=wp.vec3),
+    x: wp.vec3,
+    field_offset: int,
+    channel: int,
+) -> wp.vec3:
+    """The grid's velocity before the update at the particle, domain/s: sum w_i mv0_i / m_i,
+    with mv0 the momentum P2G scattered without the stress (p2g.py, FLIP blend), from the
+    fixed-point channels `channel`.. in deterministic mode (whose momentum quantum is the mass
+    quantum, Solver._build_state), else from grid_mv0. Empty nodes add nothing."""
+    xg = x * gp.inv_dx
+    bi = int(wp.floor(xg[0] - 0.5))
+    bj = int(wp.floor(xg[1] - 0.5))
+    bk = int(wp.floor(xg[2] - 0.5))
+    W = bspline_weights(xg - wp.vec3(float(bi), float(bj), float(bk)))
+    bi += field_offset
+    v = wp.vec3(0.0)
+    for i in range(3):
+        for j in range(3):
+            for k in range(3):
+                m = float(0.0)
+                mv = wp.vec3(0.0)
+                if gp.deterministic != 0:
+                    m = float(grid_fixed[bi + i, bj + j, bk + k, 0]) * gp.q_mass
+                    for c in range(3):
+                        mv[c] = float(grid_fixed[bi + i, bj + j, bk + k, channel + c]) * gp.q_mass
+                else:
+                    m = grid_m[bi + i, bj + j, bk + k]
+                    mv = grid_mv0[bi + i, bj + j, bk + k]
+                if m > 0.0:
+                    v += (W[i, 0] * W[j, 1] * W[k, 2] / m) * mv
+    return v
+
+
+@wp.func
 def grid_density(
     gp: G2PParams,
     grid_m: wp.array3d(dtype=float),
@@ -220,6 +258,9 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
     multi = flags.multi_field
     one = flags.one_material
     varied = flags.varied
+    flip = flags.flip > 0.0
+    flip_share = flags.flip
+    flip_channel = flags.flip_channel
 
     # registers capped (g2p_launch_shape): a solid's return map took the compiler to 128, which
     # leaves a multiprocessor 512 threads
@@ -272,6 +313,7 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
         field_id_out: wp.array(dtype=wp.int32),
         pid_out: wp.array(dtype=wp.int32),
         vary: wp.array(dtype=vec5),
+        grid_mv0: wp.array3d(dtype=wp.vec3),
     ):
         slot = wp.tid()
         if wp.static(device_clock):
@@ -318,6 +360,11 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
             if wp.static(multi):
                 fo = field_id[p] * gp.nodes
             v_new, C_new = gather(grid_v, x[p], gp.inv_dx, fo)
+            v_move = v_new  # what advects the particle: the grid's velocity
+            if wp.static(flip):
+                # FLIP blend (Fei et al. 2021): flip (v_p + sum w (v_i - v_i_old)) + (1 - flip) sum w v_i
+                v_old = gather_old(gp, grid_m, grid_fixed, grid_mv0, x[p], fo, wp.static(flip_channel))
+                v_new = v_move + wp.static(flip_share) * (v[p] - v_old)
             C_new = gp.affine_keep * C_new  # drag: blend toward PIC at a rate, not a per-substep fraction
             mid = int(0)
             if wp.static(not one):
@@ -358,9 +405,13 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
                         J_new = wp.min(J_new, 1.0)
                     j_now = J_new
                     wp.atomic_min(stats, Stat.WATER_J_MIN, J_new)
-            x_new = x_new + gp.dt * v_new
+            x_new = x_new + gp.dt * v_move
             speed = wp.length(v_new)
+            if wp.static(flip):
+                speed = wp.max(speed, wp.length(v_move))  # the CFL's and the one-cell check's
             finite = finite and wp.isfinite(x_new) and wp.isfinite(C_new) and wp.isfinite(j_now)
+            if wp.static(flip):
+                finite = finite and wp.isfinite(v_new)
             if not finite:
                 wp.atomic_add(counts, Count.NONFINITE, 1)
                 wp.atomic_add(counts, Count.PER_MATERIAL + mid, 1)

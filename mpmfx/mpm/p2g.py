@@ -21,6 +21,10 @@ domain/s), below float32 resolution for speeds above ~1e-3 domain/s.
 Multi-field contact (opt-in): every body field has its own block of nodes; the grid's
 first axis is field * nodes + i. Each particle also scatters its mass gradient
 m * grad(w) (in 1/cell units) so the grid update can find the contact normal.
+
+FLIP blend (SceneFlags.flip > 0): each particle also scatters its momentum without the
+stress, w * m (v + C dpos), into `grid_mv0` (fixed point: channels from
+SceneFlags.flip_channel), so G2P can rebuild the grid's velocity before the update.
 """
 
 from __future__ import annotations
@@ -109,6 +113,8 @@ def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
     the substep is inactive; otherwise `sub` is unused (the reference path)."""
     multi = flags.multi_field
     one = flags.one_material
+    flip = flags.flip > 0.0
+    flip_channel = flags.flip_channel
     particle_affine = make_particle_affine(flags)
 
     @wp.kernel(enable_backward=False, module=flags.key + ("_dev" if device_clock else ""))
@@ -130,6 +136,7 @@ def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
         grid_normal: wp.array3d(dtype=wp.vec3),
         grid_fixed: wp.array4d(dtype=wp.int64),
         sub: wp.array(dtype=SubstepDev),
+        grid_mv0: wp.array3d(dtype=wp.vec3),
     ):
         p = wp.tid()
         if wp.static(device_clock):
@@ -146,6 +153,9 @@ def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
         inv_dx = pp.inv_dx
         dx = 1.0 / inv_dx
         mv = m * v[p]
+        mc = wp.mat33(0.0)
+        if wp.static(flip):
+            mc = m * load_m33(C, p)  # the affine momentum alone (the stress is `affine`'s other term)
         xg = x[p] * inv_dx
         bi = int(wp.floor(xg[0] - 0.5))
         bj = int(wp.floor(xg[1] - 0.5))
@@ -178,5 +188,13 @@ def make_p2g(flags: SceneFlags, *, device_clock: bool = False):
                         wp.atomic_add(grid_mv, bi + i, bj + j, bk + k, mom)
                         if wp.static(multi):
                             wp.atomic_add(grid_normal, bi + i, bj + j, bk + k, gm)
+                    if wp.static(flip):
+                        mom0 = w * (mv + mc * dpos)
+                        if pp.deterministic != 0:
+                            for c in range(3):
+                                q = to_fixed(mom0[c], pp.q_mom_inv)
+                                wp.atomic_add(grid_fixed, bi + i, bj + j, bk + k, wp.static(flip_channel) + c, q)
+                        else:
+                            wp.atomic_add(grid_mv0, bi + i, bj + j, bk + k, mom0)
 
     return p2g

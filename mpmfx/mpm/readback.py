@@ -11,7 +11,7 @@ from .constitutive import MODE_SAND, MODE_SNOW, MODE_WATER, MaterialParams
 from .order import in_particle_order
 from .state import ParticleBuffers, State, StepperClock, load_m33, m33_to_host
 
-__all__ = ["checkpoint", "host_arrays", "restore", "state_to_numpy", "volume_ratios"]
+__all__ = ["HostStaging", "checkpoint", "host_arrays", "restore", "state_to_numpy", "volume_ratios"]
 
 CHECKPOINT_VERSION = 3  # 3: with the slots' particles (pid); 2: with the solids' stored stress (tau); 1 and 2 are
 # restored too
@@ -45,11 +45,11 @@ def state_to_numpy(solver, state: State) -> dict[str, np.ndarray]:
     return {**host_arrays(solver, state), "J": volume_ratios(solver, state)}
 
 
-def host_arrays(solver, state: State, names=None) -> dict[str, np.ndarray]:
+def host_arrays(solver, state: State, names=None, staging: HostStaging | None = None) -> dict[str, np.ndarray]:
     """Host copies of the particle arrays as the solver stores them (`names`: a subset):
     x, v, C, Jp, alive, mass, volume, material, body, F (if any solid) and J (water's
     volume ratio, if any water; other particles' entries unused). `volume_ratios` gives every
-    particle's J."""
+    particle's J. staging: copy into its reused buffers (HostStaging)."""
     cur = state.cur
     arrays = {
         "x": cur.x,
@@ -66,14 +66,66 @@ def host_arrays(solver, state: State, names=None) -> dict[str, np.ndarray]:
         arrays["F"] = cur.F
     if solver.flags.water:
         arrays["J"] = cur.J
-    return to_host(state, {k: a for k, a in arrays.items() if names is None or k in names})
+    return to_host(state, {k: a for k, a in arrays.items() if names is None or k in names}, staging)
 
 
-def to_host(state: State, arrays: dict) -> dict[str, np.ndarray]:
-    """Host copies of device arrays, in particle order (see State: storage order)."""
-    if state.permuted:
-        arrays = {k: in_particle_order(a, state.pid) for k, a in arrays.items()}
-    return {k: m33_to_host(a) if k in ParticleBuffers.MATRICES else a.numpy() for k, a in arrays.items()}
+@wp.kernel(enable_backward=False)
+def _m33_in_particle_order(
+    rows: wp.array2d(dtype=wp.vec3), pid: wp.array(dtype=wp.int32), out: wp.array(dtype=wp.mat33)
+):
+    """out[pid[s]] = the matrix whose rows slot s holds in the (3, n) row planes: the host's
+    (n, 3, 3) layout in particle order, made on the device (the host transposes nothing)."""
+    s = wp.tid()
+    out[pid[s]] = wp.matrix_from_rows(rows[0, s], rows[1, s], rows[2, s])
+
+
+class HostStaging:
+    """Host buffers that a frame's device arrays are copied into, reused frame after frame.
+
+    A fresh host copy of every array each frame costs the host more than the copy itself: new
+    pages to fault in, and from a GPU a pageable copy goes through the driver's own staging.
+    Here each array lands in a buffer allocated once (page-locked on a GPU, so the copy is one
+    DMA), in `sets` alternating sets: a frame's arrays may still be read (written to disk) while
+    the next frame's are copied, never longer (the caller's writer holds at most one frame in
+    flight: mpmfx.stages.writer.FrameWriter(1)). `take` returns numpy views of the next set."""
+
+    def __init__(self, device, sets: int = 2):
+        self.device = wp.get_device(device)
+        self._sets: list[dict[str, wp.array]] = [{} for _ in range(sets)]
+        self._next = 0
+
+    def take(self, arrays: dict[str, wp.array]) -> dict[str, np.ndarray]:
+        """Host copies (views of this set's buffers) of device arrays of any shape and dtype."""
+        bufs = self._sets[self._next]
+        self._next = (self._next + 1) % len(self._sets)
+        for k, a in arrays.items():
+            b = bufs.get(k)
+            if b is None or b.shape != a.shape or b.dtype != a.dtype:
+                b = bufs[k] = wp.empty(a.shape, dtype=a.dtype, device="cpu", pinned=self.device.is_cuda)
+            wp.copy(b, a)
+        if self.device.is_cuda:
+            wp.synchronize_stream(wp.get_stream(self.device))
+        return {k: bufs[k].numpy() for k in arrays}
+
+
+def to_host(state: State, arrays: dict, staging: HostStaging | None = None) -> dict[str, np.ndarray]:
+    """Host copies of device arrays, in particle order (see State: storage order); matrices
+    (n, 3, 3). staging: copy into its reused buffers (views returned), else fresh arrays."""
+    if staging is None:
+        if state.permuted:
+            arrays = {k: in_particle_order(a, state.pid) for k, a in arrays.items()}
+        return {k: m33_to_host(a) if k in ParticleBuffers.MATRICES else a.numpy() for k, a in arrays.items()}
+    ordered, planes = {}, set()
+    for k, a in arrays.items():
+        if k in ParticleBuffers.MATRICES and a.shape[-1] == state.n:
+            ordered[k] = wp.empty(state.n, dtype=wp.mat33, device=a.device)
+            wp.launch(_m33_in_particle_order, dim=state.n, device=a.device, inputs=[a, state.pid, ordered[k]])
+        else:  # (a matrix field no material needs is a (3, 1) placeholder: transposed on the host)
+            ordered[k] = in_particle_order(a, state.pid) if state.permuted else a
+            if k in ParticleBuffers.MATRICES:
+                planes.add(k)
+    host = staging.take(ordered)
+    return {k: np.ascontiguousarray(h.transpose(1, 0, 2)) if k in planes else h for k, h in host.items()}
 
 
 def volume_ratios(solver, state: State) -> np.ndarray:
@@ -98,9 +150,10 @@ def volume_ratios(solver, state: State) -> np.ndarray:
     return to_host(state, {"J": out})["J"]
 
 
-def checkpoint(solver, state: State, t: float) -> dict[str, np.ndarray]:
+def checkpoint(solver, state: State, t: float, staging: HostStaging | None = None) -> dict[str, np.ndarray]:
     """Full state + stepper clock, as numpy arrays in particle order, and `pid`: the particle
-    each storage slot held (State), which `restore` puts back, so it resumes bit-identically."""
+    each storage slot held (State), which `restore` puts back, so it resumes bit-identically.
+    staging: the particle arrays copied into its reused buffers (HostStaging)."""
     data = to_host(
         state,
         {
@@ -110,6 +163,7 @@ def checkpoint(solver, state: State, t: float) -> dict[str, np.ndarray]:
             "material": state.material,
             "body": state.body,
         },
+        staging,
     )
     if state.variation is not None:  # a varied scene's multipliers (particle order): the factors and dt follow
         data["variation"] = state.variation

@@ -84,7 +84,7 @@ class Solver:
         self.config = config
         self.colliders = tuple(colliders)
         self.device = wp.get_device(device)
-        self.flags = SceneFlags.of(self.materials, multi_field=config.multi_field, varied=variation)
+        self.flags = SceneFlags.of(self.materials, multi_field=config.multi_field, varied=variation, flip=config.flip)
         self._wave_materials = self.materials  # the CFL's materials: the stiffest particle's moduli (variation.py)
         # specialised kernels for this scene: all three land in one Warp module per flags,
         # built before the first launch so the module compiles once
@@ -134,8 +134,10 @@ class Solver:
             self._grid_m = wp.zeros(full if not det else (1, 1, 1), dtype=float)
             self._grid_mv = wp.zeros(full if not det else (1, 1, 1), dtype=wp.vec3)
             self._grid_normal = wp.zeros(full if multi and not det else (1, 1, 1), dtype=wp.vec3)
-            channels = 7 if multi else 4  # mass, momentum (3), mass gradient (3, multi-field)
+            channels = self.flags.fixed_channels
             self._grid_fixed = wp.zeros(full + (channels,) if det else (1, 1, 1, channels), dtype=wp.int64)
+            # FLIP: the momentum without the stress (p2g.py), in fixed point in grid_fixed
+            self._grid_mv0 = wp.zeros(full if self.flags.flip > 0.0 and not det else (1, 1, 1), dtype=wp.vec3)
             self._grid_v = wp.zeros(full, dtype=wp.vec3)
 
     def _field_ids(self, body: np.ndarray) -> tuple[np.ndarray, int]:
@@ -303,6 +305,8 @@ class Solver:
                 multi_field=self.flags.multi_field,
                 marks=brick.marks if sparse else None,
             )
+            if self.flags.flip > 0.0 and not cfg.deterministic:  # (the brick P2G has no FLIP: chunked.py)
+                self._grid_mv0.zero_()
         if brick is not None:
             brick.marks.zero_()  # the scatter below marks what it writes
         self._grid_writer = brick
@@ -362,6 +366,7 @@ class Solver:
                     self._grid_normal,
                     self._grid_fixed,
                     self._sub,
+                    self._grid_mv0,
                 ],
             )
         # 3 · grid update (with the brick P2G: only the node bricks it marked)
@@ -441,6 +446,7 @@ class Solver:
                 state.pid,
                 *outs,
                 state.vary,
+                self._grid_mv0,
             ],
         )
         if permute:
@@ -560,17 +566,19 @@ class Solver:
         """Host copy of the particles, in particle order (readback.state_to_numpy)."""
         return readback.state_to_numpy(self, state)
 
-    def host_arrays(self, state: State, names=None) -> dict[str, np.ndarray]:
-        """Host copies of the particle arrays as stored (readback.host_arrays)."""
-        return readback.host_arrays(self, state, names)
+    def host_arrays(self, state: State, names=None, staging=None) -> dict[str, np.ndarray]:
+        """Host copies of the particle arrays as stored (readback.host_arrays; staging: a
+        readback.HostStaging whose buffers they land in)."""
+        return readback.host_arrays(self, state, names, staging)
 
     def volume_ratios(self, state: State) -> np.ndarray:
         """J (n,) float32 in particle order, computed on the device (readback.volume_ratios)."""
         return readback.volume_ratios(self, state)
 
-    def checkpoint(self, state: State, t: float) -> dict[str, np.ndarray]:
-        """Full state and stepper clock at shot time t, s, as numpy arrays (readback.checkpoint)."""
-        return readback.checkpoint(self, state, t)
+    def checkpoint(self, state: State, t: float, staging=None) -> dict[str, np.ndarray]:
+        """Full state and stepper clock at shot time t, s, as numpy arrays (readback.checkpoint;
+        staging: a readback.HostStaging whose buffers they land in)."""
+        return readback.checkpoint(self, state, t, staging)
 
     def restore(self, data: dict[str, np.ndarray]) -> tuple[State, float]:
         """State and shot time t from `checkpoint` output (readback.restore)."""

@@ -30,6 +30,9 @@ class SceneFlags:
     only a scene with water volume recovery compiles the grid-density gather; a scene of one
     material reads no particle's material index (it is 0), and one of one field no field index.
     varied: particles carry their own factors on their material's row (State.vary).
+    flip: the FLIP share of the velocity update (SolverConfig.flip), a constant of the kernels;
+    above 0, P2G also scatters the momentum without the stress and G2P gathers it back as the
+    grid's velocity before the update (Solver: `_grid_mv0`).
     """
 
     snow: bool
@@ -39,9 +42,10 @@ class SceneFlags:
     volume_recovery: bool = False
     one_material: bool = False
     varied: bool = False
+    flip: float = 0.0
 
     @classmethod
-    def of(cls, materials, *, multi_field: bool = False, varied: bool = False) -> "SceneFlags":
+    def of(cls, materials, *, multi_field: bool = False, varied: bool = False, flip: float = 0.0) -> "SceneFlags":
         modes = {m.mode for m in materials}
         recovery = any(m.mode == Mode.WATER and m.volume_recovery for m in materials)
         return cls(
@@ -52,12 +56,24 @@ class SceneFlags:
             recovery,
             len(materials) == 1,
             bool(varied),
+            float(flip),
         )
 
     @property
     def solid(self) -> bool:
         """Any material that carries a deformation gradient F."""
         return self.snow or self.sand
+
+    @property
+    def fixed_channels(self) -> int:
+        """Fixed-point channels a grid node keeps in deterministic mode: mass, momentum (3),
+        the mass gradient (3, multi-field), the momentum without the stress (3, FLIP)."""
+        return 4 + 3 * self.multi_field + 3 * (self.flip > 0.0)
+
+    @property
+    def flip_channel(self) -> int:
+        """First fixed-point channel of the momentum without the stress (FLIP scenes)."""
+        return 4 + 3 * self.multi_field
 
     @property
     def key(self) -> str:
@@ -72,6 +88,8 @@ class SceneFlags:
             ("v", self.varied),
         )
         tag = "".join(c for c, on in flags if on)
+        if self.flip > 0.0:
+            tag += f"f{round(self.flip * 1e6)}"
         return f"mpmfx_mpm_scene_{tag or 'tracer'}"
 
 

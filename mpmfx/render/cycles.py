@@ -8,11 +8,12 @@ from __future__ import annotations
 
 import json
 import subprocess
+import sys
 from collections.abc import Iterator
 from importlib.metadata import PackageNotFoundError, version
 from pathlib import Path
 
-from mpmfx.blender import FRAME_LINE, bpy_available, child_command, child_env
+from mpmfx.blender import FRAME_LINE, NOTE_LINE, bpy_available, child_command, child_env
 
 INSTALL_HINT = (
     'render.engine = "cycles" needs Blender as a Python module (bpy 4.5, Python 3.11; '
@@ -58,13 +59,15 @@ def write_job(
     walls: tuple | None = None,
     basin: float | None = None,
     label: str = "",
+    device: str = "cpu",
 ) -> Path:
     """Write the JSON job the child reads. Units: metres and degrees, in the USD stage's frame
     (Y up). looks: USD prim name (surface group or object) -> `mpmfx.render.looks.LOOKS` key;
     camera: {"position", "look_at"} or None to frame the simulated bounds, seen along
     -view_direction; outputs: one PNG path per frame; blend: where the lit scene is saved;
     walls: (lo, hi) of the box the solver's walls hold, basin: height of the basin drawn there;
-    label: text burned into every frame (empty: none)."""
+    label: text burned into every frame (empty: none); device: "cpu", or "gpu" for Cycles' GPU
+    devices where Blender has one."""
     job = {
         "usd": str(usd),
         "frames": [int(f) for f in frames],
@@ -88,6 +91,7 @@ def write_job(
         "walls": walls,
         "basin": basin,
         "label": label,
+        "device": device,
     }
     path.write_text(json.dumps(job, indent=1))
     return path
@@ -109,6 +113,8 @@ def run_job(job_path: Path, *, log: Path) -> Iterator[tuple[int, float, float]]:
                 if line.startswith(FRAME_LINE):
                     _, frame, wall, cpu = line.split()
                     yield int(frame), float(wall), float(cpu)
+                elif line.startswith(NOTE_LINE):
+                    print(f"[render] {line.removeprefix(NOTE_LINE).strip()}", file=sys.stderr, flush=True)
         finally:
             if proc.poll() is None:  # the consumer stopped early (Ctrl-C): do not leave Blender running
                 proc.kill()

@@ -25,7 +25,7 @@ from pathlib import Path
 import bpy
 from mathutils import Vector
 
-from mpmfx.blender import FRAME_LINE
+from mpmfx.blender import FRAME_LINE, NOTE_LINE
 from mpmfx.render import blender_scene as bs
 from mpmfx.render.blender_scene import Y_UP_TO_Z_UP, assign, make_material
 from mpmfx.render.looks import GROUND_FADE, GROUND_MIN, GROUND_SPAN, WORLD
@@ -110,12 +110,46 @@ def set_looks(job: dict, imported: dict) -> None:
         assign(obj, material("collider"))
 
 
+GPU_BACKENDS = ("OPTIX", "CUDA", "HIP", "ONEAPI", "METAL")  # Cycles' GPU device types, preferred first
+
+
+def use_gpu() -> str | None:
+    """Make Cycles render on the first GPU backend with a device here; its name, or None (no
+    backend in this Blender build, or no device for any: the CPU renders)."""
+    prefs = bpy.context.preferences.addons["cycles"].preferences
+    for kind in GPU_BACKENDS:
+        try:
+            prefs.compute_device_type = kind
+        except TypeError:  # not in this build (e.g. Metal off macOS)
+            continue
+        prefs.refresh_devices()
+        found = [d for d in prefs.devices if d.type == kind]
+        if found:
+            for d in prefs.devices:
+                d.use = d.type == kind
+            return f"{kind} ({', '.join(d.name for d in found)})"
+    prefs.compute_device_type = "NONE"
+    return None
+
+
 def set_render(job: dict) -> None:
-    """Cycles on the CPU: samples, OpenImageDenoise, motion blur from the exported velocities."""
+    """Cycles on the CPU, or a GPU as the job asks and Blender finds one: samples,
+    OpenImageDenoise, motion blur from the exported velocities."""
     scene = bpy.context.scene
     r, c = scene.render, scene.cycles
     r.engine = "CYCLES"
     c.device = "CPU"
+    if job.get("device") == "gpu":
+        gpu = use_gpu()
+        if gpu:
+            c.device = "GPU"
+            print(f"{NOTE_LINE} Cycles renders on {gpu}", flush=True)
+        else:
+            print(
+                f"{NOTE_LINE} render.device = gpu: Blender finds no OptiX, CUDA, HIP, oneAPI or Metal device "
+                "on this machine; Cycles renders on the CPU (set render.device = cpu to skip this check)",
+                flush=True,
+            )
     c.samples = int(job["samples"])
     c.use_adaptive_sampling = True
     c.use_denoising = bool(job["denoise"])

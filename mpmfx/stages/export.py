@@ -59,11 +59,12 @@ def run(ctx: Context) -> dict:
 def frame(job: FrameJob, f: int) -> None:
     """Frame `f`'s .vdb files, then its USD layer (its existence marks the frame done): a task."""
     shot, entry = job.shot, job.entry
-    groups = SurfaceFrame.read(job.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
+    surf, sim = job.upstream["surface"], job.upstream["simulate"]  # verified reads: a changed frame is redone
+    groups = surf.read(surf.frame_path(f, SurfaceFrame.EXT), SurfaceFrame.read).groups
     volumes = _write_vdbs(shot, entry, f, groups) if shot.export.vdb else {}
     points = {}
     if shot.export.points:
-        points = _points(shot, ParticleFrame.read(job.upstream["simulate"].frame_path(f, ParticleFrame.EXT)))
+        points = _points(shot, sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read))
     _writer(shot, entry).write_frame(
         f, points=points, meshes=_meshes(groups), volumes=volumes, colliders=_colliders(shot, f)
     )

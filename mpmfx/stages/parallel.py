@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any, Callable
 
 from tqdm import tqdm
 
-from mpmfx.cache import Entry
+from mpmfx.cache import DamagedError, Entry
 from mpmfx.config import ShotError
 from mpmfx.threads import THREADS_ENV, cpu_threads, usable_cores
 
@@ -223,7 +223,7 @@ class Frames:
                 if not worth_a_cluster(len(calls), wall, cpu, self.size):
                     return done + here(calls)
             client = self.client()
-            futures = [client.submit(fn, job, f, key=task_key(job.entry, f), pure=False) for job, f in calls]
+            futures = [client.submit(_task, fn, job, f, key=task_key(job.entry, f), pure=False) for job, f in calls]
             return done + _gather(client, futures, bar)
         finally:
             bar.close()
@@ -262,12 +262,24 @@ def _worker_env(workers: int) -> dict[str, str]:
     return {THREADS_ENV: str(max(1, usable_cores() // max(1, workers)))}
 
 
+def _task(fn: Callable[[FrameJob, int], Any], job: FrameJob, f: int) -> Any:
+    """fn(job, f) as a Dask task. A damaged upstream file comes back as a value, raised in the
+    client (which has the frame redone), so the worker does not log it as a failed task with its
+    traceback."""
+    try:
+        return fn(job, f)
+    except DamagedError as exc:
+        return exc
+
+
 def _gather(client, futures: list, bar) -> list[Any]:
     from distributed import as_completed  # backend: distributed
 
     try:
         for fut in as_completed(futures):
-            fut.result()  # raises the task's exception here, in the client
+            result = fut.result()  # raises the task's exception here, in the client
+            if isinstance(result, DamagedError):  # (returned by _task)
+                raise result
             bar.update()
         return [f.result() for f in futures]
     except BaseException:

@@ -14,6 +14,7 @@ import os
 import shutil
 from pathlib import Path
 
+from mpmfx import checksum
 from mpmfx.cache import atomic_path
 from mpmfx.config import RenderEngine, Shot
 from mpmfx.geometry.colliders import collider_mesh, keyframes
@@ -138,6 +139,7 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
         height=r.height,
         samples=r.samples,
         denoise=r.denoise,
+        device=r.device,
         shutter=r.shutter,
         fps=shot.shot.fps,
         mode=r.mode,
@@ -157,6 +159,7 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
     times = {}
     try:
         for f, wall, cpu in progress(run_job(spec, log=entry.root / f"{name}.log"), total=len(frames), desc="render"):
+            checksum.record(entry.frame_path(f, FRAME_EXT))  # Blender wrote it: its digest, as written
             times[f] = [wall, cpu]
     except CyclesError as exc:
         raise StageError(f"render (cycles): {exc}") from None
@@ -186,15 +189,16 @@ def _preview(job: FrameJob, f: int) -> None:
     label = f"frame {f}  t={(f - shot.shot.frame_start) / shot.shot.fps:.2f}s"
     # The renderer writes through its own temp name; this one is unique per writer, so two
     # workers drawing one frame never share a temp file, and the frame is complete or absent.
-    with atomic_path(job.entry.frame_path(f, FRAME_EXT)) as out:
+    sim, surf = job.upstream["simulate"], job.upstream["surface"]  # verified reads: a changed frame is redone
+    with atomic_path(job.entry.frame_path(f, FRAME_EXT), checksum=True) as out:
         if r.mode == "particles":
-            p = ParticleFrame.read(job.upstream["simulate"].frame_path(f, ParticleFrame.EXT))
+            p = sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read)
             pts = {o.name: (p.x[p.body == i], colour_for(o.material, i)) for i, o in enumerate(shot.bodies)}
             px = r.height * shot.particle_spacing / shot.domain.size * 1.5
             renderer.particles(pts, px, out, label=label)
         else:
             material_of = {g: o.material for g, o in zip(shot.surface_groups(), shot.bodies)}
-            groups = SurfaceFrame.read(job.upstream["surface"].frame_path(f, SurfaceFrame.EXT)).groups
+            groups = surf.read(surf.frame_path(f, SurfaceFrame.EXT), SurfaceFrame.read).groups
             meshes = {
                 g: (d.vertices, d.faces, colour_for(material_of.get(g, g), i))
                 for i, (g, d) in enumerate(groups.items())
@@ -218,6 +222,7 @@ def _hold(src: Path, dst: Path) -> None:
     except OSError:
         shutil.copyfile(src, tmp)
     tmp.replace(dst)
+    checksum.record(dst)
 
 
 def _collider_meshes(shot: Shot, frame: int) -> dict:

@@ -8,11 +8,13 @@ from __future__ import annotations
 
 import contextlib
 import socket
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from mpmfx.cache import Cache, Entry, code_hash, default_root, read_manifest, remove_temps
+from mpmfx import checksum
+from mpmfx.cache import Cache, DamagedError, Entry, code_hash, default_root, read_manifest, remove_temps
 from mpmfx.config import Shot, ShotError
 from mpmfx.publish import check_publishable, publish_renders, publish_stage, record, sweep
 from mpmfx.shotfile import load_shot_config
@@ -24,6 +26,7 @@ from mpmfx.stages.qa import shot_flags, warn_flags
 
 MODULES: dict[str, Stage] = {m.NAME: m for m in (voxelise, simulate, surface, export, render)}
 assert tuple(MODULES) == STAGES, "mpmfx.stages.STAGES and the runner's modules disagree"
+PUBLISHED = ("export", "render")  # stages whose files a run publishes: verified byte for byte first
 
 
 def stage_module(name: str) -> Stage:
@@ -119,6 +122,29 @@ class ShotRun:
                 out.append(StageStatus(name, "missing", "never run", entry.root))
         return out
 
+    def verify(self) -> tuple[list[tuple[str, Path, str]], int]:
+        """Read every file and checkpoint of every entry of this shot (every variant's) and
+        compare each with the digest recorded when it was written (`status --verify`), under the
+        shot's lock. A damaged file is marked, so its entry turns partial and the next run redoes
+        it; a damaged checkpoint is deleted (a resume uses an earlier one). Returns
+        ([(stage, path, why)], the number of files with no recorded digest: checked by size)."""
+        out, unverified = [], 0
+        if not self.cache.shot_dir.is_dir():
+            return out, unverified  # nothing cached (and no shot folder made for its lock)
+        with contextlib.nullcontext() if self.locked else self.cache.lock():
+            for name, root in ((n, r) for n in STAGES for r in self.cache.entries(n) if _real_dir(r)):
+                entry = Entry(root, name, root.name.rpartition("-")[2], {})
+                man = entry.manifest() or {}
+                changed, unknown = entry.verify()
+                unverified += len(unknown)
+                for rel in sorted(set(changed) | set(entry.damaged(man))):
+                    out.append((name, entry.root / rel, _why_damaged(entry, man, rel)))
+                    if rel.startswith("checkpoints/"):
+                        checksum.forget(entry.root / rel)
+                if files := [rel for rel in changed if not rel.startswith("checkpoints/")]:
+                    entry.mark_damaged(files)
+        return out, unverified
+
     # -- run -------------------------------------------------------------------------------
     def run(
         self, *, until: str = "render", force: tuple[str, ...] | list[str] = (), frames: list[int] | None = None
@@ -176,8 +202,40 @@ class ShotRun:
         return out
 
     def _run_locked(self, until: str, force, frames: list[int] | None) -> list[StageResult]:
+        """The stages in order. A file a stage reads that turns out changed since it was written
+        (DamagedError) is marked in its entry, and the stages run again from the top: the one
+        that wrote it redoes that file (its other frames are kept), the reader resumes."""
+        redone: set[tuple[str, str]] = set()
+        results: dict[str, StageResult] = {}
+        while True:
+            try:
+                for r in self._stages(until, force, frames):  # a stage done on a pass before keeps its state
+                    results[r.stage] = r if r.state != "cached" or r.stage not in results else results[r.stage]
+                return [results[name] for name in STAGES[: STAGES.index(until) + 1]]
+            except DamagedError as exc:
+                if (exc.root, exc.rel) in redone:
+                    raise StageError(
+                        f"{exc}, again after it was redone: the disk (or memory) may be failing; "
+                        f"check it, or point --cache at another disk"
+                    ) from None
+                redone.add((exc.root, exc.rel))
+                self._mark(exc.root, [exc.rel], exc.why)
+                force = ()  # done on the first pass; forcing again would drop the new frames
+
+    def _mark(self, root: str, rels: list[str], why: str) -> None:
+        """Mark damaged files of one of this shot's entries, saying so on stderr."""
+        entry = next((e for e in self.entries().values() if str(e.root.resolve()) == str(Path(root).resolve())), None)
+        if entry is None:
+            raise StageError(f"{Path(root) / rels[0]}: {why}; it is no entry of this shot, so it is not redone")
+        if not entry.mark_damaged(rels):  # no manifest to mark: the files are gone, so are their frames
+            for rel in rels:
+                _forget(entry, rel)
+        more = f" (and {len(rels) - 1} more)" if len(rels) > 1 else ""
+        print(f"[{entry.stage}] {entry.root / rels[0]}{more}: {why}; redoing it", file=sys.stderr)
+
+    def _stages(self, until: str, force, frames: list[int] | None):
+        """Each stage up to `until`: its result, as it finishes."""
         entries = self.entries()
-        results = []
         names = STAGES[: STAGES.index(until) + 1]
         surfacing = "surface" in names and (
             "surface" in force or not entries["surface"].complete(self._wanted("surface", frames))
@@ -188,26 +246,27 @@ class ShotRun:
                 entries[name].remove()
             ctx = self.begin(name, entries, frames)
             if isinstance(ctx, StageResult):
-                results.append(ctx)
+                yield ctx
                 continue
             if name == "surface" and kernels:
                 kernels.wait()
             t0 = time.perf_counter()
             with self.failing(ctx):
                 extra = stage_module(name).run(ctx) or {}
-            results.append(self.end(ctx, extra, time.perf_counter() - t0))
-        return results
+            yield self.end(ctx, extra, time.perf_counter() - t0)
 
     def begin(self, name: str, entries: dict[str, Entry], frames: list[int] | None) -> Context | StageResult:
         """A cached stage's result, or the context to run it in (damaged files removed, so their
         frames are redone; the entry folder made). Call with the shot's lock held."""
-        entry, mod, wanted = entries[name], stage_module(name), self._wanted(name, frames)
+        entry, wanted = entries[name], self._wanted(name, frames)
+        if self.publish and name in PUBLISHED and entry.root.is_dir():
+            # what a publish hands on is read through: a changed file is redone, never published
+            if bad := entry.verify(list(entry.files()))[0]:
+                self._mark(str(entry.root), bad, "its bytes differ from those written (checksum)")
         if entry.complete(wanted):
             return StageResult(name, "cached", 0.0, len(wanted) if wanted is not None else 1, entry.root)
-        for rel in entry.damaged():  # lost or truncated since the manifest: redo, never trust
-            (entry.root / rel).unlink(missing_ok=True)
-            if mod.PER_FRAME and Path(rel).stem.isdigit():  # e.g. vdb/g/0003.vdb: redo frame 3
-                entry.frame_path(int(Path(rel).stem), mod.FRAME_EXT).unlink(missing_ok=True)
+        for rel in entry.damaged():  # lost, truncated or changed since written: redo, never trust
+            _forget(entry, rel)
         state = "resumed" if entry.root.exists() else "ran"
         up = {s: entries[s] for s in STAGES[: STAGES.index(name)]}
         ctx = Context(
@@ -261,6 +320,30 @@ class ShotRun:
         )
         n = len(ctx.frames) if mod.PER_FRAME else 1
         return StageResult(entry.stage, ctx.state, seconds, n, entry.root)
+
+
+def _real_dir(path: Path) -> bool:
+    return path.is_dir() and not path.is_symlink()  # (a link would send the marks outside the cache)
+
+
+def _why_damaged(entry: Entry, man: dict, rel: str) -> str:
+    path, size = entry.root / rel, {**man.get("files", {}), **man.get("checkpoints", {})}.get(rel)
+    if rel.startswith("checkpoints/"):
+        return "differs from what was written; deleted (a resume uses an earlier checkpoint, or the start)"
+    if not path.is_file():
+        return "missing; a run redoes it"
+    if size is not None and path.stat().st_size != size:
+        return f"{path.stat().st_size} bytes, {size} when written; a run redoes it"
+    return "its bytes differ from those written (checksum); a run redoes it"
+
+
+def _forget(entry: Entry, rel: str) -> None:
+    """Delete a damaged file of `entry` and, in a per-frame stage, its frame's file, so the
+    stage redoes that frame (e.g. vdb/g/0003.vdb: frames/0003.usdc goes too)."""
+    mod = stage_module(entry.stage)
+    checksum.forget(entry.root / rel)
+    if mod.PER_FRAME and Path(rel).stem.isdigit():
+        checksum.forget(entry.frame_path(int(Path(rel).stem), mod.FRAME_EXT))
 
 
 def _ranges(frames: list[int]) -> str:

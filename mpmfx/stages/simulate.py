@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from mpmfx.cache import file_hash, write_json
+from mpmfx import checksum
+from mpmfx.cache import DamagedError, file_hash, write_json
 from mpmfx.config import ColliderShape, Shot, ShotError
 from mpmfx.geometry import MESH_LOADING
 from mpmfx.geometry.colliders import collider_mesh, keyframes, mesh_sdf
@@ -29,6 +30,7 @@ from mpmfx.io.frames import ParticleFrame, SeedParticles, read_arrays, write_arr
 from mpmfx.mpm import AnimatedMesh, Collider, ColliderKind, Particles, SimulationError, Solver
 from mpmfx.mpm.emission import device_bytes
 from mpmfx.mpm.materials import VARIED_FIELDS, preset
+from mpmfx.mpm.readback import HostStaging
 from mpmfx.stages.base import Context, StageError, quiet_warp
 from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
 from mpmfx.stages.writer import FrameWriter
@@ -188,10 +190,12 @@ def run(ctx: Context) -> dict:
     )
     start, fps = shot.shot.frame_start, shot.shot.fps
     last = max(ctx.frames)
-    ckpt = _latest_checkpoint(entry.root / "checkpoints", entry.done_frames(FRAME_EXT), start)
+    ckpt, restored = _restore(ctx, solver)
+    staging = HostStaging(solver.device)  # two sets of host buffers: the frame written, the frame made
     with FrameWriter() as writer:
         if ckpt is None:
-            p = SeedParticles.read(ctx.upstream["voxelise"].root)
+            vox = ctx.upstream["voxelise"]
+            p = vox.read(vox.root / SeedParticles.FILE, lambda path: SeedParticles.read(path.parent))
             body = p.body.astype(np.int32)
             parts = Particles(
                 x=((p.x - origin) / size).astype(np.float32),
@@ -209,13 +213,14 @@ def run(ctx: Context) -> dict:
             here = slice(None) if p.birth is None else p.birth <= 0  # (late ones are not there yet)
             qa0["max_speed"] = float(np.linalg.norm(p.v[here], axis=1).max(initial=0.0))  # m/s; no substep measured it
             consts = _consts(solver, state)  # material and body: the same every frame, copied once
-            writer.submit(_write_frame, entry, frame, qa0, None, _host(solver, state, consts), origin, size)
+            writer.submit(_write_frame, entry, frame, qa0, None, _host(solver, state, consts, staging), origin, size)
         else:
-            frame = ckpt
-            state, _ = solver.restore(read_arrays(entry.root / "checkpoints" / f"{ckpt:04d}.npz"))
+            frame, state = ckpt, restored
             consts = _consts(solver, state)
             if not entry.frame_path(frame, FRAME_EXT).exists():  # killed between checkpoint and frame
-                writer.submit(_write_frame, entry, frame, None, None, _host(solver, state, consts), origin, size)
+                writer.submit(
+                    _write_frame, entry, frame, None, None, _host(solver, state, consts, staging), origin, size
+                )
         split = dict.fromkeys(("advance", "host_copy", "writer_wait"), 0.0)  # s, summed over the frames
         for f in ctx.progress(range(frame + 1, last + 1), total=last - frame, desc="simulate"):
             t0 = time.perf_counter()
@@ -226,9 +231,9 @@ def run(ctx: Context) -> dict:
             t1 = time.perf_counter()
             ckpt_data = None
             if (f - start) % shot.solver.checkpoint_every == 0 or f == last:
-                ckpt_data = _host_copy(solver.checkpoint(state, (f - start) / fps), solver)
+                ckpt_data = solver.checkpoint(state, (f - start) / fps, staging)
             # the frame's arrays are the checkpoint's where there is one (one copy off the device)
-            host = _host(solver, state, consts, ckpt_data)
+            host = _host(solver, state, consts, staging, ckpt_data)
             t2 = time.perf_counter()
             qa = _qa(report, size) | _entered(solver, state)
             writer.submit(_write_frame, entry, f, qa, ckpt_data, host, origin, size)
@@ -297,24 +302,20 @@ FRAME_ARRAYS = ("x", "v", "Jp", "alive")  # what a frame file is made of, beside
 
 def _consts(solver, state) -> dict:
     """material and body, host copies in particle order (which no substep changes)."""
-    return _host_copy(solver.host_arrays(state, ("material", "body")), solver)
+    # (copies: on the CPU device numpy() views the solver's own memory)
+    return {k: np.array(a) for k, a in solver.host_arrays(state, ("material", "body")).items()}
 
 
-def _host(solver, state, consts: dict, checkpoint: dict | None = None) -> dict:
+def _host(solver, state, consts: dict, staging: HostStaging, checkpoint: dict | None = None) -> dict:
     """The particles' host copy for the frame file (a checkpoint's arrays where there is one: one
-    copy off the device), with J, the volume ratio, computed on the device; the rest of its
-    making (masks, checks) is the writer thread's."""
+    copy off the device), in `staging`'s buffers (the writer thread reads them while the next
+    frame is made: FrameWriter(1) and two sets), with J, the volume ratio, computed on the
+    device; the rest of its making (masks, checks) is the writer thread's."""
     if checkpoint:
         arrays = {k: checkpoint[k] for k in FRAME_ARRAYS}
     else:
-        arrays = _host_copy(solver.host_arrays(state, FRAME_ARRAYS), solver)
+        arrays = solver.host_arrays(state, FRAME_ARRAYS, staging)
     return {**arrays, **consts, "J": solver.volume_ratios(state)}
-
-
-def _host_copy(arrays: dict, solver) -> dict:
-    """On the CPU device `numpy()` views the solver's memory, which the next frame overwrites
-    while the writer thread is still busy: copy it (on a GPU it is a fresh host copy already)."""
-    return {k: np.array(a) for k, a in arrays.items()} if solver.device.is_cpu else arrays
 
 
 def _particles(s: dict, frame: int, origin, size: float) -> ParticleFrame:
@@ -370,14 +371,30 @@ def _entered(solver, state) -> dict:
     return {"mass_entered": float(mass[np.isinf(state.birth.numpy())].sum(dtype=np.float64))}
 
 
-def _latest_checkpoint(folder: Path, done: list[int], start: int) -> int | None:
-    """The newest checkpoint c with every frame file before it present (c's own frame may be
-    missing: a checkpoint is written just before its frame, and resuming writes it; a frame lost
-    later must be redone, so resume before it)."""
+def _restore(ctx: Context, solver) -> tuple[int | None, object]:
+    """(frame, solver state) of the newest checkpoint to resume from that holds what was written,
+    or (None, None): start from the voxelised particles. A damaged checkpoint (changed, cut short
+    or unreadable) is deleted, said in one line, and an earlier one (or the start) is used."""
+    entry, start = ctx.entry, ctx.shot.shot.frame_start
+    candidates = _checkpoints(entry.root / "checkpoints", entry.done_frames(FRAME_EXT), start)
+    for i, c in enumerate(candidates):
+        path = entry.root / "checkpoints" / f"{c:04d}.npz"
+        try:
+            return c, solver.restore(entry.read(path, read_arrays))[0]
+        except DamagedError as exc:
+            checksum.forget(path)
+            then = f"an earlier one (frame {candidates[i + 1]})" if i + 1 < len(candidates) else "the start"
+            ctx.warn(f"checkpoint {path.name}: {exc.why}; deleted, resuming from {then}")
+    return None, None
+
+
+def _checkpoints(folder: Path, done: list[int], start: int) -> list[int]:
+    """The checkpoints c to resume from, newest first: those with every frame file before them
+    present (c's own frame may be missing: a checkpoint is written just before its frame, and
+    resuming writes it; a frame lost later must be redone, so resume before it)."""
     have, f = set(done), start - 1
     if not folder.is_dir():
-        return None
+        return []
     while f + 1 in have:
         f += 1  # start..f: the unbroken run of frames from the first
-    ok = [c for c in sorted(int(p.stem) for p in folder.glob("[0-9]*.npz")) if start < c <= f + 1]
-    return ok[-1] if ok else None
+    return sorted((c for c in (int(p.stem) for p in folder.glob("[0-9]*.npz")) if start < c <= f + 1), reverse=True)

@@ -111,7 +111,8 @@ def _pipelined(calls: list[tuple[FrameJob, int]], bar, *, write_threads: int) ->
 
 
 def _read(job: FrameJob, f: int) -> ParticleFrame:
-    return ParticleFrame.read(job.upstream["simulate"].frame_path(f, ParticleFrame.EXT))
+    sim = job.upstream["simulate"]  # verified: a changed frame is redone by simulate, not surfaced
+    return sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read)
 
 
 def _surfaces(job: FrameJob, p: ParticleFrame, f: int) -> tuple[SurfaceFrame, dict]:

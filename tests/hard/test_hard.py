@@ -15,6 +15,7 @@ from mpmfx.mpm.state import m33_assign
 
 pytestmark = pytest.mark.hard
 KNOBS = ("youngs_modulus", "cfl", "max_substeps_per_frame", "bulk_modulus", "dt_min")
+FLIPS = [0.0, 0.95]  # the critical cases run with APIC and with the FLIP blend (SolverConfig.flip)
 
 
 def make(materials, blocks, *, grid_n=16, gravity=(0.0, 0.0, 0.0), **cfg):
@@ -79,18 +80,21 @@ def cube(lo, hi, grid_n=16):
     return lattice(lo, hi, 0.5 / grid_n)
 
 
+@pytest.mark.parametrize("flip", FLIPS)
 @pytest.mark.parametrize("cfl", [0.25, 0.5, 1.0])
-def test_cfl_sweep_standing_wave(cfl):
+def test_cfl_sweep_standing_wave(cfl, flip):
     # the exact standing wave of bench.cases (nu = 0, E = 1), u = A cos(kX) sin(wt), A k = 0.2
     x = cube([0.25, 0.5 - 1 / 16, 0.5 - 1 / 16], [0.75, 0.5 + 1 / 16, 0.5 + 1 / 16])
     k = math.pi / 0.5
     v = np.zeros_like(x)
     v[:, 0] = 0.2 * np.cos(k * (x[:, 0] - 0.25))  # A w = (0.2 / k) * k * c
-    solver, state = make([elastic(1.0, 0.0)], [(x, v, 0)], cfl=cfl, dt_max=1.0)
+    solver, state = make([elastic(1.0, 0.0)], [(x, v, 0)], cfl=cfl, dt_max=1.0, flip=flip)
     e0 = energy(solver, solver.state_to_numpy(state))
     verdict, reps, s = run(solver, state, 1.0)
     e1 = energy(solver, s)
-    print(f"HARD cfl_sweep cfl={cfl}: {verdict}, E/E0={e1 / e0:.3f}, cfl_used={max(r.cfl_used for r in reps):.2f}")
+    print(
+        f"HARD cfl_sweep cfl={cfl} flip={flip}: {verdict}, E/E0={e1 / e0:.3f}, cfl_used={max(r.cfl_used for r in reps):.2f}"
+    )
     if not verdict.startswith("SimulationError"):
         assert e1 <= 1.05 * e0, f"energy grew {e1 / e0:.3f}x at cfl={cfl}"
 
@@ -126,10 +130,11 @@ def test_stiff_material_1000x_at_fixed_dx():
     print(f"HARD stiff_1000x: {verdict}; capped substeps -> SimulationError naming max_substeps_per_frame")
 
 
+@pytest.mark.parametrize("flip", FLIPS)
 @pytest.mark.parametrize("kind", ["J=0.05", "inverted"])
-def test_extreme_compression_and_inversion(kind):
+def test_extreme_compression_and_inversion(kind, flip):
     x = cube([0.4, 0.4, 0.4], [0.6, 0.6, 0.6])
-    solver, state = make([elastic(1200.0)], [(x, (0.0, 0.0, 0.0), 0)], cfl=0.4)
+    solver, state = make([elastic(1200.0)], [(x, (0.0, 0.0, 0.0), 0)], cfl=0.4, flip=flip)
     F = np.tile(np.eye(3, dtype=np.float32), (state.n, 1, 1))
     if kind == "J=0.05":
         F *= np.float32(0.05 ** (1 / 3))
@@ -140,20 +145,21 @@ def test_extreme_compression_and_inversion(kind):
     verdict, reps, s = run(solver, state, 0.05)
     e1 = energy(solver, s)
     print(
-        f"HARD compression {kind}: {verdict}, E/E0={e1 / e0:.3f}, J range after {s['J'].min():.3f}..{s['J'].max():.3f}"
+        f"HARD compression {kind} flip={flip}: {verdict}, E/E0={e1 / e0:.3f}, J range after {s['J'].min():.3f}..{s['J'].max():.3f}"
     )
     if not verdict.startswith("SimulationError"):
         assert e1 <= 1.05 * e0
 
 
+@pytest.mark.parametrize("flip", FLIPS)
 @pytest.mark.parametrize("target", ["wall", "collider"])
-def test_high_speed_impact(target):
+def test_high_speed_impact(target, flip):
     speed = 30.0  # domain widths per second: ~2 cells per substep at a naive dt
     x = cube([0.42, 0.6, 0.42], [0.58, 0.76, 0.58])
     colliders = ()
     if target == "collider":
         colliders = (Collider(ColliderKind.SPHERE, radius=0.12, translations=[[0.5, 0.35, 0.5]]),)
-    solver = Solver([elastic(1200.0)], SolverConfig(grid_n=16, gravity=(0, 0, 0)), colliders=colliders)
+    solver = Solver([elastic(1200.0)], SolverConfig(grid_n=16, gravity=(0, 0, 0), flip=flip), colliders=colliders)
     parts = Particles(
         x=x,
         v=np.tile([0.0, -speed, 0.0], (len(x), 1)).astype(np.float32),
@@ -168,87 +174,102 @@ def test_high_speed_impact(target):
     inside = 0
     if target == "collider":
         inside = int((np.linalg.norm(s["x"] - [0.5, 0.35, 0.5], axis=1) < 0.12 - 2 / 16).sum())
-    print(f"HARD impact into {target} at {speed}/s: {verdict}, E/E0={e1 / e0:.3f}, deep inside collider={inside}")
+    print(
+        f"HARD impact into {target} at {speed}/s flip={flip}: {verdict}, E/E0={e1 / e0:.3f}, deep inside collider={inside}"
+    )
     assert s["x"].min() >= 0.0 and s["x"].max() <= 1.0
     assert inside == 0
     if not verdict.startswith("SimulationError"):
         assert e1 <= 1.05 * e0
 
 
-@pytest.mark.parametrize("cells", [1, 2, 3, 4])
-def test_thin_plate(cells):
+@pytest.mark.parametrize("cells,flip", [(1, 0.0), (2, 0.0), (3, 0.0), (4, 0.0), (1, FLIPS[1]), (2, FLIPS[1])])
+def test_thin_plate(cells, flip):
     n = 16
     h = cells / n
     x = cube([0.25, 0.5, 0.25], [0.75, 0.5 + h, 0.75])
     g = 4.9
-    solver, state = make([elastic(1200.0)], [(x, (0.0, -3.0, 0.0), 0)], gravity=(0, -g, 0), walls=("slip",) * 6)
+    solver, state = make(
+        [elastic(1200.0)], [(x, (0.0, -3.0, 0.0), 0)], gravity=(0, -g, 0), walls=("slip",) * 6, flip=flip
+    )
     s0 = solver.state_to_numpy(state)
     e0 = energy(solver, s0) + (s0["mass"] * g * s0["x"][:, 1]).sum()
     verdict, reps, s = run(solver, state, 0.3)
     e1 = energy(solver, s) + (s["mass"] * g * s["x"][:, 1]).sum()
-    print(f"HARD thin plate {cells} cell(s): {verdict}, (E+PE)/(E0+PE0)={e1 / e0:.3f}, y_min={s['x'][:, 1].min():.3f}")
+    print(
+        f"HARD thin plate {cells} cell(s) flip={flip}: {verdict}, (E+PE)/(E0+PE0)={e1 / e0:.3f}, y_min={s['x'][:, 1].min():.3f}"
+    )
     assert s["x"][:, 1].min() >= 1 / n  # nothing tunnels through the floor
     if not verdict.startswith("SimulationError"):
         assert e1 <= 1.05 * e0
 
 
+@pytest.mark.parametrize("flip", FLIPS)
 @pytest.mark.parametrize("mode", [OutOfDomain.CLAMP, OutOfDomain.REMOVE])
-def test_fast_toward_domain_edge(mode):
+def test_fast_toward_domain_edge(mode, flip):
     x = cube([0.6, 0.4, 0.4], [0.75, 0.55, 0.55])
-    solver, state = make([elastic(300.0)], [(x, (50.0, 0.0, 0.0), 0)], out_of_domain=mode, walls=("separate",) * 6)
+    solver, state = make(
+        [elastic(300.0)], [(x, (50.0, 0.0, 0.0), 0)], out_of_domain=mode, walls=("separate",) * 6, flip=flip
+    )
     verdict, reps, s = run(solver, state, 0.05)
     lost = sum(r.particles_lost for r in reps)
-    print(f"HARD fast toward edge ({mode.value}): {verdict}, lost={lost}, x_max={s['x'][:, 0].max():.4f}")
+    print(f"HARD fast toward edge ({mode.value}) flip={flip}: {verdict}, lost={lost}, x_max={s['x'][:, 0].max():.4f}")
     assert s["x"].max() <= 1.0 - 1 / 16 + 1e-6 and s["x"].min() >= 1 / 16 - 1e-6
     if mode == OutOfDomain.REMOVE:
         assert lost == int((s["alive"] == 0).sum())
 
 
-def test_spray_near_empty_nodes():
+@pytest.mark.parametrize("flip", FLIPS)
+def test_spray_near_empty_nodes(flip):
     rng = np.random.default_rng(1)
     x = rng.uniform(0.25, 0.75, (300, 3)).astype(np.float32)  # ~1 particle per 14 cells
     v = rng.uniform(-2.0, 2.0, (300, 3)).astype(np.float32)
-    solver, state = make([preset("Water")], [(x, v, 0)], gravity=(0, -4.9, 0))
+    solver, state = make([preset("Water")], [(x, v, 0)], gravity=(0, -4.9, 0), flip=flip)
     verdict, reps, s = run(solver, state, 0.1)
     vmax = float(np.linalg.norm(s["v"], axis=1).max())
     print(
-        f"HARD spray (300 isolated water particles): {verdict}, |v|max={vmax:.2f} (start {np.linalg.norm(v, axis=1).max():.2f})"
+        f"HARD spray (300 isolated water particles) flip={flip}: {verdict}, |v|max={vmax:.2f} (start {np.linalg.norm(v, axis=1).max():.2f})"
     )
     assert vmax <= np.linalg.norm(v, axis=1).max() + 4.9 * 0.1 + 0.5  # no momentum from nothing
 
 
-def test_stiff_on_soft():
+@pytest.mark.parametrize("flip", FLIPS)
+def test_stiff_on_soft(flip):
     soft = cube([0.3, 3 / 16, 0.3], [0.7, 0.4, 0.7])
     stiff = cube([0.4, 0.4, 0.4], [0.6, 0.5, 0.6])
     mats = [preset("Slush"), elastic(1.2e5)]
-    solver, state = make(mats, [(soft, (0, 0, 0), 0), (stiff, (0, -1.0, 0), 1)], gravity=(0, -4.9, 0))
+    solver, state = make(mats, [(soft, (0, 0, 0), 0), (stiff, (0, -1.0, 0), 1)], gravity=(0, -4.9, 0), flip=flip)
     verdict, reps, s = run(solver, state, 0.03, frames=2)
     c_stiff = mats[1].wave_speed()
     dt_cap = 0.4 * solver.config.dx / c_stiff
-    print(f"HARD stiff on soft: {verdict}, dt_max={max(r.dt_max for r in reps):.2e} (cap {dt_cap:.2e})")
+    print(f"HARD stiff on soft flip={flip}: {verdict}, dt_max={max(r.dt_max for r in reps):.2e} (cap {dt_cap:.2e})")
     assert max(r.dt_max for r in reps) <= dt_cap * 1.001  # dt from the stiffest material
 
 
+@pytest.mark.parametrize("flip", FLIPS)
 @pytest.mark.parametrize("clamp", [True, False])
-def test_water_in_tension(clamp):
+def test_water_in_tension(clamp, flip):
     x = cube([0.4, 0.4, 0.4], [0.6, 0.6, 0.6])
     v = (x - 0.5) * 4.0  # expanding: J > 1 wherever pressure could go negative
-    solver, state = make([preset("Water", clamp_pressure=clamp)], [(x, v, 0)])
+    solver, state = make([preset("Water", clamp_pressure=clamp)], [(x, v, 0)], flip=flip)
     verdict, reps, s = run(solver, state, 0.05)
-    print(f"HARD water in tension (clamp={clamp}): {verdict}, J range {s['J'].min():.3f}..{s['J'].max():.3f}")
+    print(
+        f"HARD water in tension (clamp={clamp}) flip={flip}: {verdict}, J range {s['J'].min():.3f}..{s['J'].max():.3f}"
+    )
     if clamp:
         assert s["J"].max() <= 1.0 + 1e-6  # p >= 0: no memory of the expansion
 
 
-def test_expanding_sand():
+@pytest.mark.parametrize("flip", FLIPS)
+def test_expanding_sand(flip):
     x = cube([0.4, 0.4, 0.4], [0.6, 0.6, 0.6])
     v = (x - 0.5) * 4.0
     mat = preset("CohesiveGranular")
-    solver, state = make([mat], [(x, v, 0)])
+    solver, state = make([mat], [(x, v, 0)], flip=flip)
     verdict, reps, s = run(solver, state, 0.05)
     J = np.linalg.det(s["F"].astype(np.float64))
     print(
-        f"HARD expanding sand: {verdict}, det F max {J.max():.5f} (apex {math.exp(mat.cohesion):.5f}), "
+        f"HARD expanding sand flip={flip}: {verdict}, det F max {J.max():.5f} (apex {math.exp(mat.cohesion):.5f}), "
         f"volume correction max {s['Jp'].max():.4f}"
     )
     assert J.max() <= math.exp(mat.cohesion) * (1 + 1e-3)  # projected to the cone tip

@@ -8,6 +8,7 @@ import subprocess
 import numpy as np
 import pytest
 
+from mpmfx import checksum
 from mpmfx.io import vdb as vdbio
 from mpmfx.io.vdb import GridClass, VdbGrid, read_vdb, write_vdb
 
@@ -129,7 +130,8 @@ def test_failed_write_leaves_no_file_and_keeps_the_old_one(tmp_path, monkeypatch
         write_vdb(path, _sphere_grids(), metadata={})
     monkeypatch.undo()
     assert path.read_bytes() == before
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["0001.vdb"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == [".0001.vdb.b2", "0001.vdb"]  # and its checksum
+    assert checksum.recorded(path) == checksum.digest(path)  # still the old file's
 
 
 @pytest.mark.parametrize(

@@ -156,6 +156,28 @@ def test_cycles_render_stage_draws_the_looks(exported):
     assert 0.01 < jelly.mean() < 0.6, "the jelly cube should be in the picture, red, and not fill it"
 
 
+def test_a_gpu_render_on_a_machine_without_one_says_so_and_renders_on_the_cpu(exported, capsys):
+    """render.device = gpu where Blender finds no OptiX / CUDA / HIP / oneAPI / Metal device (as
+    here and in CI): one line says so, and Cycles draws the frame on the CPU."""
+    folder, shot, _ = exported
+    cwd = os.getcwd()
+    os.chdir(folder)
+    try:
+        run = mpmfx.load_shot(
+            shot,
+            cache_root=folder / "cache",
+            quiet=True,
+            overrides=["render.engine=cycles", "render.device=gpu", "render.samples=1", "render.width=64"]
+            + ["render.height=48", "render.movie=false"],
+        )
+        entry = {r.stage: r for r in run.run(frames=[1])}["render"].entry
+    finally:
+        os.chdir(cwd)
+    err = capsys.readouterr().err
+    assert "render.device = gpu" in err and "renders on the CPU" in err, err[-2000:]
+    assert (entry / "frames" / "0001.png").stat().st_size > 0
+
+
 def test_material_lands_on_the_drawn_ground(exported):
     """The renders' ground is the solver's floor (the top of its wall band), where material stops."""
     from mpmfx.io.frames import ParticleFrame

@@ -79,7 +79,9 @@ def test_a_non_finite_frame_writes_nothing(tmp_path):
     state["v"][2, 1] = 0.0
     _write_frame(Entry, 7, {"substeps": 3}, {"x": state["x"]}, state, np.zeros(3), 2.0)
     assert sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*.*")) == [
+        "checkpoints/.0007.npz.b2",  # each with its checksum (mpmfx.checksum)
         "checkpoints/0007.npz",
+        "frames/.0007.npz.b2",
         "frames/0007.npz",
         "qa/0007.json",
     ]
