@@ -9,6 +9,7 @@ stage's frame and converted with `to_blender`, so the two can never drift apart.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import bmesh
 import bpy
@@ -33,7 +34,8 @@ def _link(tree, a, b):
 
 
 def make_material(name: str, look: str) -> bpy.types.Material:
-    """A Principled BSDF material from `LOOKS[look]`, with its grain, bump and absorption."""
+    """A Principled BSDF material from `LOOKS[look]`, with its grain, bump, sparkle, clear
+    shadows and absorption."""
     spec = LOOKS[look]
     mat = bpy.data.materials.new(f"mpmfx_{name}")
     mat.use_nodes = True
@@ -44,28 +46,29 @@ def make_material(name: str, look: str) -> bpy.types.Material:
         bsdf.inputs[key].default_value = (*value, 1.0) if key == "Base Color" else value
     bsdf.subsurface_method = "BURLEY"  # about half the time of random walk on the CPU, same read at this scale
     if spec.get("grain") or spec.get("bump"):
+        coords = tree.nodes.new("ShaderNodeTexCoord").outputs["Object"]  # object coordinates are metres
         size = (spec.get("bump") or (0.002, 0, 0))[0]
-        coords = tree.nodes.new("ShaderNodeTexCoord")
-        noise = tree.nodes.new("ShaderNodeTexNoise")
-        noise.inputs["Scale"].default_value = 1.0 / size  # object coordinates are metres
-        noise.inputs["Detail"].default_value = 4.0
-        _link(tree, coords.outputs["Object"], noise.inputs["Vector"])
+        fac, height = (_cells if spec.get("cells") else _noise)(tree, coords, size)
         if spec.get("grain"):
             ramp = tree.nodes.new("ShaderNodeValToRGB")
             ramp.color_ramp.elements[0].position, ramp.color_ramp.elements[1].position = 0.35, 0.65
             ramp.color_ramp.elements[0].color = (*spec["grain"], 1.0)
             ramp.color_ramp.elements[1].color = (*spec["bsdf"]["Base Color"], 1.0)
-            _link(tree, noise.outputs["Fac"], ramp.inputs["Fac"])
+            _link(tree, fac, ramp.inputs["Fac"])
             _link(tree, ramp.outputs["Color"], bsdf.inputs["Base Color"])
         if spec.get("bump"):
             _, strength, distance = spec["bump"]
             bump = tree.nodes.new("ShaderNodeBump")
             bump.inputs["Strength"].default_value = strength
             bump.inputs["Distance"].default_value = distance
-            _link(tree, noise.outputs["Fac"], bump.inputs["Height"])
+            _link(tree, height, bump.inputs["Height"])
             _link(tree, bump.outputs["Normal"], bsdf.inputs["Normal"])
+    surface = bsdf.outputs["BSDF"]
+    if spec.get("sparkle"):
+        surface = _sparkle(tree, surface, *spec["sparkle"])
     if spec.get("clear_shadow"):
-        _clear_shadow(tree, bsdf, out)
+        surface = _clear_shadow(tree, surface)
+    _link(tree, surface, out.inputs["Surface"])
     if spec.get("absorb"):
         colour, density = spec["absorb"]
         absorb = tree.nodes.new("ShaderNodeVolumeAbsorption")
@@ -75,15 +78,90 @@ def make_material(name: str, look: str) -> bpy.types.Material:
     return mat
 
 
-def _clear_shadow(tree, bsdf, out) -> None:
-    """Shadow rays see a transparent surface, camera and bounce rays the BSDF."""
+def _math(tree, op: str, a, b=None, *, vector: bool = False):
+    """A Math (or Vector Math) node `op` of sockets or constants a, b; returns its output."""
+    node = tree.nodes.new("ShaderNodeVectorMath" if vector else "ShaderNodeMath")
+    node.operation = op
+    for i, v in enumerate((a, b)):
+        if v is None:
+            continue
+        if isinstance(v, bpy.types.NodeSocket):
+            _link(tree, v, node.inputs[i])
+        else:
+            node.inputs[i].default_value = v
+    return node.outputs["Vector" if vector else "Value"]
+
+
+def _noise(tree, coords, size: float):
+    """(colour mix factor, bump height): a smooth noise of feature `size` m."""
+    noise = tree.nodes.new("ShaderNodeTexNoise")
+    noise.inputs["Scale"].default_value = 1.0 / size
+    noise.inputs["Detail"].default_value = 4.0
+    _link(tree, coords, noise.inputs["Vector"])
+    return noise.outputs["Fac"], noise.outputs["Fac"]
+
+
+def _cells(tree, coords, size: float):
+    """(colour mix factor, bump height) for grains of `size` m: one random value per Voronoi
+    cell mixed with a mottle eight grains across; each grain a dome (high at its centre)."""
+    cells = tree.nodes.new("ShaderNodeTexVoronoi")
+    cells.inputs["Scale"].default_value = 1.0 / size
+    _link(tree, coords, cells.inputs["Vector"])
+    mottle = tree.nodes.new("ShaderNodeTexNoise")
+    mottle.inputs["Scale"].default_value = 1.0 / (8.0 * size)
+    _link(tree, coords, mottle.inputs["Vector"])
+    each = tree.nodes.new("ShaderNodeSeparateColor")
+    _link(tree, cells.outputs["Color"], each.inputs["Color"])
+    fac = _math(
+        tree,
+        "ADD",
+        _math(tree, "MULTIPLY", each.outputs["Red"], 0.6),
+        _math(tree, "MULTIPLY", mottle.outputs["Fac"], 0.5),
+    )
+    dome = _math(tree, "SUBTRACT", 1.0, _math(tree, "MULTIPLY", cells.outputs["Distance"], cells.outputs["Distance"]))
+    return _math(tree, "SUBTRACT", fac, 0.05), dome
+
+
+def _sparkle(tree, surface, size: float, fraction: float, weight: float):
+    """`surface` plus sparse glints: in `fraction` of the surface (the cores of Voronoi cells of
+    `size` m) a near-mirror glossy facet, tilted at random per cell, added at `weight` (added,
+    not mixed: a facet that mirrors something darker than the surface must not show as a dark
+    speck)."""
+    cells = tree.nodes.new("ShaderNodeTexVoronoi")
+    cells.inputs["Scale"].default_value = 1.0 / size
+    _link(tree, tree.nodes.new("ShaderNodeTexCoord").outputs["Object"], cells.inputs["Vector"])
+    # a cell's core within radius r of its point covers (4/3) pi r^3 of a unit cell
+    core = (3.0 * fraction / (4.0 * math.pi)) ** (1.0 / 3.0)
+    mask = _math(tree, "LESS_THAN", cells.outputs["Distance"], core)
+    # tilts up to about 30 degrees each way: a spread of facets, so that some of them mirror the
+    # sun towards the camera wherever the surface is lit
+    tilt = _math(tree, "SUBTRACT", cells.outputs["Color"], (0.5, 0.5, 0.5), vector=True)
+    tilt = _math(tree, "SCALE", tilt, vector=True)
+    tilt.node.inputs["Scale"].default_value = 1.2
+    normal = tree.nodes.new("ShaderNodeNewGeometry").outputs["Normal"]
+    facet = _math(tree, "NORMALIZE", _math(tree, "ADD", normal, tilt, vector=True), vector=True)
+    glossy = tree.nodes.new("ShaderNodeBsdfAnisotropic")  # Blender 4.x's Glossy BSDF
+    glossy.inputs["Roughness"].default_value = 0.15
+    _link(tree, facet, glossy.inputs["Normal"])
+    grey = tree.nodes.new("ShaderNodeCombineColor")
+    for channel in ("Red", "Green", "Blue"):
+        _link(tree, _math(tree, "MULTIPLY", mask, weight), grey.inputs[channel])
+    _link(tree, grey.outputs["Color"], glossy.inputs["Color"])
+    add = tree.nodes.new("ShaderNodeAddShader")
+    _link(tree, surface, add.inputs[0])
+    _link(tree, glossy.outputs[0], add.inputs[1])
+    return add.outputs["Shader"]
+
+
+def _clear_shadow(tree, surface):
+    """`surface` for camera and bounce rays; shadow rays see it transparent."""
     path = tree.nodes.new("ShaderNodeLightPath")
     clear = tree.nodes.new("ShaderNodeBsdfTransparent")
     mix = tree.nodes.new("ShaderNodeMixShader")
     _link(tree, path.outputs["Is Shadow Ray"], mix.inputs["Fac"])
-    _link(tree, bsdf.outputs["BSDF"], mix.inputs[1])
+    _link(tree, surface, mix.inputs[1])
     _link(tree, clear.outputs["BSDF"], mix.inputs[2])
-    _link(tree, mix.outputs["Shader"], out.inputs["Surface"])
+    return mix.outputs["Shader"]
 
 
 def assign(obj, mat) -> None:
@@ -98,8 +176,10 @@ def assign(obj, mat) -> None:
 # Ground, sky, sun
 
 
-def add_ground(floor_y: float, centre, *, size: float) -> bpy.types.Object:
-    """A square ground plane of `size` metres at the solver's floor height (stage y = floor_y)."""
+def add_ground(floor_y: float, centre, *, size: float, fade: tuple[float, float], world: dict) -> bpy.types.Object:
+    """A square ground plane of `size` metres at the solver's floor height (stage y = floor_y),
+    fading between `fade` (near, far) metres from the camera into the world's colour at the
+    horizon (`world`: `mpmfx.render.looks.WORLD`), so that it meets the sky with no edge."""
     mesh = bpy.data.meshes.new("ground")
     h = size / 2
     mesh.from_pydata([(-h, -h, 0), (h, -h, 0), (h, h, 0), (-h, h, 0)], [], [(0, 1, 2, 3)])
@@ -107,7 +187,30 @@ def add_ground(floor_y: float, centre, *, size: float) -> bpy.types.Object:
     bpy.context.scene.collection.objects.link(obj)
     c = to_blender((centre[0], floor_y, centre[2]))
     obj.location = c
-    assign(obj, make_material("ground", "ground"))
+    mat = make_material("ground", "ground")
+    tree = mat.node_tree
+    out = tree.nodes["Material Output"]
+    stone = out.inputs["Surface"].links[0].from_socket
+    # the horizon in the direction of this point (the view ray, flattened), as the camera sees it
+    away = _math(tree, "SCALE", tree.nodes.new("ShaderNodeNewGeometry").outputs["Incoming"], vector=True)
+    away.node.inputs["Scale"].default_value = -1.0
+    flat = _math(tree, "MULTIPLY", away, (1.0, 1.0, 0.0), vector=True)
+    haze = tree.nodes.new("ShaderNodeEmission")
+    haze.inputs["Strength"].default_value = world["strength"]
+    _link(tree, _environment(tree, _lifted(tree, flat, world), world), haze.inputs["Color"])
+    far = tree.nodes.new("ShaderNodeMapRange")
+    far.interpolation_type = "SMOOTHSTEP"
+    far.inputs["From Min"].default_value, far.inputs["From Max"].default_value = fade
+    _link(tree, tree.nodes.new("ShaderNodeCameraData").outputs["View Distance"], far.inputs["Value"])
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    _link(tree, far.outputs["Result"], mix.inputs["Fac"])
+    _link(tree, stone, mix.inputs[1])
+    _link(tree, haze.outputs["Emission"], mix.inputs[2])
+    _link(tree, mix.outputs["Shader"], out.inputs["Surface"])
+    # the haze is the world's colour, already lit: not a light for Cycles to sample (a lamp
+    # kilometres wide would take samples from the sun and the sky)
+    mat.cycles.emission_sampling = "NONE"
+    assign(obj, mat)
     return obj
 
 
@@ -139,34 +242,103 @@ def add_basin(lo, hi, *, height: float, thickness: float, look: str = "ground") 
     return obj
 
 
-def add_sky(*, sun_elevation: float, sun_rotation: float, strength: float = 0.25, sun_strength: float = 3.5) -> None:
-    """Blender's Nishita sky for the background and fill light, plus a sun lamp along the sky's
-    sun direction (a lamp converges in a few samples; the sky's own sun disc would be noise)."""
+def studio_hdri(name: str) -> Path:
+    """The path of one of the studio HDRIs that Blender ships (datafiles/studiolights/world)."""
+    return Path(bpy.utils.system_resource("DATAFILES", path="studiolights/world")) / f"{name}.exr"
+
+
+def _environment(tree, vector, world: dict):
+    """The world's HDRI colour in the direction `vector` (a socket, Blender world axes), turned
+    by world["rotation"] degrees about the up axis and clamped to world["clamp"]."""
+    image = bpy.data.images.get(world["hdri"]) or bpy.data.images.load(str(studio_hdri(world["hdri"])))
+    image.name = world["hdri"]
+    env = tree.nodes.new("ShaderNodeTexEnvironment")
+    env.image = image
+    turn = tree.nodes.new("ShaderNodeMapping")
+    turn.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(world.get("rotation", 0.0)))
+    _link(tree, vector, turn.inputs["Vector"])
+    _link(tree, turn.outputs["Vector"], env.inputs["Vector"])
+    c = world["clamp"]
+    return _math(tree, "MINIMUM", env.outputs["Color"], (c, c, c), vector=True)
+
+
+def _lifted(tree, direction, world: dict):
+    """`direction` tilted up: the horizon moves to world["horizon_lift"] (tan of its elevation)."""
+    return _math(
+        tree, "NORMALIZE", _math(tree, "ADD", direction, (0.0, 0.0, world["horizon_lift"]), vector=True), vector=True
+    )
+
+
+def add_world(world: dict, *, sun_elevation: float, sun_rotation: float) -> dict:
+    """Light the scene with `world` (`mpmfx.render.looks.WORLD`: a studio HDRI, its own sun
+    clamped) plus a sun lamp along elevation / rotation (degrees; rotation about the up axis,
+    from +Y towards -X): a lamp converges in a few samples and casts the sharp shadows. The HDRI
+    is turned so that its sun stands where the lamp is; returns `world` with that "rotation"."""
     scene = bpy.context.scene
-    world = scene.world or bpy.data.worlds.new("World")
-    scene.world = world
-    world.use_nodes = True
-    tree = world.node_tree
+    el, rot = math.radians(sun_elevation), math.radians(sun_rotation)
+    towards_sun = Vector((-math.sin(rot) * math.cos(el), math.cos(rot) * math.cos(el), math.sin(el)))
+    lamp_azimuth = math.degrees(math.atan2(towards_sun.y, towards_sun.x))
+    world = {**world, "rotation": world["sun_azimuth"] - lamp_azimuth}
+    bw = scene.world or bpy.data.worlds.new("World")
+    scene.world = bw
+    bw.use_nodes = True
+    tree = bw.node_tree
     tree.nodes.clear()
-    sky = tree.nodes.new("ShaderNodeTexSky")
-    sky.sky_type = "NISHITA"
-    sky.sun_disc = False
-    sky.sun_elevation, sky.sun_rotation = math.radians(sun_elevation), math.radians(sun_rotation)
     bg = tree.nodes.new("ShaderNodeBackground")
-    bg.inputs["Strength"].default_value = strength
+    bg.inputs["Strength"].default_value = world["strength"]
     out = tree.nodes.new("ShaderNodeOutputWorld")
-    _link(tree, sky.outputs["Color"], bg.inputs["Color"])
+    direction = tree.nodes.new("ShaderNodeTexCoord").outputs["Generated"]  # world: the view direction
+    # The camera sees the sky over the skyline (the view lifted, as the ground's haze is), so the
+    # picture's top meets the ground's far edge in one colour; reflections see the whole HDRI.
+    pick = tree.nodes.new("ShaderNodeMix")
+    pick.data_type = "VECTOR"
+    _link(tree, tree.nodes.new("ShaderNodeLightPath").outputs["Is Camera Ray"], pick.inputs["Factor"])
+    _link(tree, direction, pick.inputs["A"])
+    _link(tree, _lifted(tree, direction, world), pick.inputs["B"])
+    _link(tree, _environment(tree, pick.outputs["Result"], world), bg.inputs["Color"])
     _link(tree, bg.outputs["Background"], out.inputs["Surface"])
     lamp = bpy.data.lights.new("sun", "SUN")
-    lamp.energy = sun_strength
+    lamp.energy = world["sun_strength"]
     lamp.angle = math.radians(3.0)  # a slightly soft sun: softer contact shadows
     sun = bpy.data.objects.new("sun", lamp)
     scene.collection.objects.link(sun)
-    # The lamp comes from elevation / rotation (rotation about the up axis, from +Y towards -X);
-    # the sky takes the same two angles for its gradient (its own sun disc is off).
-    el, rot = math.radians(sun_elevation), math.radians(sun_rotation)
-    towards_sun = Vector((-math.sin(rot) * math.cos(el), math.cos(rot) * math.cos(el), math.sin(el)))
     sun.rotation_euler = towards_sun.to_track_quat("Z", "Y").to_euler()
+    return world
+
+
+# ---------------------------------------------------------------------------------------------
+# Clipping
+
+
+def clip_to_box(obj, lo, hi) -> None:
+    """Hold every vertex of `obj` inside the box [lo, hi] (stage metres): a Geometry Nodes
+    modifier after the USD cache moves a vertex outside onto the nearest face of the box.
+
+    The surfacer's level set reaches a particle radius past the material, so a surface at rest
+    on the solver's floor or against its walls pokes through the ground or the tank's glass;
+    clamped, it meets them flat. The topology (and the vertex count, and the velocities) stay."""
+    # the box in the object's own frame (its transform is the importer's Y-up rotation)
+    bpy.context.view_layer.update()
+    inv = obj.matrix_world.inverted()
+    corners = [inv @ to_blender((x, y, z)) for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])]
+    low = tuple(min(c[i] for c in corners) for i in range(3))
+    high = tuple(max(c[i] for c in corners) for i in range(3))
+    group = bpy.data.node_groups.new(f"mpmfx_clip_{obj.name}", "GeometryNodeTree")
+    group.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes = group.nodes
+    inside = _math(
+        group,
+        "MINIMUM",
+        _math(group, "MAXIMUM", nodes.new("GeometryNodeInputPosition").outputs[0], low, vector=True),
+        high,
+        vector=True,
+    )
+    move = nodes.new("GeometryNodeSetPosition")
+    _link(group, nodes.new("NodeGroupInput").outputs[0], move.inputs["Geometry"])
+    _link(group, inside, move.inputs["Position"])
+    _link(group, move.outputs["Geometry"], nodes.new("NodeGroupOutput").inputs[0])
+    obj.modifiers.new("mpmfx_clip", "NODES").node_group = group
 
 
 # ---------------------------------------------------------------------------------------------
@@ -177,7 +349,7 @@ def add_camera(position, look_at, *, focal_mm: float = 35.0, film_mm: float = 36
     """A camera at `position` looking at `look_at` (stage metres), `film_mm` wide, horizontal fit."""
     cam = bpy.data.cameras.new("render_camera")
     cam.lens, cam.sensor_width, cam.sensor_fit = focal_mm, film_mm, "HORIZONTAL"
-    cam.clip_start, cam.clip_end = 0.01, 1000.0
+    cam.clip_start, cam.clip_end = 0.01, 1.0e5  # the ground runs kilometres to the horizon
     obj = bpy.data.objects.new("render_camera", cam)
     bpy.context.scene.collection.objects.link(obj)
     pos, target = to_blender(position), to_blender(look_at)

@@ -27,6 +27,7 @@ from mpmfx.blender import FRAME_LINE, NOTE_LINE, temp_name
 from mpmfx.render import blender_scene as bs
 from mpmfx.render.blender_scene import assign, make_material
 from mpmfx.render.label import burn_label
+from mpmfx.render.looks import GROUND_FADE, GROUND_MIN, GROUND_SPAN, WORLD
 
 
 def import_stage(usd: str) -> dict[str, list]:
@@ -129,8 +130,8 @@ def set_render(job: dict) -> None:
     c.use_denoising = bool(job["denoise"])
     if job["denoise"]:
         c.denoiser = "OPENIMAGEDENOISE"
-    c.max_bounces, c.diffuse_bounces, c.glossy_bounces = 8, 2, 4
-    c.transmission_bounces, c.transparent_max_bounces, c.volume_bounces = 8, 8, 0
+    c.max_bounces, c.diffuse_bounces, c.glossy_bounces = 16, 2, 4
+    c.transmission_bounces, c.transparent_max_bounces, c.volume_bounces = 16, 8, 0
     c.caustics_reflective = c.caustics_refractive = False
     c.blur_glossy = 1.0
     r.resolution_x, r.resolution_y, r.resolution_percentage = int(job["width"]), int(job["height"]), 100
@@ -153,14 +154,18 @@ def build_scene(job: dict) -> None:
     scene = bpy.context.scene
     dom_lo, dom_size = job["domain_origin"], job["domain_size"]
     centre = [o + dom_size / 2 for o in dom_lo]
-    bs.add_ground(job["floor_y"], centre, size=40.0 * dom_size)
+    world = bs.add_world(WORLD, sun_elevation=job["sun_elevation"], sun_rotation=job["sun_rotation"])
+    fade = tuple(f * dom_size for f in GROUND_FADE)
+    bs.add_ground(job["floor_y"], centre, size=max(GROUND_SPAN * dom_size, GROUND_MIN), fade=fade, world=world)
+    if job.get("walls"):  # no surface under the drawn ground or through the drawn walls
+        for _, obj in imported["meshes"]:
+            bs.clip_to_box(obj, *job["walls"])
     if job.get("basin") and job.get("walls"):
         look = job["looks"].get("basin", "ground")
         # glass as thin as an aquarium's (thick glass would bend the view of the water)
         bs.add_basin(
             *job["walls"], height=job["basin"], thickness=(0.012 if look == "glass" else 0.04) * dom_size, look=look
         )
-    bs.add_sky(sun_elevation=job["sun_elevation"], sun_rotation=job["sun_rotation"])
     cam = job["camera"]  # the exported USD's camera (`mpmfx.render.camera.render_camera`)
     scene.camera = bs.add_camera(
         cam["position"], cam["look_at"], focal_mm=cam["focal_length"], film_mm=cam["horizontal_aperture"]

@@ -30,28 +30,42 @@ DEFAULT_LOOK = {
 # name -> {"bsdf": Principled inputs, "bump": (feature size m, strength, distance m) or None,
 #          "absorb": (colour, density 1/m) for a volume absorption inside, or None,
 #          "grain": second base colour mixed in by a fine noise (sand grains), or None,
-#          "clear_shadow": True where shadow rays pass straight through (optional; glass)}
+#          optional:
+#          "cells": True where the grain is one colour per grain-sized cell (Voronoi), with each
+#                   grain a small dome in the bump, instead of a smooth noise,
+#          "sparkle": (cell size m, fraction of the surface, weight): sparse mirror-like glints,
+#                   each cell's facet tilted at random (snow crystals),
+#          "clear_shadow": True where shadow rays pass straight through (glass, water: with
+#                   caustics off, a refracting surface would otherwise cast a solid shadow)}
 LOOKS: dict[str, dict] = {
-    # Clear, refractive, slightly blue-green in depth: the absorption tints thick water only.
+    # Clear, refractive, slightly blue-green in depth: the absorption (about 0.4 1/m in red, as in
+    # clean water seen through tens of centimetres) tints thick water only. Light reaches the floor
+    # under it (clear shadows), so the water shows a lit floor and the sky, not a dark pit.
     "water": {
-        "bsdf": {"Base Color": (1.0, 1.0, 1.0), "Roughness": 0.03, "IOR": 1.333, "Transmission Weight": 1.0},
-        "absorb": ((0.55, 0.82, 0.88), 6.0),
+        "bsdf": {"Base Color": (1.0, 1.0, 1.0), "Roughness": 0.02, "IOR": 1.333, "Transmission Weight": 1.0},
+        "absorb": ((0.74, 0.92, 0.95), 2.0),
         "bump": None,
         "grain": None,
+        "clear_shadow": True,
     },
-    # White, bright, light scattering under the surface over about a centimetre.
+    # White, bright, light scattering under the surface over millimetres (bluer deeper in),
+    # a crumbly bump, and sparse glints: 2 % of the surface is crystal facets about 4 mm across
+    # (two pixels at 480 px across a metre: the denoiser erases finer ones), tilted at random,
+    # that mirror the sun and sky as points of light (at four times a mirror's weight: under the
+    # view transform's highlight roll-off, weaker glints vanish into the white snow).
     "snow": {
         "bsdf": {
-            "Base Color": (0.93, 0.95, 0.98),
-            "Roughness": 0.55,
+            "Base Color": (0.86, 0.89, 0.94),
+            "Roughness": 0.6,
             "Subsurface Weight": 1.0,
-            "Subsurface Radius": (1.0, 1.0, 1.25),
-            "Subsurface Scale": 0.01,
-            "Specular IOR Level": 0.35,
+            "Subsurface Radius": (0.8, 0.95, 1.3),
+            "Subsurface Scale": 0.006,
+            "Specular IOR Level": 0.3,
         },
-        "bump": (0.004, 0.25, 0.002),
+        "bump": (0.02, 0.7, 0.006),
         "absorb": None,
         "grain": None,
+        "sparkle": (0.012, 0.02, 4.0),
     },
     "slush": {
         "bsdf": {
@@ -67,18 +81,21 @@ LOOKS: dict[str, dict] = {
         "absorb": None,
         "grain": None,
     },
-    # Rough and granular: grain-sized noise in colour and bump (no gloss).
+    # Rough and granular: one colour per grain (3 mm cells: visible at 480 px across a metre) over
+    # a slower mottle, and each grain a small dome in the bump (no gloss).
     "sand": {
-        "bsdf": {"Base Color": (0.60, 0.42, 0.21), "Roughness": 0.95, "Specular IOR Level": 0.2},
-        "bump": (0.0015, 0.6, 0.0015),
+        "bsdf": {"Base Color": (0.66, 0.49, 0.28), "Roughness": 0.95, "Specular IOR Level": 0.2},
+        "bump": (0.003, 0.5, 0.0015),
         "absorb": None,
-        "grain": (0.40, 0.27, 0.13),
+        "grain": (0.42, 0.30, 0.16),
+        "cells": True,
     },
     "wet_sand": {
-        "bsdf": {"Base Color": (0.40, 0.28, 0.15), "Roughness": 0.55, "Specular IOR Level": 0.45},
-        "bump": (0.002, 0.5, 0.0015),
+        "bsdf": {"Base Color": (0.40, 0.28, 0.15), "Roughness": 0.5, "Specular IOR Level": 0.45},
+        "bump": (0.003, 0.35, 0.0015),
         "absorb": None,
-        "grain": (0.28, 0.19, 0.10),
+        "grain": (0.26, 0.18, 0.09),
+        "cells": True,
     },
     "mud": {
         "bsdf": {"Base Color": (0.22, 0.15, 0.09), "Roughness": 0.3, "Coat Weight": 0.4, "Coat Roughness": 0.15},
@@ -89,11 +106,11 @@ LOOKS: dict[str, dict] = {
     # Translucent and coloured: gummy-bear red, light travelling centimetres inside, glossy skin.
     "jelly": {
         "bsdf": {
-            "Base Color": (0.95, 0.16, 0.24),
+            "Base Color": (0.85, 0.06, 0.10),
             "Roughness": 0.12,
             "Subsurface Weight": 1.0,
-            "Subsurface Radius": (1.0, 0.25, 0.3),
-            "Subsurface Scale": 0.06,
+            "Subsurface Radius": (1.0, 0.15, 0.18),
+            "Subsurface Scale": 0.05,
             "Coat Weight": 1.0,
             "Coat Roughness": 0.04,
             "IOR": 1.45,
@@ -124,14 +141,32 @@ LOOKS: dict[str, dict] = {
         "grain": None,
         "clear_shadow": True,
     },
-    # A dark, slightly warm stone floor: snow, water and jelly all read against it.
+    # A mid-grey, slightly warm stone floor: white snow and red jelly read against it, and clear
+    # water shows it lit through the surface.
     "ground": {
-        "bsdf": {"Base Color": (0.11, 0.105, 0.10), "Roughness": 0.6},
+        "bsdf": {"Base Color": (0.16, 0.15, 0.14), "Roughness": 0.6},
         "bump": (0.03, 0.08, 0.002),
         "absorb": None,
-        "grain": (0.075, 0.07, 0.065),
+        "grain": (0.11, 0.105, 0.10),
     },
 }
+
+# The world: one of the studio HDRIs that Blender ships (datafiles/studiolights/world, CC0, by
+# Greg Zaal, from Poly Haven: "city" is Portland Landing Pad, a clear sky over a skyline). It
+# lights the scene and is what water and glass reflect and refract; its own sun is clamped to
+# WORLD["clamp"] (a lamp along render.sun_elevation / sun_rotation casts the sharp shadows, and
+# the HDRI is turned so that its sun, at azimuth `sun_azimuth` degrees (from +x towards +y,
+# Blender axes), stands where the lamp is). Strength multiplies the HDRI. Camera rays see it
+# lifted by `horizon_lift` (the tangent of the elevation that their horizon shows: 61 degrees,
+# over the tallest tower), so the background is sky, not the HDRI's own skyline; reflections
+# see the skyline.
+WORLD = {"hdri": "city", "sun_azimuth": -36.0, "clamp": 6.0, "strength": 0.8, "sun_strength": 3.0, "horizon_lift": 1.8}
+
+# The ground: a plane `GROUND_SPAN` domain sizes across (at least GROUND_MIN m), so that it runs
+# to the horizon from any camera over the shot; beyond `GROUND_FADE` (near, far) domain sizes
+# from the camera it fades into the world's colour at the horizon, so it meets the sky with no
+# edge and far texture does not alias.
+GROUND_SPAN, GROUND_MIN, GROUND_FADE = 4000.0, 1000.0, (8.0, 120.0)
 
 
 # Scene props that `render.looks` may also name: the basin drawn along the solver's side walls

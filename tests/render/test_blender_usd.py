@@ -340,3 +340,98 @@ def test_a_plain_blender_import_gets_named_surfaces_with_materials_and_no_partic
     assert not [n for n in objects if "." in n]  # no mesh.001: every name is its own
     assert got["lens"] == pytest.approx([35.0, 36.0])
     assert sorted(got["hidden"]) == ["cube_particles", "pool_particles"]  # there as data, when asked for
+
+
+# Runs inside Blender: build the lit scene as the render stage's child does, then report the
+# world's environment, where near-horizontal rays from the camera meet the ground, and the
+# extent of every surface mesh as drawn (clipped) and as imported (its clip modifier off).
+SCENE = """
+import json, math, sys
+import bpy
+from mathutils import Vector
+from mpmfx.render import cycles_job
+from mpmfx.render.blender_scene import Y_UP_TO_Z_UP
+job = json.loads(open(sys.argv[1]).read())
+cycles_job.build_scene(job)
+scene = bpy.context.scene
+out = {"env": [n.image.filepath for n in scene.world.node_tree.nodes if n.type == "TEX_ENVIRONMENT"]}
+ground = bpy.data.objects["ground"]
+eye = scene.camera.matrix_world.translation
+dip = math.tan(math.radians(float(sys.argv[2])))
+dg = bpy.context.evaluated_depsgraph_get()
+out["horizon"] = []
+for k in range(16):
+    a = 2 * math.pi * k / 16
+    d = Vector((math.cos(a), math.sin(a), -dip)).normalized()
+    hit = ground.ray_cast(ground.matrix_world.inverted() @ eye, ground.matrix_world.inverted().to_3x3() @ d, depsgraph=dg)
+    out["horizon"].append(bool(hit[0]))
+back = Y_UP_TO_Z_UP.inverted()
+out["frames"] = {}
+meshes = [o for o in scene.objects if o.type == "MESH" and "mpmfx_clip" in o.modifiers]
+for f in range(scene.frame_start, scene.frame_end + 1):
+    scene.frame_set(f)
+    for clipped in (True, False):
+        for o in meshes:
+            o.modifiers["mpmfx_clip"].show_viewport = clipped
+        dg = bpy.context.evaluated_depsgraph_get()
+        for o in meshes:
+            ev = o.evaluated_get(dg)
+            pts = [back @ (ev.matrix_world @ v.co) for v in ev.data.vertices]
+            key = f"{f} {o.name} {'drawn' if clipped else 'imported'}"
+            out["frames"][key] = [[min(p[i] for p in pts) for i in range(3)], [max(p[i] for p in pts) for i in range(3)], len(pts)]
+print("SCENE " + json.dumps(out))
+"""
+
+
+def test_cycles_scene_world_horizon_and_clipped_surfaces(exported, tmp_path):
+    """The Cycles scene is lit by one of Blender's studio HDRIs; from the camera, the ground runs
+    on to the horizon (a ray a quarter of a degree below it still meets the ground, all round);
+    and no drawn surface lies under the ground or outside the solver's walls, while the imported
+    surfaces did (the surfacer's level set reaches past the material)."""
+    from mpmfx.render.camera import render_camera, solver_box, solver_floor
+    from mpmfx.render.cycles import write_job
+    from mpmfx.shotfile import load_shot_config
+
+    _, shot_path, entries = exported
+    shot = load_shot_config(shot_path)
+    lo, hi = solver_box(shot)
+    job = write_job(
+        tmp_path / "job.json",
+        usd=entries["export"] / "shot.usda",
+        frames=[1],
+        outputs=[tmp_path / "0001.png"],
+        blend=None,
+        width=64,
+        height=48,
+        samples=1,
+        denoise=False,
+        shutter=0.0,
+        fps=24.0,
+        mode="surface",
+        looks={"Elastic": "jelly", "Water": "water"},
+        floor_y=solver_floor(shot),
+        domain_origin=shot.domain.origin,
+        domain_size=shot.domain.size,
+        camera=render_camera(shot),
+        sun_elevation=35.0,
+        sun_rotation=150.0,
+        walls=(lo, hi),
+        basin=0.1,
+    )
+    line = next(s for s in _blender(SCENE, str(job), "0.25").splitlines() if s.startswith("SCENE "))
+    seen = json.loads(line.removeprefix("SCENE "))
+    assert len(seen["env"]) == 1 and "studiolights" in seen["env"][0] and Path(seen["env"][0]).is_file()
+    assert all(seen["horizon"]), seen["horizon"]
+    tol = 1e-5
+    outside = {}
+    for key, (low, high, count) in seen["frames"].items():
+        assert count > 0, key
+        over = max(max(a - b for a, b in zip(lo, low)), max(a - b for a, b in zip(high, hi)))
+        outside[key] = over
+    drawn = {k: v for k, v in outside.items() if k.endswith("drawn")}
+    assert max(drawn.values()) <= tol, drawn
+    # the check means something: the surfaces as imported did cross the floor or a wall
+    assert max(v for k, v in outside.items() if k.endswith("imported")) > 10 * tol, outside
+    # clamping keeps the topology: the drawn mesh has the imported mesh's vertices
+    for key in drawn:
+        assert seen["frames"][key][2] == seen["frames"][key.replace("drawn", "imported")][2], key
