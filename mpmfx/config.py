@@ -347,8 +347,8 @@ class Render(_Section):
     looks: dict[str, str] = Field(
         default_factory=dict,
         description="cycles: look per preset, object or surface "
-        'group, e.g. {Goopy = "mud"}, or of the basin, {basin = "glass"} '
-        "(looks: mpmfx/render/looks.py).",
+        'group, e.g. {Goopy = "mud"}, of a collider by its name, e.g. {glass = "glass"}, or of the '
+        'basin, {basin = "glass"} (looks: mpmfx/render/looks.py).',
     )
     basin: Real | None = Field(
         None,

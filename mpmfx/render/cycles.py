@@ -70,6 +70,7 @@ def write_job(
     label: str = "",
     blend_usd_root: str | None = None,
     device: str = "cpu",
+    collider_looks: dict[str, str] | None = None,
 ) -> Path:
     """Write the JSON job the child reads. Units: metres and degrees, in the USD stage's frame
     (Y up). looks: USD prim name (surface group or object) -> `mpmfx.render.looks.LOOKS` key;
@@ -79,7 +80,8 @@ def write_job(
     label: text burned into every frame (empty: none); device: "cpu", or "gpu" for Cycles' GPU
     devices where Blender has one; blend_usd_root: what the saved .blend calls the export
     entry's folder (a Blender path such as `//../../published/<name>`, relative to where the
-    .blend is published), None: its own absolute path."""
+    .blend is published), None: its own absolute path; collider_looks: collider prim name ->
+    look (default "collider")."""
     job = {
         "usd": str(usd),
         "frames": [int(f) for f in frames],
@@ -104,6 +106,7 @@ def write_job(
         "label": label,
         "blend_usd_root": blend_usd_root,
         "device": device,
+        "collider_looks": collider_looks or {},
     }
     path.write_text(json.dumps(job, indent=1))
     return path

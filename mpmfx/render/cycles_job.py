@@ -81,8 +81,8 @@ def set_looks(job: dict, imported: dict) -> None:
                 assign(obj, material(job["looks"].get(name, "plastic")))
     for _, obj in imported["volumes"]:
         obj.hide_render = True
-    for _, obj in imported["colliders"]:
-        assign(obj, material("collider"))
+    for name, obj in imported["colliders"]:  # (a glass the material pours into: render.looks names it)
+        assign(obj, material(job.get("collider_looks", {}).get(name, "collider")))
 
 
 GPU_BACKENDS = ("OPTIX", "CUDA", "HIP", "ONEAPI", "METAL")  # Cycles' GPU device types, preferred first

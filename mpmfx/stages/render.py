@@ -178,6 +178,7 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
     looks = {names.surfaces[g]: look for g, look in surface_looks(shot).items()}
     looks |= {names.particles[o.name]: look_for([o.name, o.material], r.looks) for o in shot.bodies}
     looks |= {prop: r.looks.get(prop, look) for prop, look in PROP_LOOKS.items()}
+    collider_looks = {c.name: r.looks.get(c.name, "collider") for c in shot.colliders}
     # the camera the export framed and wrote into the USD: the render looks through the same one
     cam = (job.upstream["export"].manifest() or {}).get("camera") or render_camera(shot)
     name = f"cycles_{frames[0]:04d}" if len(frames) == 1 else "cycles"  # a wedge's tasks: one job each
@@ -195,6 +196,7 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
         samples=r.samples,
         denoise=r.denoise,
         device=r.device,
+        collider_looks=collider_looks,
         shutter=r.shutter,
         fps=shot.shot.fps,
         mode=r.mode,

@@ -124,7 +124,7 @@ CYCLES = [
     "render.frame_step=2",
     "render.movie=true",
     "render.basin=0.05",
-    'render.looks={basin = "glass"}',
+    'render.looks={basin = "glass", paddle = "glass"}',
 ]
 
 
@@ -163,7 +163,7 @@ def test_cycles_render_stage_draws_the_looks(cycles):
     one, two = (imageio.imread(entry / "frames" / f"{f:04d}.png") for f in (1, 2))
     assert np.array_equal(one, two)  # frame 2 holds frame 1 (frame_step = 2)
     job = json.loads((entry / "cycles_job.json").read_text())
-    assert job["looks"]["basin"] == "glass"
+    assert job["looks"]["basin"] == "glass" and job["collider_looks"] == {"paddle": "glass"}
     # the render looks through the camera the USD carries
     assert job["camera"] == json.loads((entries["export"] / "manifest.json").read_text())["camera"]
     rgb = imageio.imread(entry / "frames" / "0003.png")[..., :3].astype(int)
