@@ -52,8 +52,15 @@ make_venv() {
     || die "the environment in $VENV is broken; remove it (rm -rf $VENV) and run this again"
 }
 
+warm_kernels() {
+  # the surfacer's CPU kernels, compiled once here rather than by the first run (seconds when cached)
+  say "compiling the surfacer's CPU kernels (first time: about 2 minutes on 2 cores)"
+  "$VENV/bin/python" -m mpmfx.stages.kernels || die "compiling Warp's kernels failed; see the messages above"
+}
+
 apt_install
 make_venv
+warm_kernels
 case "${1:-}" in
   "") say "ready: $VENV/bin/mpmfx --help" ;;
   demo) shift; exec "$VENV/bin/mpmfx" run pipeline/shots/jelly_splash.toml "$@" ;;

@@ -7,7 +7,9 @@ of it in the surfacer's modules (the largest 32 s), none of which the solver nee
 at once when it starts, on threads (NVRTC runs outside the GIL; Warp generates each module's code
 under its own lock), so they are ready, or nearly, when the surface stage starts. Compiled
 modules stay in Warp's kernel cache: a later run loads them in well under a second. CPU runs keep
-Warp's lazy compiles: their cores are busy with the solver.
+Warp's lazy compiles: their cores are busy with the solver. Instead, `bash setup.sh` compiles the
+surfacer's CPU kernels once, on every core (`python -m mpmfx.stages.kernels`): on the 2-core CPU
+they take about 170 s of clang one after another, which a first demo would otherwise wait for.
 """
 
 from __future__ import annotations
@@ -67,3 +69,16 @@ class SurfacerKernels:
         if self._error is not None:
             print(f"[surface] compiling ahead failed ({self._error}); compiling as frames need them", file=sys.stderr)
         self._thread = None
+
+
+def compile_now(device: str = "cpu") -> float:
+    """Compile (or load from Warp's cache) the surfacer's modules for `device` on every core;
+    the seconds it took."""
+    quiet_warp(device)
+    t0 = time.perf_counter()
+    wp.load_module("mpmfx.surface", device=wp.get_device(device), recursive=True, max_workers=os.cpu_count() or 1)
+    return time.perf_counter() - t0
+
+
+if __name__ == "__main__":
+    print(f"surfacer kernels ready for the CPU in {compile_now('cpu'):.0f} s (kept in Warp's kernel cache)")
