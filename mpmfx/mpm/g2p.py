@@ -352,6 +352,11 @@ def make_g2p(flags: SceneFlags, *, device_clock: bool = False, sorting: bool = F
             # they are not read (48 of G2P's ~220 bytes a solid particle, C a slow 36-byte load)
             v_new = v[p]
             C_new = load_m33(C, p)
+            if wp.static(has_solid):
+                # and its stored stress: a dormant particle's (emission.py) is what its first P2G
+                # reads when it wakes, so both copies must hold it (a checkpoint saves one)
+                tau_new = tau[p]
+                solid = True
         else:
             # a scene of one field or one material reads neither index: 8 bytes of the 32 a
             # water particle reads here, 64 a snow one, and the material row's load no longer

@@ -11,12 +11,15 @@ SPEED_SLACK = 2.0  # ... while the top speed grew faster than SPEED_SLACK x grav
 CFL_CAP = 1.0  # SolverConfig's upper bound on cfl: past it a particle outran a cell in a substep
 
 
-def flags(qa: dict[int, dict], *, gravity: float = 9.81, frame_dt: float = 1 / 24) -> dict[int, list[str]]:
+def flags(
+    qa: dict[int, dict], *, gravity: float = 9.81, frame_dt: float = 1 / 24, entering_speed: float = 0.0
+) -> dict[int, list[str]]:
     """Frame -> reasons it looks wrong (mass changed, energy jumped, particles lost, rejected substeps).
 
     Energy released by gravity is not a jump: a frame is flagged only when kinetic + elastic
     energy grew ENERGY_JUMP-fold and the top speed (m/s) grew faster than gravity (m/s^2) can
-    explain over frame_dt (s)."""
+    explain over frame_dt (s), from the faster of the last frame's top speed and entering_speed
+    (m/s: what emitters and late objects bring in, which gravity then speeds up)."""
     out: dict[int, list[str]] = {}
     frames = sorted(qa)
     m0 = qa[frames[0]].get("mass") if frames else None
@@ -32,7 +35,7 @@ def flags(qa: dict[int, dict], *, gravity: float = 9.81, frame_dt: float = 1 / 2
             prev is not None
             and prev[0] > 1e-12
             and ke > ENERGY_JUMP * prev[0]
-            and speed > prev[1] + SPEED_SLACK * gravity * frame_dt
+            and speed > max(prev[1], entering_speed) + SPEED_SLACK * gravity * frame_dt
         ):
             why.append(f"energy x{ke / prev[0]:.1f} beyond what gravity explains")
         if q.get("j_min") is not None and q["j_min"] <= 0:
@@ -58,7 +61,16 @@ def shot_flags(shot, qa: dict) -> dict[int, list[str]]:
         qa,
         gravity=float(sum(g * g for g in shot.solver.gravity) ** 0.5),
         frame_dt=shot.solver.time_scale / shot.shot.fps,
+        entering_speed=max(
+            [_speed(e.velocity) for e in shot.emitters]
+            + [_speed(o.velocity) for o in shot.objects if o.start_time > 0]
+            + [0.0]
+        ),
     )
+
+
+def _speed(v) -> float:
+    return float(sum(c * c for c in v) ** 0.5)
 
 
 def warn_flags(bad: dict[int, list[str]], shot_path: str = "SHOT") -> None:

@@ -91,8 +91,11 @@ def test_ids_stay_with_their_particles_and_reach_the_usd_points(ran):
         np.testing.assert_array_equal(b.body, seed.body[b.id])
         same = np.isin(b.id, a.id) & (b.body > 0)  # the late ones (the first cube bounces off the floor)
         prev = np.isin(a.id, b.id) & (a.body > 0)
-        miss = np.linalg.norm(b.x[same] - (a.x[prev] + a.v[prev] / FPS), axis=1)
-        assert miss.max(initial=0) < 0.02  # m: where its velocity took it: the same particle, not another's
+        # each id is where its own velocity (and gravity) took it: the same particle, not another's,
+        # which would be a body's size away (a few contacts bend a path by about a spacing, 1/48 m)
+        pred = a.x[prev] + a.v[prev] / FPS + np.array([0.0, -0.5 * 9.81 / FPS**2, 0.0])
+        miss = np.linalg.norm(b.x[same] - pred, axis=1)
+        assert not len(miss) or (np.percentile(miss, 99) < 0.02 and miss.max() < 0.05)  # m
     surfaces = [SurfaceFrame.read(p) for p in sorted((results["surface"].entry / "frames").glob("*.npz"))]
     assert all(list(s.groups) == ["Elastic", "Water"] for s in surfaces)  # one mesh a material, as it grows
     water = [len(s.groups["Water"].vertices) for s in surfaces]
