@@ -11,23 +11,13 @@ import time
 
 import numpy as np
 import warp as wp
+from collider_cost import snow_block
 
 from mpmfx.bench.report import print_table
-from mpmfx.mpm import Particles, Solver, SolverConfig, preset
+from mpmfx.mpm import Solver, SolverConfig, preset
 from mpmfx.mpm.readback import HostStaging
 
 FPS = 24.0
-
-
-def block(n: int, grid: int) -> Particles:
-    """About n particles, 8 a cell, in a cube on the floor in the middle of the domain."""
-    side = min((n / 8) ** (1 / 3) / grid, 0.8)
-    h = 1.0 / (2 * grid)
-    lo = np.array([0.5 - side / 2, 3.0 / grid, 0.5 - side / 2])
-    axes = [np.arange(lo[a] + h / 2, lo[a] + side, h) for a in range(3)]
-    x = np.stack(np.meshgrid(*axes, indexing="ij"), -1).reshape(-1, 3).astype(np.float32)
-    k = len(x)
-    return Particles(x, np.zeros_like(x), np.full(k, h**3, np.float32), np.zeros(k, np.int32), np.zeros(k, np.int32))
 
 
 def timed(fn, reps: int) -> tuple[float, dict]:
@@ -49,7 +39,7 @@ def main():
     rows = []
     for material in ("Mushy", "Water"):
         s = Solver([preset(material)], SolverConfig(grid_n=a.grid), device=a.device)
-        st = s.init_state(block(a.particles, a.grid))
+        st = s.init_state(snow_block(a.particles, a.grid))
         s.advance(st, 0.0, 2.0 / FPS)  # sorted at least once: storage order is not particle order
         staging = HostStaging(s.device)
         fresh_s, fresh = timed(lambda: s.checkpoint(st, 0.0), a.reps)
