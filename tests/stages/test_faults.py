@@ -127,24 +127,11 @@ def test_usd_failing_for_another_reason_gives_its_first_line_not_a_traceback(cop
 
 
 def test_a_vdb_writer_cut_short_by_a_full_disk_is_said_as_a_full_disk(copy, monkeypatch, capsys):
-    import mpmfx.io.vdb as vdb_io
+    from tests.stages.test_safety import truncating_vdb
 
     shot, cache = copy
-    real = vdb_io.import_pyopenvdb()
     free = [1 << 40]
-
-    class Full:  # pyopenvdb on a full disk: no error, half a file
-        def __getattr__(self, name):
-            return getattr(real, name)
-
-        @staticmethod
-        def write(path, **kw):
-            real.write(path, **kw)
-            with open(path, "r+b") as f:
-                f.truncate(os.path.getsize(path) // 2)
-            free[0] = 0
-
-    monkeypatch.setattr(vdb_io, "import_pyopenvdb", lambda: Full())
+    truncating_vdb(monkeypatch, after=lambda: free.__setitem__(0, 0))  # no error, half a file; then full
     monkeypatch.setattr(diskspace, "free_bytes", lambda _p: free[0])
     assert main(["run", str(shot), "--until", "export", "--force", "export", "--cache", str(cache), "-q"]) == 2
     _said(capsys, ".vdb", "--cache")

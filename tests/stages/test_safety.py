@@ -147,8 +147,9 @@ def test_a_lost_frame_is_redone_not_trusted(tmp_path):
     assert sim.frame_path(2, "npz").read_bytes() == before and sim.complete(list(range(1, 5)))
 
 
-def _truncating_vdb(monkeypatch):
-    """pyopenvdb as on a full disk: the write 'succeeds' and leaves half a file."""
+def truncating_vdb(monkeypatch, after=lambda: None):
+    """pyopenvdb as on a full disk: the write 'succeeds' and leaves half a file; `after` runs
+    once it has (e.g. to make the disk read as full from then on)."""
     import mpmfx.io.vdb as vdb_io
 
     real = vdb_io.import_pyopenvdb()
@@ -162,6 +163,7 @@ def _truncating_vdb(monkeypatch):
             real.write(path, **kw)
             with open(path, "r+b") as f:
                 f.truncate(os.path.getsize(path) // 2)
+            after()
 
     monkeypatch.setattr(vdb_io, "import_pyopenvdb", lambda: Full())
 
@@ -171,7 +173,7 @@ def test_a_failing_vdb_writer_leaves_nothing_under_a_final_name(tmp_path, monkey
 
     shot = write_tiny_shot(tmp_path, frame_end=3)
     cache = tmp_path / "c"
-    _truncating_vdb(monkeypatch)
+    truncating_vdb(monkeypatch)
     assert main(["run", str(shot), "--until", "export", "--cache", str(cache), "-q"]) == 1
     err = capsys.readouterr().err
     assert ".vdb" in err and "disk" in err and "Traceback" not in err
