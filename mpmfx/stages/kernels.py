@@ -37,7 +37,6 @@ class SurfacerKernels:
         self.device = device
         self._thread: threading.Thread | None = None
         self._error: BaseException | None = None
-        self.seconds = 0.0
 
     def start(self) -> "SurfacerKernels":
         quiet_warp(self.device)
@@ -48,13 +47,10 @@ class SurfacerKernels:
         return self
 
     def _load(self) -> None:
-        t0 = time.perf_counter()
         try:
-            workers = min(WORKERS, os.cpu_count() or 1)
-            wp.load_module("mpmfx.surface", device=wp.get_device(self.device), recursive=True, max_workers=workers)
+            _load_surfacer(self.device, min(WORKERS, os.cpu_count() or 1))
         except BaseException as exc:  # said by wait(): the surface stage then compiles as it goes
             self._error = exc
-        self.seconds = time.perf_counter() - t0
 
     def wait(self) -> None:
         if self._thread is None:
@@ -71,12 +67,16 @@ class SurfacerKernels:
         self._thread = None
 
 
+def _load_surfacer(device: str | None, workers: int) -> None:
+    """Compile (or load from Warp's cache) every surfacer module for `device`, `workers` at once."""
+    wp.load_module("mpmfx.surface", device=wp.get_device(device), recursive=True, max_workers=workers)
+
+
 def compile_now(device: str = "cpu") -> float:
-    """Compile (or load from Warp's cache) the surfacer's modules for `device` on every core;
-    the seconds it took."""
+    """The surfacer's modules for `device`, on every core; the seconds it took."""
     quiet_warp(device)
     t0 = time.perf_counter()
-    wp.load_module("mpmfx.surface", device=wp.get_device(device), recursive=True, max_workers=os.cpu_count() or 1)
+    _load_surfacer(device, os.cpu_count() or 1)
     return time.perf_counter() - t0
 
 
