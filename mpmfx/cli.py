@@ -52,6 +52,12 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--device", choices=("cpu", "cuda"), default=None, help="Warp device (default: cuda if present)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     r.add_argument("--strict", action="store_true", help="exit 1 when the QA flags a frame (CI, farms)")
+    r.add_argument(
+        "--no-overlap",
+        dest="overlap",
+        action="store_false",
+        help="run the stages one after another (default: surface and export follow simulate frame by frame)",
+    )
     e = shot_cmd("export", "run export alone from the cached upstream stages")
     e.add_argument("--frames", type=frame_range, default=None, metavar="A:B")
     add_parallel_args(r)
@@ -125,9 +131,10 @@ def _parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="speed and accuracy benchmarks (run them on the GPU)")
     b.add_argument(
         "what",
-        choices=("accuracy", "oscillation", "gpu", "surface", "surface-times", "solver", "voxelise", "shots"),
+        choices=("accuracy", "oscillation", "gpu", "surface", "surface-times", "solver", "voxelise", "shots", "shot"),
         help="which benchmark",
     )
+    b.add_argument("shot", nargs="?", default=None, help="shot: the shot file to run (default: the default shot)")
     b.add_argument("--quick", action="store_true", help="small CPU-sized sweep")
     b.add_argument("--device", choices=("cpu", "cuda"), default=None)
     b.add_argument("--out", default="renders/bench", help="folder for CSV/JSON/PNG")
@@ -149,6 +156,11 @@ def _parser() -> argparse.ArgumentParser:
         help="surface: particle counts (default 100000 with --quick, else 1000000 10000000); "
         "surface-times: likewise (default 100000 with --quick, else 10000000)",
     )
+    b.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help="shot: override a shot field"
+    )
+    b.add_argument("--cache", default=None, help="shot: a cache root to run in and keep (default: a temporary one)")
+    b.add_argument("--no-overlap", dest="overlap", action="store_false", help="shot: run the stages one after another")
     return p
 
 
@@ -222,7 +234,16 @@ def _dispatch(args) -> int:
 
         quiet_warp()  # stdout carries the benchmark's tables only, never Warp's banner
         return bench_main(
-            args.what, quick=args.quick, device=args.device, out=args.out, peers=args.peers, counts=args.counts
+            args.what,
+            quick=args.quick,
+            device=args.device,
+            out=args.out,
+            peers=args.peers,
+            counts=args.counts,
+            shot=args.shot,
+            overrides=args.overrides,
+            cache=args.cache,
+            overlap=args.overlap,
         )
 
     if args.cmd == "cache":
@@ -247,6 +268,7 @@ def _dispatch(args) -> int:
         workers=getattr(args, "workers", None),
         scheduler=getattr(args, "scheduler", None),
         publish_as=getattr(args, "publish_as", "variant"),
+        overlap=getattr(args, "overlap", True),
     )
     if args.cmd == "run":
         results = run.run(until=args.until, force=args.force, frames=args.frames)

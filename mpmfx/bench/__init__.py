@@ -9,33 +9,35 @@ from __future__ import annotations
 import importlib
 import sys
 
+MODULES = {
+    "accuracy": "mpmfx.bench.accuracy",
+    "oscillation": "mpmfx.bench.oscillation",
+    "surface": "mpmfx.bench.surface",
+    "solver": "mpmfx.bench.solver",
+    "gpu": "mpmfx.bench.gpu",
+    "voxelise": "mpmfx.bench.voxelise",
+    "shots": "mpmfx.bench.shots",
+    "shot": "mpmfx.bench.shot",
+    "surface-times": "mpmfx.bench.surface_times",
+}
+# The options only some benchmarks take (the CLI's flags), and which take them.
+OWN = {
+    "peers": ("surface", "surface-times"),
+    "counts": ("surface", "surface-times"),
+    "shot": ("shot",),
+    "overrides": ("shot",),
+    "cache": ("shot",),
+    "overlap": ("shot",),
+}
+UNSET = {"overrides": [], "overlap": True}  # what a flag holds when it is not given
 
-def main(
-    what: str,
-    *,
-    quick: bool = False,
-    device: str | None = None,
-    out: str = "renders/bench",
-    peers: list[str] | None = None,
-    counts: list[int] | None = None,
-) -> int:
-    """Run benchmark `what`; `peers` and `counts` are the options of `surface` and `surface-times`
-    (None: their defaults)."""
-    module = {
-        "accuracy": "mpmfx.bench.accuracy",
-        "oscillation": "mpmfx.bench.oscillation",
-        "surface": "mpmfx.bench.surface",
-        "solver": "mpmfx.bench.solver",
-        "gpu": "mpmfx.bench.gpu",
-        "voxelise": "mpmfx.bench.voxelise",
-        "shots": "mpmfx.bench.shots",
-        "surface-times": "mpmfx.bench.surface_times",
-    }[what]
-    own = {"peers": peers, "counts": counts} if what in ("surface", "surface-times") else {}
-    if not own and (peers is not None or counts is not None):
-        print(
-            f"error: --peers / --counts belong to `mpmfx bench surface` and `surface-times`, not `{what}`",
-            file=sys.stderr,
-        )
+
+def main(what: str, *, quick: bool = False, device: str | None = None, out: str = "renders/bench", **options) -> int:
+    """Run benchmark `what`; `options` are the ones of OWN (None or unset: the benchmark's defaults)."""
+    given = {k: v for k, v in options.items() if v is not None and v != UNSET.get(k)}
+    if wrong := [k for k in given if what not in OWN[k]]:
+        flag = "--" + wrong[0].replace("overrides", "set").replace("overlap", "no-overlap")
+        print(f"error: {flag} belongs to `mpmfx bench {' / '.join(OWN[wrong[0]])}`, not `{what}`", file=sys.stderr)
         return 2
-    return importlib.import_module(module).main(quick=quick, device=device, out=out, **own)
+    own = {k: options.get(k) for k in OWN if what in OWN[k] and k in options}
+    return importlib.import_module(MODULES[what]).main(quick=quick, device=device, out=out, **own)

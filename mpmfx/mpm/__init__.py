@@ -18,6 +18,7 @@ import importlib
 
 _WHERE = {
     "AnimatedMesh": "animated",
+    "CAPTURE_LOCK": "chunked",
     "Collider": "colliders",
     "ColliderKind": "colliders",
     "OutOfDomain": "config",

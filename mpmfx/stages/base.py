@@ -35,6 +35,7 @@ class Context:
     warnings: list[str] = field(default_factory=list)  # `warn`'s: the closing table repeats them
     executor: Frames | None = None  # where independent frames run (None: here, one by one)
     state: str = "ran"  # "ran" (a new entry) or "resumed" (complete frames were there)
+    followed: list = field(default_factory=list)  # frames' results made while upstream ran (stages.follow)
 
     def job(self) -> FrameJob:
         return FrameJob.of(self.shot, self.entry, self.upstream, self.device)

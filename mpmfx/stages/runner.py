@@ -21,6 +21,7 @@ from mpmfx.shotfile import load_shot_config
 from mpmfx.stages import STAGES, export, memory, render, simulate, surface, voxelise
 from mpmfx.stages.base import Context, Stage, StageError
 from mpmfx.stages.colliders import check_collider_meshes
+from mpmfx.stages.follow import FOLLOWED, Follower
 from mpmfx.stages.kernels import SurfacerKernels
 from mpmfx.stages.parallel import Frames
 from mpmfx.stages.qa import shot_flags, warn_flags
@@ -70,6 +71,7 @@ class ShotRun:
         publish: bool = True,
         locked: bool = False,
         publish_as: str = "variant",
+        overlap: bool = True,
     ):
         if publish_as not in PUBLISH_AS:
             raise ShotError(f"--publish-as {publish_as!r}: one of {', '.join(PUBLISH_AS)}")
@@ -88,6 +90,7 @@ class ShotRun:
         if publish_as == "default" and shot.shot.name not in self.publish_names:
             self.publish_names.append(shot.shot.name)
         self.published: dict[str, Path] = {}  # what the last run() published: "usd", "renders"
+        self.overlap = overlap  # surface and export follow simulate frame by frame (stages.follow)
 
     # -- keys ------------------------------------------------------------------------------
     def entries(self) -> dict[str, Entry]:
@@ -283,26 +286,56 @@ class ShotRun:
         print(f"[{entry.stage}] {entry.root / rels[0]}{more}: {why}; redoing it", file=sys.stderr)
 
     def _stages(self, until: str, force, frames: list[int] | None):
-        """Each stage up to `until`: its result, as it finishes."""
+        """Each stage up to `until`: its result, as it finishes. While simulate runs, the surface
+        and export stages follow it frame by frame (`mpmfx.stages.follow`)."""
         entries = self.entries()
         names = STAGES[: STAGES.index(until) + 1]
-        surfacing = "surface" in names and (
-            "surface" in force or not entries["surface"].complete(self._wanted("surface", frames))
-        )
-        kernels = SurfacerKernels(self.device).start() if surfacing else None
         for name in names:
-            if name in force:
+            if name in force:  # before anything runs: a follower writes into later stages' entries
                 entries[name].remove()
+        surfacing = "surface" in names and not entries["surface"].complete(self._wanted("surface", frames))
+        kernels = SurfacerKernels(self.device).start() if surfacing else None
+        follower = None
+        try:
+            for name in names:
+                if follower and name in follower.contexts:
+                    ctx = follower.finish(name)  # (its error, if it had one, is this stage's)
+                else:
+                    ctx = self.begin(name, entries, frames)
+                if isinstance(ctx, StageResult):
+                    yield ctx
+                    continue
+                if name == "simulate" and surfacing and self.overlap:
+                    follower = self._follow(names, entries, frames, kernels)
+                if name == "surface" and kernels:
+                    kernels.wait()
+                t0 = time.perf_counter()
+                with self.failing(ctx):
+                    extra = stage_module(name).run(ctx) or {}
+                if name == "simulate" and follower:
+                    follower.upstream_done()
+                if follower and name in follower.seconds:
+                    extra["followed_s"] = {k: round(v, 3) for k, v in follower.seconds[name].items()}
+                yield self.end(ctx, extra, time.perf_counter() - t0)
+        finally:
+            if follower:
+                follower.stop()  # (a no-op wait when every followed stage has finished)
+                for ctx in follower.contexts.values():
+                    if ctx.entry.root.exists() and not ctx.entry.manifest():
+                        self.abandon(ctx)  # a failed run: keep the frames it made, drop an empty entry
+
+    def _follow(self, names, entries: dict[str, Entry], frames: list[int] | None, kernels) -> Follower | None:
+        """A follower for the stages after simulate that this run makes (surface, and export
+        when asked for), started; None when there is none to follow."""
+        contexts = {}
+        for name in FOLLOWED:
+            if name not in names:
+                break
             ctx = self.begin(name, entries, frames)
             if isinstance(ctx, StageResult):
-                yield ctx
-                continue
-            if name == "surface" and kernels:
-                kernels.wait()
-            t0 = time.perf_counter()
-            with self.failing(ctx):
-                extra = stage_module(name).run(ctx) or {}
-            yield self.end(ctx, extra, time.perf_counter() - t0)
+                break
+            contexts[name] = ctx
+        return Follower(contexts, kernels=kernels).start() if contexts else None
 
     def begin(self, name: str, entries: dict[str, Entry], frames: list[int] | None) -> Context | StageResult:
         """A cached stage's result, or the context to run it in (damaged files removed, so their
@@ -438,10 +471,12 @@ def load_shot(
     workers: int | None = None,
     scheduler: str | None = None,
     publish_as: str = "variant",
+    overlap: bool = True,
 ) -> ShotRun:
     """Load and validate a shot file; returns a ShotRun (see module docstring). workers /
     scheduler: where independent frames run (`mpmfx.stages.parallel.Frames`); publish_as:
-    "variant" (a --set run publishes beside the plain shot's outputs) or "default" (also over them)."""
+    "variant" (a --set run publishes beside the plain shot's outputs) or "default" (also over them);
+    overlap: surface and export follow simulate frame by frame (`mpmfx.stages.follow`)."""
     return ShotRun(
         load_shot_config(path, list(overrides)),
         cache_root=cache_root,
@@ -450,4 +485,5 @@ def load_shot(
         workers=workers,
         scheduler=scheduler,
         publish_as=publish_as,
+        overlap=overlap,
     )

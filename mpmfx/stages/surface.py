@@ -72,18 +72,25 @@ def run(ctx: Context) -> dict:
     # Serial frames are read ahead and written behind on threads: at 3.4M particles reading a
     # frame takes ~1 s and deflating and writing its surface ~4 s, the GPU's surfacing ~0.2 s.
     on_gpu = wp.get_device(ctx.device).is_cuda
-    serial = partial(_pipelined, write_threads=GPU_WRITE_THREADS if on_gpu else 1)
+    serial = partial(_pipelined, write_threads=write_threads(ctx.device))
     return finish(ctx, ctx.map_frames(frame, todo(ctx), desc="surface", auto=not on_gpu, serial=serial))
 
 
+def write_threads(device: str | None) -> int:
+    """Threads writing frames behind the surfacing: on a GPU the host's deflate is the slow part."""
+    return GPU_WRITE_THREADS if wp.get_device(device).is_cuda else 1
+
+
 def finish(ctx: Context, results: list[dict]) -> dict:
-    """In the client, after every frame's task: the manifest's extras."""
-    return {"this_run": {k: sum(r[k] for r in results) for k in ("vertices", "faces")}}
+    """In the client, after every frame's task (those made while simulate ran included): the
+    manifest's extras."""
+    done = results + ctx.followed
+    return {"this_run": {k: sum(r[k] for r in done) for k in ("vertices", "faces")}}
 
 
 def frame(job: FrameJob, f: int) -> dict:
     """Surface frame `f` into the entry (a task: runs on any worker); returns its mesh size."""
-    surfaces, stats = _surfaces(job, _read(job, f), f)
+    surfaces, stats = make_surfaces(job, read_particles(job, f), f)
     surfaces.write(job.entry.frame_path(f, FRAME_EXT))
     return stats
 
@@ -97,12 +104,12 @@ def _pipelined(calls: list[tuple[FrameJob, int]], bar, *, write_threads: int) ->
         ThreadPoolExecutor(max_workers=1, thread_name_prefix="mpmfx-read") as reader,
         FrameWriter(write_threads) as writer,
     ):
-        ahead = reader.submit(_read, *calls[0])
+        ahead = reader.submit(read_particles, *calls[0])
         for i, (job, f) in enumerate(calls):
             particles = ahead.result()
             if i + 1 < len(calls):
-                ahead = reader.submit(_read, *calls[i + 1])
-            surfaces, stats = _surfaces(job, particles, f)
+                ahead = reader.submit(read_particles, *calls[i + 1])
+            surfaces, stats = make_surfaces(job, particles, f)
             del particles
             writer.submit(surfaces.write, job.entry.frame_path(f, FRAME_EXT))
             out.append(stats)
@@ -110,12 +117,12 @@ def _pipelined(calls: list[tuple[FrameJob, int]], bar, *, write_threads: int) ->
     return out
 
 
-def _read(job: FrameJob, f: int) -> ParticleFrame:
+def read_particles(job: FrameJob, f: int) -> ParticleFrame:
     sim = job.upstream["simulate"]  # verified: a changed frame is redone by simulate, not surfaced
     return sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read)
 
 
-def _surfaces(job: FrameJob, p: ParticleFrame, f: int) -> tuple[SurfaceFrame, dict]:
+def make_surfaces(job: FrameJob, p: ParticleFrame, f: int) -> tuple[SurfaceFrame, dict]:
     """(frame f's surfaces, one GroupSurface a surface group; its mesh size)."""
     quiet_warp(job.device)
     shot = job.shot

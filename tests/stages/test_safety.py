@@ -318,7 +318,7 @@ def test_a_surfacing_error_keeps_the_frames_before_it_and_a_rerun_resumes(tmp_pa
     shot = write_tiny_shot(tmp_path, frame_end=4)
     run = mpmfx.load_shot(shot, cache_root=tmp_path / "c", quiet=True)
     run.run(until="simulate")
-    real, calls = surface_stage._surfaces, []
+    real, calls = surface_stage.make_surfaces, []
 
     def failing(job, particles, f):
         calls.append(1)
@@ -326,14 +326,14 @@ def test_a_surfacing_error_keeps_the_frames_before_it_and_a_rerun_resumes(tmp_pa
             raise RuntimeError("frame 3: the surfacer failed")
         return real(job, particles, f)
 
-    monkeypatch.setattr(surface_stage, "_surfaces", failing)
+    monkeypatch.setattr(surface_stage, "make_surfaces", failing)
     with pytest.raises(RuntimeError, match="frame 3"):
         run.run(until="surface")
     entry = run.entries()["surface"]
     written = sorted(int(p.stem) for p in entry.frames_dir.glob("[0-9]*.npz"))
     assert len(written) == 2 and all(SurfaceFrame.read(entry.frame_path(f, "npz")).groups for f in written)
     assert not list(entry.frames_dir.glob(".*tmp*"))  # no half-written file left behind
-    monkeypatch.setattr(surface_stage, "_surfaces", real)
+    monkeypatch.setattr(surface_stage, "make_surfaces", real)
     assert {r.stage: r.state for r in run.run(until="surface")}["surface"] == "resumed"
     assert len(list(entry.frames_dir.glob("[0-9]*.npz"))) == len(run.entries()["simulate"].done_frames("npz"))
 
