@@ -18,7 +18,6 @@ import importlib
 
 _WHERE = {
     "AnimatedMesh": "animated",
-    "CAPTURE_LOCK": "chunked",
     "Collider": "colliders",
     "ColliderKind": "colliders",
     "OutOfDomain": "config",

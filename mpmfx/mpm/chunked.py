@@ -9,7 +9,6 @@ SimulationError as the reference loop (`Solver._advance_host`).
 from __future__ import annotations
 
 import math
-import threading
 import time
 
 import numpy as np
@@ -24,12 +23,7 @@ from .report import step_report
 from .slots import Clock, Count, Status
 from .stepper import CHUNKS, StepperParams, WaveParams, make_clock_kernels, pose_colliders, wave_table
 
-__all__ = ["CAPTURE_LOCK", "DeviceAdvance"]
-
-# Held while a chunk's CUDA graph is captured on the device's stream. A capture takes in every
-# launch on that stream, from any thread: another thread that launches work on the same device
-# while the solver runs (the stage runner's surfacing of finished frames) holds it meanwhile.
-CAPTURE_LOCK = threading.Lock()
+__all__ = ["DeviceAdvance"]
 
 
 class DeviceAdvance:
@@ -144,7 +138,7 @@ class DeviceAdvance:
         )
         graph = self._graphs.get(key)
         if graph is None:
-            with CAPTURE_LOCK, wp.ScopedCapture(device=self.s.device) as cap:
+            with wp.ScopedCapture(device=self.s.device) as cap:
                 self._launch_chunk(state, k, every)
             graph = self._graphs[key] = cap.graph
         wp.capture_launch(graph)

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import os
 import sys
 import tempfile
+import threading
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -81,6 +83,42 @@ class Stage(Protocol):
     def params(self, shot: Shot) -> dict: ...  # the stage's own parameters (key inputs)
     def inputs(self, shot: Shot) -> dict[str, str]: ...  # input files: name -> sha256
     def run(self, ctx: Context) -> dict: ...  # writes into ctx.entry; returns manifest extras
+
+
+class Turns:
+    """A lock granted in the order it was asked for (threading.Lock is not fair: a thread that
+    releases and asks again at once can keep it for ever while another waits)."""
+
+    def __init__(self):
+        self._cv = threading.Condition()
+        self._next = self._serving = 0
+
+    @contextlib.contextmanager
+    def turn(self):
+        with self._cv:
+            ticket, self._next = self._next, self._next + 1
+            self._cv.wait_for(lambda: self._serving == ticket)
+        try:
+            yield
+        finally:
+            with self._cv:
+                self._serving += 1
+                self._cv.notify_all()
+
+
+# One thread at a time launches work on a GPU. Warp's current stream is the device's, not the
+# thread's, and its array.numpy() swaps it for the null stream and back: two threads doing so at
+# once can leave the device on the null stream, where the solver's next CUDA graph capture fails
+# ("unknown stream"); a capture would also take in the other thread's launches. The simulate
+# stage takes a turn for each frame's substeps and host copies, the frames that follow it
+# (mpmfx.stages.follow) one for each frame's surfacing: host work (reading, deflating, writing,
+# exporting) overlaps, the device's work alternates.
+_GPU = Turns()
+
+
+def device_turn(device: str | None):
+    """A turn on `device` (a context manager): exclusive on a GPU, free on the CPU."""
+    return _GPU.turn() if wp.get_device(device).is_cuda else contextlib.nullcontext()
 
 
 NO_DRIVER = "Could not find or load the NVIDIA CUDA driver"  # Warp's native line on a CPU machine

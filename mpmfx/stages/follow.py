@@ -3,8 +3,8 @@
 Without it a shot's wall time is simulate + surface + export one after another. The frames of
 those stages do not depend on each other, only on their upstream frame, so while simulate runs,
 `Follower` watches its entry and takes every frame the moment its file lands (a frame file is
-complete or absent: `mpmfx.cache.atomic_path`): one thread surfaces it (on the GPU, its kernels
-interleave with the solver's on the device's stream) and writes its file behind on threads, and
+complete or absent: `mpmfx.cache.atomic_path`): one thread surfaces it (on a GPU, in turns with the
+solver's frames) and writes its file behind on threads, and
 one thread exports every frame whose surface has landed. When simulate ends, the runner waits
 for each followed stage in turn, then runs that stage as usual: it finds its frames made (those
 the follower did not get to, it makes itself) and writes the manifest, as for a resumed stage.
@@ -16,8 +16,8 @@ What this keeps:
 - a follower's error (a surface that cannot be made, a damaged upstream file) stops the
   following and is raised by the stage it belongs to, when the runner reaches it; a failed
   simulate stops the follower after the frame in hand;
-- the solver's CUDA graph captures never take in a surfacing kernel: the follower surfaces
-  holding `mpmfx.mpm.CAPTURE_LOCK`, which the solver holds while it captures.
+- on a GPU the solver and the surfacer take turns (`mpmfx.stages.base.device_turn`): Warp's
+  current stream is the device's, not the thread's, so two threads must not launch at once.
 """
 
 from __future__ import annotations
@@ -26,9 +26,8 @@ import threading
 import time
 
 from mpmfx.io.frames import ParticleFrame, SurfaceFrame
-from mpmfx.mpm import CAPTURE_LOCK
 from mpmfx.stages import export, surface
-from mpmfx.stages.base import Context
+from mpmfx.stages.base import Context, device_turn
 from mpmfx.stages.writer import FrameWriter
 
 POLL_S = 0.05  # how often the follower looks for a new upstream frame file
@@ -106,7 +105,7 @@ class Follower:
                     t0 = time.perf_counter()
                     particles = surface.read_particles(job, f)
                     t1 = time.perf_counter()
-                    with CAPTURE_LOCK:
+                    with device_turn(ctx.device):
                         surfaces, stats = surface.make_surfaces(job, particles, f)
                     del particles
                     t2 = time.perf_counter()

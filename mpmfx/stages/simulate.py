@@ -31,7 +31,7 @@ from mpmfx.mpm import AnimatedMesh, Collider, ColliderKind, Particles, Simulatio
 from mpmfx.mpm.emission import device_bytes
 from mpmfx.mpm.materials import VARIED_FIELDS, preset
 from mpmfx.mpm.readback import HostStaging
-from mpmfx.stages.base import Context, StageError, quiet_warp
+from mpmfx.stages.base import Context, StageError, device_turn, quiet_warp
 from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key, static_collider_mesh
 from mpmfx.stages.writer import FrameWriter
 
@@ -180,62 +180,68 @@ def run(ctx: Context) -> dict:
     shot, entry = ctx.shot, ctx.entry
     origin, size = np.asarray(shot.domain.origin), shot.domain.size
     mats, obj_mat = materials(shot)
-    solver = Solver(
-        mats,
-        shot.solver_config(),
-        colliders=colliders(shot),
-        animated=animated_meshes(shot),
-        device=ctx.device,
-        variation=_varied(shot),
-    )
-    start, fps = shot.shot.frame_start, shot.shot.fps
-    last = max(ctx.frames)
-    ckpt, restored = _restore(ctx, solver)
-    staging = HostStaging(solver.device)  # two sets of host buffers: the frame written, the frame made
     with FrameWriter() as writer:
-        if ckpt is None:
-            vox = ctx.upstream["voxelise"]
-            p = vox.read(vox.root / SeedParticles.FILE, lambda path: SeedParticles.read(path.parent))
-            body = p.body.astype(np.int32)
-            parts = Particles(
-                x=((p.x - origin) / size).astype(np.float32),
-                v=(p.v / size).astype(np.float32),
-                volume=(p.volume / size**3).astype(np.float32),
-                material=np.asarray(obj_mat, np.int32)[body],
-                body=body,
-                birth=None if p.birth is None else p.birth.astype(np.float32),
-                variation=variation(shot, p.x, body, p.birth) if _varied(shot) else None,
+        with device_turn(ctx.device):  # the set-up and the first frame (see device_turn)
+            solver = Solver(
+                mats,
+                shot.solver_config(),
+                colliders=colliders(shot),
+                animated=animated_meshes(shot),
+                device=ctx.device,
+                variation=_varied(shot),
             )
-            _budget(ctx, solver, p)
-            state, frame = solver.init_state(parts), start
-            qa0 = _qa(solver.advance(state, 0.0, 0.0), size)  # a zero-length advance: the initial observables
-            qa0 |= _entered(solver, state)
-            here = slice(None) if p.birth is None else p.birth <= 0  # (late ones are not there yet)
-            qa0["max_speed"] = float(np.linalg.norm(p.v[here], axis=1).max(initial=0.0))  # m/s; no substep measured it
-            consts = _consts(solver, state)  # material and body: the same every frame, copied once
-            writer.submit(_write_frame, entry, frame, qa0, None, _host(solver, state, consts, staging), origin, size)
-        else:
-            frame, state = ckpt, restored
-            consts = _consts(solver, state)
-            if not entry.frame_path(frame, FRAME_EXT).exists():  # killed between checkpoint and frame
-                writer.submit(
-                    _write_frame, entry, frame, None, None, _host(solver, state, consts, staging), origin, size
+            start, fps = shot.shot.frame_start, shot.shot.fps
+            last = max(ctx.frames)
+            ckpt, restored = _restore(ctx, solver)
+            staging = HostStaging(solver.device)  # two sets of host buffers: the frame written, the frame made
+            if ckpt is None:
+                vox = ctx.upstream["voxelise"]
+                p = vox.read(vox.root / SeedParticles.FILE, lambda path: SeedParticles.read(path.parent))
+                body = p.body.astype(np.int32)
+                parts = Particles(
+                    x=((p.x - origin) / size).astype(np.float32),
+                    v=(p.v / size).astype(np.float32),
+                    volume=(p.volume / size**3).astype(np.float32),
+                    material=np.asarray(obj_mat, np.int32)[body],
+                    body=body,
+                    birth=None if p.birth is None else p.birth.astype(np.float32),
+                    variation=variation(shot, p.x, body, p.birth) if _varied(shot) else None,
                 )
+                _budget(ctx, solver, p)
+                state, frame = solver.init_state(parts), start
+                qa0 = _qa(solver.advance(state, 0.0, 0.0), size)  # a zero-length advance: the initial observables
+                qa0 |= _entered(solver, state)
+                here = slice(None) if p.birth is None else p.birth <= 0  # (late ones are not there yet)
+                qa0["max_speed"] = float(
+                    np.linalg.norm(p.v[here], axis=1).max(initial=0.0)
+                )  # m/s; no substep measured it
+                consts = _consts(solver, state)  # material and body: the same every frame, copied once
+                writer.submit(
+                    _write_frame, entry, frame, qa0, None, _host(solver, state, consts, staging), origin, size
+                )
+            else:
+                frame, state = ckpt, restored
+                consts = _consts(solver, state)
+                if not entry.frame_path(frame, FRAME_EXT).exists():  # killed between checkpoint and frame
+                    writer.submit(
+                        _write_frame, entry, frame, None, None, _host(solver, state, consts, staging), origin, size
+                    )
         split = dict.fromkeys(("advance", "host_copy", "writer_wait"), 0.0)  # s, summed over the frames
         for f in ctx.progress(range(frame + 1, last + 1), total=last - frame, desc="simulate"):
             t0 = time.perf_counter()
-            try:
-                report = solver.advance(state, (f - 1 - start) / fps, (f - start) / fps)
-            except SimulationError as exc:
-                raise StageError(f"frame {f}: {_advice(shot, exc)}") from None
-            t1 = time.perf_counter()
-            ckpt_data = None
-            if (f - start) % shot.solver.checkpoint_every == 0 or f == last:
-                ckpt_data = solver.checkpoint(state, (f - start) / fps, staging)
-            # the frame's arrays are the checkpoint's where there is one (one copy off the device)
-            host = _host(solver, state, consts, staging, ckpt_data)
+            with device_turn(ctx.device):  # (the frames that follow simulate take theirs between)
+                try:
+                    report = solver.advance(state, (f - 1 - start) / fps, (f - start) / fps)
+                except SimulationError as exc:
+                    raise StageError(f"frame {f}: {_advice(shot, exc)}") from None
+                t1 = time.perf_counter()
+                ckpt_data = None
+                if (f - start) % shot.solver.checkpoint_every == 0 or f == last:
+                    ckpt_data = solver.checkpoint(state, (f - start) / fps, staging)
+                # the frame's arrays are the checkpoint's where there is one (one copy off the device)
+                host = _host(solver, state, consts, staging, ckpt_data)
+                qa = _qa(report, size) | _entered(solver, state)
             t2 = time.perf_counter()
-            qa = _qa(report, size) | _entered(solver, state)
             writer.submit(_write_frame, entry, f, qa, ckpt_data, host, origin, size)
             for k, dt in zip(split, (t1 - t0, t2 - t1, time.perf_counter() - t2)):
                 split[k] += dt

@@ -90,3 +90,35 @@ def test_a_failure_on_either_side_leaves_caches_a_rerun_resumes(tmp_path, monkey
     assert states["simulate"] == "resumed" and states["surface"] == "resumed"
     ours, theirs = run.entries()["surface"], ref.entries()["surface"]
     assert _files(ours, "*.npz") == _files(theirs, "*.npz") and len(_files(ours, "*.npz")) == len(run.shot.frames)
+
+
+def test_device_turns_are_granted_in_the_order_asked():
+    """The solver asks for the GPU again as soon as it releases it: a waiting follower must still
+    get its turn next (a plain lock may hand it back to the solver frame after frame)."""
+    import threading
+
+    from mpmfx.stages.base import Turns
+
+    turns, order, asked = Turns(), [], threading.Event()
+
+    def solver():
+        for i in range(4):
+            with turns.turn():
+                order.append(f"frame {i}")
+                if i == 1:
+                    asked.wait(10)
+                    time.sleep(0.05)  # the follower is now waiting for its turn
+
+    def follower():
+        while "frame 1" not in order:
+            time.sleep(0.001)
+        asked.set()
+        with turns.turn():
+            order.append("surface")
+
+    threads = [threading.Thread(target=solver), threading.Thread(target=follower)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(20)
+    assert order == ["frame 0", "frame 1", "surface", "frame 2", "frame 3"]
