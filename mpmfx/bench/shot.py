@@ -25,6 +25,8 @@ from pathlib import Path
 import warp as wp
 
 from mpmfx.bench.shots import device_name
+from mpmfx.meminfo import host_available
+from mpmfx.stages import memory
 from mpmfx.stages.runner import load_shot
 
 STAGES = ("voxelise", "simulate", "surface", "export")
@@ -41,6 +43,15 @@ def measure(shot: str | Path, *, overrides=(), cache: Path, device: str | None, 
     frames = len(man["simulate"].get("frames", []))
     qa = man["simulate"].get("qa", {})
     dev = wp.get_device(device)
+    n = int(man["simulate"].get("particles", 0))
+    est = memory.need(run.shot, memory.Counts(n), cuda=dev.is_cuda, overlap=overlap)
+    most, per = memory.largest(
+        run.shot,
+        cuda=dev.is_cuda,
+        overlap=overlap,
+        host_free=host_available() or 0,
+        device_free=int(dev.total_memory) if dev.is_cuda else None,
+    )
     return {
         "shot": run.shot.shot.name,
         "overrides": list(overrides),
@@ -58,6 +69,9 @@ def measure(shot: str | Path, *, overrides=(), cache: Path, device: str | None, 
         "bytes_per_frame": {s: _frame_bytes(entries[s], frames) for s in ("simulate", "surface", "export")},
         "device_peak_bytes": wp.get_mempool_used_mem_high(dev) if dev.is_cuda and dev.is_mempool_enabled else None,
         "host_peak_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+        "estimate_bytes": {"host": est.host, "device": est.device},
+        "bytes_per_particle": per,
+        "largest_particles": most,  # this shot's set-up, at this machine's memory (the GPU's whole)
     }
 
 
@@ -97,6 +111,16 @@ def table(r: dict) -> str:
         "  cache a frame: "
         + ", ".join(f"{s} {b[s] / 1e6:.1f} MB" + (per if s == "simulate" else "") for s in b)
         + f"; peak memory: device {_gb(r['device_peak_bytes'])}, host {_gb(r['host_peak_bytes'])}"
+    )
+    est, per = r["estimate_bytes"], r["bytes_per_particle"]
+    lines.append(
+        "  estimated peak: "
+        + "; ".join(
+            f"{w} {_gb(max(est[w].values()))} ({', '.join(f'{k} {b:.0f} B' for k, b in per[w].items())} a particle)"
+            for w in ("device", "host")
+            if est[w]
+        )
+        + f"; this machine holds such a shot up to ~{r['largest_particles'] / 1e6:.0f}M particles"
     )
     return "\n".join(lines)
 

@@ -1,7 +1,9 @@
 """The memory a shot needs, estimated before voxelise starts, against what the machine has.
 
 An estimate from array counts, not an allocator's tally: each figure below says which arrays
-it counts. The stages run one after another, so the need is the largest stage's, not the sum.
+it counts. The need is the largest stage's, except that surface follows simulate frame by frame
+(`mpmfx.stages.follow`): then the solver's and the surfacer's buffers are held at once, on the
+device and on the host.
 A shot over the memory available (host: /proc/meminfo MemAvailable; a CUDA device: Warp's free
 memory) is refused as bad input naming the keys that shrink it, before anything is written.
 """
@@ -78,9 +80,10 @@ def _gb(b: int) -> str:
     return f"{b / 1e9:.1f} GB" if b >= 1e8 else f"{b / 1e6:.0f} MB"
 
 
-def need(shot: Shot, counted: Counts, *, cuda: bool) -> Need:
+def need(shot: Shot, counted: Counts, *, cuda: bool, overlap: bool = False) -> Need:
     """The estimate for what `counted` says (bytes; see the figures above), each stage's peak
-    with the process's own PROCESS_BYTES on the host. cuda: the solver and surfacer run on a GPU."""
+    with the process's own PROCESS_BYTES on the host. cuda: the solver and surfacer run on a GPU;
+    overlap: surface follows simulate (both stages' buffers at once, as "simulate + surface")."""
     n = counted.particles
     flags = SceneFlags(snow=True, sand=True, water=True)  # every branch's arrays: an upper bound
     solver = device_bytes(n, flags, shot.domain.grid_n, deterministic=shot.solver.deterministic, births=True, gpu=cuda)
@@ -96,7 +99,28 @@ def need(shot: Shot, counted: Counts, *, cuda: bool) -> Need:
         out.host["surface"] = PROCESS_BYTES + n * SURFACE_BYTES_PER_PARTICLE
     else:
         out.host["simulate"], out.host["surface"] = PROCESS_BYTES + solver + writer, PROCESS_BYTES + surface
+    if overlap:
+        for where in (out.host, out.device):
+            if "simulate" in where:
+                both = where.pop("simulate") + where.pop("surface") - (PROCESS_BYTES if where is out.host else 0)
+                where["simulate + surface"] = both
     return out
+
+
+def largest(shot: Shot, *, cuda: bool, overlap: bool, host_free: int, device_free: int | None) -> tuple[int, dict]:
+    """(the most particles `shot` fits in host_free and device_free bytes, bytes a particle of
+    each stage's peak: {"host": {stage: B}, "device": {stage: B}}). The estimate is linear in
+    the particles (the grid and the process are the fixed part)."""
+    fixed, per = (need(shot, Counts(n), cuda=cuda, overlap=overlap) for n in (0, 10**6))
+    slope = {
+        w: {k: (getattr(per, w)[k] - getattr(fixed, w)[k]) / 10**6 for k in getattr(per, w)} for w in ("host", "device")
+    }
+    fits = []
+    for where, free in (("host", host_free), ("device", device_free)):
+        for k, b in slope[where].items():
+            if free is not None and b > 0:
+                fits.append(int((free - getattr(fixed, where)[k]) / b))
+    return max(0, min(fits)), slope
 
 
 def surface_bytes(shot: Shot, particles: int) -> int:
@@ -160,11 +184,12 @@ def device_free(device: str | None) -> int | None:
         return None
 
 
-def check(shot: Shot, counted: Counts, *, device: str | None, quiet: bool = False) -> Need:
+def check(shot: Shot, counted: Counts, *, device: str | None, quiet: bool = False, overlap: bool = False) -> Need:
     """Print the estimate in one line; raise ShotError (exit 2) naming the keys to change when
-    it exceeds the host's available memory or the device's free memory."""
+    it exceeds the host's available memory or the device's free memory. overlap: surface will
+    follow simulate (`need`)."""
     free_dev = device_free(device) if device != "cpu" else None
-    est = need(shot, counted, cuda=free_dev is not None)
+    est = need(shot, counted, cuda=free_dev is not None, overlap=overlap)
     free_host = host_available()
     if not quiet:
         print(f"[run] {est.line(host_free=free_host, device_free=free_dev)}", file=sys.stderr)

@@ -223,9 +223,9 @@ class ShotRun:
                     f"--frames: {bad[0]} is outside the shot's frames "
                     f"{self.shot.shot.frame_start}..{self.shot.shot.frame_end}"
                 )
-        self.memory()
+        self.memory(until)
 
-    def memory(self) -> None:
+    def memory(self, until: str = "render") -> None:
         """State the memory the shot needs and refuse it (ShotError) over what the machine has
         (`mpmfx.stages.memory`): particles as voxelised when that is cached, else bounded from
         the objects' boxes."""
@@ -237,7 +237,8 @@ class ShotRun:
             counted = memory.Counts(int((vox.manifest() or {}).get("particles", 0)))
         else:
             counted = memory.counts(self.shot)
-        memory.check(self.shot, counted, device=self.device, quiet=self.quiet)
+        follows = self.overlap and STAGES.index(until) >= STAGES.index("surface") and not entries["simulate"].complete()
+        memory.check(self.shot, counted, device=self.device, quiet=self.quiet, overlap=follows)
 
     def _publish(self, results: list[StageResult]) -> dict[str, Path]:
         """Every run that reaches export / render publishes them at stable paths (`mpmfx.publish`)."""

@@ -61,3 +61,22 @@ def test_check_bounds_its_grid(tmp_path, capsys, grid_n, words):
     assert main(["check", str(tmp_path / "box.obj"), "--grid-n", str(grid_n)]) == 2
     err = capsys.readouterr().err
     assert "--grid-n" in err and words in err
+
+
+def test_followed_stages_need_the_solver_and_the_surfacer_at_once(tmp_path):
+    """Surface follows simulate: on a GPU both hold their buffers together; the largest shot the
+    estimate admits fits what it was given, and one more million particles does not."""
+    import mpmfx
+
+    shot = mpmfx.load_shot(write_tiny_shot(tmp_path), cache_root=tmp_path / "c").shot
+    n = memory.Counts(2_000_000)
+    apart = memory.need(shot, n, cuda=True)
+    both = memory.need(shot, n, cuda=True, overlap=True)
+    assert both.device["simulate + surface"] == apart.device["simulate"] + apart.device["surface"]
+    assert max(both.host.values()) > max(apart.host.values())
+    most, per = memory.largest(shot, cuda=True, overlap=True, host_free=64 * 10**9, device_free=80 * 10**9)
+    fits = memory.need(shot, memory.Counts(most), cuda=True, overlap=True)
+    over = memory.need(shot, memory.Counts(most + 10**6), cuda=True, overlap=True)
+    assert max(fits.host.values()) <= 64e9 and max(fits.device.values()) <= 80e9
+    assert max(over.host.values()) > 64e9 or max(over.device.values()) > 80e9
+    assert 100 < per["device"]["simulate + surface"] < 2000  # bytes a particle
