@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import threading
 import time
+from functools import partial
 
 from mpmfx.io.frames import ParticleFrame, SurfaceFrame
 from mpmfx.stages import export, surface
@@ -105,8 +106,8 @@ class Follower:
                     t0 = time.perf_counter()
                     particles = surface.read_particles(job, f)
                     t1 = time.perf_counter()
-                    with device_turn(ctx.device):
-                        surfaces, stats = surface.make_surfaces(job, particles, f)
+                    turn = partial(device_turn, ctx.device)
+                    surfaces, stats = surface.make_surfaces(job, particles, f, turn=turn)
                     del particles
                     t2 = time.perf_counter()
                     writer.submit(self._write_surface, surfaces, ctx.entry.frame_path(f, surface.FRAME_EXT))

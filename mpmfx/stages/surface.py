@@ -8,6 +8,7 @@ the domain), with velocity leaves and, with `surface.density` on, fog density le
 
 from __future__ import annotations
 
+import contextlib
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 
@@ -122,8 +123,9 @@ def read_particles(job: FrameJob, f: int) -> ParticleFrame:
     return sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read)
 
 
-def make_surfaces(job: FrameJob, p: ParticleFrame, f: int) -> tuple[SurfaceFrame, dict]:
-    """(frame f's surfaces, one GroupSurface a surface group; its mesh size)."""
+def make_surfaces(job: FrameJob, p: ParticleFrame, f: int, *, turn=contextlib.nullcontext) -> tuple[SurfaceFrame, dict]:
+    """(frame f's surfaces, one GroupSurface a surface group; its mesh size). turn(): held while
+    the surfacer has the device (`mpmfx.stages.base.device_turn`); the host's share is outside it."""
     quiet_warp(job.device)
     shot = job.shot
     names = shot.surface_groups()
@@ -133,8 +135,10 @@ def make_surfaces(job: FrameJob, p: ParticleFrame, f: int) -> tuple[SurfaceFrame
     out = {}
     for gi, g in enumerate(groups):
         sel = group_of == gi
+        x, v = p.x[sel], p.v[sel]
         try:
-            res = surface_particles(p.x[sel], p.v[sel], surface_params(shot, g), device=job.device)
+            with turn():
+                res = surface_particles(x, v, surface_params(shot, g), device=job.device)
         except GridTooLarge as exc:  # the surfacer names its own parameter; the shot has a key for voxel_size
             raise StageError(
                 f"{shot.source or shot.shot.name}: surface.voxel_size, frame {f}, group {g!r}: "

@@ -57,11 +57,11 @@ def test_a_failure_on_either_side_leaves_caches_a_rerun_resumes(tmp_path, monkey
     # the error is the surface stage's
     real, calls = surface_stage.make_surfaces, []
 
-    def failing(job, particles, f):
+    def failing(job, particles, f, **kw):
         calls.append(f)
         if len(calls) == 3:
             raise RuntimeError(f"frame {f}: the surfacer failed")
-        return real(job, particles, f)
+        return real(job, particles, f, **kw)
 
     monkeypatch.setattr(surface_stage, "make_surfaces", failing)
     with pytest.raises(RuntimeError, match="the surfacer failed"):
