@@ -31,9 +31,10 @@ PART_BYTES = 15 * 2**20  # a returned file's cap is 16 MiB
 MAX_PARTS = 8
 
 
-def overrides(grid: int, frames: int) -> list[str]:
+def overrides(grid: int, frames: int, extra=()) -> list[str]:
+    """The shot at `grid` (its floor kept at y = 0), `frames` long; `extra` --set overrides."""
     dx = 2.0 / grid
-    return [f"domain.grid_n={grid}", f"domain.origin=[-1.0, {-3 * dx:.6g}, -1.0]", f"shot.frame_end={frames}"]
+    return [f"domain.grid_n={grid}", f"domain.origin=[-1.0, {-3 * dx:.6g}, -1.0]", f"shot.frame_end={frames}", *extra]
 
 
 def run(args) -> None:
@@ -42,9 +43,9 @@ def run(args) -> None:
     out = Path(os.environ.get("OUT", "shot_out"))
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    measure(SHOT, overrides=overrides(48, 3), cache=CACHE / "warmup", device=args.device)
+    measure(SHOT, overrides=overrides(48, 3, args.overrides), cache=CACHE / "warmup", device=args.device)
     print(f"warm-up (kernel compiles, grid 48, 3 frames): {time.perf_counter() - t0:.1f} s", flush=True)
-    row = measure(SHOT, overrides=overrides(args.grid, args.frames), cache=CACHE, device=args.device)
+    row = measure(SHOT, overrides=overrides(args.grid, args.frames, args.overrides), cache=CACHE, device=args.device)
     print(table(row), flush=True)
     (out / "shot.json").write_text(json.dumps(row, indent=1))
 
@@ -61,7 +62,7 @@ def proxies(args) -> None:
     out = Path(os.environ.get("OUT", "shot_out"))
     work = Path("/tmp/shot_proxies")
     work.mkdir(parents=True, exist_ok=True)
-    over = overrides(args.grid, args.frames)
+    over = overrides(args.grid, args.frames, args.overrides)
     shot_run = mpmfx.load_shot(SHOT, overrides=over, cache_root=CACHE, device=args.device, quiet=True)
     sim = shot_run.entries()["simulate"]
     (group,) = set(shot_run.shot.surface_groups())  # one object: one surface group
@@ -118,6 +119,7 @@ def main(argv=None) -> int:
     ap.add_argument("--device", default="cuda")
     ap.add_argument("--grid", type=int, default=400)
     ap.add_argument("--frames", type=int, default=96)
+    ap.add_argument("--set", dest="overrides", action="append", default=[], help="more shot overrides")
     ap.add_argument("--voxel-h", type=float, default=2.0, help="proxies: the voxel in particle spacings")
     args = ap.parse_args(argv)
     (run if args.what == "run" else proxies)(args)
