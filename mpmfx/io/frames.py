@@ -18,7 +18,8 @@ import numpy as np
 from mpmfx.cache import atomic_path
 from mpmfx.io.npz import write_npz
 
-FRAME_FORMAT = 1
+FRAME_FORMAT = 2  # 2: particle ids dropped when they count 0..n-1; surface normals, velocities float16
+READS = (1, 2)  # older frames still read: what changed is what a writer leaves out or rounds
 
 
 def write_arrays(path: str | Path, arrays: dict[str, np.ndarray], *, compress: bool | Collection[str] = False) -> Path:
@@ -49,9 +50,9 @@ def read_arrays(path: str | Path) -> dict[str, np.ndarray]:
     with np.load(path, allow_pickle=False) as data:
         out = {k: data[k] for k in data.files if k != "_format"}
         fmt = int(data["_format"]) if "_format" in data.files else -1
-    if fmt != FRAME_FORMAT:
+    if fmt not in READS:
         raise ValueError(
-            f"{path}: frame format {fmt}, this mpmfx reads {FRAME_FORMAT}: "
+            f"{path}: frame format {fmt}, this mpmfx reads {', '.join(map(str, READS))}: "
             f"re-run the stage (mpmfx run SHOT --force STAGE)"
         )
     return out
@@ -91,7 +92,10 @@ class ParticleFrame:
     frame; a frame holds the particles in the shot, not the removed ones nor those that enter
     later, before they do; material: index into the simulate stage's materials; body: index
     into shot.bodies); Jp (snow/sand plastic volume ratio) and J (water
-    volume ratio) (n,) float32 where a material has them, else None."""
+    volume ratio) (n,) float32 where a material has them, else None.
+
+    On disk, 28 bytes a particle where every material has J and Jp: an id that counts 0..n-1 (no
+    particle removed or still to enter) is left out and rebuilt on read."""
 
     x: np.ndarray
     v: np.ndarray
@@ -109,21 +113,34 @@ class ParticleFrame:
     _DEFLATE = ("material", "body", "Jp")
 
     def write(self, path: str | Path) -> Path:
-        return write_arrays(path, self.arrays(), compress=[k for k in self._DEFLATE if getattr(self, k) is not None])
+        arrays = self.arrays()
+        if _counts_up(self.id):
+            del arrays["id"]
+        return write_arrays(path, arrays, compress=[k for k in self._DEFLATE if getattr(self, k) is not None])
 
     @classmethod
     def read(cls, path: str | Path) -> ParticleFrame:
-        return cls(**read_arrays(path))
+        arrays = read_arrays(path)
+        if "id" not in arrays:
+            arrays["id"] = np.arange(len(arrays["x"]), dtype=np.int32)
+        return cls(**arrays)
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {k: a for k, a in vars(self).items() if a is not None}
+
+
+def _counts_up(ids: np.ndarray) -> bool:
+    """ids == 0, 1, ..., n-1 (the whole voxelised set in order)."""
+    n = len(ids)
+    return n == 0 or (int(ids[0]) == 0 and int(ids[-1]) == n - 1 and bool(np.all(np.diff(ids) == 1)))
 
 
 @dataclass
 class GroupSurface:
     """One surface group's mesh and sparse level set, world units.
 
-    vertices, normals (m,3) float32 m / unit; velocities (m,3) float32 m/s; faces (k,3) int32;
+    vertices, normals (m,3) float32 m / unit; velocities (m,3) float32 m/s (float16 as read from a
+    frame file: 1e-3 relative is below what a shading normal or motion blur shows); faces (k,3) int32;
     block_ijk (b,3) int64 leaf origins in voxels; blocks (b,8,8,8) float32 signed distance (m);
     inside_ijk (c,3) int64 leaves wholly inside; voxel_size, background (m); vel_blocks
     (b,8,8,8,3) float16 m/s; density_blocks (b,8,8,8) float16 fog density 0..1 (or None)."""
@@ -152,12 +169,19 @@ class SurfaceFrame:
     # leaves half exact zeros (both ~2.3-2.5x), the fog mostly exact 0 and 1, faces index runs (~3.5x),
     # vertices sit on lattice edges (~1.9x); normals and mesh velocities barely shrink (1.1x): stored
     _DEFLATE = ("blocks", "density_blocks", "vel_blocks", "faces", "vertices")
+    _HALF = ("normals", "velocities")  # 25 bytes a vertex on disk, not 37
 
     def write(self, path: str | Path) -> Path:
         out: dict[str, np.ndarray] = {"groups": np.asarray(list(self.groups))}
         for g, s in self.groups.items():
             out |= {
-                f"{g}.{k}": (np.float64(a) if k in ("voxel_size", "background") else a)
+                f"{g}.{k}": (
+                    np.float64(a)
+                    if k in ("voxel_size", "background")
+                    else a.astype(np.float16)
+                    if k in self._HALF
+                    else a
+                )
                 for k, a in vars(s).items()
                 if a is not None
             }
