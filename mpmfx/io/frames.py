@@ -143,17 +143,19 @@ class GroupSurface:
     frame file: 1e-3 relative is below what a shading normal or motion blur shows); faces (k,3) int32;
     block_ijk (b,3) int64 leaf origins in voxels; blocks (b,8,8,8) float32 signed distance (m);
     inside_ijk (c,3) int64 leaves wholly inside; voxel_size, background (m); vel_blocks
-    (b,8,8,8,3) float16 m/s; density_blocks (b,8,8,8) float16 fog density 0..1 (or None)."""
+    (b,8,8,8,3) float16 m/s; density_blocks (b,8,8,8) float16 fog density 0..1 (or None).
+    The leaves are None in a shot that exports no VDB: they are its only reader, and three
+    quarters of a frame's bytes."""
 
     vertices: np.ndarray
     faces: np.ndarray
     normals: np.ndarray
     velocities: np.ndarray
-    block_ijk: np.ndarray
-    blocks: np.ndarray
-    inside_ijk: np.ndarray
     voxel_size: float
     background: float
+    block_ijk: np.ndarray | None = None  # the leaves: None where no stage reads them (no VDB export)
+    blocks: np.ndarray | None = None
+    inside_ijk: np.ndarray | None = None
     vel_blocks: np.ndarray | None = None
     density_blocks: np.ndarray | None = None
 

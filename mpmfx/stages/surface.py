@@ -3,7 +3,8 @@
 Output `frames/NNNN.npz`: an `mpmfx.io.frames.SurfaceFrame` record, one `GroupSurface` per
 surface group (a material, an object, or "all": `surface.group`): the mesh with vertex normals
 and velocities, and the sparse level set as 8^3 leaves (its size follows the surface area, not
-the domain), with velocity leaves and, with `surface.density` on, fog density leaves.
+the domain), with velocity leaves and, with `surface.density` on, fog density leaves. The
+leaves are kept only when export writes VDB (`export.vdb`), their one reader.
 """
 
 from __future__ import annotations
@@ -34,7 +35,8 @@ def params(shot: Shot) -> dict:
         g: {k: getattr(v, "value", v) for k, v in vars(surface_params(shot, g)).items()}
         for g in sorted(set(shot.surface_groups()))
     }
-    return {"surface": resolved, "groups": shot.surface_groups()}
+    # the level set's leaves are stored only for the VDB export, their one reader
+    return {"surface": resolved, "groups": shot.surface_groups(), "leaves": shot.export.vdb}
 
 
 def inputs(shot: Shot) -> dict[str, str]:
@@ -145,20 +147,25 @@ def make_surfaces(job: FrameJob, p: ParticleFrame, f: int, *, turn=contextlib.nu
                 f"{exc.detail} (--set surface.voxel_size=...)"
             ) from None
         m, ls = res.mesh, res.sparse
+        leaves = {}
+        if shot.export.vdb:
+            leaves = dict(
+                block_ijk=ls.block_ijk,
+                blocks=ls.values,
+                inside_ijk=ls.inside_ijk,
+                # motion-blur vectors: half precision is plenty, and half the bytes
+                vel_blocks=None if ls.velocity is None else ls.velocity.astype(np.float16),
+                # 0..1 for a fog shader: float16's 5e-4 steps are invisible
+                density_blocks=None if ls.density is None else ls.density.astype(np.float16),
+            )
         out[g] = GroupSurface(
             vertices=m.vertices,
             faces=m.faces,
             normals=m.normals,
             velocities=m.velocities,
-            block_ijk=ls.block_ijk,
-            blocks=ls.values,
-            inside_ijk=ls.inside_ijk,
             voxel_size=ls.voxel_size,
             background=ls.background,
-            # motion-blur vectors: half precision is plenty, and half the bytes
-            vel_blocks=None if ls.velocity is None else ls.velocity.astype(np.float16),
-            # 0..1 for a fog shader: float16's 5e-4 steps are invisible
-            density_blocks=None if ls.density is None else ls.density.astype(np.float16),
+            **leaves,
         )
         stats["vertices"] += len(m.vertices)
         stats["faces"] += len(m.faces)

@@ -418,3 +418,22 @@ def test_a_surface_too_big_for_one_call_names_the_shot_key_and_keeps_the_cache(f
     assert _bytes(first[1].entry / "frames") == sim_before
     run = mpmfx.load_shot(shot, overrides=["surface.radius_scale=1.45"], cache_root=cache, quiet=True)
     assert not run.entries()["surface"].root.exists()  # no half-made entry left
+
+
+def test_without_vdb_export_the_surface_keeps_the_mesh_and_drops_the_leaves(first_run):
+    """The level set's leaves have one reader, the VDB export: a shot that writes no VDB stores
+    only the meshes (same mesh, a fraction of the bytes), and its USD still plays them."""
+    from mpmfx.io.frames import SurfaceFrame
+
+    shot, cache, first = first_run
+    run = mpmfx.load_shot(shot, overrides=["export.vdb=false"], cache_root=cache, quiet=True)
+    results = run.run(until="export")
+    assert _states(results) == {"voxelise": "cached", "simulate": "cached", "surface": "ran", "export": "ran"}
+    with_leaves = first[2].entry / "frames" / "0003.npz"
+    without = results[2].entry / "frames" / "0003.npz"
+    a, b = SurfaceFrame.read(with_leaves).groups["Elastic"], SurfaceFrame.read(without).groups["Elastic"]
+    np.testing.assert_array_equal(a.vertices, b.vertices)
+    np.testing.assert_array_equal(a.faces, b.faces)
+    assert a.blocks is not None and b.blocks is None and b.vel_blocks is None
+    assert without.stat().st_size < 0.6 * with_leaves.stat().st_size
+    assert not list(results[3].entry.rglob("*.vdb")) and len(list((results[3].entry / "frames").glob("*.usdc"))) == 6
