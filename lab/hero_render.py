@@ -20,7 +20,6 @@ import time
 from pathlib import Path
 
 import hero_codec
-import numpy as np
 
 from mpmfx.bench.shots import SHOT_DIR
 
@@ -44,9 +43,6 @@ def import_frames(run, returned: Path, frames: list[int], info: dict) -> list[in
                 faces=fc,
                 normals=n,
                 velocities=vel,
-                block_ijk=np.zeros((0, 3), np.int64),
-                blocks=np.zeros((0, 8, 8, 8), np.float32),
-                inside_ijk=np.zeros((0, 3), np.int64),
                 voxel_size=voxel,
                 background=3 * voxel,
             )

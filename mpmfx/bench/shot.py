@@ -17,7 +17,6 @@ host, the cache bytes a frame, and the peak memory (device and host). Writes sho
 from __future__ import annotations
 
 import json
-import resource
 import tempfile
 import time
 from pathlib import Path
@@ -25,18 +24,26 @@ from pathlib import Path
 import warp as wp
 
 from mpmfx.bench.shots import device_name
-from mpmfx.meminfo import host_available
+from mpmfx.meminfo import host_available, peak_rss, reset_peak_rss
 from mpmfx.stages import memory
 from mpmfx.stages.runner import load_shot
 
 STAGES = ("voxelise", "simulate", "surface", "export")
+# the host peak after voxelise is one figure: the stages at once, or the largest of them in turn
+AFTER_VOXELISE = {True: "simulate + surface", False: "simulate, surface, export"}
 
 
 def measure(shot: str | Path, *, overrides=(), cache: Path, device: str | None, overlap: bool = True) -> dict:
     """Run `shot` up to export in `cache`; its times, bytes and memory (the module docstring)."""
     run = load_shot(shot, overrides=list(overrides), cache_root=cache, device=device, quiet=True, overlap=overlap)
+    peaks = {}  # host bytes at the peak of voxelise, then of the stages after it (together when overlapped)
     t0 = time.perf_counter()
-    results = {r.stage: r for r in run.run(until="export")}
+    reset_peak_rss()
+    results = {r.stage: r for r in run.run(until="voxelise")}
+    peaks["voxelise"] = peak_rss()
+    reset_peak_rss()
+    results |= {r.stage: r for r in run.run(until="export") if r.stage != "voxelise"}
+    peaks[AFTER_VOXELISE[overlap]] = peak_rss()
     wall = time.perf_counter() - t0
     entries = run.entries()
     man = {s: entries[s].manifest() or {} for s in STAGES}
@@ -44,7 +51,8 @@ def measure(shot: str | Path, *, overrides=(), cache: Path, device: str | None, 
     qa = man["simulate"].get("qa", {})
     dev = wp.get_device(device)
     n = int(man["simulate"].get("particles", 0))
-    est = memory.need(run.shot, memory.Counts(n), cuda=dev.is_cuda, overlap=overlap)
+    counted = memory.counts(run.shot)
+    est = memory.need(run.shot, memory.Counts(n, counted.candidates, counted.raster), cuda=dev.is_cuda, overlap=overlap)
     most, per = memory.largest(
         run.shot,
         cuda=dev.is_cuda,
@@ -68,7 +76,7 @@ def measure(shot: str | Path, *, overrides=(), cache: Path, device: str | None, 
         "faces": man["surface"].get("this_run", {}).get("faces", 0),
         "bytes_per_frame": {s: _frame_bytes(entries[s], frames) for s in ("simulate", "surface", "export")},
         "device_peak_bytes": wp.get_mempool_used_mem_high(dev) if dev.is_cuda and dev.is_mempool_enabled else None,
-        "host_peak_bytes": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024,
+        "host_peak_bytes": peaks,
         "estimate_bytes": {"host": est.host, "device": est.device},
         "bytes_per_particle": per,
         "largest_particles": most,  # this shot's set-up, at this machine's memory (the GPU's whole)
@@ -110,9 +118,15 @@ def table(r: dict) -> str:
     lines.append(
         "  cache a frame: "
         + ", ".join(f"{s} {b[s] / 1e6:.1f} MB" + (per if s == "simulate" else "") for s in b)
-        + f"; peak memory: device {_gb(r['device_peak_bytes'])}, host {_gb(r['host_peak_bytes'])}"
+        + f"; peak memory: device {_gb(r['device_peak_bytes'])}"
     )
     est, per = r["estimate_bytes"], r["bytes_per_particle"]
+    lines.append(
+        "  host peak against the estimate: "
+        + ", ".join(
+            f"{k} {_gb(b)} (estimated {_gb(_estimate(est['host'], k))})" for k, b in r["host_peak_bytes"].items()
+        )
+    )
     lines.append(
         "  estimated peak: "
         + "; ".join(
@@ -123,6 +137,13 @@ def table(r: dict) -> str:
         + f"; this machine holds such a shot up to ~{r['largest_particles'] / 1e6:.0f}M particles"
     )
     return "\n".join(lines)
+
+
+def _estimate(host: dict[str, int], measured: str) -> int | None:
+    """The estimate beside a measured peak: that stage's, or the largest of the stages it covers."""
+    if measured in host:
+        return host[measured]
+    return max((b for k, b in host.items() if k != "voxelise"), default=None)
 
 
 def _gb(b) -> str:

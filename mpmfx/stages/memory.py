@@ -43,6 +43,15 @@ WRITER_BYTES_PER_PARTICLE = 68 + 2 * 44 + 132
 SURFACE_BYTES_PER_PARTICLE = 4 * 12 + 8
 SURFACE_BYTES_PER_VOXEL = 20 + 8 + 8 + 8
 SURFACE_BYTES_PER_BLOCK = 16  # the block map over the particles' box: index, class, counts (8^3 voxels)
+# A frame's mesh on the host, per particle: at the default voxel a body of particles has about
+# 0.3 surface vertices a particle (hero_castle at 10M particles: 0.32), thin or splashing ones
+# more; bounded at 0.6 vertices (position, normal, velocity 36 B) and twice as many faces (24 B).
+MESH_BYTES_PER_PARTICLE = int(0.6 * (36 + 2 * 12))
+# Surface and export following simulate (overlap) hold, beside the two stages' own buffers: the
+# particle frame being surfaced (44, as above), the surface frames that GPU_WRITE_THREADS threads
+# deflate and write behind plus the one being made, and export's frame read and its USD arrays.
+FOLLOW_SURFACE_FRAMES = 4 + 1
+FOLLOW_BYTES_PER_PARTICLE = 44 + FOLLOW_SURFACE_FRAMES * MESH_BYTES_PER_PARTICLE + 2 * MESH_BYTES_PER_PARTICLE
 # Voxelise's five-cell thickness check (per solid object, one at a time) on its raster of at
 # most MAX_RASTER_VOXELS: distance transforms, labels and the subdivided mesh. Not counted from
 # arrays but measured (peak RSS over the imports, 2-core CPU, assets/sand_column.obj at
@@ -103,7 +112,7 @@ def need(shot: Shot, counted: Counts, *, cuda: bool, overlap: bool = False) -> N
         for where in (out.host, out.device):
             if "simulate" in where:
                 both = where.pop("simulate") + where.pop("surface") - (PROCESS_BYTES if where is out.host else 0)
-                where["simulate + surface"] = both
+                where["simulate + surface"] = both + (n * FOLLOW_BYTES_PER_PARTICLE if where is out.host else 0)
     return out
 
 

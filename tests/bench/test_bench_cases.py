@@ -47,3 +47,20 @@ def test_shots_times_every_stage_of_the_hero_shots(tmp_path):
         assert {k: v["state"] for k, v in s["stages"].items()} == {
             k: "ran" for k in ("voxelise", "simulate", "surface")
         }
+
+
+def test_bench_shot_reports_each_stage_its_bytes_and_its_memory(tmp_path, capsys):
+    """`mpmfx bench shot SHOT`: a real run to export, each stage's time, the cache bytes a frame,
+    and the host's peak of voxelise and of the stages after it beside their estimates."""
+    from tests.conftest import write_tiny_shot
+
+    shot = write_tiny_shot(tmp_path)
+    args = ["bench", "shot", str(shot), "--device", "cpu", "--cache", str(tmp_path / "c"), "--out", str(tmp_path / "o")]
+    assert main([*args, "--set", "export.vdb=false"]) == 0
+    row = json.loads((tmp_path / "o" / "shot.json").read_text())
+    assert row["particles"] > 0 and row["frames"] == 6 and row["overlap"]
+    assert all(row["bytes_per_frame"][s] > 0 for s in ("simulate", "surface", "export"))
+    assert set(row["host_peak_bytes"]) == {"voxelise", "simulate + surface"}
+    assert all(b > 10**6 for b in row["host_peak_bytes"].values())
+    out = capsys.readouterr().out
+    assert "x simulate" in out and "host peak against the estimate: voxelise" in out
