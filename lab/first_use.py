@@ -23,6 +23,7 @@ from mpmfx.bench.shots import run_shot, smoke_overrides
 
 LOADS: dict[str, float] = defaultdict(float)
 COMPILES: dict[str, float] = defaultdict(float)
+CPU: dict[str, float] = defaultdict(float)  # the loading thread's CPU seconds (clang and NVRTC run in it)
 _current = threading.local()  # the module a thread is loading (the surfacer's load on threads of their own)
 
 
@@ -35,6 +36,14 @@ def _timed(fn, book, name_of):
             book[name_of(args)] += time.perf_counter() - t0
 
     return wrapper
+
+
+def _owner(name: str) -> str:
+    """Whose module: the surfacer's, the solver's (its scene-specialised modules are named
+    mpmfx_mpm_...), or another (Warp's own, the bench's)."""
+    if name.startswith("mpmfx.surface"):
+        return "surfacer"
+    return "solver" if name.startswith(("mpmfx.mpm", "mpmfx_mpm")) else "other"
 
 
 def main():
@@ -51,7 +60,11 @@ def main():
 
     def load_named(self, *args, **kw):
         _current.name = self.name
-        return _timed(load, LOADS, lambda _a: self.name)(self, *args, **kw)
+        c0 = time.thread_time()
+        try:
+            return _timed(load, LOADS, lambda _a: self.name)(self, *args, **kw)
+        finally:
+            CPU[self.name] += time.thread_time() - c0
 
     Module.load = load_named
     for fn in ("build_cuda", "build_cpu"):
@@ -69,11 +82,18 @@ def main():
             "load_s": round(s, 2),
             "compiler_s": round(COMPILES[n], 2),
             "codegen_etc_s": round(s - COMPILES[n], 2),
+            "cpu_s": round(CPU[n], 2),
         }
         for n, s in sorted(LOADS.items(), key=lambda kv: -kv[1])
         if s > 0.05
     ]
-    print_table(rows, ["module", "load_s", "compiler_s", "codegen_etc_s"])
+    print_table(rows, ["module", "load_s", "compiler_s", "codegen_etc_s", "cpu_s"])
+    for owner in ("surfacer", "solver", "other"):
+        names = [n for n in LOADS if _owner(n) == owner]
+        print(
+            f"{owner}: {len(names)} modules, load {sum(LOADS[n] for n in names):.1f} s, "
+            f"compiler {sum(COMPILES[n] for n in names):.1f} s, CPU {sum(CPU[n] for n in names):.1f} s"
+        )
     print(
         f"{a.shot} grid {a.grid}, {a.frames} frames on {a.device}: wall {wall:.1f} s, module loads "
         f"{sum(LOADS.values()):.1f} s ({len(LOADS)} modules, the surfacer's compiled ahead on threads on a GPU), "
