@@ -19,6 +19,7 @@ import logging
 import warp as wp
 
 from mpmfx.surface.bitwords import ALL, BYTE, by_tile, face_mask, large_piece, spread, take_face, tile_face, vec8u
+from mpmfx.surface.kernel_modules import cpu_kernel
 from mpmfx.surface.launch import launch_blocks, launch_split, split
 from mpmfx.surface.lines import rows, side_code, vec8
 from mpmfx.surface.voxels import (
@@ -278,7 +279,7 @@ def seed_bits(
     pending[b] = left
 
 
-@wp.kernel
+@cpu_kernel
 def mark_particle_bits(
     bcoord: wp.array(dtype=wp.vec3i),
     cells: wp.array3d(dtype=wp.int32),
@@ -377,7 +378,7 @@ def flood_bits(
         wp.atomic_add(changed, 0, 1)
 
 
-@wp.kernel
+@cpu_kernel
 def flip_unreached_bits(
     reached: wp.array(dtype=wp.uint64), inside_value: float, outside_value: float, phi: wp.array(dtype=float), base: int
 ):

@@ -1,0 +1,35 @@
+"""Which Warp modules hold the surfacer's kernels, and which of them a device loads.
+
+Warp compiles a module whole, every kernel in it, the first time any one of them launches on a
+device. The CPU-only kernels (the `*_by_block` passes, mpmfx.surface.variants) are therefore kept
+in Warp modules of their own, named `<python module>_cpu` (`cpu_kernel`), so a GPU never compiles
+them, and `device_modules` lists what a device loads: on a GPU every surfacer module but those.
+"""
+
+from __future__ import annotations
+
+import warp as wp
+
+CPU_SUFFIX = "_cpu"  # the Warp modules of CPU-only kernels: "<python module>_cpu"
+PACKAGE = "mpmfx.surface"
+
+
+def cpu_kernel(fn):
+    """`@wp.kernel` for a kernel only the CPU launches: forward only (nothing differentiates the
+    surfacer), in the Warp module `<its python module>_cpu`."""
+    return wp.kernel(fn, enable_backward=False, module=fn.__module__ + CPU_SUFFIX)
+
+
+def device_modules(device) -> list:
+    """The surfacer's Warp modules (`warp.Module`) that `device` launches kernels of: all on the
+    CPU, all but the CPU-only ones on a GPU. The surfacer's Python modules must be imported."""
+    from warp._src.context import user_modules
+
+    import mpmfx.surface  # noqa: F401  (registers every surfacer module with Warp)
+
+    cpu = wp.get_device(device).is_cpu
+    return [
+        m
+        for name, m in list(user_modules.items())
+        if name.startswith(PACKAGE + ".") and (cpu or not name.endswith(CPU_SUFFIX))
+    ]
