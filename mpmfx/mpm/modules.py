@@ -1,0 +1,97 @@
+"""The Warp modules a Solver launches kernels of, listed before it exists, so that a run can
+compile them ahead, side by side, while it prepares the scene (mpmfx.stages.kernels).
+
+Warp compiles a module, every kernel in it, the first time one of its kernels launches: the
+solver's would otherwise compile one after another before its first frame. The specialised
+kernels are made here by the same cached factories the Solver calls (so the Solver later finds
+them made and their modules loaded); only the variants the scene uses are listed.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+import warp as wp
+
+from . import animated as animated_mod
+from .bricks import fits_brick_keys
+from .config import SolverConfig
+from .energy import make_report
+from .g2p import g2p_launch_shape, make_g2p
+from .grid_update import make_grid_update
+from .materials import Material
+from .p2g import make_p2g
+from .p2g_brick import BLOCK_CUDA, make_brick_scatter
+from .state import SceneFlags
+from .stepper import make_clock_kernels
+
+__all__ = ["solver_modules"]
+
+# modules of plain (unspecialised) kernels every run launches: the frame's read-back, the solid stress
+STATIC = ("mpmfx.mpm.readback", "mpmfx.mpm.g2p")
+# and those of the brick P2G's runs: its sort, the sparse grid clear, frames put back in particle order
+BRICK = ("mpmfx.mpm.bricks", "mpmfx.mpm.clear_grid", "mpmfx.mpm.order")
+
+
+def solver_modules(
+    materials: Sequence[Material],
+    config: SolverConfig,
+    *,
+    device=None,
+    colliders: bool = False,
+    animated: bool = False,
+    emission: bool = False,
+    variation: bool = False,
+    stepper: str = "device",
+) -> list:
+    """(`warp.Module`, block_dim) of each Warp module a `Solver(materials, config, ...,
+    device=device, stepper=stepper)` launches kernels of; block_dim: the threads a block its
+    kernels launch with on a GPU (a module compiles for one), None for Warp's default. colliders: the scene has rigid colliders (posed on the device);
+    animated: it has animated mesh colliders; emission: particles
+    are born late (emitters, late objects); variation: as Solver's."""
+    dev = wp.get_device(device)
+    flags = SceneFlags.of(materials, multi_field=config.multi_field, varied=variation, flip=config.flip)
+    meshes = animated_mod.INSIDE_TEST if animated else ""
+    device_clock = stepper == "device"
+    g2p_block = g2p_launch_shape()[1]
+    blocks = {}  # module name -> block_dim, where not Warp's default
+    kernels = [
+        make_p2g(flags, device_clock=False),  # (its module also holds make_report's: the frame's sums)
+        make_report(flags),
+        make_g2p(flags, device_clock=device_clock),
+        make_grid_update(device_clock=device_clock, meshes=meshes),
+    ]
+    blocks[kernels[2].module.name] = g2p_block
+    if device_clock:
+        kernels += [make_p2g(flags, device_clock=True), *make_clock_kernels(flags.snow, flags.water)]
+        # the brick P2G (chunked.DeviceAdvance's choice): its scatter, its sorting G2P, the sparse grid update
+        if not flags.multi_field and flags.flip == 0.0 and dev.is_cuda and fits_brick_keys(config.grid_n + 1):
+            clears = not flags.volume_recovery
+            scatter, g2p_sort = (
+                make_brick_scatter(flags, bool(config.deterministic)),
+                make_g2p(flags, device_clock=True, sorting=True),
+            )
+            kernels += [
+                scatter,
+                g2p_sort,
+                make_grid_update(device_clock=True, sparse=True, clears=clears, meshes=meshes),
+            ]
+            blocks[scatter.module.name], blocks[g2p_sort.module.name] = BLOCK_CUDA, g2p_block
+            names = list(BRICK)
+        else:
+            names = []
+    else:
+        names = []
+    names += list(STATIC)
+    if colliders and device_clock:
+        names.append("mpmfx.mpm.stepper")
+    if animated:
+        names.append("mpmfx.mpm.animated")
+    modules = {k.module.name: k.module for k in kernels}
+    for name in names:
+        modules.setdefault(name, wp.get_module(name))
+    if emission:
+        from .emission import activate
+
+        modules.setdefault(activate.module.name, activate.module)
+    return [(m, blocks.get(name)) for name, m in modules.items()]
