@@ -49,7 +49,8 @@ def solver_modules(
     kernels launch with on a GPU (a module compiles for one), None for Warp's default. colliders: the scene has rigid colliders (posed on the device);
     animated: it has animated mesh colliders; emission: particles
     are born late (emitters, late objects); variation: as Solver's."""
-    dev = wp.get_device(device)
+    # (by name: the list is also made where no GPU is, to measure what a GPU would compile)
+    cuda = str(device if device is not None else wp.get_device()).startswith("cuda")
     flags = SceneFlags.of(materials, multi_field=config.multi_field, varied=variation, flip=config.flip)
     meshes = animated_mod.INSIDE_TEST if animated else ""
     device_clock = stepper == "device"
@@ -65,7 +66,7 @@ def solver_modules(
     if device_clock:
         kernels += [make_p2g(flags, device_clock=True), *make_clock_kernels(flags.snow, flags.water)]
         # the brick P2G (chunked.DeviceAdvance's choice): its scatter, its sorting G2P, the sparse grid update
-        if not flags.multi_field and flags.flip == 0.0 and dev.is_cuda and fits_brick_keys(config.grid_n + 1):
+        if not flags.multi_field and flags.flip == 0.0 and cuda and fits_brick_keys(config.grid_n + 1):
             clears = not flags.volume_recovery
             scatter, g2p_sort = (
                 make_brick_scatter(flags, bool(config.deterministic)),

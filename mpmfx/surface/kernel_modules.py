@@ -27,7 +27,7 @@ def device_modules(device) -> list:
 
     import mpmfx.surface  # noqa: F401  (registers every surfacer module with Warp)
 
-    cpu = wp.get_device(device).is_cpu
+    cpu = not str(device if device is not None else wp.get_device()).startswith("cuda")  # (by name: listed also where no GPU is)
     return [
         m
         for name, m in list(user_modules.items())
