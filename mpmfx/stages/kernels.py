@@ -69,9 +69,12 @@ class ShotKernels:
     def total(self) -> int:
         return sum(len(mods) for mods in self.groups.values())
 
-    def start(self) -> "ShotKernels":
+    def start(self, *, ahead: bool | None = None) -> "ShotKernels":
+        """Start compiling; ahead: whether to (default: on a GPU only)."""
         quiet_warp(self.device)
-        if not self.groups or not wp.get_device(self.device).is_cuda:
+        if ahead is None:
+            ahead = wp.get_device(self.device).is_cuda
+        if not self.groups or not ahead:
             return self
         dev = wp.get_device(self.device)
         self._pool = ThreadPoolExecutor(
