@@ -29,8 +29,9 @@ __all__ = ["solver_modules"]
 
 # modules of plain (unspecialised) kernels every run launches: the frame's read-back, the solid stress
 STATIC = ("mpmfx.mpm.readback", "mpmfx.mpm.g2p")
-# and those of the brick P2G's runs: its sort, the sparse grid clear, frames put back in particle order
-BRICK = ("mpmfx.mpm.bricks", "mpmfx.mpm.clear_grid", "mpmfx.mpm.order")
+# and those of the brick P2G's runs: its sort, the sparse grid clear (not mpmfx.mpm.order, which
+# puts frames back in particle order: its kernel is generic, made for its types at the launch)
+BRICK = ("mpmfx.mpm.bricks", "mpmfx.mpm.clear_grid")
 
 
 def solver_modules(
