@@ -44,6 +44,11 @@ SEEDS = {"bubbles": 0, "specks": 1, "bodies": 2}  # seed_bits' modes
 wp.set_module_options({"enable_backward": False})
 
 
+# the bit-word flood's kernels (fill_bits: both devices run them) in a Warp module of their own:
+# the flood's compile, the surfacer's longest once sharpen was split, runs on two threads
+BITS_MODULE = __name__ + "_bits"
+
+
 @wp.kernel
 def mark_particle_voxels(
     g: wp.array(dtype=wp.vec3), bmap: wp.array3d(dtype=wp.int32), mark: wp.array(dtype=wp.int32), base: int
@@ -188,7 +193,7 @@ def flip_unreached(
             phi[t] = outside_value
 
 
-@wp.kernel
+@wp.kernel(enable_backward=False, module=BITS_MODULE)
 def seed_bits(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
@@ -322,7 +327,7 @@ def mark_particle_bits(
         mark[b * BS + x] = words[x]
 
 
-@wp.kernel
+@wp.kernel(enable_backward=False, module=BITS_MODULE)
 def flood_bits(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
