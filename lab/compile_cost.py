@@ -15,6 +15,7 @@ from pathlib import Path
 
 import warp as wp
 
+import mpmfx.surface  # noqa: F401  (registers the surfacer's Warp modules)
 from mpmfx.bench.report import print_table
 from mpmfx.shotfile import load_shot_config
 from mpmfx.stages import simulate

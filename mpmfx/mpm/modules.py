@@ -16,6 +16,7 @@ import warp as wp
 from . import animated as animated_mod
 from .bricks import fits_brick_keys
 from .config import SolverConfig
+from .emission import activate
 from .energy import make_report
 from .g2p import g2p_launch_shape, make_g2p
 from .grid_update import make_grid_update
@@ -93,7 +94,5 @@ def solver_modules(
     for name in names:
         modules.setdefault(name, wp.get_module(name))
     if emission:
-        from .emission import activate
-
         modules.setdefault(activate.module.name, activate.module)
     return [(m, blocks.get(name)) for name, m in modules.items()]

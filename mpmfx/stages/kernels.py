@@ -23,6 +23,8 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 import warp as wp
 
+import mpmfx.surface  # noqa: F401  (registers the surfacer's Warp modules)
+from mpmfx.stages import simulate
 from mpmfx.stages.base import quiet_warp
 from mpmfx.surface.kernel_modules import device_modules
 
@@ -53,8 +55,6 @@ class ShotKernels:
     @classmethod
     def for_run(cls, shot, device: str | None, stages) -> "ShotKernels":
         """The modules of those of `stages` ("simulate", "surface") that will run kernels."""
-        from mpmfx.stages import simulate  # (imported here: simulate imports the solver)
-
         quiet_warp(device)
         groups = {}
         if not wp.get_device(device).is_cuda:  # (a CPU run compiles as it launches)

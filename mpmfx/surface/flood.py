@@ -44,9 +44,9 @@ SEEDS = {"bubbles": 0, "specks": 1, "bodies": 2}  # seed_bits' modes
 wp.set_module_options({"enable_backward": False})
 
 
-# the bit-word flood's kernels (fill_bits: both devices run them) in a Warp module of their own:
-# the flood's compile, the surfacer's longest once sharpen was split, runs on two threads
-BITS_MODULE = __name__ + "_bits"
+# the bit-word flood's two kernels (fill_bits: both devices run them) in a Warp module each: the
+# flood's compile, the surfacer's longest once sharpen was split, runs on three threads
+SEED_MODULE, SWEEP_MODULE = __name__ + "_seed", __name__ + "_sweep"
 
 
 @wp.kernel
@@ -193,7 +193,7 @@ def flip_unreached(
             phi[t] = outside_value
 
 
-@wp.kernel(enable_backward=False, module=BITS_MODULE)
+@wp.kernel(enable_backward=False, module=SEED_MODULE)
 def seed_bits(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
@@ -327,7 +327,7 @@ def mark_particle_bits(
         mark[b * BS + x] = words[x]
 
 
-@wp.kernel(enable_backward=False, module=BITS_MODULE)
+@wp.kernel(enable_backward=False, module=SWEEP_MODULE)
 def flood_bits(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),

@@ -9,6 +9,7 @@ them, and `device_modules` lists what a device loads: on a GPU every surfacer mo
 from __future__ import annotations
 
 import warp as wp
+from warp._src.context import user_modules  # (Warp's registry of modules, as its load_module reads it)
 
 CPU_SUFFIX = "_cpu"  # the Warp modules of CPU-only kernels: "<python module>_cpu"
 PACKAGE = "mpmfx.surface"
@@ -22,12 +23,9 @@ def cpu_kernel(fn):
 
 def device_modules(device) -> list:
     """The surfacer's Warp modules (`warp.Module`) that `device` launches kernels of: all on the
-    CPU, all but the CPU-only ones on a GPU. The surfacer's Python modules must be imported."""
-    from warp._src.context import user_modules
-
-    import mpmfx.surface  # noqa: F401  (registers every surfacer module with Warp)
-
-    cpu = not str(device if device is not None else wp.get_device()).startswith("cuda")  # (by name: listed also where no GPU is)
+    CPU, all but the CPU-only ones on a GPU. Import mpmfx.surface first (it registers them)."""
+    # (by the device's name: the list is also made where no GPU is, to measure what one compiles)
+    cpu = not str(device if device is not None else wp.get_device()).startswith("cuda")
     return [
         m
         for name, m in list(user_modules.items())
