@@ -60,7 +60,10 @@ class ShotKernels:
         if not wp.get_device(device).is_cuda:  # (a CPU run compiles as it launches)
             return cls(device, groups)
         if "simulate" in stages:
-            groups["simulate"] = simulate.kernel_modules(shot, device)
+            try:
+                groups["simulate"] = simulate.kernel_modules(shot, device)
+            except Exception:  # (a scene the solver refuses: the stage says why when it runs)
+                pass
         if "surface" in stages:
             groups["surface"] = [(m, None) for m in device_modules(device)]
         return cls(device, groups)

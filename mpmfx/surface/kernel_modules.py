@@ -22,12 +22,13 @@ def cpu_kernel(fn):
 
 
 def device_modules(device) -> list:
-    """The surfacer's Warp modules (`warp.Module`) that `device` launches kernels of: all on the
-    CPU, all but the CPU-only ones on a GPU. Import mpmfx.surface first (it registers them)."""
+    """The surfacer's Warp modules (`warp.Module`; those holding kernels, as functions compile
+    into the modules that call them) that `device` launches kernels of: all on the CPU, all but
+    the CPU-only ones on a GPU. Import mpmfx.surface first (it registers them)."""
     # (by the device's name: the list is also made where no GPU is, to measure what one compiles)
     cpu = not str(device if device is not None else wp.get_device()).startswith("cuda")
     return [
         m
         for name, m in list(user_modules.items())
-        if name.startswith(PACKAGE + ".") and (cpu or not name.endswith(CPU_SUFFIX))
+        if name.startswith(PACKAGE + ".") and m.kernels and (cpu or not name.endswith(CPU_SUFFIX))
     ]
