@@ -48,51 +48,43 @@ def solver_modules(
 ) -> list:
     """(`warp.Module`, block_dim) of each Warp module a `Solver(materials, config, ...,
     device=device, stepper=stepper)` launches kernels of; block_dim: the threads a block its
-    kernels launch with on a GPU (a module compiles for one), None for Warp's default. colliders: the scene has rigid colliders (posed on the device);
-    animated: it has animated mesh colliders; emission: particles
-    are born late (emitters, late objects); variation: as Solver's."""
-    # (by name: the list is also made where no GPU is, to measure what a GPU would compile)
+    kernels launch with on a GPU (a module compiles for one), None for Warp's default.
+    colliders: the scene has rigid colliders (posed on the device); animated: animated mesh
+    colliders; emission: particles born late (emitters, late objects); variation: as Solver's."""
+    # (by the device's name: the list is also made where no GPU is, to measure what one compiles)
     cuda = str(device if device is not None else wp.get_device()).startswith("cuda")
     flags = SceneFlags.of(materials, multi_field=config.multi_field, varied=variation, flip=config.flip)
     meshes = animated_mod.INSIDE_TEST if animated else ""
-    device_clock = stepper == "device"
-    g2p_block = g2p_launch_shape()[1]
-    blocks = {}  # module name -> block_dim, where not Warp's default
-    kernels = [
-        make_p2g(flags, device_clock=False),  # (its module also holds make_report's: the frame's sums)
-        make_report(flags),
-        make_g2p(flags, device_clock=device_clock),
-        make_grid_update(device_clock=device_clock, meshes=meshes),
-    ]
-    blocks[kernels[2].module.name] = g2p_block
-    if device_clock:
-        kernels += [make_p2g(flags, device_clock=True), *make_clock_kernels(flags.snow, flags.water)]
-        # the brick P2G (chunked.DeviceAdvance's choice): its scatter, its sorting G2P, the sparse grid update
-        if not flags.multi_field and flags.flip == 0.0 and cuda and fits_brick_keys(config.grid_n + 1):
-            clears = not flags.volume_recovery
-            scatter, g2p_sort = (
-                make_brick_scatter(flags, bool(config.deterministic)),
-                make_g2p(flags, device_clock=True, sorting=True),
-            )
-            kernels += [
-                scatter,
-                g2p_sort,
-                make_grid_update(device_clock=True, sparse=True, clears=clears, meshes=meshes),
-            ]
-            blocks[scatter.module.name], blocks[g2p_sort.module.name] = BLOCK_CUDA, g2p_block
-            names = list(BRICK)
-        else:
-            names = []
-    else:
-        names = []
-    names += list(STATIC)
-    if colliders and device_clock:
+    dc = stepper == "device"
+    # the brick P2G: chunked.DeviceAdvance's choice, on a GPU
+    brick = dc and cuda and not flags.multi_field and flags.flip == 0.0 and fits_brick_keys(config.grid_n + 1)
+    g2p = make_g2p(flags, device_clock=dc)
+    # the frame's sums (make_report) share the module of the host clock's P2G
+    kernels = [make_p2g(flags), make_report(flags), g2p]
+    blocks = {g2p.module.name: g2p_launch_shape()[1]}  # module name -> block_dim, where not Warp's default
+    names = list(STATIC)
+    if dc:
+        kernels += make_clock_kernels(flags.snow, flags.water)
+    if not brick:  # the reference P2G and the grid update over every node
+        kernels.append(make_grid_update(device_clock=dc, meshes=meshes))
+    if dc and not brick:
+        kernels.append(make_p2g(flags, device_clock=True))
+    if brick:  # its scatter, the G2P of a substep that sorted, the sparse grid update
+        scatter, g2p_sort = (
+            make_brick_scatter(flags, bool(config.deterministic)),
+            make_g2p(flags, device_clock=True, sorting=True),
+        )
+        sparse = make_grid_update(device_clock=True, sparse=True, clears=not flags.volume_recovery, meshes=meshes)
+        kernels += [scatter, g2p_sort, sparse]
+        blocks |= {scatter.module.name: BLOCK_CUDA, g2p_sort.module.name: g2p_launch_shape()[1]}
+        names += BRICK
+    if colliders and dc:
         names.append("mpmfx.mpm.stepper")
     if animated:
         names.append("mpmfx.mpm.animated")
+    if emission:
+        kernels.append(activate)
     modules = {k.module.name: k.module for k in kernels}
     for name in names:
         modules.setdefault(name, wp.get_module(name))
-    if emission:
-        modules.setdefault(activate.module.name, activate.module)
     return [(m, blocks.get(name)) for name, m in modules.items()]
