@@ -39,8 +39,8 @@ class Follower:
     """Follows a running simulate stage with the surface (and export) stages' frames.
 
     contexts: the followed stages' contexts ("surface", optionally "export"), made by the runner
-    as it would make them; kernels: the surfacer's ahead-of-time compile (waited for before the
-    first frame), or None."""
+    as it would make them; kernels: the run's ahead-of-time compile (kernels.ShotKernels),
+    waited for before the first frame, or None."""
 
     def __init__(self, contexts: dict[str, Context], *, kernels=None):
         self.contexts = contexts
@@ -101,7 +101,7 @@ class Follower:
                     if not self._wait_for(sim.frame_path(f, ParticleFrame.EXT), self._upstream_done.is_set):
                         break
                     if self.kernels is not None:
-                        self.kernels.wait()
+                        self.kernels.wait("surface")
                         self.kernels = None
                     t0 = time.perf_counter()
                     particles = surface.read_particles(job, f)

@@ -22,7 +22,7 @@ from mpmfx.stages import STAGES, export, memory, render, simulate, surface, voxe
 from mpmfx.stages.base import Context, Stage, StageError
 from mpmfx.stages.colliders import check_collider_meshes
 from mpmfx.stages.follow import FOLLOWED, Follower
-from mpmfx.stages.kernels import SurfacerKernels
+from mpmfx.stages.kernels import GROUPS, ShotKernels
 from mpmfx.stages.parallel import Frames
 from mpmfx.stages.qa import shot_flags, warn_flags
 
@@ -295,7 +295,9 @@ class ShotRun:
             if name in force:  # before anything runs: a follower writes into later stages' entries
                 entries[name].remove()
         surfacing = "surface" in names and not entries["surface"].complete(self._wanted("surface", frames))
-        kernels = SurfacerKernels(self.device).start() if surfacing else None
+        # the Warp modules of the stages that will launch kernels, compiled ahead from now (kernels.py)
+        making = [s for s in GROUPS if s in names and not entries[s].complete(self._wanted(s, frames))]
+        kernels = ShotKernels.for_run(self.shot, self.device, making).start()
         follower = None
         try:
             for name in names:
@@ -308,8 +310,7 @@ class ShotRun:
                     continue
                 if name == "simulate" and surfacing and self.overlap:
                     follower = self._follow(names, entries, frames, kernels)
-                if name == "surface" and kernels:
-                    kernels.wait()
+                kernels.wait(name)  # (a no-op but for the first run of a stage that launches kernels)
                 t0 = time.perf_counter()
                 with self.failing(ctx):
                     extra = stage_module(name).run(ctx) or {}

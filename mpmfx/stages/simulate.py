@@ -30,6 +30,7 @@ from mpmfx.io.frames import ParticleFrame, SeedParticles, read_arrays, write_arr
 from mpmfx.mpm import AnimatedMesh, Collider, ColliderKind, Particles, SimulationError, Solver
 from mpmfx.mpm.emission import device_bytes
 from mpmfx.mpm.materials import VARIED_FIELDS, preset
+from mpmfx.mpm.modules import solver_modules
 from mpmfx.mpm.readback import HostStaging
 from mpmfx.stages.base import Context, StageError, device_turn, quiet_warp
 from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key, static_collider_mesh
@@ -161,6 +162,20 @@ def colliders(shot: Shot) -> list:
                 )
             )
     return out
+
+
+def kernel_modules(shot: Shot, device: str | None) -> list:
+    """(warp.Module, block_dim) of each Warp module this stage's solver will launch on `device`
+    (mpmfx.mpm.modules), known before anything is voxelised: for compiling them ahead."""
+    return solver_modules(
+        materials(shot)[0],
+        shot.solver_config(),
+        device=device,
+        colliders=any(not c.animated for c in shot.colliders),
+        animated=any(c.animated for c in shot.colliders),
+        emission=bool(shot.emitters) or any(o.start_time > 0 for o in shot.objects),
+        variation=_varied(shot),
+    )
 
 
 def animated_meshes(shot: Shot) -> list:

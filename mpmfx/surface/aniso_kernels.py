@@ -16,6 +16,9 @@ import warp as wp
 from mpmfx.surface.gather import cell_range, column_slots, write_field
 from mpmfx.surface.voxels import voxel_of
 
+# forward only: nothing differentiates these kernels; their adjoint code would only lengthen the compile
+wp.set_module_options({"enable_backward": False})
+
 
 @wp.kernel
 def particle_shape(

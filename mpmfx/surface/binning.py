@@ -11,6 +11,7 @@ import numpy as np
 import warp as wp
 
 from mpmfx.surface.grid import SparseGrid
+from mpmfx.surface.kernel_modules import cpu_kernel
 from mpmfx.surface.launch import scan, split
 from mpmfx.surface.voxels import BS, CS
 
@@ -87,7 +88,7 @@ def sorted_copy(src: wp.array(dtype=wp.vec3), order: wp.array(dtype=wp.int32), d
     dst[q] = src[order[q]]
 
 
-@wp.kernel
+@cpu_kernel
 def counting_sort(
     keys: wp.array(dtype=wp.int32),
     starts: wp.array(dtype=wp.int32),

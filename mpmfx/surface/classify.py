@@ -27,6 +27,7 @@ import math
 import warp as wp
 
 from mpmfx.surface.grid import SparseGrid
+from mpmfx.surface.kernel_modules import cpu_kernel
 from mpmfx.surface.launch import launch_split, scan, split
 from mpmfx.surface.voxels import BS, BV, LABEL_BIG, LABEL_NONE, TILE_ACTIVE, TILE_INSIDE, TILE_OUTSIDE
 
@@ -277,7 +278,7 @@ def neighbour_range(near: wp.array3d(dtype=wp.int32), c: wp.vec3i, reach: float)
     return lo, hi
 
 
-@wp.kernel
+@cpu_kernel
 def mark_near_certain(cells: wp.array3d(dtype=wp.int32), reach: float, near: wp.array3d(dtype=wp.int32), base: int):
     """near = 1 on the blocks within reach of every point of block c's span (thread = block c
     of the grid), where c holds a particle."""
@@ -294,7 +295,7 @@ def mark_near_certain(cells: wp.array3d(dtype=wp.int32), reach: float, near: wp.
                     near[bi, bj, bk] = 1
 
 
-@wp.kernel
+@cpu_kernel
 def mark_near_tested(
     cells: wp.array3d(dtype=wp.int32),
     starts: wp.array(dtype=wp.int32),

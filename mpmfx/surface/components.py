@@ -12,6 +12,7 @@ import warp as wp
 
 from mpmfx.surface.bitwords import bit, large_piece, vec8u
 from mpmfx.surface.flood import active_rounds, fill_bits
+from mpmfx.surface.kernel_modules import cpu_kernel
 from mpmfx.surface.launch import launch_split, split
 from mpmfx.surface.voxels import BS, BV, LABEL_NONE, TILE_INSIDE, line_start, line_voxel, slot, voxel_of
 
@@ -126,7 +127,7 @@ def remove_small_components(
         phi[t] = outside_value
 
 
-@wp.kernel
+@cpu_kernel
 def small_blocks(
     sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), pending: wp.array(dtype=wp.int32), base: int
 ):
@@ -139,7 +140,7 @@ def small_blocks(
     pending[b] = wp.where(left != wp.uint64(0), 1, 0)
 
 
-@wp.kernel
+@cpu_kernel
 def labels_from_bits(
     sign: wp.array(dtype=wp.uint64), reached: wp.array(dtype=wp.uint64), labels: wp.array(dtype=wp.int32), base: int
 ):
@@ -191,7 +192,7 @@ def seed_large_labels(
                 labels[b * BV + q] = 0
 
 
-@wp.kernel
+@cpu_kernel
 def sweep_min_labels_blocks(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),

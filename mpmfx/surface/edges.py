@@ -19,6 +19,9 @@ from mpmfx.surface.grid import SparseGrid
 from mpmfx.surface.launch import split
 from mpmfx.surface.voxels import BS, BV, in_block, slot, voxel_of, weight_at
 
+# forward only: nothing differentiates these kernels; their adjoint code would only lengthen the compile
+wp.set_module_options({"enable_backward": False})
+
 EDGE_CURVATURE = (0.35, 0.5)  # x 1 / the wide normal's blur width: a convex edge starts / is whole
 EDGE_NOISE = 2.0  # x the samples' noise (standard deviation): how far the smoothing may move an edge inward
 EDGE_BAND = 3.0  # voxels from the raw zero level where a 2^3 cell's corner looks for an edge (its voxels within ~2)

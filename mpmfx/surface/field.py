@@ -11,6 +11,7 @@ from mpmfx.surface import aniso_kernels as A
 from mpmfx.surface.binning import sorted_copy
 from mpmfx.surface.edges import edges
 from mpmfx.surface.grid import ANISO_MAX_STRETCH, NORMAL_STEP, SparseGrid
+from mpmfx.surface.kernel_modules import cpu_kernel
 from mpmfx.surface.launch import launch_blocks, launch_sequence, split
 from mpmfx.surface.lines import block_faces, line_neighbours, line_sides, row_steps, rows, side_code, vec8
 from mpmfx.surface.params import SurfaceParams
@@ -143,7 +144,7 @@ def weight_row(src: wp.array(dtype=vec8), code: int, r: int, own: vec8):
     return vec8(0.0)
 
 
-@wp.kernel
+@cpu_kernel
 def blur_weight_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
@@ -198,7 +199,7 @@ def blur_weight_lines(
         dst[r0 + 7 * sa + o * so] = 0.25 * c5 + 0.5 * c7 + 0.25 * h1
 
 
-@wp.kernel
+@cpu_kernel
 def project_on_wide_normal_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),

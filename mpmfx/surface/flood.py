@@ -19,6 +19,7 @@ import logging
 import warp as wp
 
 from mpmfx.surface.bitwords import ALL, BYTE, by_tile, face_mask, large_piece, spread, take_face, tile_face, vec8u
+from mpmfx.surface.kernel_modules import cpu_kernel
 from mpmfx.surface.launch import launch_blocks, launch_split, split
 from mpmfx.surface.lines import rows, side_code, vec8
 from mpmfx.surface.voxels import (
@@ -41,6 +42,11 @@ SEEDS = {"bubbles": 0, "specks": 1, "bodies": 2}  # seed_bits' modes
 
 # forward only: nothing differentiates these kernels, and their adjoints lengthen the compile of the unrolled loops
 wp.set_module_options({"enable_backward": False})
+
+
+# the bit-word flood's two kernels (fill_bits: both devices run them) in a Warp module each: the
+# flood's compile, the surfacer's longest once sharpen was split, runs on three threads
+SEED_MODULE, SWEEP_MODULE = __name__ + "_seed", __name__ + "_sweep"
 
 
 @wp.kernel
@@ -187,7 +193,7 @@ def flip_unreached(
             phi[t] = outside_value
 
 
-@wp.kernel
+@wp.kernel(enable_backward=False, module=SEED_MODULE)
 def seed_bits(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
@@ -278,7 +284,7 @@ def seed_bits(
     pending[b] = left
 
 
-@wp.kernel
+@cpu_kernel
 def mark_particle_bits(
     bcoord: wp.array(dtype=wp.vec3i),
     cells: wp.array3d(dtype=wp.int32),
@@ -321,7 +327,7 @@ def mark_particle_bits(
         mark[b * BS + x] = words[x]
 
 
-@wp.kernel
+@wp.kernel(enable_backward=False, module=SWEEP_MODULE)
 def flood_bits(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
@@ -377,7 +383,7 @@ def flood_bits(
         wp.atomic_add(changed, 0, 1)
 
 
-@wp.kernel
+@cpu_kernel
 def flip_unreached_bits(
     reached: wp.array(dtype=wp.uint64), inside_value: float, outside_value: float, phi: wp.array(dtype=float), base: int
 ):

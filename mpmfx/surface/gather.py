@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from mpmfx.surface.kernel_modules import cpu_kernel
 from mpmfx.surface.launch import launch_split_scratch
 from mpmfx.surface.lines import fmax, fmin, vec8
 from mpmfx.surface.voxels import BS, BV, CS, voxel_of
@@ -267,7 +268,7 @@ def add_particle(gp: wp.vec3, vp: wp.vec3, c: wp.vec3i, r2: float, with_v: int, 
             acc[la, 9] = acc[la, 9] + vp[2] * wk
 
 
-@wp.kernel
+@cpu_kernel
 def gather_zhu_bridson_blocks(
     bcoord: wp.array(dtype=wp.vec3i),
     cells: wp.array3d(dtype=wp.int32),

@@ -17,6 +17,7 @@ import numpy as np
 import warp as wp
 
 from mpmfx.surface.grid import SparseGrid
+from mpmfx.surface.kernel_modules import cpu_kernel
 from mpmfx.surface.launch import launch_blocks, scan, split
 from mpmfx.surface.lines import read, row_or_tile, rows, side_code, vec8, vec27i
 from mpmfx.surface.mc_tables import device_tables
@@ -66,7 +67,7 @@ def match_tiles(
     phi[t] = v
 
 
-@wp.kernel
+@cpu_kernel
 def match_tiles_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
@@ -320,7 +321,7 @@ def column(phi: wp.array(dtype=float), codes: vec8i, x: int, y: int, out_v: floa
     return col
 
 
-@wp.kernel
+@cpu_kernel
 def sign_columns(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
@@ -375,7 +376,7 @@ def edge_bits(ex: int, ey: int, ez: int):
     return m
 
 
-@wp.kernel
+@cpu_kernel
 def mc_vertices_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
@@ -433,7 +434,7 @@ def mc_vertices_lines(
             idx += 1
 
 
-@wp.kernel
+@cpu_kernel
 def mc_faces_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),

@@ -18,6 +18,9 @@ from mpmfx.surface.params import LevelSet, SparseLevelSet, SurfaceMesh, SurfaceP
 from mpmfx.surface.pinned import to_host
 from mpmfx.surface.voxels import BS, BV, TILE_INSIDE, voxel_of
 
+# forward only: nothing differentiates these kernels; their adjoint code would only lengthen the compile
+wp.set_module_options({"enable_backward": False})
+
 log = logging.getLogger(__name__)
 
 

@@ -17,6 +17,7 @@ import math
 
 import warp as wp
 
+from mpmfx.surface.kernel_modules import cpu_kernel
 from mpmfx.surface.launch import launch_blocks, launch_nonempty, split
 from mpmfx.surface.lines import (
     block_faces,
@@ -209,7 +210,7 @@ Z_HIGH = wp.constant(wp.uint64(0xFEFEFEFEFEFEFEFE))  # z = 1..7
 BYTE = wp.constant(wp.uint64(0xFF))
 
 
-@wp.kernel
+@cpu_kernel
 def crossing_average_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
@@ -253,7 +254,7 @@ def crossing_average_lines(
         out[r] = res
 
 
-@wp.kernel
+@cpu_kernel
 def init_eikonal_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
@@ -358,7 +359,7 @@ def word_or_tile(words: wp.array(dtype=wp.uint64), code: int, x: int):
     return w
 
 
-@wp.kernel
+@cpu_kernel
 def eikonal_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),

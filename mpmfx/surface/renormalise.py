@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from mpmfx.surface.kernel_modules import cpu_kernel
 from mpmfx.surface.launch import launch_blocks, split
 from mpmfx.surface.lines import block_faces, line_sides, neighbour_rows, rows, vec8
 from mpmfx.surface.voxels import BS, step_get, voxel_of
@@ -46,7 +47,7 @@ def renormalise(
     )
 
 
-@wp.kernel
+@cpu_kernel
 def renormalise_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),

@@ -50,6 +50,9 @@ from mpmfx.surface.sharpen_planes import (
 )
 from mpmfx.surface.voxels import BS, slot
 
+# forward only: nothing differentiates these kernels; their adjoint code would only lengthen the compile
+wp.set_module_options({"enable_backward": False})
+
 SHARP = {  # sharpen()'s settings; lengths in particle spacings h unless said
     "band": 3.0,  # voxels: cells whose centre lies this near the zero level
     "thin": 2.5,  # and where the body is thicker than this (a sheet is its faces back to back)
@@ -284,7 +287,9 @@ def sharpen_weight(
     return wp.clamp(2.0 * float(yes) / float(n) - 1.0, 0.0, 1.0)
 
 
-@wp.kernel
+# a Warp module of its own: the two kernels' modules compile side by side (decide_cells' alone was
+# the surfacer's longest compile)
+@wp.kernel(enable_backward=False, module=__name__ + "_cells")
 def sharpen_cells(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),

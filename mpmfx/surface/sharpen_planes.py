@@ -8,6 +8,9 @@ import warp as wp
 
 from mpmfx.surface.voxels import BS, BV, gate_cell, get, slot
 
+# forward only: nothing differentiates these kernels; their adjoint code would only lengthen the compile
+wp.set_module_options({"enable_backward": False})
+
 # directions around a cell's normal that look for a face: each face's normal is a mean over the
 # directions that found it, and at 8 it turned enough from frame to frame to move a crest 5-10
 # voxels from its points (the gliding block's vertices p99 0.080 h off the previous frame, 0.038

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import warp as wp
 
+from mpmfx.surface.kernel_modules import cpu_kernel
 from mpmfx.surface.launch import launch_blocks, split
 from mpmfx.surface.lines import block_codes27, ext_row, rows, vec8, vec27i, z_pair
 from mpmfx.surface.voxels import BS, BV, gate_cell, get, in_block, line_value, line_z, side_line, voxel_of
@@ -355,7 +356,7 @@ def flow_rows(src: wp.array(dtype=vec8), codes: vec27i, r0: int, r: int, c: vec8
     return xm, xp, ym, yp, zm, zp, fxy, fxz, fyz
 
 
-@wp.kernel
+@cpu_kernel
 def curvature_flow_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
@@ -429,7 +430,7 @@ def curvature_flow_lines(
         dst[r0 + r] = out
 
 
-@wp.kernel
+@cpu_kernel
 def edge_flow_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     bmap: wp.array3d(dtype=wp.int32),
@@ -484,7 +485,7 @@ def edge_flow_lines(
             dst[r0 + r] = out
 
 
-@wp.kernel
+@cpu_kernel
 def limit_inward_lines(
     bcoord: wp.array(dtype=wp.vec3i),
     a: wp.array(dtype=vec8),

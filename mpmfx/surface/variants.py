@@ -8,7 +8,9 @@ A pass that runs differently on a CPU and a GPU holds both variants side by side
 per thread, what a GPU runs; `*_by_block`, a block of 8^3 voxels per thread, what the CPU runs
 (Warp's CPU backend runs a launch's threads one after another, so there the work per voxel
 counts, not the thread count). Both give every voxel the same arithmetic in the same order:
-the same surface, bit for bit (tests/surface/test_line_kernels.py runs both on the CPU).
+the same surface, bit for bit (tests/surface/test_line_kernels.py runs both on the CPU). The
+CPU-only kernels compile in Warp modules of their own, which a GPU never loads
+(:mod:`mpmfx.surface.kernel_modules`).
 
 The table of each is built once, here; :func:`variant` picks one by device.
 """
