@@ -49,7 +49,7 @@ def sphere(faces: int, center: np.ndarray, density: bool) -> GroupSurface:
     a, b, c, d = i * n + j, ((i + 1) % n) * n + j, ((i + 1) % n) * n + j + 1, i * n + j + 1
     tris = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([a, c, d], -1).reshape(-1, 3)])
     # leaves: the 8^3 blocks the band touches, and those wholly inside
-    c0 = np.round(center / h).astype(np.int64)
+    c0 = np.round(center / h / 8).astype(np.int64) * 8  # leaves start at multiples of 8
     m = int(np.ceil((r + 8) / 8))
     g = np.stack(np.meshgrid(*[np.arange(-m, m + 1)] * 3, indexing="ij"), -1).reshape(-1, 3) * 8
     dist = np.linalg.norm(g + 3.5, axis=1)

@@ -18,7 +18,7 @@ from mpmfx.geometry.colliders import collider_mesh, keyframes
 from mpmfx.io.frames import GroupSurface, ParticleFrame, SurfaceFrame
 from mpmfx.io.usd import ColliderSample, MeshSample, PointsSample, UsdShotWriter
 from mpmfx.io.usd_view import PreviewLook
-from mpmfx.io.vdb import VdbGrid, write_vdb
+from mpmfx.io.vdb import LeafGrid, write_vdb
 from mpmfx.mpm.colliders import pose_matrix
 from mpmfx.render.camera import camera_inputs, frames_bounds, render_camera
 from mpmfx.render.looks import preview_surface
@@ -188,19 +188,19 @@ def _colliders(shot: Shot, frame: int) -> list:
 def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
     volumes = {}
     for g, d in groups.items():
-        sparse = level_set(d)
-        ls = sparse.to_dense()
-        if ls.values.size == 0:
+        if len(d.block_ijk) == 0:
             continue
-        ijk0 = tuple(int(i) for i in ls.ijk0)
-        # half floats on disk: 27 % smaller files (jelly_splash), ~5e-4 relative, invisible in a render
-        grids = [VdbGrid("surface", ls.values, ijk0, ls.voxel_size, "level_set", ls.background, half=True)]
-        vel = sparse.velocity_dense(ls.ijk0, ls.values.shape)
-        if vel is not None:
-            grids.append(VdbGrid("vel", vel, ijk0, ls.voxel_size, "unknown", 0.0, half=True))
-        density = sparse.density_dense(ls.ijk0, ls.values.shape)
-        if density is not None:  # 0 outside the stored leaves: the writer leaves those voxels inactive
-            grids.append(VdbGrid("density", density, ijk0, ls.voxel_size, "fog_volume", 0.0, half=True))
+        vs, band = float(d.voxel_size), float(d.background)
+        # straight from the stored leaves: a dense block over their bounding box grows with the
+        # cube of the resolution (tens of GB at 10M faces). Half floats on disk: 27 % smaller
+        # files (jelly_splash), ~5e-4 relative, invisible in a render
+        grids = [LeafGrid("surface", d.block_ijk, d.blocks, vs, "level_set", band, half=True)]
+        if d.vel_blocks is not None:  # 0 outside the stored leaves, inside ones too
+            grids.append(LeafGrid("vel", d.block_ijk, d.vel_blocks, vs, "unknown", 0.0, half=True))
+        if d.density_blocks is not None:  # 1 on the leaves wholly inside, 0 (inactive) outside the stored ones
+            grids.append(
+                LeafGrid("density", d.block_ijk, d.density_blocks, vs, "fog_volume", 0.0, True, d.inside_ijk, 1.0)
+            )
         rel = f"vdb/{g}/{frame:04d}.vdb"
         write_vdb(entry.root / rel, grids, metadata={"shot": shot.shot.name, "frame": frame, "units": "m", "group": g})
         volumes[g] = {grid.name: rel for grid in grids}
