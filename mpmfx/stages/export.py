@@ -11,6 +11,9 @@ hidden; the camera the render looks through; the time codes of the frames run.
 
 from __future__ import annotations
 
+import time
+from functools import partial
+
 import numpy as np
 
 from mpmfx.config import Shot
@@ -29,6 +32,7 @@ from mpmfx.stages.parallel import FrameJob
 from mpmfx.surface.params import SparseLevelSet
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "export", 2, True, "usdc"
+MESH = ("vertices", "faces", "normals", "velocities")  # what a surface frame gives the USD layer
 CAMERA_SAMPLES = 12  # frames whose bounds the render camera frames (evenly spaced over those run)
 CODE = (
     "mpmfx.stages.export",
@@ -69,23 +73,32 @@ def run(ctx: Context) -> dict:
     return finish(ctx, ctx.map_frames(frame, todo(ctx), desc="export"))
 
 
-def frame(job: FrameJob, f: int) -> None:
-    """Frame `f`'s .vdb files, then its USD layer (its existence marks the frame done): a task."""
+def frame(job: FrameJob, f: int) -> dict[str, float]:
+    """Frame `f`'s .vdb files, then its USD layer (its existence marks the frame done): a task.
+    Returns where its time went, s: read (the upstream frames), vdb (the grids, built and
+    written), usd (the layer built in memory), write (the layer written and read back)."""
     shot, entry = job.shot, job.entry
     surf, sim = job.upstream["surface"], job.upstream["simulate"]  # verified reads: a changed frame is redone
-    groups = surf.read(surf.frame_path(f, SurfaceFrame.EXT), SurfaceFrame.read).groups
+    t0 = time.perf_counter()
+    fields = None if shot.export.vdb else MESH  # without grids the leaves, most of the file, stay unread
+    groups = surf.read(surf.frame_path(f, SurfaceFrame.EXT), partial(SurfaceFrame.read, fields=fields)).groups
+    particles = sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read) if shot.export.points else None
+    t1 = time.perf_counter()
     volumes = _write_vdbs(shot, entry, f, groups) if shot.export.vdb else {}
-    points = {}
-    if shot.export.points:
-        points = _points(shot, sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read))
+    split = {"read": t1 - t0, "vdb": time.perf_counter() - t1}
+    t2 = time.perf_counter()
+    points = _points(shot, particles) if particles is not None else {}
     names = usd_names(shot)
+    seconds = {"usd": time.perf_counter() - t2}
     _writer(shot, entry).write_frame(
         f,
         points=points,
         meshes={names.surfaces[g]: m for g, m in _meshes(groups).items()},
         volumes={names.volumes[g]: v for g, v in volumes.items()},
         colliders=_colliders(shot, f),
+        seconds=seconds,
     )
+    return {**split, **seconds}
 
 
 def finish(ctx: Context, results: list) -> dict:
