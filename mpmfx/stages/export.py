@@ -104,7 +104,8 @@ def frame(job: FrameJob, f: int) -> dict[str, float]:
 def finish(ctx: Context, results: list) -> dict:
     """In the client, after every frame's task: the root stage stitches the frames' layers, with
     the render camera (framing what the frames show) and each surface's material. The camera
-    goes in the manifest too: the render stage looks through it."""
+    goes in the manifest too: the render stage looks through it, and `seconds_split`, the
+    frames' time summed (`frame`)."""
     frames = ctx.entry.done_frames(FRAME_EXT)
     camera = render_camera(ctx.shot, _bounds(ctx, frames))
     names = usd_names(ctx.shot)
@@ -112,7 +113,11 @@ def finish(ctx: Context, results: list) -> dict:
         names.surfaces[g]: PreviewLook(look, **preview_surface(look)) for g, look in surface_looks(ctx.shot).items()
     }
     root = _writer(ctx.shot, ctx.entry).finalize(frames, camera=camera, looks=looks)
-    return {"usd": str(root), "camera": camera}
+    split: dict[str, float] = {}
+    for seconds in results:  # the frames this run made (`frame`'s split; None from older tasks)
+        for k, s in (seconds or {}).items():
+            split[k] = split.get(k, 0.0) + s
+    return {"usd": str(root), "camera": camera, "seconds_split": {k: round(s, 3) for k, s in split.items()}}
 
 
 def _bounds(ctx: Context, frames: list[int]):
