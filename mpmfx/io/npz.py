@@ -49,6 +49,13 @@ def threads() -> int:
     return max(1, min(MAX_THREADS, cores // 2))
 
 
+def read_threads() -> int:
+    """Inflating threads: this process's cores (its Dask worker's share), at most MAX_THREADS. A
+    reader waits for its arrays, so unlike the writer it takes every core it has."""
+    cores = min(usable_cores(), cpu_threads()) if THREADS_ENV in os.environ else usable_cores()
+    return max(1, min(MAX_THREADS, cores))
+
+
 def npy_parts(value: np.ndarray) -> tuple[bytes, memoryview]:
     """(the .npy header, the array's bytes in C order) of what np.save would write."""
     value = np.asarray(value, order="C")  # (ascontiguousarray would make a 0-d array 1-d)
@@ -198,9 +205,9 @@ def _end(f: BinaryIO, central: list[bytes], start: int) -> None:
 
 def read_npz(path, names: Collection[str] | None = None, *, workers: int | None = None) -> dict[str, np.ndarray]:
     """{name (without .npy): array} of the zip at `path`: the entries in `names` (None: all),
-    deflated ones inflated on `workers` threads (None: threads()) at once. The arrays are
+    deflated ones inflated on `workers` threads (None: read_threads()) at once. The arrays are
     writable, as np.load's."""
-    workers = threads() if workers is None else workers
+    workers = read_threads() if workers is None else workers
     with open(path, "rb") as f, zipfile.ZipFile(f) as zf:
         infos = [i for i in zf.infolist() if i.filename.endswith(".npy")]
         if names is not None:
@@ -249,7 +256,7 @@ def _array(buf, name: str) -> np.ndarray:
     dtype, shape, fortran, start = _npy(buf, name)
     n = math.prod(shape)
     if len(buf) - start < n * dtype.itemsize:
-        raise ValueError(f"{name}: {len(buf) - start} bytes for {n} values of {dtype}")
+        raise zipfile.BadZipFile(f"{name}: {len(buf) - start} bytes for {n} values of {dtype}")
     flat = np.frombuffer(buf, dtype, count=n, offset=start)
     return flat.reshape(shape[::-1]).T if fortran else flat.reshape(shape)
 
