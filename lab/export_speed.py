@@ -18,6 +18,7 @@ import json
 import os
 import tempfile
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -119,15 +120,23 @@ def main() -> None:
         nfaces = sum(len(g.faces) for g in sf.groups.values())
         leaves = sum(len(g.block_ijk) for g in sf.groups.values())
         size = surf.frame_path(FRAME, SurfaceFrame.EXT).stat().st_size
+        # without VDB the surface stage keeps no leaves: the frame export reads is the mesh alone
+        mesh = Entry(root / "surface-mesh", "surface", "surface-mesh", {})
+        no_leaves = dict.fromkeys(("block_ijk", "blocks", "inside_ijk", "vel_blocks", "density_blocks"))
+        SurfaceFrame({g: replace(d, **no_leaves) for g, d in sf.groups.items()}).write(
+            mesh.frame_path(FRAME, SurfaceFrame.EXT)
+        )
         del sf
         print(
-            f"frame: {nfaces:,} faces, {leaves:,} leaves, {len(shot.surface_groups())} objects, "
-            f"{size / 1e6:.0f} MB on disk; built and written in {built:.1f} s",
+            f"frame: {nfaces:,} faces, {leaves:,} leaves, {len(shot.surface_groups())} objects; "
+            f"{size / 1e6:.0f} MB on disk with its leaves, "
+            f"{mesh.frame_path(FRAME, SurfaceFrame.EXT).stat().st_size / 1e6:.0f} MB without; "
+            f"built and written in {built:.1f} s",
             flush=True,
         )
         rows, dev = [], device_name(args.device)
         for vdb in [False] if args.no_vdb_run else [False, True]:
-            runs = time_export(shot, root, surf, vdb, args.repeat)
+            runs = time_export(shot, root, surf if vdb else mesh, vdb, args.repeat)
             best = min(runs, key=lambda r: r["whole"])
             tag = "VDB on" if vdb else "VDB off"
             for part, s in best.items():

@@ -206,7 +206,7 @@ def _colliders(shot: Shot, frame: int) -> list:
 def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
     volumes = {}
     for g, d in groups.items():
-        if len(d.block_ijk) == 0:
+        if d.block_ijk is None or len(d.block_ijk) == 0:  # (no leaves: a frame surfaced for no VDB)
             continue
         vs, band = float(d.voxel_size), float(d.background)
         # straight from the stored leaves: a dense block over their bounding box grows with the
