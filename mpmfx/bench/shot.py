@@ -7,7 +7,7 @@ Prints one table: each stage's wall time and time a frame, split into
 - surface: reading and checking the particle frame, surfacing it (the GPU's kernels and the
   mesh's copy to the host), writing its file (deflate, checksums, disk, on threads), and the
   surfacer's wait for those writers; the part made while simulate ran and the tail after it;
-- export: each frame's USD layer and VDB grids;
+- export: each frame's reading of the upstream frames, VDB grids, USD layer built, and written;
 then the whole run against simulate alone, the share of simulate the GPU spent waiting on the
 host, the cache bytes a frame, and the peak memory (device and host). Writes shot.json under
 --out. Kernel compiles of a fresh machine land in the first frames: run it twice, or after
@@ -73,6 +73,7 @@ def measure(shot: str | Path, *, overrides=(), cache: Path, device: str | None, 
         "stages_s": {s: round(results[s].seconds, 2) for s in STAGES},
         "simulate_split_s": man["simulate"].get("seconds_split", {}),
         "followed_s": {s: man[s].get("followed_s", {}) for s in ("surface", "export")},
+        "export_split_s": man["export"].get("seconds_split", {}),  # the frames exported after simulate
         "faces": man["surface"].get("this_run", {}).get("faces", 0),
         "bytes_per_frame": {s: _frame_bytes(entries[s], frames) for s in ("simulate", "surface", "export")},
         "device_peak_bytes": wp.get_mempool_used_mem_high(dev) if dev.is_cuda and dev.is_mempool_enabled else None,
@@ -111,6 +112,7 @@ def table(r: dict) -> str:
             f"  {name:<8}  {r['stages_s'][name]:7.1f}  {ms(busy + r['stages_s'][name], r['frames']):>8}   "
             + ", ".join(f"{k} {v:.1f}" for k, v in part.items())
             + f"{'; ' if part else ''}after simulate {r['stages_s'][name]:.1f}"
+            + _parts(r.get("export_split_s") if name == "export" else None)
         )
     lines.append(f"  total     {r['wall_s']:7.1f}            {r['wall_s'] / sim:.2f} x simulate" if sim else "")
     b = r["bytes_per_frame"]
@@ -144,6 +146,11 @@ def _estimate(host: dict[str, int], measured: str) -> int | None:
     if measured in host:
         return host[measured]
     return max((b for k, b in host.items() if k != "voxelise"), default=None)
+
+
+def _parts(split: dict | None) -> str:
+    """' (read 0.1, vdb 0.2, ...)': where the stage's own time went, when it says."""
+    return f" ({', '.join(f'{k} {v:.1f}' for k, v in split.items())})" if split else ""
 
 
 def _gb(b) -> str:

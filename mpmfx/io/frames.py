@@ -8,6 +8,7 @@ tests rely on.
 
 from __future__ import annotations
 
+import dataclasses
 import zipfile
 from collections.abc import Collection
 from dataclasses import dataclass
@@ -16,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from mpmfx.cache import atomic_path
-from mpmfx.io.npz import write_npz
+from mpmfx.io.npz import read_npz, write_npz
 
 FRAME_FORMAT = 2  # 2: particle ids dropped when they count 0..n-1; surface normals, velocities float16
 READS = (1, 2)  # older frames still read: what changed is what a writer leaves out or rounds
@@ -46,10 +47,12 @@ def write_arrays(path: str | Path, arrays: dict[str, np.ndarray], *, compress: b
     return path
 
 
-def read_arrays(path: str | Path) -> dict[str, np.ndarray]:
-    with np.load(path, allow_pickle=False) as data:
-        out = {k: data[k] for k in data.files if k != "_format"}
-        fmt = int(data["_format"]) if "_format" in data.files else -1
+def read_arrays(path: str | Path, names: Collection[str] | None = None) -> dict[str, np.ndarray]:
+    """The arrays of a frame file (those in `names`, None: all), big ones inflated on several
+    threads at once (mpmfx.io.npz)."""
+    data = read_npz(path, None if names is None else {"_format", *names})
+    out = {k: a for k, a in data.items() if k != "_format"}
+    fmt = int(data["_format"]) if "_format" in data else -1
     if fmt not in READS:
         raise ValueError(
             f"{path}: frame format {fmt}, this mpmfx reads {', '.join(map(str, READS))}: "
@@ -190,11 +193,19 @@ class SurfaceFrame:
         return write_arrays(path, out, compress=[f"{g}.{k}" for g in self.groups for k in self._DEFLATE])
 
     @classmethod
-    def read(cls, path: str | Path) -> SurfaceFrame:
-        data = read_arrays(path)
+    def read(cls, path: str | Path, fields: Collection[str] | None = None) -> SurfaceFrame:
+        """fields: the GroupSurface fields to read (None: all); the others are None (the export
+        without VDB grids needs the mesh, not the leaves)."""
+        names = None
+        if fields is not None:
+            names = ["groups"] + [f"{g}.{k}" for g in read_arrays(path, ["groups"])["groups"] for k in fields]
+        data = read_arrays(path, names)
+        unread = dict.fromkeys(f.name for f in dataclasses.fields(GroupSurface))
         return cls(
             {
-                str(g): GroupSurface(**{k.split(".", 1)[1]: a for k, a in data.items() if k.startswith(f"{g}.")})
+                str(g): GroupSurface(
+                    **unread | {k.split(".", 1)[1]: a for k, a in data.items() if k.startswith(f"{g}.")}
+                )
                 for g in data["groups"]
             }
         )

@@ -1,10 +1,15 @@
-"""The .npz writer of the frame files: big entries deflated on several threads at once.
+"""The .npz writer and reader of the frame files: big entries deflated, and inflated, on several
+threads at once.
 
 zipfile deflates one entry after another on one core, and a GPU shot's surface frame (~330 MB
 of arrays at 3.4M particles) then takes longer to write than the GPU takes to simulate and
 surface it. Here each entry's .npy bytes are cut into CHUNK pieces that are deflated independently on a
 thread pool (zlib releases the GIL). Every piece but the last ends on a full flush, so the pieces
 join into one raw deflate stream, as pigz's do. The zip is then written around them.
+
+`read_npz` inflates the entries a caller asks for each on a thread of its own (one stream
+cannot be cut: the pieces' boundaries are not recorded), and reads stored ones straight into
+their arrays.
 
 The files are ordinary zips (np.load, zipfile and unzip read them), with zip64 records only where
 a size or an offset needs them. Each entry carries the fixed date 1980-01-01, so the same arrays
@@ -14,9 +19,12 @@ give the same bytes whatever the number of threads.
 from __future__ import annotations
 
 import io
+import math
 import os
 import struct
+import zipfile
 import zlib
+from collections.abc import Collection
 from concurrent.futures import ThreadPoolExecutor
 from typing import BinaryIO
 
@@ -39,6 +47,13 @@ def threads() -> int:
     writing at once do not each start threads for every core."""
     cores = min(usable_cores(), cpu_threads()) if THREADS_ENV in os.environ else usable_cores()
     return max(1, min(MAX_THREADS, cores // 2))
+
+
+def read_threads() -> int:
+    """Inflating threads: this process's cores (its Dask worker's share), at most MAX_THREADS. A
+    reader waits for its arrays, so unlike the writer it takes every core it has."""
+    cores = min(usable_cores(), cpu_threads()) if THREADS_ENV in os.environ else usable_cores()
+    return max(1, min(MAX_THREADS, cores))
 
 
 def npy_parts(value: np.ndarray) -> tuple[bytes, memoryview]:
@@ -186,3 +201,85 @@ def _end(f: BinaryIO, central: list[bytes], start: int) -> None:
         f.write(struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, 0xFFFF, 0xFFFF, _U32, _U32, 0))
     else:
         f.write(struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, n, n, size, start, 0))
+
+
+def read_npz(path, names: Collection[str] | None = None, *, workers: int | None = None) -> dict[str, np.ndarray]:
+    """{name (without .npy): array} of the zip at `path`: the entries in `names` (None: all),
+    deflated ones inflated on `workers` threads (None: read_threads()) at once. The arrays are
+    writable, as np.load's."""
+    workers = read_threads() if workers is None else workers
+    with open(path, "rb") as f, zipfile.ZipFile(f) as zf:
+        infos = [i for i in zf.infolist() if i.filename.endswith(".npy")]
+        if names is not None:
+            want = set(names)
+            infos = [i for i in infos if i.filename[:-4] in want]
+        if any(i.compress_type not in (zipfile.ZIP_STORED, zipfile.ZIP_DEFLATED) for i in infos):
+            with np.load(path, allow_pickle=False) as data:  # a zip not of this writer's making
+                return {i.filename[:-4]: data[i.filename[:-4]] for i in infos}
+        fd = f.fileno()
+        spans = [(i, _data_offset(fd, i)) for i in infos]
+        stored = [(i, at) for i, at in spans if i.compress_type == zipfile.ZIP_STORED]
+        packed = [(i, at) for i, at in spans if i.compress_type == zipfile.ZIP_DEFLATED]
+        out = {i.filename[:-4]: _stored(fd, i, at) for i, at in stored}
+        inflate = lambda item: _inflated(fd, *item)  # noqa: E731
+        if workers > 1 and len(packed) > 1:
+            with ThreadPoolExecutor(max_workers=min(workers, len(packed)), thread_name_prefix="mpmfx-inflate") as pool:
+                arrays = list(pool.map(inflate, packed))
+        else:
+            arrays = [inflate(item) for item in packed]
+        out |= {i.filename[:-4]: a for (i, _), a in zip(packed, arrays)}
+    return {i.filename[:-4]: out[i.filename[:-4]] for i in infos}  # in the file's order
+
+
+def _data_offset(fd: int, info: zipfile.ZipInfo) -> int:
+    """Where the entry's bytes start: after its local header (name and extra field)."""
+    head = os.pread(fd, 30, info.header_offset)
+    if len(head) != 30 or head[:4] != b"PK\x03\x04":
+        raise zipfile.BadZipFile(f"{info.filename}: no local header at {info.header_offset}")
+    name_len, extra_len = struct.unpack("<HH", head[26:30])
+    return info.header_offset + 30 + name_len + extra_len
+
+
+def _npy(buf, name: str) -> tuple[np.dtype, tuple, bool, int]:
+    """(dtype, shape, fortran order, header length) of the .npy bytes in `buf`."""
+    head = io.BytesIO(bytes(buf[: min(len(buf), 1 << 16)]))
+    version = np.lib.format.read_magic(head)
+    read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+    shape, fortran, dtype = read(head)
+    if dtype.hasobject:
+        raise ValueError(f"{name}: npz entries hold plain arrays, not Python objects")
+    return dtype, shape, fortran, head.tell()
+
+
+def _array(buf, name: str) -> np.ndarray:
+    """The array of the .npy bytes in the writable buffer `buf` (no copy)."""
+    dtype, shape, fortran, start = _npy(buf, name)
+    n = math.prod(shape)
+    if len(buf) - start < n * dtype.itemsize:
+        raise zipfile.BadZipFile(f"{name}: {len(buf) - start} bytes for {n} values of {dtype}")
+    flat = np.frombuffer(buf, dtype, count=n, offset=start)
+    return flat.reshape(shape[::-1]).T if fortran else flat.reshape(shape)
+
+
+def _stored(fd: int, info: zipfile.ZipInfo, at: int) -> np.ndarray:
+    buf = bytearray(info.file_size)
+    got = os.preadv(fd, [buf], at) if hasattr(os, "preadv") else _pread_into(fd, buf, at)
+    if got != info.file_size:
+        raise zipfile.BadZipFile(f"{info.filename}: {got} of {info.file_size} bytes")
+    if zlib.crc32(buf) != info.CRC:
+        raise zipfile.BadZipFile(f"{info.filename}: CRC differs")
+    return _array(buf, info.filename)
+
+
+def _pread_into(fd: int, buf: bytearray, at: int) -> int:
+    data = os.pread(fd, len(buf), at)
+    buf[: len(data)] = data
+    return len(data)
+
+
+def _inflated(fd: int, info: zipfile.ZipInfo, at: int) -> np.ndarray:
+    d = zlib.decompressobj(-15)
+    raw = bytearray(d.decompress(os.pread(fd, info.compress_size, at)))  # zlib releases the GIL
+    if len(raw) != info.file_size or zlib.crc32(raw) != info.CRC:
+        raise zipfile.BadZipFile(f"{info.filename}: inflated to {len(raw)} bytes or CRC differs")
+    return _array(raw, info.filename)

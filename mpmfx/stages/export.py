@@ -11,6 +11,9 @@ hidden; the camera the render looks through; the time codes of the frames run.
 
 from __future__ import annotations
 
+import time
+from functools import partial
+
 import numpy as np
 
 from mpmfx.config import Shot
@@ -18,7 +21,7 @@ from mpmfx.geometry.colliders import collider_mesh, keyframes
 from mpmfx.io.frames import GroupSurface, ParticleFrame, SurfaceFrame
 from mpmfx.io.usd import ColliderSample, MeshSample, PointsSample, UsdShotWriter
 from mpmfx.io.usd_view import PreviewLook
-from mpmfx.io.vdb import VdbGrid, write_vdb
+from mpmfx.io.vdb import LeafGrid, write_vdb
 from mpmfx.mpm.colliders import pose_matrix
 from mpmfx.render.camera import camera_inputs, frames_bounds, render_camera
 from mpmfx.render.looks import preview_surface
@@ -29,6 +32,7 @@ from mpmfx.stages.parallel import FrameJob
 from mpmfx.surface.params import SparseLevelSet
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "export", 2, True, "usdc"
+MESH = ("vertices", "faces", "normals", "velocities")  # what a surface frame gives the USD layer
 CAMERA_SAMPLES = 12  # frames whose bounds the render camera frames (evenly spaced over those run)
 CODE = (
     "mpmfx.stages.export",
@@ -69,29 +73,39 @@ def run(ctx: Context) -> dict:
     return finish(ctx, ctx.map_frames(frame, todo(ctx), desc="export"))
 
 
-def frame(job: FrameJob, f: int) -> None:
-    """Frame `f`'s .vdb files, then its USD layer (its existence marks the frame done): a task."""
+def frame(job: FrameJob, f: int) -> dict[str, float]:
+    """Frame `f`'s .vdb files, then its USD layer (its existence marks the frame done): a task.
+    Returns where its time went, s: read (the upstream frames), vdb (the grids, built and
+    written), usd (the layer built in memory), write (the layer written and read back)."""
     shot, entry = job.shot, job.entry
     surf, sim = job.upstream["surface"], job.upstream["simulate"]  # verified reads: a changed frame is redone
-    groups = surf.read(surf.frame_path(f, SurfaceFrame.EXT), SurfaceFrame.read).groups
+    t0 = time.perf_counter()
+    fields = None if shot.export.vdb else MESH  # without grids the leaves, most of the file, stay unread
+    groups = surf.read(surf.frame_path(f, SurfaceFrame.EXT), partial(SurfaceFrame.read, fields=fields)).groups
+    particles = sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read) if shot.export.points else None
+    t1 = time.perf_counter()
     volumes = _write_vdbs(shot, entry, f, groups) if shot.export.vdb else {}
-    points = {}
-    if shot.export.points:
-        points = _points(shot, sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read))
+    split = {"read": t1 - t0, "vdb": time.perf_counter() - t1}
+    t2 = time.perf_counter()
+    points = _points(shot, particles) if particles is not None else {}
     names = usd_names(shot)
+    seconds = {"usd": time.perf_counter() - t2}
     _writer(shot, entry).write_frame(
         f,
         points=points,
         meshes={names.surfaces[g]: m for g, m in _meshes(groups).items()},
         volumes={names.volumes[g]: v for g, v in volumes.items()},
         colliders=_colliders(shot, f),
+        seconds=seconds,
     )
+    return {**split, **seconds}
 
 
 def finish(ctx: Context, results: list) -> dict:
     """In the client, after every frame's task: the root stage stitches the frames' layers, with
     the render camera (framing what the frames show) and each surface's material. The camera
-    goes in the manifest too: the render stage looks through it."""
+    goes in the manifest too: the render stage looks through it, and `seconds_split`, the
+    frames' time summed (`frame`)."""
     frames = ctx.entry.done_frames(FRAME_EXT)
     camera = render_camera(ctx.shot, _bounds(ctx, frames))
     names = usd_names(ctx.shot)
@@ -99,7 +113,11 @@ def finish(ctx: Context, results: list) -> dict:
         names.surfaces[g]: PreviewLook(look, **preview_surface(look)) for g, look in surface_looks(ctx.shot).items()
     }
     root = _writer(ctx.shot, ctx.entry).finalize(frames, camera=camera, looks=looks)
-    return {"usd": str(root), "camera": camera}
+    split: dict[str, float] = {}
+    for seconds in results:  # the frames this run made (`frame`'s split; None from older tasks)
+        for k, s in (seconds or {}).items():
+            split[k] = split.get(k, 0.0) + s
+    return {"usd": str(root), "camera": camera, "seconds_split": {k: round(s, 3) for k, s in split.items()}}
 
 
 def _bounds(ctx: Context, frames: list[int]):
@@ -188,19 +206,19 @@ def _colliders(shot: Shot, frame: int) -> list:
 def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
     volumes = {}
     for g, d in groups.items():
-        sparse = level_set(d)
-        ls = sparse.to_dense()
-        if ls.values.size == 0:
+        if d.block_ijk is None or len(d.block_ijk) == 0:  # (no leaves: a frame surfaced for no VDB)
             continue
-        ijk0 = tuple(int(i) for i in ls.ijk0)
-        # half floats on disk: 27 % smaller files (jelly_splash), ~5e-4 relative, invisible in a render
-        grids = [VdbGrid("surface", ls.values, ijk0, ls.voxel_size, "level_set", ls.background, half=True)]
-        vel = sparse.velocity_dense(ls.ijk0, ls.values.shape)
-        if vel is not None:
-            grids.append(VdbGrid("vel", vel, ijk0, ls.voxel_size, "unknown", 0.0, half=True))
-        density = sparse.density_dense(ls.ijk0, ls.values.shape)
-        if density is not None:  # 0 outside the stored leaves: the writer leaves those voxels inactive
-            grids.append(VdbGrid("density", density, ijk0, ls.voxel_size, "fog_volume", 0.0, half=True))
+        vs, band = float(d.voxel_size), float(d.background)
+        # straight from the stored leaves: a dense block over their bounding box grows with the
+        # cube of the resolution (tens of GB at 10M faces). Half floats on disk: 27 % smaller
+        # files (jelly_splash), ~5e-4 relative, invisible in a render
+        grids = [LeafGrid("surface", d.block_ijk, d.blocks, vs, "level_set", band, half=True)]
+        if d.vel_blocks is not None:  # 0 outside the stored leaves, inside ones too
+            grids.append(LeafGrid("vel", d.block_ijk, d.vel_blocks, vs, "unknown", 0.0, half=True))
+        if d.density_blocks is not None:  # 1 on the leaves wholly inside, 0 (inactive) outside the stored ones
+            grids.append(
+                LeafGrid("density", d.block_ijk, d.density_blocks, vs, "fog_volume", 0.0, True, d.inside_ijk, 1.0)
+            )
         rel = f"vdb/{g}/{frame:04d}.vdb"
         write_vdb(entry.root / rel, grids, metadata={"shot": shot.shot.name, "frame": frame, "units": "m", "group": g})
         volumes[g] = {grid.name: rel for grid in grids}

@@ -129,9 +129,7 @@ class Follower:
             for f in export.todo(ctx):
                 if not self._wait_for(surf.frame_path(f, SurfaceFrame.EXT), lambda: not surfacing.is_alive()):
                     break
-                t0 = time.perf_counter()
-                export.frame(job, f)
-                _add(self.seconds["export"], export=time.perf_counter() - t0)
+                _add(self.seconds["export"], **export.frame(job, f))  # read, vdb, usd, write
         except BaseException as exc:
             self._errors["export"] = exc
 

@@ -192,3 +192,42 @@ def test_half_float_grids_are_smaller_and_close(tmp_path):
         got = read_vdb(path, with_values=True)["grids"]["vel"]["values"]
         assert np.allclose(got, vel[tuple(slice(0, s) for s in got.shape[:3])], rtol=1e-3, atol=1e-3)
     assert sizes[True] < 0.7 * sizes[False]
+
+
+def test_leaf_grids_write_what_the_dense_blocks_of_the_same_leaves_write(tmp_path):
+    """The export writes the surface stage's leaves without a dense block over their bounding
+    box: a reader gets the same voxels (values, active set, classes) either way."""
+    from mpmfx.surface.params import SparseLevelSet
+
+    corners = np.stack(np.meshgrid(*[np.arange(-24, 24, 8)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    idx = corners[:, None, None, None, :] + np.stack(np.meshgrid(*[np.arange(8)] * 3, indexing="ij"), -1)
+    phi = (np.linalg.norm(idx * VOXEL - CENTRE, axis=-1) - 0.9).astype(np.float32)  # (216, 8, 8, 8)
+    near, inside = np.abs(phi).min(axis=(1, 2, 3)) < BAND, phi.max(axis=(1, 2, 3)) <= -BAND
+    vel = np.where(phi[..., None] < BAND, idx * 0.1, 0).astype(np.float16)
+    fog = np.clip(-phi / BAND, 0, 1).astype(np.float16)
+    both = np.flatnonzero(inside)[0]  # a leaf both stored and listed inside: the stored values win
+    near[both], fog[both] = True, 0.5
+    sparse = SparseLevelSet(
+        corners[near], np.clip(phi[near], -BAND, BAND), vel[near], corners[inside], VOXEL, BAND, fog[near]
+    )
+    ls = sparse.to_dense()
+    ijk0 = tuple(int(i) for i in ls.ijk0)
+    dense = [
+        VdbGrid("surface", ls.values, ijk0, VOXEL, "level_set", BAND, half=True),
+        VdbGrid("vel", sparse.velocity_dense(ls.ijk0, ls.values.shape), ijk0, VOXEL, "unknown", 0.0, half=True),
+        VdbGrid("density", sparse.density_dense(ls.ijk0, ls.values.shape), ijk0, VOXEL, "fog_volume", 0.0, half=True),
+    ]
+    leaves = [
+        vdbio.LeafGrid("surface", corners[near], phi[near], VOXEL, "level_set", BAND, half=True),
+        vdbio.LeafGrid("vel", corners[near], vel[near], VOXEL, "unknown", 0.0, half=True),
+        vdbio.LeafGrid("density", corners[near], fog[near], VOXEL, "fog_volume", 0.0, True, corners[inside], 1.0),
+    ]
+    write_vdb(tmp_path / "dense.vdb", dense, metadata={})
+    write_vdb(tmp_path / "leaves.vdb", leaves, metadata={})
+    a = read_vdb(tmp_path / "dense.vdb", with_values=True)["grids"]
+    b = read_vdb(tmp_path / "leaves.vdb", with_values=True)["grids"]
+    assert a["density"]["active_voxel_count"] > fog[near].astype(bool).sum()  # the inside leaves are there
+    for name in ("surface", "vel", "density"):
+        values_a, values_b = a[name].pop("values"), b[name].pop("values")
+        assert a[name] == b[name], name
+        np.testing.assert_array_equal(values_a, values_b)

@@ -198,10 +198,10 @@ def test_a_file_damaged_again_after_its_redo_stops_the_run_naming_the_disk(tmp_p
     assert main(["run", str(shot), "--until", "surface", "--cache", cache, "-q"]) == 0
     real = SurfaceFrame.read.__func__
 
-    def failing(cls, path):
+    def failing(cls, path, **kw):
         if path.name == "0002.npz":
             raise zlib.error("Error -3 while decompressing data: invalid distance too far back")
-        return real(cls, path)
+        return real(cls, path, **kw)
 
     monkeypatch.setattr(SurfaceFrame, "read", classmethod(failing))
     capsys.readouterr()

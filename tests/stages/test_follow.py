@@ -45,6 +45,13 @@ def test_followed_stages_write_what_the_stages_alone_write(tmp_path, monkeypatch
     man, ref = run.entries()["surface"].manifest(), alone.entries()["surface"].manifest()
     assert man["this_run"] == ref["this_run"]  # the frames made while simulate ran are counted
     assert man["followed_s"]["surface"] > 0
+    # where export's time went (mpmfx bench shot prints it): the frames exported while simulate
+    # ran, and those after, together every frame's
+    ours, theirs = run.entries()["export"].manifest(), alone.entries()["export"].manifest()
+    assert set(theirs["seconds_split"]) == {"read", "vdb", "usd", "write"} and theirs["seconds_split"]["write"] > 0
+    followed, after = ours.get("followed_s", {}), ours["seconds_split"]
+    assert set(followed) | set(after) == {"read", "vdb", "usd", "write"}
+    assert followed.get("usd", 0) + after.get("usd", 0) > 0
 
 
 def test_a_failure_on_either_side_leaves_caches_a_rerun_resumes(tmp_path, monkeypatch):
