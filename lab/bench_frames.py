@@ -1,7 +1,11 @@
 """Wall time of one per-frame stage on 1, 2, ... Dask workers (LocalCluster), upstream cached.
 
     python lab/bench_frames.py pipeline/shots/jelly_splash.toml --cache cache --frames 1:16 \
-        --workers 1 2 4 8 16 --device cpu [--stage surface]
+        --workers 1 2 4 8 16 --device cpu [--stage surface] [--set render.width=160 ...]
+
+The Cycles render (`--stage render`, the shot's engine) runs one Blender process on 1 worker
+and strided chunks of frames, one Blender a chunk on its worker's share of the cores, on 2 or
+more (`mpmfx.stages.render.chunks`); frames/min counts the frames asked for.
 
 Each row re-runs the stage from scratch (`force`) through the product's path (`ShotRun.run`,
 `mpmfx.stages.parallel.Frames`), including the LocalCluster's start (also timed alone). A
@@ -30,19 +34,22 @@ def main() -> int:
     ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--device", default=None)
     ap.add_argument("--stage", default="surface")
+    ap.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     args = ap.parse_args()
+    shot = lambda w: load_shot(  # noqa: E731
+        args.shot, cache_root=args.cache, device=args.device, quiet=True, workers=w, overrides=args.overrides
+    )
     frames = None
     if args.frames:
         a, b = args.frames.split(":")
         frames = list(range(int(a), int(b) + 1))
     t = time.perf_counter()
-    load_shot(args.shot, cache_root=args.cache, device=args.device, quiet=True, workers=1).run(
-        until=args.stage, frames=frames[:1] if frames else None, force=[args.stage]
-    )
+    shot(1).run(until=args.stage, frames=frames[:1] if frames else None, force=[args.stage])
     print(f"warm-up (1 frame, serial, kernels loaded/compiled): {time.perf_counter() - t:.1f} s", flush=True)
-    print(f"{os.cpu_count()} cores; {len(frames) if frames else 'all'} frames of {args.stage}")
-    print("| workers | wall s | of which cluster start s | speed-up | CPU s, all processes |")
-    print("|---|---|---|---|---|")
+    n = len(frames) if frames else len(shot(1).shot.frames)
+    print(f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}; {n} frames of {args.stage}")
+    print("| workers | wall s | of which cluster start s | speed-up | frames/min | CPU s, all processes |")
+    print("|---|---|---|---|---|---|")
     base = None
     for w in args.workers:
         start = 0.0
@@ -52,12 +59,10 @@ def main() -> int:
                 ex.client()
             start = time.perf_counter() - t
         t, cpu = time.perf_counter(), _cpu()
-        load_shot(args.shot, cache_root=args.cache, device=args.device, quiet=True, workers=w).run(
-            until=args.stage, frames=frames, force=[args.stage]
-        )
+        shot(w).run(until=args.stage, frames=frames, force=[args.stage])
         wall, cpu = time.perf_counter() - t, _cpu() - cpu
         base = base or wall
-        print(f"| {w} | {wall:.1f} | {start:.1f} | {base / wall:.2f} | {cpu:.1f} |", flush=True)
+        print(f"| {w} | {wall:.1f} | {start:.1f} | {base / wall:.2f} | {60 * n / wall:.1f} | {cpu:.1f} |", flush=True)
     return 0
 
 

@@ -20,6 +20,7 @@ TIMEOUT_ENV = "MPMFX_BLENDER_TIMEOUT"  # seconds a Blender child that reads a fi
 TIMEOUT_S = 600.0
 FRAME_LINE = "MPMFX_FRAME"  # a Cycles child's line per finished frame: FRAME_LINE frame wall_s cpu_s
 NOTE_LINE = "MPMFX_NOTE"  # a Cycles child's line for the user: NOTE_LINE text (the parent prints the text)
+PARENT_ENV = "MPMFX_PARENT_PID"  # the process that started a Blender child (die_with_parent)
 ERROR = "mpmfx-blender-error: "  # a child's line the parent reads the reason of a failure from
 
 
@@ -40,8 +41,27 @@ def child_env() -> dict:
     """The environment of a Blender child process (`python -m mpmfx....`): it runs this very
     mpmfx (a worktree or an editable install alike): the folder that holds this package."""
     env = dict(os.environ)
+    env[PARENT_ENV] = str(os.getpid())
     env["PYTHONPATH"] = os.pathsep.join([str(Path(__file__).parents[1]), env.get("PYTHONPATH", "")])
     return env
+
+
+def die_with_parent() -> None:
+    """In a Blender child, first thing: the kernel kills it (SIGKILL) when the thread that
+    started it ends, so a killed worker or client leaves no Blender rendering on for hours. That
+    thread (`mpmfx.render.cycles.run_job`'s caller) waits on the child for its whole life. A
+    parent already gone by now ($MPMFX_PARENT_PID no longer ours): exit at once. Linux only
+    (prctl); elsewhere nothing changes."""
+    if not sys.platform.startswith("linux"):
+        return
+    import ctypes
+    import signal
+
+    PR_SET_PDEATHSIG = 1
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+    parent = os.environ.get(PARENT_ENV)
+    if parent and parent.isdigit() and os.getppid() != int(parent):
+        os._exit(1)
 
 
 def child_command(module: str, *args: str) -> list[str]:

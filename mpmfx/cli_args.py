@@ -33,7 +33,8 @@ def add_parallel_args(p) -> None:
         default=None,
         metavar="N",
         help="Dask LocalCluster worker processes for independent frames; 1 = serial "
-        "(default: all cores when there are 10 or more frames to make, else serial; $MPMFX_WORKERS)",
+        "(default: all cores when there are 10 or more frames to make, else serial; $MPMFX_WORKERS); "
+        "Cycles frames go to workers only when N >= 2 or a scheduler is given",
     )
     p.add_argument(
         "--scheduler",

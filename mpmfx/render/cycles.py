@@ -71,6 +71,7 @@ def write_job(
     blend_usd_root: str | None = None,
     device: str = "cpu",
     collider_looks: dict[str, str] | None = None,
+    threads: int = 0,
 ) -> Path:
     """Write the JSON job the child reads. Units: metres and degrees, in the USD stage's frame
     (Y up). looks: USD prim name (surface group or object) -> `mpmfx.render.looks.LOOKS` key;
@@ -81,7 +82,7 @@ def write_job(
     devices where Blender has one; blend_usd_root: what the saved .blend calls the export
     entry's folder (a Blender path such as `//../../published/<name>`, relative to where the
     .blend is published), None: its own absolute path; collider_looks: collider prim name ->
-    look (default "collider")."""
+    look (default "collider"); threads: Cycles' CPU threads (0: every core)."""
     job = {
         "usd": str(usd),
         "frames": [int(f) for f in frames],
@@ -107,6 +108,7 @@ def write_job(
         "blend_usd_root": blend_usd_root,
         "device": device,
         "collider_looks": collider_looks or {},
+        "threads": int(threads),
     }
     path.write_text(json.dumps(job, indent=1))
     return path
@@ -129,8 +131,9 @@ def run_job(job_path: Path, *, log: Path) -> Iterator[tuple[int, float, float]]:
 
     The child's full output goes to `log`; a failure raises CyclesError with its last lines. A
     child that finishes no frame for `stall_limit()` seconds (from its start, or its last frame)
-    is killed, its temp files deleted, and CyclesError names the frame it was on; one that
-    hangs after its last frame is killed after EXIT_S with a warning (its frames are complete)."""
+    is killed and CyclesError names the frame it was on; one that hangs after its last frame is
+    killed after EXIT_S with a warning (its frames are complete). A child that fails, is killed,
+    or is left early (Ctrl-C, another task's failure) leaves no temp file."""
     if not bpy_available():
         raise CyclesError(INSTALL_HINT)
     limit = stall_limit()
@@ -155,7 +158,6 @@ def run_job(job_path: Path, *, log: Path) -> Iterator[tuple[int, float, float]]:
             proc.kill()
             proc.wait()
             out.flush()
-            _remove_child_temps(job)
             if done < len(job["frames"]):
                 raise CyclesError(_stalled(job, done, limit, log)) from None
             print(
@@ -168,6 +170,7 @@ def run_job(job_path: Path, *, log: Path) -> Iterator[tuple[int, float, float]]:
             if proc.poll() is None:  # the consumer stopped early (Ctrl-C): do not leave Blender running
                 proc.kill()
             proc.wait()
+            _remove_child_temps(job, proc.pid)
     if proc.returncode != 0:
         tail = "".join(log.read_text().splitlines(keepends=True)[-15:])
         raise CyclesError(f"Blender (Cycles) exited with code {proc.returncode}; full log: {log}\n{tail}")
@@ -209,7 +212,9 @@ def _stalled(job: dict, done: int, limit: float, log: Path) -> str:
     )
 
 
-def _remove_child_temps(job: dict) -> None:
-    """The temp files a killed child leaves (mpmfx.render.cycles_job writes these names)."""
+def _remove_child_temps(job: dict, pid: int) -> None:
+    """The temp files child `pid` left (`mpmfx.blender.temp_name`'s, its pid in the name: never
+    another child's, e.g. another worker's render of the same frame)."""
     for p in [Path(o) for o in job["outputs"]] + ([Path(job["blend"])] if job.get("blend") else []):
-        p.with_name(f".{p.stem}.tmp{p.suffix}").unlink(missing_ok=True)
+        for tmp in p.parent.glob(f".{p.stem}.{pid}-*.tmp{p.suffix}"):
+            tmp.unlink(missing_ok=True)

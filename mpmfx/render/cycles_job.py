@@ -23,7 +23,7 @@ from pathlib import Path
 
 import bpy
 
-from mpmfx.blender import FRAME_LINE, NOTE_LINE, temp_name
+from mpmfx.blender import FRAME_LINE, NOTE_LINE, die_with_parent, temp_name
 from mpmfx.render import blender_scene as bs
 from mpmfx.render.blender_scene import assign, make_material
 from mpmfx.render.label import burn_label
@@ -139,6 +139,8 @@ def set_render(job: dict) -> None:
     # Meshes carry `velocity` per vertex (the USD export's velocities): Cycles blurs them along it.
     r.use_motion_blur = job["shutter"] > 0
     r.motion_blur_shutter = max(job["shutter"], 1e-3)
+    if job.get("threads"):  # a worker's share of the cores (several Blenders on one host)
+        r.threads_mode, r.threads = "FIXED", int(job["threads"])
     r.use_persistent_data = True  # shaders and the unchanged scene stay compiled between frames
     r.image_settings.file_format, r.image_settings.color_mode = "PNG", "RGB"
     scene.view_settings.view_transform = "AgX"
@@ -216,6 +218,7 @@ def main(argv: list[str]) -> int:
     if len(argv) != 1:
         print("usage: python -m mpmfx.render.cycles_job JOB.json", file=sys.stderr)
         return 2
+    die_with_parent()
     job = json.loads(Path(argv[0]).read_text())
     build_scene(job)
     render_frames(job)

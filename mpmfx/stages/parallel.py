@@ -44,6 +44,7 @@ if TYPE_CHECKING:
 
 SCHEDULER_ENV = "MPMFX_SCHEDULER"  # a farm scheduler's address, e.g. tcp://farm-head:8786
 WORKERS_ENV = "MPMFX_WORKERS"  # worker processes of the LocalCluster; 1 = serial
+CORES_ENV = "MPMFX_WORKER_CORES"  # a LocalCluster worker's share of the cores (a Blender child's threads)
 # Below this many frames to make, `workers=None` (auto) stays serial: a two-worker LocalCluster
 # costs ~20 CPU seconds (start, Warp kernels loaded in each worker; docs/scale-out.md).
 AUTO_MIN_TASKS = 10
@@ -127,6 +128,14 @@ class Frames:
     def size(self) -> int:
         """Worker processes of a LocalCluster started here: the workers asked for, else all cores."""
         return self.workers or os.cpu_count() or 1
+
+    def spread(self) -> int:
+        """How many workers were asked for: the farm's workers now connected (at least 1) with a
+        scheduler, the LocalCluster's size with --workers, else 1 (auto and serial: work that
+        already keeps every core busy, such as a Cycles render, stays in one process)."""
+        if self.scheduler:
+            return max(1, len(self.client().scheduler_info()["workers"]))
+        return self.workers or 1
 
     def parallel(self, n_calls: int, *, auto_min: int = AUTO_MIN_TASKS) -> bool:
         """Whether `n_calls` calls go to Dask (auto: only `auto_min` calls or more)."""
@@ -237,9 +246,17 @@ class Frames:
         return self.calls(fn, [args], keys=[key], desc=desc, quiet=quiet)[0]
 
     def calls(
-        self, fn: Callable[..., Any], args: list[tuple], *, keys: list[str], desc: str = "", quiet: bool = False
+        self,
+        fn: Callable[..., Any],
+        args: list[tuple],
+        *,
+        keys: list[str],
+        desc: str = "",
+        quiet: bool = False,
+        labels: list[str] | None = None,
     ) -> list[Any]:
-        """fn(*a) for each a in `args` (e.g. a wedge's simulations): tasks, or here when serial."""
+        """fn(*a) for each a in `args` (e.g. a wedge's simulations): tasks, or here when serial.
+        labels: what each call is, for its failure line (default: desc and its key)."""
         if not args:
             return []
         bar = _bar(len(args), desc, quiet)
@@ -251,7 +268,8 @@ class Frames:
                     bar.update()
                 return out
             client = self.client()
-            futures = [client.submit(_call, fn, f"{desc} {k}", *a, key=k, pure=False) for a, k in zip(args, keys)]
+            labels = labels or [f"{desc} {k}" for k in keys]
+            futures = [client.submit(_call, fn, w, *a, key=k, pure=False) for a, k, w in zip(args, keys, labels)]
             return _gather(client, futures, bar)
         finally:
             bar.close()
@@ -270,7 +288,8 @@ def one_line(exc: BaseException) -> str:
     return text if type(exc).__name__ in ("StageError", "TaskError") else f"{type(exc).__name__}: {text}"
 
 
-def _worker_name() -> str:
+def worker_name() -> str:
+    """The Dask worker this runs on (its address), or this host and process outside one."""
     try:
         from distributed import get_worker  # backend: distributed
 
@@ -293,7 +312,7 @@ def _task(fn: Callable[[FrameJob, int], Any], job: FrameJob, f: int, desc: str) 
     except Exception as exc:  # noqa: BLE001 - every failure is reported as one line
         raise TaskError(
             f"{desc or job.entry.stage} frame {f} of {publish_name(job.shot)} failed on worker "
-            f"{_worker_name()}: {one_line(exc)}"
+            f"{worker_name()}: {one_line(exc)}"
         ) from None
 
 
@@ -304,17 +323,17 @@ def _call(fn: Callable[..., Any], what: str, *args) -> Any:
     except ShotError:
         raise
     except Exception as exc:  # noqa: BLE001 - every failure is reported as one line
-        raise TaskError(f"{what} failed on worker {_worker_name()}: {one_line(exc)}") from None
+        raise TaskError(f"{what} failed on worker {worker_name()}: {one_line(exc)}") from None
 
 
 def _worker_env(workers: int) -> dict[str, str]:
-    """The LocalCluster workers' share of the cores for the surfacer's CPU threads
-    (mpmfx.threads): without it each of n workers splits its kernels across every core,
-    and two workers on two cores surfaced the default shot 10 % slower (44.0-46.1 s against
-    40.4-41.2 s with one thread each). A value the user set is inherited as it is."""
-    if THREADS_ENV in os.environ:
-        return {}
-    return {THREADS_ENV: str(max(1, usable_cores() // max(1, workers)))}
+    """The LocalCluster workers' share of the cores, for the surfacer's CPU threads
+    (mpmfx.threads) and a Cycles child's threads ($MPMFX_WORKER_CORES): without it each of n
+    workers splits its kernels across every core, and two workers on two cores surfaced the
+    default shot 10 % slower (44.0-46.1 s against 40.4-41.2 s with one thread each). A surfacer
+    thread count the user set is inherited as it is."""
+    share = str(max(1, usable_cores() // max(1, workers)))
+    return {CORES_ENV: share} | ({} if THREADS_ENV in os.environ else {THREADS_ENV: share})
 
 
 def _gather(client, futures: list, bar) -> list[Any]:

@@ -31,7 +31,9 @@ from mpmfx.render.sheets import contact_sheet, evenly_spaced
 from mpmfx.stages.base import Context, StageError
 from mpmfx.stages.colliders import animated_collider, collider_geometry, collider_key
 from mpmfx.stages.names import surface_looks, usd_names
-from mpmfx.stages.parallel import FrameJob
+from mpmfx.stages.parallel import CORES_ENV, FrameJob, task_key
+
+CHUNK = 16  # at most this many frames to one Blender process when frames are spread over workers
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "render", 2, True, "png"
 CODE = (
@@ -96,9 +98,13 @@ def todo(ctx: Context) -> list[int]:
 
 def run(ctx: Context) -> dict:
     if ctx.shot.render.engine is RenderEngine.CYCLES:
-        # One Blender process for every frame: it imports the USD stage once, and Cycles
-        # already uses every core, so frames do not go to Dask workers here.
-        return finish(ctx, [_cycles(ctx.job(), todo(ctx), progress=ctx.progress)])
+        workers = ctx.executor.spread() if ctx.executor is not None else 1
+        frames = todo(ctx)
+        if workers < 2 or len(frames) < 2:
+            # One Blender process for every frame: it imports the USD stage once, and Cycles
+            # already uses every core of this machine.
+            return finish(ctx, [_cycles(ctx.job(), frames, progress=ctx.progress)])
+        return finish(ctx, _cycles_on_workers(ctx, frames, workers))
     try:
         return finish(ctx, ctx.map_frames(frame, todo(ctx), desc="render"))
     finally:
@@ -166,10 +172,52 @@ def framing_camera(shot: Shot, lo, hi) -> Shot:
     )
 
 
-def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -> dict:
+def chunks(frames: list[int], workers: int, most: int = CHUNK) -> list[list[int]]:
+    """`frames` dealt into Blender jobs: at least one a worker, at most `most` frames each,
+    strided (every n-th frame) so each job's frames spread over the shot, and a worker that
+    finishes early is not left with the heavy end of it. Every chunk non-empty."""
+    n = min(len(frames), max(workers, -(-len(frames) // most)))
+    return [frames[i::n] for i in range(n)] if frames else []
+
+
+def _cycles_on_workers(ctx: Context, frames: list[int], workers: int) -> list[dict]:
+    """The frames as Blender jobs on the Dask workers (`chunks`), each reading the same USD
+    stage; the first job saves the .blend. A failed job is one line naming its frames and worker;
+    the frames others finished stay, and a re-run renders only the missing ones."""
+    job, parts = ctx.job(), chunks(frames, workers)
+    labels = [f"render (cycles) frames {_span(p)} of {ctx.shot.shot.name}" for p in parts]
+    keys = [f"{task_key(ctx.entry)}-cycles-{p[0]:04d}-{len(p)}" for p in parts]
+    args = [(job, p, i == 0) for i, p in enumerate(parts)]
+    return ctx.executor.calls(_cycles_chunk, args, keys=keys, labels=labels, desc="render", quiet=ctx.quiet)
+
+
+def _span(frames: list[int]) -> str:
+    """Frames for a message: '1, 3, 5' or, for many, '1, 3, ... 31 (16 frames)'."""
+    if len(frames) <= 4:
+        return ", ".join(map(str, frames))
+    return f"{frames[0]}, {frames[1]}, ... {frames[-1]} ({len(frames)} frames)"
+
+
+def _cycles_chunk(job: FrameJob, frames: list[int], save_blend: bool) -> dict:
+    """On a worker: one Blender process for `frames`, on the worker's share of the cores (a
+    LocalCluster's $MPMFX_WORKER_CORES; a farm worker, alone on its host, uses every core)."""
+    threads = int(os.environ.get(CORES_ENV) or 0)
+    return _cycles(job, frames, name=f"cycles_{frames[0]:04d}_{len(frames)}", blend=save_blend, threads=threads)
+
+
+def _cycles(
+    job: FrameJob,
+    frames: list[int],
+    *,
+    progress=lambda it, **kw: it,
+    name: str | None = None,
+    blend: bool | None = None,
+    threads: int = 0,
+) -> dict:
     """Cycles through Blender's own process; saves the lit scene as `<shot>.blend` and returns
     the seconds per frame (wall, and CPU of all render threads: wall / CPU shows how much of the
-    machine it had)."""
+    machine it had). name: of its job and log files; blend: whether it saves the .blend (None:
+    a whole render does, a one-frame job while none is there); threads: Cycles' (0: all cores)."""
     shot, entry, r = job.shot, job.entry, job.shot.render
     if not frames:
         return {}
@@ -181,15 +229,17 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
     collider_looks = {c.name: r.looks.get(c.name, "collider") for c in shot.colliders}
     # the camera the export framed and wrote into the USD: the render looks through the same one
     cam = (job.upstream["export"].manifest() or {}).get("camera") or render_camera(shot)
-    name = f"cycles_{frames[0]:04d}" if len(frames) == 1 else "cycles"  # a wedge's tasks: one job each
-    blend = entry.root / f"{shot.shot.name}.blend"
+    name = name or (f"cycles_{frames[0]:04d}" if len(frames) == 1 else "cycles")  # a wedge's tasks: one job each
+    path = entry.root / f"{shot.shot.name}.blend"
+    if blend is None:
+        # one .blend an entry: a wedge's per-frame tasks (each a job) save it only while it is
+        # missing; two that race write the same scene through temp names of their own
+        blend = len(frames) > 1 or not path.exists()
     spec = write_job(
         entry.root / f"{name}_job.json",
         usd=job.upstream["export"].root / "shot.usda",
         frames=frames,
-        # one .blend an entry: a wedge's per-frame tasks (each a job) save it only while it is
-        # missing; two that race write the same scene through temp names of their own
-        blend=blend if len(frames) > 1 or not blend.exists() else None,
+        blend=path if blend else None,
         outputs=[entry.frame_path(f, FRAME_EXT) for f in frames],
         width=r.width,
         height=r.height,
@@ -211,6 +261,7 @@ def _cycles(job: FrameJob, frames: list[int], *, progress=lambda it, **kw: it) -
         basin=r.basin,
         label=title(shot) if shot.overrides else "",
         blend_usd_root=blend_usd_root(shot),
+        threads=threads,
     )
     entry.frames_dir.mkdir(parents=True, exist_ok=True)
     times = {}

@@ -47,12 +47,12 @@ def _stand_in(monkeypatch, script: str) -> None:
 
 
 HANGS_ON_FRAME_2 = f"""
-import json, sys, time
+import json, os, sys, time
 from pathlib import Path
 job = json.loads(Path(sys.argv[1]).read_text())
 Path(job["outputs"][0]).write_bytes(b"png")
 print("{FRAME_LINE} 1 0.1 0.1", flush=True)
-Path(job["outputs"][1]).with_name(".0002.tmp.png").write_bytes(b"half")  # Cycles at work
+Path(job["outputs"][1]).with_name(f".0002.{{os.getpid()}}-0badcafe.tmp.png").write_bytes(b"half")  # Cycles at work
 print("Fra:2 Sample 1/64", flush=True)  # chatter is no progress
 time.sleep(60)
 """
@@ -100,3 +100,66 @@ def test_a_bad_stall_limit_names_the_variable(tmp_path, monkeypatch, value):
     monkeypatch.setenv(cycles.STALL_ENV, value)
     with pytest.raises(cycles.CyclesError, match=cycles.STALL_ENV):
         list(cycles.run_job(_job(tmp_path), log=tmp_path / "cycles.log"))
+
+
+def test_a_failed_child_leaves_no_temp_file(tmp_path, monkeypatch):
+    job = _job(tmp_path)
+    script = (
+        "import json, os, sys\nfrom pathlib import Path\njob = json.loads(Path(sys.argv[1]).read_text())\n"
+        "Path(job['outputs'][0]).with_name(f'.0001.{os.getpid()}-0badcafe.tmp.png').write_bytes(b'half')\n"
+        "sys.exit('out of memory')"
+    )
+    _stand_in(monkeypatch, script)
+    with pytest.raises(cycles.CyclesError, match="exited with code 1"):
+        list(cycles.run_job(job, log=tmp_path / "cycles.log"))
+    assert not list((tmp_path / "frames").glob(".*"))
+
+
+ORPHAN_PARENT = """
+import sys
+from pathlib import Path
+import mpmfx.render.cycles as cycles
+CHILD = '''
+import os, sys, time
+from pathlib import Path
+from mpmfx.blender import die_with_parent
+die_with_parent()
+Path(sys.argv[1]).with_name("child.pid").write_text(str(os.getpid()))
+time.sleep(120)
+'''
+cycles.bpy_available = lambda: True
+cycles.child_command = lambda module, *args: [sys.executable, "-c", CHILD, *args]
+list(cycles.run_job(Path(sys.argv[1]), log=Path(sys.argv[2])))
+"""
+
+
+def _running(pid: int) -> bool:
+    """Whether `pid` is a live process (a zombie that no one has reaped yet is not)."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (FileNotFoundError, ProcessLookupError):
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the kernel's parent-death signal is Linux's")
+def test_a_blender_child_exits_when_its_parent_is_killed(tmp_path):
+    import os
+    import signal
+    import subprocess
+
+    import mpmfx
+
+    job = _job(tmp_path)
+    env = {**os.environ, "PYTHONPATH": str(Path(mpmfx.__file__).parents[1])}
+    parent = subprocess.Popen([sys.executable, "-c", ORPHAN_PARENT, str(job), str(tmp_path / "cycles.log")], env=env)
+    marker, t0 = tmp_path / "child.pid", time.monotonic()
+    while not marker.exists() and time.monotonic() - t0 < 60:
+        time.sleep(0.1)
+    child = int(marker.read_text())
+    assert _running(child)
+    parent.send_signal(signal.SIGKILL)  # a Dask worker killed mid-render, say
+    parent.wait()
+    t0 = time.monotonic()
+    while _running(child) and time.monotonic() - t0 < 10:
+        time.sleep(0.1)
+    assert not _running(child)
