@@ -1,7 +1,8 @@
 """Stage 5: PNG frames and an mp4 of the surfaces (or the particle debug look).
 
 `render.engine = "cycles"`: Blender's Cycles renders the export stage's USD stage in a child
-process (`mpmfx.render.cycles`), and the lit scene is saved as `<shot>.blend`; `"preview"`:
+process (`mpmfx.render.cycles`; given two or more Dask workers, one child a chunk of frames on
+each, `chunks`), and the lit scene is saved as `<shot>.blend`; `"preview"`:
 PyVista viewport captures of the surface frames.
 Output in the cache entry: `frames/NNNN.png`, `<shot>.mp4`, `contact.png` (and `<shot>.blend`);
 the runner then publishes them to `renders/<shot>/`, the folder artists look in (`mpmfx.publish`),
@@ -174,8 +175,8 @@ def framing_camera(shot: Shot, lo, hi) -> Shot:
 
 def chunks(frames: list[int], workers: int, most: int = CHUNK) -> list[list[int]]:
     """`frames` dealt into Blender jobs: at least one a worker, at most `most` frames each,
-    strided (every n-th frame) so each job's frames spread over the shot, and a worker that
-    finishes early is not left with the heavy end of it. Every chunk non-empty."""
+    strided (every n-th frame) so each job's frames spread over the shot: the heavy end of a
+    shot (the splash) is shared by every worker, not one worker's. Every chunk non-empty."""
     n = min(len(frames), max(workers, -(-len(frames) // most)))
     return [frames[i::n] for i in range(n)] if frames else []
 
