@@ -4,6 +4,7 @@ linear theory, and the dam-break front against Martin & Moyce 1952 with and with
 friction. Prints one table.
 
     python lab/walls_gpu.py                  # the full set, device cuda
+    python lab/walls_gpu.py --dams           # the dam-break rows only
     python lab/walls_gpu.py --quick --device cpu   # small grids, a check that it runs
 
 Rows:
@@ -17,7 +18,10 @@ Rows:
   linear theory w^2 = g k tanh(k h), k = pi / (wall-to-wall width), and the fraction of the
   mode's amplitude lost from the first period to the second.
 - dam break: mean relative front error against Martin & Moyce 1952 (a = 2.25 in) at grid
-  64 / 128 / 256, all walls separate, wall_friction 0 and 0.3 (`mpmfx.bench.experiments.dam_break`).
+  64 / 128 / 256, all walls separate, wall_friction 0, then 0.3 at the walls' nodes only
+  (wall_layer 0) and 0.3 over the layer (`--layer`, default SolverConfig's 0.02: 2 cm in the
+  1 m domain); and each friction's effect, the points it takes off the frictionless error
+  (`mpmfx.bench.experiments.dam_break`).
 """
 
 from __future__ import annotations
@@ -125,25 +129,28 @@ def pool_period(n: int, depth_cells: int, device: str, periods: float = 2.3) -> 
     return T, T_lin, decay
 
 
-def dam_front(n: int, mu: float, device: str) -> float:
-    run = ex.dam_break(grid_n=n, width=0.2, t_star=(1.0, 1.5, 2.0, 2.5, 3.0), ppz=1, wall_friction=mu, device=device)
+def dam_front(n: int, mu: float, layer: float, device: str) -> float:
+    run = ex.dam_break(
+        grid_n=n,
+        width=0.2,
+        t_star=(1.0, 1.5, 2.0, 2.5, 3.0),
+        ppz=1,
+        wall_friction=mu,
+        wall_layer=layer,
+        device=device,
+    )
     return front_error(run.extra["T"], run.extra["Z"], water_references()["martin_moyce_1952_a2.25in"])
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--device", default="cuda")
-    ap.add_argument("--quick", action="store_true", help="small grids: a check that the script runs")
-    a = ap.parse_args()
-    rest_n, pool_n, dams = (24, 32, (16, 24, 32)) if a.quick else (64, 64, (64, 128, 256))
+def rest_rows(rest_n: int, pool_n: int, device: str) -> list[tuple[str, str, str]]:
+    """The rows of material at rest on the walls and the pool's period."""
     rows = []
-    t0 = time.perf_counter()
-    sink, lowest = sand_sink(rest_n, a.device)
+    sink, lowest = sand_sink(rest_n, device)
     rows.append(("sand: bottom layer moves / lowest particle", f"grid {rest_n}", f"{sink:+.3f} / {lowest:+.3f} cells"))
-    climb, j = water_at_rest(rest_n, a.device)
+    climb, j = water_at_rest(rest_n, device)
     rows.append(("water at rest: climb at the walls / min J", f"grid {rest_n}", f"{climb:.3f} cells / {j:.3f}"))
     for depth in (8, 16):
-        T, T_lin, decay = pool_period(pool_n, depth, a.device)
+        T, T_lin, decay = pool_period(pool_n, depth, device)
         rows.append(
             (
                 f"pool period, {depth} cells deep",
@@ -151,12 +158,35 @@ def main() -> None:
                 f"{T:.4f} s vs {T_lin:.4f} s ({T / T_lin - 1:+.2%}); amplitude lost a period {decay:.1%}",
             )
         )
+    return rows
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--device", default="cuda")
+    ap.add_argument("--quick", action="store_true", help="small grids: a check that the script runs")
+    ap.add_argument("--dams", action="store_true", help="the dam-break rows only")
+    ap.add_argument("--layer", type=float, default=SolverConfig.wall_layer, help="wall_layer, domain units (1 m)")
+    a = ap.parse_args()
+    rest_n, pool_n, dams = (24, 32, (16, 24, 32)) if a.quick else (64, 64, (64, 128, 256))
+    rows = []
+    t0 = time.perf_counter()
+    if not a.dams:
+        rows += rest_rows(rest_n, pool_n, a.device)
     for n in dams:
-        free, rough = dam_front(n, 0.0, a.device), dam_front(n, 0.3, a.device)
-        rows.append(("dam-break front vs Martin & Moyce, mu 0 / 0.3", f"grid {n}", f"{free:+.1%} / {rough:+.1%}"))
-    print(f"\n{'case':<48} {'grid':<9} result   (device {a.device}, {time.perf_counter() - t0:.0f} s)")
+        free = dam_front(n, 0.0, a.layer, a.device)
+        nodes, layer = dam_front(n, 0.3, 0.0, a.device), dam_front(n, 0.3, a.layer, a.device)
+        rows.append(
+            (
+                f"dam front vs M&M: mu 0 / 0.3 nodes / 0.3 layer {a.layer:g}",
+                f"grid {n}",
+                f"{free:+.1%} / {nodes:+.1%} / {layer:+.1%}; effect {(free - nodes) * 100:.1f} / "
+                f"{(free - layer) * 100:.1f} points",
+            )
+        )
+    print(f"\n{'case':<52} {'grid':<9} result   (device {a.device}, {time.perf_counter() - t0:.0f} s)")
     for case, grid, result in rows:
-        print(f"{case:<48} {grid:<9} {result}")
+        print(f"{case:<52} {grid:<9} {result}")
 
 
 if __name__ == "__main__":

@@ -218,6 +218,12 @@ class Solver(_Section):
         _SOLVER.walls[0].value, description="Domain walls: one type, or six for -x,+x,-y,+y,-z,+z."
     )
     wall_friction: Real = Field(_SOLVER.wall_friction, description="Coulomb friction at the walls.")
+    wall_layer: Real = Field(
+        _SOLVER.wall_layer,
+        description="The layer over which a wall's friction acts (m, >= 0; a modelling choice): mu times "
+        "the wall's normal impulse is shared by the material within it, so friction slows water alike on "
+        "any grid. 0: only the nodes at the wall, whose layer thins as the grid refines.",
+    )
     dt_max: Real = Field(_SOLVER.dt_max, description="Largest substep (s).")
     dt_min: Real = Field(_SOLVER.dt_min, description="Substep floor (s): below it the run stops with advice.")
     deterministic: Bool = Field(
@@ -413,12 +419,13 @@ class Shot(_Section):
 
     def solver_config(self) -> SolverConfig:
         """The solver's config in domain units: every `[solver]` knob that SolverConfig has, by
-        name, plus grid_n and gravity / domain.size (the solver's domain is [0, 1]^3). Raises SolverConfigError."""
+        name, plus grid_n, and gravity and wall_layer / domain.size (the solver's domain is [0, 1]^3). Raises SolverConfigError."""
         s = self.solver
         knobs = {f.name: getattr(s, f.name) for f in dataclasses.fields(SolverConfig) if f.name in Solver.model_fields}
         knobs |= {
             "grid_n": self.domain.grid_n,
             "gravity": tuple(g / self.domain.size for g in s.gravity),
+            "wall_layer": s.wall_layer / self.domain.size,
             "walls": (s.walls,) * 6 if isinstance(s.walls, str) else tuple(s.walls),
         }
         return SolverConfig(**knobs)

@@ -97,8 +97,15 @@ def test_a_shot_and_the_python_api_share_the_solver_defaults(tiny_shot):
     assert cfg.gravity == (0.0, -STANDARD_GRAVITY / shot.domain.size, 0.0) == default.gravity  # a 1 m domain
 
 
+def test_the_wall_layer_is_metres_in_a_shot(tiny_shot):
+    """solver.wall_layer is a length in the world: 2 cm in a 4 m domain is 0.005 of it."""
+    shot = load_shot_config(tiny_shot, ["domain.size=4.0", "solver.wall_layer=0.02"])
+    assert shot.solver_config().wall_layer == pytest.approx(0.005)
+
+
 def test_solver_ranges_are_checked_once_and_named_as_shot_keys(tiny_shot):
     for override, key in (
+        ("solver.wall_layer=-0.01", "solver.wall_layer"),
         ("solver.cfl=1.5", "solver.cfl"),
         ("solver.damping=-1.0", "solver.damping"),
         ("solver.flip=1.5", "solver.flip"),

@@ -146,6 +146,7 @@ def dam_break(
     ppa=2,
     ppz=None,
     wall_friction=0.0,
+    wall_layer=SolverConfig.wall_layer,
     floor="separate",
     cfl=0.4,
     device=None,
@@ -154,10 +155,15 @@ def dam_break(
     the domain depth (Martin & Moyce 1952 n^2 = 2; Koshizuka & Oka 1996). Fronts (surge tip
     from the back wall) at T = t sqrt(2 g / width) = each of t_star. floor/wall_friction:
     the frictionless case is all walls `separate` with mu = 0; the rough case gives the
-    walls Coulomb friction (or a sticky floor)."""
+    walls Coulomb friction (or a sticky floor), acting over `wall_layer` (domain units)."""
     mat = preset("Water")
     cfg = SolverConfig(
-        grid_n=grid_n, gravity=(0.0, -G, 0.0), walls=channel_walls(floor), wall_friction=wall_friction, cfl=cfl
+        grid_n=grid_n,
+        gravity=(0.0, -G, 0.0),
+        walls=channel_walls(floor),
+        wall_friction=wall_friction,
+        wall_layer=wall_layer,
+        cfl=cfl,
     )
     dx = cfg.dx
     x, spacing, depth = _quasi2d_block(dx, width, 2 * width, ppa, ppz)

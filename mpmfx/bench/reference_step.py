@@ -4,7 +4,7 @@ Read it line by line against docs/physics.md ("The method", "Materials", "Bounda
 the tutorial "Material Point Method: Step by Step": the four phases, the stencil and B-spline
 weights, the fused MLS stress, fixed-corotated elasticity, the snow clamp and the sand cone, the Tait fluid, and the
 walls of `mpmfx.mpm.config.SolverConfig` (planes `wall_planes`, holding the nodes on and beyond
-them, sticky / slip / separate, Coulomb `wall_friction`). It is the reference the production
+them, sticky / slip / separate, Coulomb `wall_friction` over the `wall_layer`). It is the reference the production
 Warp solver (`mpmfx.mpm.Solver`) must match on the same particles, grid and dt; it is
 slow (vectorised numpy, thousands of particles) and has the FLIP blend (`SolverConfig.flip`)
 but no colliders, multi-field contact,
@@ -139,6 +139,40 @@ def apply_wall(v, n_out: np.ndarray, kind: str, mu: float):
     return out
 
 
+def layer_friction(v, grid_m, cfg: SolverConfig) -> np.ndarray:
+    """The walls' Coulomb friction over their boundary layer (grid_update.layer_friction): per wall
+    and column of nodes across it, mu times the normal impulse J = sum m vn (into the wall) of
+    the column's nodes on the plane or beyond, taken off the tangential speed of its nodes within
+    `wall_layer` of the plane, each scaled by max(0, 1 - w mu J / sum w m |vt|), w = 1 - d /
+    wall_layer. v, grid_m: the nodes' velocities (N^3, 3) before the walls and masses (N^3,)."""
+    n = cfg.grid_n + 1
+    lo, hi = cfg.wall_planes
+    v0 = v.reshape(n, n, n, 3)
+    m = grid_m.reshape(n, n, n)
+    out = v0.copy()
+    c = np.arange(n) * cfg.dx
+    for a in range(3):
+        for side, kind in ((-1.0, cfg.walls[2 * a]), (1.0, cfg.walls[2 * a + 1])):
+            if kind.value == "sticky":
+                continue
+            d = c - lo if side < 0 else hi - c  # distance from the plane into the domain
+            w = np.where(d < cfg.wall_layer, 1.0 - np.maximum(d, 0.0) / cfg.wall_layer, 0.0)
+            shape = [1, 1, 1]
+            shape[a] = n
+            w, wall = w.reshape(shape), (d < 0.5 * cfg.dx).reshape(shape)
+            vn = v0[..., a] * side
+            vt = v0.copy()
+            vt[..., a] = 0.0
+            jn = (m * np.maximum(vn, 0.0) * wall).sum(axis=a, keepdims=True)
+            share = (w * m * np.linalg.norm(vt, axis=-1)).sum(axis=a, keepdims=True)
+            ratio = np.where((jn > 0) & (share > 0), cfg.wall_friction * jn / np.maximum(share, 1e-300), 0.0)
+            scale = np.maximum(0.0, 1.0 - w * ratio)
+            keep = out[..., a].copy()
+            out *= scale[..., None]
+            out[..., a] = keep
+    return out.reshape(-1, 3)
+
+
 class ReferenceSolver:
     """Plain MLS-MPM with the Solver's interface subset: init_state, step, state_to_numpy."""
 
@@ -259,13 +293,17 @@ class ReferenceSolver:
         v[has] = (v[has] + dt * np.asarray(cfg.gravity)) * max(0.0, 1.0 - cfg.damping * dt)
         xn = np.stack(np.unravel_index(np.flatnonzero(has), (n_nodes,) * 3), -1) * cfg.dx
         reach = 0.5 * cfg.dx  # the planes lie on nodes: the half cell only absorbs rounding
+        mu = cfg.wall_friction
+        if cfg.wall_layer > 0 and mu > 0:
+            v = layer_friction(v, grid_m, cfg)
+            mu = 0.0  # the walls below only hold the normal speed: their friction was the layer's
         for a in range(3):  # same face order as grid_update.apply_walls: -a then +a
             for side, band in ((-1.0, xn[:, a] < lo + reach), (1.0, xn[:, a] > hi - reach)):
                 sel = np.flatnonzero(has)[band]
                 n_out = np.zeros(3)
                 n_out[a] = side
                 kind = cfg.walls[2 * a + (side > 0)].value
-                v[sel] = apply_wall(v[sel], n_out, kind, cfg.wall_friction)
+                v[sel] = apply_wall(v[sel], n_out, kind, mu)
         return v
 
     def _update_deformation(self, s, live, C, dt) -> None:

@@ -74,6 +74,13 @@ class SolverConfig:
         wall_friction: Coulomb coefficient mu at the walls: tangential speed drops by
             mu * |removed normal speed|, an impulse ratio independent of dt (a fraction
             kept per substep would make creep on a slope depend on dt).
+        wall_layer: domain units (>= 0): the boundary layer over which a wall's friction acts, a
+            modelling choice (default 0.02: 2 cm in a 1 m domain). The Coulomb impulse, mu times
+            the normal impulse the wall takes at a column of nodes, is shared over the column's
+            nodes within this distance of the plane (more to those nearer), so the friction a
+            wall applies is the same on any grid, for water too (docs/physics.md, "Boundaries").
+            0: it acts at the nodes on the plane and beyond only, whose layer of water thins as
+            the grid refines.
         boundary_cells: how far inside each face of the domain its wall's plane lies, in cells
             (`wall_planes`). The nodes between the face and the plane are a guard that keeps the
             3-node stencil on the grid (>= 2).
@@ -99,6 +106,7 @@ class SolverConfig:
     time_scale: float = 1.0
     walls: tuple[WallType, ...] = (WallType.SEPARATE,) * 6
     wall_friction: float = 0.3
+    wall_layer: float = 0.02
     boundary_cells: int = 3
     dt_max: float = 1e-2
     dt_min: float = 1e-7
@@ -134,6 +142,7 @@ class SolverConfig:
             "flip",
             "time_scale",
             "wall_friction",
+            "wall_layer",
             "contact_friction",
             "dt_max",
             "dt_min",
@@ -153,6 +162,7 @@ class SolverConfig:
             ("flip", 0 <= self.flip <= 1, "must be in [0, 1] (0: APIC; 0.9-0.99: FLIP blends)"),
             ("time_scale", self.time_scale > 0, "must be > 0"),
             ("wall_friction", self.wall_friction >= 0, "must be >= 0"),
+            ("wall_layer", self.wall_layer >= 0, "must be >= 0 (a length; 0: friction at the wall's nodes only)"),
             ("contact_friction", self.contact_friction >= 0, "must be >= 0"),
             ("boundary_cells", 2 <= self.boundary_cells < self.grid_n // 2, "must be >= 2 and < grid_n / 2"),
             ("dt_min", 0 < self.dt_min <= self.dt_max, f"must be > 0 and not above dt_max ({self.dt_max})"),

@@ -31,6 +31,8 @@ class GridParams:
 
     dt: s; dx: domain units; gravity: domain/s^2; damping_factor: 1 - damping*dt (>= 0);
     walls_lo / walls_hi: wall codes of the -x,-y,-z / +x,+y,+z faces; wall_friction: mu;
+    wall_layer: domain units, the layer over which a wall's friction acts (0: the nodes at the
+    wall only; SolverConfig.wall_layer);
     plane_lo / plane_hi: the walls' planes on every axis, domain units (SolverConfig.wall_planes);
     deterministic: 1 when
     P2G accumulated in fixed point; q_mass / q_mom: fixed-point quanta (mass, momentum);
@@ -45,6 +47,7 @@ class GridParams:
     walls_lo: wp.vec3i
     walls_hi: wp.vec3i
     wall_friction: float
+    wall_layer: float
     plane_lo: float
     plane_hi: float
     deterministic: int
@@ -74,21 +77,21 @@ def apply_wall(v: wp.vec3, n_out: wp.vec3, wall: int, mu: float) -> wp.vec3:
 
 
 @wp.func
-def apply_walls(v: wp.vec3, xn: wp.vec3, gp: GridParams) -> wp.vec3:
-    """The walls at a node at xn (domain units). A node on a wall's plane or beyond it gets the
-    wall's condition: the last node held is the one on the plane, so material rests on the plane
-    itself (the nodes beyond it are the guard that keeps the stencil on the grid). The half cell
-    only absorbs rounding: the planes lie on nodes."""
+def apply_walls(v: wp.vec3, xn: wp.vec3, gp: GridParams, mu: float) -> wp.vec3:
+    """The walls at a node at xn (domain units), friction mu at the node itself. A node on a
+    wall's plane or beyond it gets the wall's condition: the last node held is the one on the
+    plane, so material rests on the plane itself (the nodes beyond it are the guard that keeps
+    the stencil on the grid). The half cell only absorbs rounding: the planes lie on nodes."""
     out = v
     reach = 0.5 * gp.dx
     for a in range(3):
         n_out = wp.vec3(0.0)
         if xn[a] < gp.plane_lo + reach:
             n_out[a] = -1.0
-            out = apply_wall(out, n_out, gp.walls_lo[a], gp.wall_friction)
+            out = apply_wall(out, n_out, gp.walls_lo[a], mu)
         if xn[a] > gp.plane_hi - reach:
             n_out[a] = 1.0
-            out = apply_wall(out, n_out, gp.walls_hi[a], gp.wall_friction)
+            out = apply_wall(out, n_out, gp.walls_hi[a], mu)
     return out
 
 
@@ -119,6 +122,71 @@ def node_velocity(
         v = mv / m  # grid_mv held momentum until here
         v = (v + gp.dt * gp.gravity) * gp.damping_factor
     return m, v
+
+
+@wp.func
+def layer_friction(
+    gp: GridParams,
+    grid_m: wp.array3d(dtype=float),
+    grid_mv: wp.array3d(dtype=wp.vec3),
+    grid_fixed: wp.array4d(dtype=wp.int64),
+    v: wp.vec3,
+    fo: int,
+    i: int,
+    j: int,
+    k: int,
+) -> wp.vec3:
+    """The walls' Coulomb friction shared over their boundary layers (gp.wall_layer > 0), at node
+    (i, j, k) of the field whose block starts at fo on the first axis; v: its velocity.
+
+    Per wall and per column of nodes across it: the normal impulse J = sum m vn (> 0: into the
+    wall) of the column's nodes on the plane or beyond it, and mu J taken off the tangential
+    momentum of the column's nodes within wall_layer of the plane, each node's share weighted
+    by w = 1 - d / wall_layer (d: its distance from the plane, 0 at the wall): a node's
+    tangential speed is scaled by max(0, 1 - w mu J / sum w m |vt|). Unsaturated, the column
+    loses mu J of tangential momentum on any grid; the sums read every node of the column
+    (before the walls), so all of them agree on it without atomics."""
+    xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
+    reach = 0.5 * gp.dx
+    out = v
+    for a in range(3):
+        for side in range(2):
+            wall = gp.walls_lo[a]
+            plane = gp.plane_lo
+            sgn = float(-1.0)
+            if side == 1:
+                wall = gp.walls_hi[a]
+                plane = gp.plane_hi
+                sgn = 1.0
+            d = sgn * (plane - xn[a])  # distance from the plane into the domain (< 0: beyond it)
+            if wall == WallCode.STICKY or d >= gp.wall_layer:
+                continue
+            n_out = wp.vec3(0.0)
+            n_out[a] = sgn
+            jn = float(0.0)
+            share = float(0.0)
+            c = int(0)
+            if side == 1:
+                c = gp.nodes - 1
+            # walk the column from the domain face inward, through the guard, the plane and the layer
+            while c >= 0 and c < gp.nodes:
+                dc = sgn * (plane - float(c) * gp.dx)
+                if dc >= gp.wall_layer:
+                    break
+                at = wp.vec3i(i, j, k)
+                at[a] = c
+                m, vc = node_velocity(gp, grid_m, grid_mv, grid_fixed, fo + at[0], at[1], at[2])
+                if m > 0.0:
+                    vn = wp.dot(vc, n_out)
+                    if dc < reach and vn > 0.0:
+                        jn += m * vn
+                    share += (1.0 - wp.max(dc, 0.0) / gp.wall_layer) * m * wp.length(vc - vn * n_out)
+                c -= int(sgn)
+            if jn > 0.0 and share > 0.0:
+                w = 1.0 - wp.max(d, 0.0) / gp.wall_layer
+                vn_self = wp.dot(out, n_out)
+                out = vn_self * n_out + (out - vn_self * n_out) * wp.max(0.0, 1.0 - w * gp.wall_friction * jn / share)
+    return out
 
 
 @wp.func
@@ -160,16 +228,25 @@ def boundaries(
     colliders: wp.array(dtype=ColliderParams),
     sdf: wp.array(dtype=float),
     counts: wp.array(dtype=wp.int32),
+    grid_m: wp.array3d(dtype=float),
+    grid_mv: wp.array3d(dtype=wp.vec3),
+    grid_fixed: wp.array4d(dtype=wp.int64),
     v: wp.vec3,
+    fo: int,
     i: int,
     j: int,
     k: int,
 ) -> wp.vec3:
-    """A node's velocity after the colliders and the walls (zero, and counted, if not finite)."""
+    """A node's velocity after the colliders and the walls (zero, and counted, if not finite).
+    fo: the first-axis offset of the node's field block (layer_friction)."""
     xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
     for c in range(gp.num_colliders):
         v = apply_collider(colliders[c], sdf, xn, v, 0.5 * gp.dx)
-    v = apply_walls(v, xn, gp)
+    if gp.wall_layer > 0.0 and gp.wall_friction > 0.0:
+        v = layer_friction(gp, grid_m, grid_mv, grid_fixed, v, fo, i, j, k)
+        v = apply_walls(v, xn, gp, 0.0)  # the walls' normal condition; their friction is the layer's
+    else:
+        v = apply_walls(v, xn, gp, gp.wall_friction)
     if not wp.isfinite(v):
         wp.atomic_add(counts, Count.GRID_NONFINITE, 1)
         v = wp.vec3(0.0)  # the substep is rejected anyway; keep G2P finite
@@ -211,7 +288,7 @@ def update_node(
                 # own gradient minus the others': for two fields the normals are exactly
                 # opposite, so the contact impulses cancel and momentum is conserved
                 v = field_contact(v, p_tot / m_tot, 2.0 * g - grad_tot, gp.contact_friction)
-            v = boundaries(gp, colliders, sdf, counts, v, i, j, k)
+            v = boundaries(gp, colliders, sdf, counts, grid_m, grid_mv, grid_fixed, v, f * gp.nodes, i, j, k)
         grid_v[fi, j, k] = v
 
 
@@ -226,7 +303,10 @@ def make_mesh_boundaries(inside_test: str):
     def mesh_boundaries(gp: GridParams, mc: MeshColliders, v: wp.vec3, i: int, j: int, k: int) -> wp.vec3:
         xn = wp.vec3(float(i), float(j), float(k)) * gp.dx
         v = wp.static(contact)(mc, xn, v, gp.dx)
-        return apply_walls(v, xn, gp)
+        mu = gp.wall_friction
+        if gp.wall_layer > 0.0:
+            mu = 0.0  # the layer's friction was applied once, in `boundaries`
+        return apply_walls(v, xn, gp, mu)
 
     return mesh_boundaries
 
@@ -275,7 +355,9 @@ def make_grid_update(*, device_clock: bool = False, sparse: bool = False, clears
             if node[0] >= 0:
                 m, v = node_velocity(gp, grid_m, grid_mv, grid_fixed, node[0], node[1], node[2])
                 if m > 0.0:
-                    v = boundaries(gp, colliders, sdf, counts, v, node[0], node[1], node[2])
+                    v = boundaries(
+                        gp, colliders, sdf, counts, grid_m, grid_mv, grid_fixed, v, 0, node[0], node[1], node[2]
+                    )
                     if wp.static(bool(meshes)):
                         v = wp.static(mesh_boundaries)(gp, mesh_cols, v, node[0], node[1], node[2])
                 grid_v[node[0], node[1], node[2]] = v

@@ -372,8 +372,11 @@ class Solver:
         # 3 · grid update (with the brick P2G: only the node bricks it marked)
         dim = (nn, nn, nn)
         # with the brick P2G the update zeroes what it read, the next substep's sparse clear,
-        # unless G2P reads node masses (water volume recovery): the clear then costs almost nothing
-        self._grid_cleared = brick is not None and not self.flags.volume_recovery and not keep_grid
+        # unless G2P reads node masses (water volume recovery) or the walls' friction layer reads
+        # other nodes' (a node zeroed while its column is read would race): the clear then costs
+        # almost nothing
+        layer = cfg.wall_layer > 0 and cfg.wall_friction > 0
+        self._grid_cleared = brick is not None and not self.flags.volume_recovery and not keep_grid and not layer
         max_blocks = 0
         if brick is not None:
             grid = make_grid_update(
@@ -463,6 +466,7 @@ class Solver:
         gp.walls_lo = wp.vec3i(codes[0], codes[2], codes[4])
         gp.walls_hi = wp.vec3i(codes[1], codes[3], codes[5])
         gp.wall_friction = cfg.wall_friction
+        gp.wall_layer = cfg.wall_layer
         gp.plane_lo, gp.plane_hi = cfg.wall_planes
         gp.deterministic = int(cfg.deterministic)
         gp.q_mass, gp.q_mom = self._q_mass, self._q_mom

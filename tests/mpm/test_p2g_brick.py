@@ -88,12 +88,12 @@ def _assert_close(out, ref):
 SPARSE_GRID = 64
 
 
-def _sparse_scene(deterministic=True):
+def _sparse_scene(deterministic=True, wall_layer=0.0):
     """A few hundred particles strewn through the domain: most bricks' neighbours are empty,
     so a window's marks are all that covers the nodes its particles reach."""
     solver = Solver(
         [preset("Water"), preset("Mushy")],
-        SolverConfig(grid_n=SPARSE_GRID, deterministic=deterministic),
+        SolverConfig(grid_n=SPARSE_GRID, deterministic=deterministic, wall_layer=wall_layer),
         device="cpu",
         stepper="device",
     )
@@ -111,20 +111,25 @@ def _sparse_scene(deterministic=True):
     return solver, state, rng
 
 
-@pytest.mark.parametrize("keep_grid, deterministic", [(True, True), (False, True), (False, False)])
-def test_substeps_after_the_first_clear_and_update_only_the_marked_node_bricks(keep_grid, deterministic):
+@pytest.mark.parametrize(
+    "keep_grid, deterministic, wall_layer",
+    [(True, True, 0.0), (False, True, 0.0), (False, False, 0.0), (False, True, 0.2)],
+)
+def test_substeps_after_the_first_clear_and_update_only_the_marked_node_bricks(keep_grid, deterministic, wall_layer):
     """Inside a chunk the brick P2G's node marks stand in for the whole grid: the clear zeroes
     only the bricks the last scatter touched and the grid update skips the rest. The marks
     must cover every node holding mass (the windows' and the fallbacks', for particles that
     left their window since the sort), and G2P must read the same velocities as with the
     dense phases, or particles would pick up the last substep's stale grid. Without keep_grid
     the grid update itself zeroes what it read (no clear launch): then the particles of the
-    second substep after the fallback tell whether it left anything behind."""
-    solver, state, rng = _sparse_scene(deterministic)
+    second substep after the fallback tell whether it left anything behind. With the walls'
+    friction over a layer (wall_layer) a node's update reads its column's nodes, so none is
+    zeroed while read: the grid is kept and cleared by the marks, with the same particles."""
+    solver, state, rng = _sparse_scene(deterministic, wall_layer)
     brick = BrickP2G(solver.flags, state.n, solver.device, nodes=SPARSE_GRID + 1)
     _grid(solver, state, brick, sort=True)  # a chunk's first substep: all of the grid cleared
     x0 = state.cur.x.numpy().copy()
-    ref_solver, ref_state, _ = _sparse_scene(deterministic)  # the dense reference phases at the same positions
+    ref_solver, ref_state, _ = _sparse_scene(deterministic, wall_layer)  # the dense phases at the same positions
     # moved within their windows (up to a cell), then out of them (up to 6 cells): the fallback
     for reach, substeps in ((1.0, 1), (6.0, 2)):
         x = x0 + rng.uniform(-reach, reach, x0.shape).astype(np.float32) / SPARSE_GRID
@@ -133,7 +138,7 @@ def test_substeps_after_the_first_clear_and_update_only_the_marked_node_bricks(k
         ref = _grid(ref_solver, ref_state)
         for _ in range(substeps):  # each cleared by the last one's marks
             grid = _grid(solver, state, brick, keep_grid=keep_grid)
-            if keep_grid:
+            if keep_grid or wall_layer > 0:
                 _assert_close(grid, ref)
             else:
                 assert not grid.any()  # zeroed once read
@@ -206,3 +211,23 @@ def test_the_brick_scatter_counts_the_wear_of_the_order():
     assert frag[FRAG_PIECES] == state.n  # on the CPU a block parks one particle at a time: a run each
     assert 0 < frag[FRAG_FALLBACKS] < 3 * state.n
     assert frag[FRAG_PIECES + 1] + frag[FRAG_FALLBACKS] == 3 * state.n  # each particle in a run or fallen back
+
+
+def test_the_brick_update_shares_the_walls_friction_over_the_layer_as_the_dense_one_does():
+    """A block sliding into the floor: the update over the marked node bricks reads each node's
+    column across the wall as the dense update does, so the particles leave with the same
+    velocities, which the layer's friction has changed."""
+    out = {}
+    for layer in (0.0, 0.2):
+        cfg = SolverConfig(grid_n=GRID, wall_layer=layer)
+        solver = Solver([preset("Water")], cfg, device="cpu", stepper="device")
+        floor = cfg.wall_planes[0]
+        state = solver.init_state(block((0.3, floor, 0.3), (0.6, floor + 0.3, 0.6), grid_n=GRID, v=(1.0, -1.0, 0.3)))
+        _set_substep(solver)
+        by_place = lambda: state.nxt.v.numpy()[np.lexsort(state.nxt.x.numpy().T)]  # noqa: E731 (the sort reorders)
+        _grid(solver, state)
+        out[layer] = by_place().copy()
+        brick = BrickP2G(solver.flags, state.n, solver.device, nodes=GRID + 1)
+        _grid(solver, state, brick, sort=True, keep_grid=False)
+        np.testing.assert_allclose(by_place(), out[layer], rtol=1e-5, atol=1e-6)
+    assert np.abs(out[0.2] - out[0.0]).max() > 0.01  # the layer took more than rounding off
