@@ -19,6 +19,7 @@ Imports numpy, warp and mpmfx.mpm only.
 from __future__ import annotations
 
 import math
+import sys
 import time
 
 from mpmfx.bench import experiments as ex
@@ -81,7 +82,14 @@ def sweep(sizes, aspects: dict, device=None, sands=tuple(SANDS)) -> list[dict]:
         for geom, avals in aspects.items():
             for a in avals:
                 for n in sizes:
-                    rows.append(collapse_row(sand, a, n, axisymmetric=geom == "axisymmetric", device=device))
+                    r = collapse_row(sand, a, n, axisymmetric=geom == "axisymmetric", device=device)
+                    rows.append(r)
+                    print(  # progress on stderr: stdout carries the table
+                        f"  {geom} {sand} a={a:g} grid {n}: runout {r['runout']:.3f} (law {r['law_runout']:.3f}), "
+                        f"{r['cells_across']:g} cells across, {r['particles']} particles, {r['wall_s']:.1f} s",
+                        file=sys.stderr,
+                        flush=True,
+                    )
     return rows
 
 
