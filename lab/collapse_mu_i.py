@@ -11,7 +11,7 @@ at most as strong as the largest I's, so its runout lies between those rows. I e
 a laboratory column (grain d = 0.5 mm, H0 = 0.2 m): about 0.005 in the bulk (shear rate
 sqrt(g / H0) under half the column's weight), up to about 1 in the thin fast front.
 
-    python lab/collapse_mu_i.py [--device cpu] [--grid 40] [--a 0.5] [--phi 30] [--I 0 0.1 1]
+    python lab/collapse_mu_i.py [--device cpu] [--grid 40] [--a 0.5] [--phi 30] [--I 0 0.1 0.3 1]
 
 One table; mu_2 - mu_s = 0.26 and I0 = 0.279 are Jop et al.'s glass-bead constants.
 """
@@ -38,7 +38,7 @@ def main() -> None:
     p.add_argument("--grid", type=int, default=40)
     p.add_argument("--a", type=float, default=0.5, help="aspect ratio H0 / L0")
     p.add_argument("--phi", type=float, default=30.0, help="static friction angle, degrees")
-    p.add_argument("--I", type=float, nargs="+", default=[0.0, 0.1, 1.0], help="inertial numbers")
+    p.add_argument("--I", type=float, nargs="+", default=[0.0, 0.1, 0.3, 1.0], help="inertial numbers")
     args = p.parse_args()
     rows = []
     for inertial in args.I:
@@ -54,6 +54,7 @@ def main() -> None:
                 "runout": e["runout"],
                 "law_runout": e["law_runout"],
                 "runout_error": e["runout"] / e["law_runout"] - 1.0,
+                "runout_q": e["runout_q"],  # not quantised to cells: compares the rows
                 "height": e["height"],
                 "wall_s": round(r.wall_s, 1),
                 "device": r.device,
