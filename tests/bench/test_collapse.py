@@ -34,3 +34,28 @@ def test_cli_writes_the_table_rows_and_summary(tmp_path, capsys):
     assert {(s["sand"], s["geometry"]) for s in lines} == {k[:2] for k in cases}
     assert "cells_across" in capsys.readouterr().out
     assert main(["bench", "accuracy", "--sizes", "16"]) == 2  # --sizes belongs to collapse
+
+
+def test_summary_names_the_coarsest_grid_from_which_the_runout_holds():
+    def row(n, cells, runout, a=1.0):
+        return {
+            "sand": "s",
+            "geometry": "quasi2d",
+            "reference": "lube2005",
+            "a": a,
+            "grid_n": n,
+            "cells_across": cells,
+            "runout": runout,
+            "runout_error": runout / 1.2 - 1,
+            "height_error": 0.0,
+        }
+
+    # grid 32 is 40 % short of grid 128, grid 64 within 5 %: resolved from grid 64's 20 cells
+    rows = [row(32, 10, 0.6), row(64, 20, 0.95), row(128, 40, 1.0)]
+    assert collapse.summary(rows)[0]["needs_cells_across"] == 20
+    # still moving 20 % between the two finest grids: not resolved
+    rows = [row(32, 10, 0.6), row(64, 20, 0.8), row(128, 40, 1.0)]
+    assert collapse.summary(rows)[0]["needs_cells_across"] is None
+    # a grid close by chance but followed by one that is not does not count
+    rows = [row(32, 10, 1.0), row(64, 20, 0.8), row(128, 40, 1.0)]
+    assert collapse.summary(rows)[0]["needs_cells_across"] is None
