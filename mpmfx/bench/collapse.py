@@ -151,7 +151,9 @@ def main(*, quick: bool = False, device: str | None = None, out: str = "renders/
         need = (
             f"runout within {100 * CONVERGED:.0f} % of the finest grid's from {s['needs_cells_across']:g} cells across"
             if s["needs_cells_across"] is not None
-            else f"runout still moves by more than {100 * CONVERGED:.0f} % on the finest grid: resolve it further"
+            else "one grid: no resolution check"
+            if len(sizes) < 2
+            else f"runout moves by more than {100 * CONVERGED:.0f} % up to the finest grid: finer grids needed"
         )
         print(
             f"{s['sand']} {s['geometry']} vs {s['reference']} at grid {s['grid_n']}: runout "
