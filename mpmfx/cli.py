@@ -131,7 +131,18 @@ def _parser() -> argparse.ArgumentParser:
     b = sub.add_parser("bench", help="speed and accuracy benchmarks (run them on the GPU)")
     b.add_argument(
         "what",
-        choices=("accuracy", "oscillation", "gpu", "surface", "surface-times", "solver", "voxelise", "shots", "shot"),
+        choices=(
+            "accuracy",
+            "oscillation",
+            "gpu",
+            "surface",
+            "surface-times",
+            "solver",
+            "voxelise",
+            "shots",
+            "shot",
+            "collapse",
+        ),
         help="which benchmark",
     )
     b.add_argument("shot", nargs="?", default=None, help="shot: the shot file to run (default: the default shot)")
@@ -161,6 +172,14 @@ def _parser() -> argparse.ArgumentParser:
     )
     b.add_argument("--cache", default=None, help="shot: a cache root to run in and keep (default: a temporary one)")
     b.add_argument("--no-overlap", dest="overlap", action="store_false", help="shot: run the stages one after another")
+    b.add_argument(
+        "--sizes",
+        type=int,
+        nargs="+",
+        default=None,
+        metavar="N",
+        help="collapse: grid resolutions (default 32 64 128; --quick: 16 24 32)",
+    )
     return p
 
 
@@ -244,6 +263,7 @@ def _dispatch(args) -> int:
             overrides=args.overrides,
             cache=args.cache,
             overlap=args.overlap,
+            sizes=args.sizes,
         )
 
     if args.cmd == "cache":

@@ -19,6 +19,7 @@ MODULES = {
     "shots": "mpmfx.bench.shots",
     "shot": "mpmfx.bench.shot",
     "surface-times": "mpmfx.bench.surface_times",
+    "collapse": "mpmfx.bench.collapse",
 }
 # The options only some benchmarks take (the CLI's flags), and which take them.
 OWN = {
@@ -28,6 +29,7 @@ OWN = {
     "overrides": ("shot",),
     "cache": ("shot",),
     "overlap": ("shot",),
+    "sizes": ("collapse",),
 }
 UNSET = {"overrides": [], "overlap": True}  # what a flag holds when it is not given
 
