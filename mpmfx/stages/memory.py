@@ -52,6 +52,14 @@ MESH_BYTES_PER_PARTICLE = int(0.6 * (36 + 2 * 12))
 # deflate and write behind plus the one being made, and export's frame read and its USD arrays.
 FOLLOW_SURFACE_FRAMES = 4 + 1
 FOLLOW_BYTES_PER_PARTICLE = 44 + FOLLOW_SURFACE_FRAMES * MESH_BYTES_PER_PARTICLE + 2 * MESH_BYTES_PER_PARTICLE
+# Measured, not counted: on one H200, hero_castle's overlapped stages peaked at 4.21 and 6.52 GB
+# of host at 2.64M and 5.16M particles (`mpmfx bench shot`, the peak after voxelise): 917 B a
+# particle over 1.8 GB. The arrays counted above make 640 B a particle; the rest is what the
+# allocator keeps between frames for the many threads that read, deflate and write them. The
+# 1.8 GB is the GPU process itself (CUDA's context, Warp's modules, page-locked pools). At 10.1M
+# particles this gives 11.1 GB, above the 8.7 GB that run peaked at: an upper bound.
+CUDA_PROCESS_BYTES = 1_800_000_000
+FOLLOW_ALLOCATOR_BYTES_PER_PARTICLE = 280
 # Voxelise's five-cell thickness check (per solid object, one at a time) on its raster of at
 # most MAX_RASTER_VOXELS: distance transforms, labels and the subdivided mesh. Not counted from
 # arrays but measured (peak RSS over the imports, 2-core CPU, assets/sand_column.obj at
@@ -104,15 +112,16 @@ def need(shot: Shot, counted: Counts, *, cuda: bool, overlap: bool = False) -> N
     writer = n * WRITER_BYTES_PER_PARTICLE
     if cuda:
         out.device["simulate"], out.device["surface"] = solver, surface
-        out.host["simulate"] = PROCESS_BYTES + writer
-        out.host["surface"] = PROCESS_BYTES + n * SURFACE_BYTES_PER_PARTICLE
+        out.host["simulate"] = CUDA_PROCESS_BYTES + writer
+        out.host["surface"] = CUDA_PROCESS_BYTES + n * SURFACE_BYTES_PER_PARTICLE
     else:
         out.host["simulate"], out.host["surface"] = PROCESS_BYTES + solver + writer, PROCESS_BYTES + surface
     if overlap:
-        for where in (out.host, out.device):
-            if "simulate" in where:
-                both = where.pop("simulate") + where.pop("surface") - (PROCESS_BYTES if where is out.host else 0)
-                where["simulate + surface"] = both + (n * FOLLOW_BYTES_PER_PARTICLE if where is out.host else 0)
+        if cuda:
+            out.device["simulate + surface"] = out.device.pop("simulate") + out.device.pop("surface")
+        followers = n * (FOLLOW_BYTES_PER_PARTICLE + (FOLLOW_ALLOCATOR_BYTES_PER_PARTICLE if cuda else 0))
+        one_process = CUDA_PROCESS_BYTES if cuda else PROCESS_BYTES  # counted once, not per stage
+        out.host["simulate + surface"] = out.host.pop("simulate") + out.host.pop("surface") - one_process + followers
     return out
 
 

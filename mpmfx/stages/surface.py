@@ -133,10 +133,10 @@ def make_surfaces(job: FrameJob, p: ParticleFrame, f: int, *, turn=contextlib.nu
     names = shot.surface_groups()
     groups = sorted(set(names))
     stats = {"vertices": 0, "faces": 0}
-    group_of = np.asarray([groups.index(n) for n in names], np.int32)[p.body]
+    group_of = np.asarray([groups.index(n) for n in names], np.int32)[p.body] if len(groups) > 1 else None
     out = {}
     for gi, g in enumerate(groups):
-        sel = group_of == gi
+        sel = slice(None) if group_of is None else group_of == gi  # one group: a view, not a 240 MB copy at 10M
         x, v = p.x[sel], p.v[sel]
         try:
             with turn():
