@@ -35,8 +35,7 @@ def params(shot: Shot) -> dict:
         g: {k: getattr(v, "value", v) for k, v in vars(surface_params(shot, g)).items()}
         for g in sorted(set(shot.surface_groups()))
     }
-    # the level set's leaves are stored only for the VDB export, their one reader
-    return {"surface": resolved, "groups": shot.surface_groups(), "leaves": shot.export.vdb}
+    return {"surface": resolved, "groups": shot.surface_groups()}
 
 
 def inputs(shot: Shot) -> dict[str, str]:
@@ -58,6 +57,7 @@ def surface_params(shot: Shot, group: str):
         dilate=s.dilate,
         min_feature_particles=s.min_feature_particles,
         density=s.density,
+        leaves=shot.export.vdb,  # the level set's leaves are for the VDB export, their one reader
         anisotropic=s.anisotropic,
         close_voids=s.close_voids,
         sharp_edges=shot.sharp_edges_for(group),
@@ -148,7 +148,7 @@ def make_surfaces(job: FrameJob, p: ParticleFrame, f: int, *, turn=contextlib.nu
             ) from None
         m, ls = res.mesh, res.sparse
         leaves = {}
-        if shot.export.vdb:
+        if shot.export.vdb:  # the surfacer returned them (surface_params: leaves)
             leaves = dict(
                 block_ijk=ls.block_ijk,
                 blocks=ls.values,

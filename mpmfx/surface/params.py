@@ -90,6 +90,9 @@ class SurfaceParams:
     density: also return `SparseLevelSet.density`, a fog density (0..1,
         dimensionless: kernel weight sum over its bulk value) on the stored leaves, for granular /
         volume looks; False (the default) costs nothing.
+    leaves: return the sparse level set's leaves (`SurfaceResult.sparse`); False returns the
+        mesh alone (the leaves then hold no block): at 10M particles the leaves and their
+        velocities are ~1 GB to copy off a GPU, wasted where nothing reads them.
     """
 
     particle_radius: float
@@ -106,6 +109,7 @@ class SurfaceParams:
     sharp_edges: bool = False
     dense_output: bool = True
     density: bool = False
+    leaves: bool = True
 
     def __post_init__(self) -> None:
         def bad(field: str, fix: str) -> ValueError:
@@ -141,8 +145,9 @@ class SurfaceParams:
                 "needs smooth_iters > 0 (the edges are found while smoothing); "
                 "give smooth_iters or turn sharp_edges off",
             )
-        if not isinstance(self.density, bool):
-            raise bad("density", f"got {self.density!r}; give True or False")
+        for flag in ("density", "leaves"):
+            if not isinstance(getattr(self, flag), bool):
+                raise bad(flag, f"got {getattr(self, flag)!r}; give True or False")
 
     @property
     def resolved_voxel_size(self) -> float:

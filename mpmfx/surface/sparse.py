@@ -48,7 +48,13 @@ from mpmfx.surface.field import field
 from mpmfx.surface.flood import fix_topology
 from mpmfx.surface.grid import SparseGrid
 from mpmfx.surface.output import dense_output, output_kinds
-from mpmfx.surface.params import PARTICLE_RADIUS_PER_SPACING, GridTooLarge, SurfaceParams, SurfaceResult
+from mpmfx.surface.params import (
+    PARTICLE_RADIUS_PER_SPACING,
+    GridTooLarge,
+    SparseLevelSet,
+    SurfaceParams,
+    SurfaceResult,
+)
 from mpmfx.surface.redistance import add_scalar
 from mpmfx.surface.sharpen import sharpen
 from mpmfx.surface.variants import Variant, variant
@@ -99,7 +105,7 @@ class DeviceSurface:
         t0 = time.perf_counter()
         mesh = passes.download_mesh(self.mesh, with_v=self.vel is not None, pinned=pinned)
         t1 = time.perf_counter()
-        sparse = passes.leaves(self, params, pinned=pinned)
+        sparse = passes.leaves(self, params, pinned=pinned) if params.leaves else self.no_leaves(params)
         t2 = time.perf_counter()
         result = dense_output(self, params)
         t3 = time.perf_counter()
@@ -108,6 +114,19 @@ class DeviceSurface:
         )
         result.mesh, result.sparse, result.stats = mesh, sparse, stats
         return result
+
+    def no_leaves(self, params: SurfaceParams) -> SparseLevelSet:
+        """The sparse level set without a block (params.leaves off): its voxel and background."""
+        empty = np.zeros((0, 8, 8, 8), np.float32)
+        return SparseLevelSet(
+            np.zeros((0, 3), np.int64),
+            empty,
+            np.zeros((0, 8, 8, 8, 3), np.float32) if self.vel is not None else None,
+            np.zeros((0, 3), np.int64),
+            self.grid.voxel,
+            self.grid.background,
+            empty.copy() if params.density else None,
+        )
 
 
 def surface_sparse(x, v, params: SurfaceParams) -> SurfaceResult:
