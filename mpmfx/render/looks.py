@@ -53,10 +53,10 @@ LOOKS: dict[str, dict] = {
     },
     # White, bright, light scattering under the surface over millimetres (bluer deeper in),
     # a crumbly bump, and sparse glints: 2 % of the surface is crystal facets two pixels of the
-    # render across (the denoiser erases finer ones; a cut through a facet's core shows about
-    # 1.6 px on average), tilted at random, that mirror the sun and sky as points of light (at
-    # four times a mirror's weight: under the view transform's highlight roll-off, weaker glints
-    # vanish into the white snow).
+    # render across at any width (the denoiser erases finer ones; lab/glint_scale.py measures
+    # 2.1 px at 480 and at 1920 px wide), tilted at random, that mirror the sun and sky as
+    # points of light (at four times a mirror's weight: under the view transform's highlight
+    # roll-off, weaker glints vanish into the white snow).
     "snow": {
         "bsdf": {
             "Base Color": (0.86, 0.89, 0.94),
