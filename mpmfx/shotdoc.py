@@ -45,6 +45,10 @@ material = "Elastic"
 translate = [0.0, 0.5, 0.0]
 ```
 
+The bear (`assets/jelly_bear.obj`, also in `jelly_splash`) is a union of spheres and capsules
+(`assets/make_assets.py`), not a sculpted model: its blobby shape is the asset's, and the
+surfacer keeps it. A shot looks as detailed as the mesh it is given.
+
 Unknown keys, wrong types and values out of range stop the run before anything is computed, with
 a message that names the file, the key and the fix.
 

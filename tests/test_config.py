@@ -20,6 +20,22 @@ def test_example_shots_validate():
             assert shot.resolve(obj.mesh).is_file()
 
 
+def test_sand_collapse_rests_without_the_ridges_of_too_little_smoothing():
+    """Fewer than 8 smoothing steps leave ridges down the pile at rest (lab/ridge_slope.py)."""
+    from mpmfx.stages.surface import surface_params
+
+    sand = load_shot_config(REPO / "pipeline" / "shots" / "sand_collapse.toml")
+    assert surface_params(sand, "Granular").smooth_iters >= 8
+
+
+def test_jelly_splash_keeps_every_drop_of_its_spray():
+    """No blob of water is removed as a speck: the spray stays drops, not only the sheets."""
+    from mpmfx.stages.surface import surface_params
+
+    splash = load_shot_config(REPO / "pipeline" / "shots" / "jelly_splash.toml")
+    assert surface_params(splash, "Water").min_feature_particles == 0
+
+
 def test_defaults_and_units(tiny_shot):
     shot = load_shot_config(tiny_shot)
     assert shot.domain.grid_n == 24 and shot.solver.gravity == (0.0, -9.81, 0.0)

@@ -15,7 +15,7 @@ import bmesh
 import bpy
 from mathutils import Matrix, Vector
 
-from mpmfx.render.looks import LOOKS
+from mpmfx.render.looks import DEFAULT_PIXEL_M, LOOKS, sparkle
 
 # USD (x, y, z), Y up  ->  Blender (x, -z, y), Z up: what the importer does for a Y-up stage.
 Y_UP_TO_Z_UP = Matrix.Rotation(math.radians(90.0), 4, "X")
@@ -33,9 +33,10 @@ def _link(tree, a, b):
     tree.links.new(a, b)
 
 
-def make_material(name: str, look: str) -> bpy.types.Material:
+def make_material(name: str, look: str, pixel_m: float = DEFAULT_PIXEL_M) -> bpy.types.Material:
     """A Principled BSDF material from `LOOKS[look]`, with its grain, bump, sparkle, clear
-    shadows and absorption."""
+    shadows and absorption; pixel_m: the metres one pixel of the render covers at the subject
+    (`mpmfx.render.looks.metres_per_pixel`), which sizes the glints."""
     spec = LOOKS[look]
     mat = bpy.data.materials.new(f"mpmfx_{name}")
     mat.use_nodes = True
@@ -64,8 +65,9 @@ def make_material(name: str, look: str) -> bpy.types.Material:
             _link(tree, height, bump.inputs["Height"])
             _link(tree, bump.outputs["Normal"], bsdf.inputs["Normal"])
     surface = bsdf.outputs["BSDF"]
-    if spec.get("sparkle"):
-        surface = _sparkle(tree, surface, *spec["sparkle"])
+    glints = sparkle(look, pixel_m)
+    if glints:
+        surface = _sparkle(tree, surface, *glints)
     if spec.get("clear_shadow"):
         surface = _clear_shadow(tree, surface)
     _link(tree, surface, out.inputs["Surface"])
@@ -122,16 +124,14 @@ def _cells(tree, coords, size: float):
     return _math(tree, "SUBTRACT", fac, 0.05), dome
 
 
-def _sparkle(tree, surface, size: float, fraction: float, weight: float):
-    """`surface` plus sparse glints: in `fraction` of the surface (the cores of Voronoi cells of
-    `size` m) a near-mirror glossy facet, tilted at random per cell, added at `weight` (added,
-    not mixed: a facet that mirrors something darker than the surface must not show as a dark
-    speck)."""
+def _sparkle(tree, surface, size: float, core: float, weight: float):
+    """`surface` plus sparse glints: in the cores of Voronoi cells of `size` m (within `core`
+    cell sizes of the cell's point) a near-mirror glossy facet, tilted at random per cell,
+    added at `weight` (added, not mixed: a facet that mirrors something darker than the surface
+    must not show as a dark speck)."""
     cells = tree.nodes.new("ShaderNodeTexVoronoi")
     cells.inputs["Scale"].default_value = 1.0 / size
     _link(tree, tree.nodes.new("ShaderNodeTexCoord").outputs["Object"], cells.inputs["Vector"])
-    # a cell's core within radius r of its point covers (4/3) pi r^3 of a unit cell
-    core = (3.0 * fraction / (4.0 * math.pi)) ** (1.0 / 3.0)
     mask = _math(tree, "LESS_THAN", cells.outputs["Distance"], core)
     # tilts up to about 30 degrees each way: a spread of facets, so that some of them mirror the
     # sun towards the camera wherever the surface is lit

@@ -27,7 +27,7 @@ from mpmfx.blender import FRAME_LINE, NOTE_LINE, die_with_parent, temp_name
 from mpmfx.render import blender_scene as bs
 from mpmfx.render.blender_scene import assign, make_material
 from mpmfx.render.label import burn_label
-from mpmfx.render.looks import GROUND_FADE, GROUND_MIN, GROUND_SPAN, WORLD
+from mpmfx.render.looks import GROUND_FADE, GROUND_MIN, GROUND_SPAN, WORLD, metres_per_pixel
 
 
 def import_stage(usd: str) -> dict[str, list]:
@@ -65,12 +65,14 @@ def _prim_name(obj) -> str:
 
 def set_looks(job: dict, imported: dict) -> None:
     """Materials per look; surface mode shows the meshes, particles mode the points; volumes
-    (the .vdb level sets) stay in the file for the artist but out of the picture."""
+    (the .vdb level sets) stay in the file for the artist but out of the picture. Glints are
+    sized in pixels of this render (its width, the camera's distance to what it looks at)."""
     made: dict[str, object] = {}
+    pixel_m = metres_per_pixel(job["camera"], job["width"])
 
     def material(look):
         if look not in made:
-            made[look] = make_material(look, look)
+            made[look] = make_material(look, look, pixel_m)
         return made[look]
 
     particles = job["mode"] == "particles"

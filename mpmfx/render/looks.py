@@ -11,6 +11,8 @@ group (`look_for`), and the Blender child process builds the materials (`LOOKS`)
 
 from __future__ import annotations
 
+import math
+
 # The look of each preset (docs/physics.md, "Materials"), by what the material is, not by
 # its name's promise (the names describe intent, not physics): the snow ladder reads as snow from
 # packed (Soft) to slush (Wet, Slush); CohesiveGranular as damp sand; Elastic as jelly.
@@ -33,8 +35,9 @@ DEFAULT_LOOK = {
 #          optional:
 #          "cells": True where the grain is one colour per grain-sized cell (Voronoi), with each
 #                   grain a small dome in the bump, instead of a smooth noise,
-#          "sparkle": (cell size m, fraction of the surface, weight): sparse mirror-like glints,
-#                   each cell's facet tilted at random (snow crystals),
+#          "sparkle": (glint size px, fraction of the surface, weight): sparse mirror-like glints,
+#                   each cell's facet tilted at random (snow crystals); the size is in pixels of
+#                   the render (`sparkle`), so a glint is a point of light at any resolution,
 #          "clear_shadow": True where shadow rays pass straight through (glass, water: with
 #                   caustics off, a refracting surface would otherwise cast a solid shadow)}
 LOOKS: dict[str, dict] = {
@@ -49,10 +52,11 @@ LOOKS: dict[str, dict] = {
         "clear_shadow": True,
     },
     # White, bright, light scattering under the surface over millimetres (bluer deeper in),
-    # a crumbly bump, and sparse glints: 2 % of the surface is crystal facets about 4 mm across
-    # (two pixels at 480 px across a metre: the denoiser erases finer ones), tilted at random,
-    # that mirror the sun and sky as points of light (at four times a mirror's weight: under the
-    # view transform's highlight roll-off, weaker glints vanish into the white snow).
+    # a crumbly bump, and sparse glints: 2 % of the surface is crystal facets two pixels of the
+    # render across at any width (the denoiser erases finer ones; lab/glint_scale.py measures
+    # 2.1 px at 480 and at 1920 px wide), tilted at random, that mirror the sun and sky as
+    # points of light (at four times a mirror's weight: under the view transform's highlight
+    # roll-off, weaker glints vanish into the white snow).
     "snow": {
         "bsdf": {
             "Base Color": (0.86, 0.89, 0.94),
@@ -65,7 +69,7 @@ LOOKS: dict[str, dict] = {
         "bump": (0.02, 0.7, 0.006),
         "absorb": None,
         "grain": None,
-        "sparkle": (0.012, 0.02, 4.0),
+        "sparkle": (2.0, 0.02, 4.0),
     },
     "slush": {
         "bsdf": {
@@ -90,11 +94,14 @@ LOOKS: dict[str, dict] = {
         "grain": (0.42, 0.30, 0.16),
         "cells": True,
     },
+    # Damp sand: water in the pores darkens it to about a third of dry sand's brightness and
+    # deepens its colour (less light scattered back white from the grains' faces), and the film
+    # between the grains gives a soft sheen; the grains' domes flatter under it.
     "wet_sand": {
-        "bsdf": {"Base Color": (0.40, 0.28, 0.15), "Roughness": 0.5, "Specular IOR Level": 0.45},
-        "bump": (0.003, 0.35, 0.0015),
+        "bsdf": {"Base Color": (0.30, 0.17, 0.07), "Roughness": 0.45, "Specular IOR Level": 0.5},
+        "bump": (0.003, 0.3, 0.0015),
         "absorb": None,
-        "grain": (0.26, 0.18, 0.09),
+        "grain": (0.19, 0.10, 0.04),
         "cells": True,
     },
     "mud": {
@@ -172,6 +179,32 @@ GROUND_SPAN, GROUND_MIN, GROUND_FADE = 4000.0, 1000.0, (8.0, 120.0)
 # Scene props that `render.looks` may also name: the basin drawn along the solver's side walls
 # (stone by default).
 PROP_LOOKS = {"basin": "ground"}
+
+
+# A metre across 480 pixels: the scale a look's pixel sizes mean where no camera is known.
+DEFAULT_PIXEL_M = 1.0 / 480.0
+
+
+def metres_per_pixel(camera: dict, width: int) -> float:
+    """The width (m) one pixel of a `width`-pixel-wide render covers at the camera's look-at
+    point: its distance times the film's width over the focal length (both mm; horizontal fit),
+    over `width`. camera: `mpmfx.render.camera.render_camera`'s dict."""
+    distance = math.dist(camera["position"], camera["look_at"])
+    return distance * float(camera["horizontal_aperture"]) / float(camera["focal_length"]) / int(width)
+
+
+def sparkle(look: str, pixel_m: float = DEFAULT_PIXEL_M) -> tuple[float, float, float] | None:
+    """The glints of `look` for a render whose pixel covers `pixel_m` metres at the subject:
+    (Voronoi cell size m, core radius in cell sizes, weight), or None for a look without glints.
+    A glint is the core of a cell (`LOOKS[look]["sparkle"]` = (size px, fraction, weight)): a
+    ball of radius r in a unit cell covers (4/3) pi r^3 of it, and its diameter 2 r cells spans
+    `size px` pixels, so the cells shrink as the render's pixels do."""
+    spec = LOOKS[look].get("sparkle")
+    if not spec:
+        return None
+    size_px, fraction, weight = spec
+    core = (3.0 * fraction / (4.0 * math.pi)) ** (1.0 / 3.0)
+    return size_px * pixel_m / (2.0 * core), core, weight
 
 
 def look_for(names: list[str], overrides: dict[str, str] | None = None) -> str:
