@@ -9,7 +9,8 @@ Prints one table: each stage's wall time and time a frame, split into
   surfacer's wait for those writers; the part made while simulate ran and the tail after it;
 - export: each frame's reading of the upstream frames, VDB grids, USD layer built, and written;
 then the whole run against simulate alone, the share of simulate the GPU spent waiting on the
-host, the cache bytes a frame, and the peak memory (device and host). Writes shot.json under
+host, the cache bytes a frame, the device's peak memory and the host's (voxelise's, then the
+stages' after it), each beside the run's estimate. Writes shot.json under
 --out. Kernel compiles of a fresh machine land in the first frames: run it twice, or after
 `mpmfx run` of any shot, for the figures docs/benchmarks.md shows.
 """
