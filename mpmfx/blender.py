@@ -9,8 +9,10 @@ them; what parent and child share (the lines the child prints) is here.
 
 from __future__ import annotations
 
+import ctypes
 import importlib.util
 import os
+import signal
 import subprocess
 import sys
 import uuid
@@ -54,9 +56,6 @@ def die_with_parent() -> None:
     (prctl); elsewhere nothing changes."""
     if not sys.platform.startswith("linux"):
         return
-    import ctypes
-    import signal
-
     PR_SET_PDEATHSIG = 1
     ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
     parent = os.environ.get(PARENT_ENV)
