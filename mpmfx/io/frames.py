@@ -122,11 +122,14 @@ class ParticleFrame:
         return write_arrays(path, arrays, compress=[k for k in self._DEFLATE if getattr(self, k) is not None])
 
     @classmethod
-    def read(cls, path: str | Path) -> ParticleFrame:
-        arrays = read_arrays(path)
-        if "id" not in arrays:
+    def read(cls, path: str | Path, fields: Collection[str] | None = None) -> ParticleFrame:
+        """fields: the arrays to read (None: all); the others are None (the surfacer needs x, v
+        and body, not the materials' state)."""
+        arrays = read_arrays(path, None if fields is None else {*fields, "x"})  # (x: the count)
+        if "id" not in arrays and (fields is None or "id" in fields):
             arrays["id"] = np.arange(len(arrays["x"]), dtype=np.int32)
-        return cls(**arrays)
+        unread = dict.fromkeys(f.name for f in dataclasses.fields(cls))
+        return cls(**unread | arrays)
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {k: a for k, a in vars(self).items() if a is not None}

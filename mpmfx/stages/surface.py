@@ -25,6 +25,7 @@ from mpmfx.surface import PARTICLE_RADIUS_PER_SPACING, GridTooLarge, SurfacePara
 
 NAME, VERSION, PER_FRAME, FRAME_EXT = "surface", 2, True, SurfaceFrame.EXT
 CODE = ("mpmfx.stages.surface", "mpmfx.surface", "mpmfx.io.frames")
+SURFACED = ("x", "v", "body")  # what the surfacer reads of a particle frame
 GPU_WRITE_THREADS = 4  # frames deflated and written at once while the GPU surfaces the next
 
 
@@ -122,7 +123,7 @@ def _pipelined(calls: list[tuple[FrameJob, int]], bar, *, write_threads: int) ->
 
 def read_particles(job: FrameJob, f: int) -> ParticleFrame:
     sim = job.upstream["simulate"]  # verified: a changed frame is redone by simulate, not surfaced
-    return sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read)
+    return sim.read(sim.frame_path(f, ParticleFrame.EXT), partial(ParticleFrame.read, fields=SURFACED))
 
 
 def make_surfaces(job: FrameJob, p: ParticleFrame, f: int, *, turn=contextlib.nullcontext) -> tuple[SurfaceFrame, dict]:

@@ -66,3 +66,12 @@ def test_frames_of_the_previous_format_still_read(tmp_path):
     data["_format"] = np.int32(1)
     np.savez(path, **data)
     np.testing.assert_array_equal(ParticleFrame.read(path).id, old.id)
+
+
+def test_a_reader_takes_only_the_arrays_it_names(tmp_path):
+    whole = _particles(np.arange(500))
+    whole.write(tmp_path / "a.npz")
+    part = ParticleFrame.read(tmp_path / "a.npz", fields=("x", "v", "body"))
+    np.testing.assert_array_equal(part.x, whole.x)
+    np.testing.assert_array_equal(part.body, whole.body)
+    assert part.J is None and part.material is None and part.id is None
