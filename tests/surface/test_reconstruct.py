@@ -205,3 +205,15 @@ def test_leaves_hold_the_distance_to_the_mesh(shape, sampling, most):
     assert np.mean(off) < 0.1, f"mean {np.mean(off):.3f} voxels off"
     if most is not None:
         assert off.max() < most, f"max {off.max():.2f} voxels off"
+
+
+def test_non_finite_velocities_become_zero_and_the_callers_array_is_left_alone():
+    from mpmfx.surface.reconstruct import check_inputs
+
+    x = np.zeros((4, 3), np.float32)
+    v = np.array([[1, 2, 3], [np.nan, 0, 0], [0, np.inf, 0], [0, 0, -np.inf]], np.float32)
+    _, out = check_inputs(x, v)
+    np.testing.assert_array_equal(out, [[1, 2, 3], [0, 0, 0], [0, 0, 0], [0, 0, 0]])
+    assert np.isnan(v[1, 0])  # the frame's own array is not rewritten
+    fine = np.ones((4, 3), np.float32)
+    assert check_inputs(x, fine)[1] is fine  # finite float32: no copy
