@@ -48,7 +48,7 @@ SURFACE_BYTES_PER_BLOCK = 16  # the block map over the particles' box: index, cl
 # more; bounded at 0.6 vertices (position, normal, velocity 36 B) and twice as many faces (24 B).
 MESH_BYTES_PER_PARTICLE = int(0.6 * (36 + 2 * 12))
 # Surface and export following simulate (overlap) hold, beside the two stages' own buffers: the
-# particle frame being surfaced (44, as above), the surface frames that GPU_WRITE_THREADS threads
+# particle frame being surfaced (44 as above, of which the stage reads x, v, body: 28), the surface frames that GPU_WRITE_THREADS threads
 # deflate and write behind plus the one being made, and export's frame read and its USD arrays.
 FOLLOW_SURFACE_FRAMES = 4 + 1
 FOLLOW_BYTES_PER_PARTICLE = 44 + FOLLOW_SURFACE_FRAMES * MESH_BYTES_PER_PARTICLE + 2 * MESH_BYTES_PER_PARTICLE
