@@ -2,6 +2,7 @@
 written, whatever the number of deflating threads, byte for byte, and past zip's 32-bit limits."""
 
 import zipfile
+import zlib
 
 import numpy as np
 import pytest
@@ -67,3 +68,39 @@ def test_deflating_threads_follow_the_process_share_of_the_cores(monkeypatch):
     assert npz.threads() == 8  # half the cores, at most MAX_THREADS
     monkeypatch.setenv("MPMFX_SURFACE_THREADS", "2")  # a Dask worker's share (parallel._worker_env)
     assert npz.threads() == 1
+
+
+def test_pieces_are_read_on_threads_and_every_one_is_checked(tmp_path, monkeypatch):
+    """Stored and deflated entries come back in pieces read on several threads: the pieces'
+    CRCs, joined, must equal the entry's (a flipped byte in any piece is caught), and a file
+    whose deflated entries carry no piece table (older files) reads as one stream."""
+    monkeypatch.setattr(npz, "CHUNK", 64 << 10)
+    want = arrays()
+    path = write_arrays(tmp_path / "p.npz", want, compress=["x", "blocks"])
+    with zipfile.ZipFile(path) as zf:
+        pieces = {i.filename: npz._pieces_of(i) for i in zf.infolist()}
+        x_at = zf.getinfo("x.npy").header_offset  # deflated
+        stored_at = zf.getinfo("fortran.npy").header_offset  # stored
+    assert len(pieces["x.npy"]) == -(-want["x"].nbytes // npz.CHUNK) and pieces["fortran.npy"] == []
+    for workers in (1, 4):
+        got = npz.read_npz(path, workers=workers)
+        assert all(np.array_equal(got[k], np.asarray(v)) for k, v in want.items())
+    for at in (x_at + 500 + 3 * (64 << 10) // 2, stored_at + 200):
+        bad = bytearray(path.read_bytes())
+        bad[at] ^= 0x10
+        (tmp_path / "bad.npz").write_bytes(bad)
+        with pytest.raises((zipfile.BadZipFile, zlib.error)):
+            npz.read_npz(tmp_path / "bad.npz", workers=4)
+    monkeypatch.setattr(npz, "PIECES_TAG", 0x7777)  # a writer that records no table, as older ones
+    old = write_arrays(tmp_path / "old.npz", want, compress=["x", "blocks"])
+    monkeypatch.setattr(npz, "PIECES_TAG", 0x6D70)
+    with zipfile.ZipFile(old) as zf:
+        assert npz._pieces_of(zf.getinfo("x.npy")) is None
+    check(old, want)
+
+
+@pytest.mark.parametrize("size", [0, 1, 1000, 64 << 10, (64 << 10) + 1, 5 * (64 << 10) - 3])
+def test_joined_piece_crcs_equal_zlibs(size, monkeypatch):
+    monkeypatch.setattr(npz, "CHUNK", 64 << 10)
+    data = memoryview(np.random.default_rng(size).integers(0, 256, size, np.uint8).tobytes())
+    assert npz._CRC(lambda fn, *a: npz._Done(fn(*a)), b"head", data).result() == zlib.crc32(b"head" + bytes(data))
