@@ -170,10 +170,12 @@ def _array(value: Any, where: str, *, shape: tuple[int | None, ...], dtype: type
     if arr.ndim != len(shape) or any(s is not None and s != a for s, a in zip(shape, arr.shape)):
         want = "(" + ", ".join("n" if s is None else str(s) for s in shape) + ")"
         raise ValueError(f"{where}: shape {arr.shape}, expected {want}")
-    # min and max carry a NaN or an inf through, and read the array without a mask the size of it
-    if np.issubdtype(arr.dtype, np.floating) and arr.size and not np.isfinite([arr.min(), arr.max()]).all():
+    out = np.ascontiguousarray(arr, dtype=dtype)
+    # min and max carry a NaN or an inf through, and read the array without a mask the size of it;
+    # on the float32 copy: numpy reduces half floats (the surface frames' normals) ~10x slower
+    if np.issubdtype(arr.dtype, np.floating) and out.size and not np.isfinite([out.min(), out.max()]).all():
         raise ValueError(f"{where}: contains NaN or inf; the upstream stage produced invalid values")
-    return np.ascontiguousarray(arr, dtype=dtype)
+    return out
 
 
 def _extent(points: np.ndarray, pad: float = 0.0) -> Any:

@@ -88,6 +88,17 @@ def sorted_copy(src: wp.array(dtype=wp.vec3), order: wp.array(dtype=wp.int32), d
     dst[q] = src[order[q]]
 
 
+@wp.kernel
+def sorted_velocity(src: wp.array(dtype=wp.vec3), order: wp.array(dtype=wp.int32), dst: wp.array(dtype=wp.vec3), base: int):
+    """dst[q] = src[order[q]], a non-finite velocity as 0 (one bad particle must not poison its
+    neighbours' velocity; here it costs nothing, where a host pass over 10M costs 20-40 ms)."""
+    q = wp.tid() + base
+    u = src[order[q]]
+    if not (wp.isfinite(u[0]) and wp.isfinite(u[1]) and wp.isfinite(u[2])):
+        u = wp.vec3(0.0)
+    dst[q] = u
+
+
 @cpu_kernel
 def counting_sort(
     keys: wp.array(dtype=wp.int32),

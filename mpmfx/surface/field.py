@@ -8,7 +8,7 @@ from __future__ import annotations
 import warp as wp
 
 from mpmfx.surface import aniso_kernels as A
-from mpmfx.surface.binning import sorted_copy
+from mpmfx.surface.binning import sorted_velocity
 from mpmfx.surface.edges import edges
 from mpmfx.surface.grid import ANISO_MAX_STRETCH, NORMAL_STEP, SparseGrid
 from mpmfx.surface.kernel_modules import cpu_kernel
@@ -251,9 +251,9 @@ def field(variant, bcoord, bmap, cells, starts, order, gs, v, grid: SparseGrid, 
     cov = wp.empty(nvox if aniso else 1, dtype=wp.mat33)
     radius = wp.empty(nvox if aniso else 1, dtype=float)
     n = gs.shape[0]
-    vs = wp.empty(n if with_v else 1, dtype=wp.vec3)  # v in the cells' order, as gs
+    vs = wp.empty(n if with_v else 1, dtype=wp.vec3)  # v in the cells' order, as gs; non-finite ones 0
     if with_v:
-        split(wp, sorted_copy, n, [v, order, vs])
+        split(wp, sorted_velocity, n, [v, order, vs])
     if aniso:
         gmat, thin = wp.empty(n, dtype=wp.mat33), wp.empty(n, dtype=float)
         wp.launch(
