@@ -137,17 +137,21 @@ def _check_grid(grid: VdbGrid, path: Path) -> np.ndarray:
 
 
 def _check_leaves(grid: LeafGrid, path: Path) -> np.ndarray:
-    """Validate one leaf grid; return its blocks as float32 (a level set's clamped to the band)."""
+    """Validate one leaf grid; return its blocks, float16 or float32 as given (each tile is cast
+    to float32 as it is filled: a 10M-face frame's velocity leaves are 270M half floats, a
+    second's pass and 1 GB as float32), a level set's clamped to the band."""
     where = f"{path}: grid {grid.name!r}"
     if not grid.name or not isinstance(grid.name, str):
         raise ValueError(f"{path}: every grid needs a non-empty name")
-    blocks = np.asarray(grid.blocks, dtype=np.float32)
+    blocks = np.asarray(grid.blocks)
+    if blocks.dtype not in (np.float16, np.float32):
+        blocks = blocks.astype(np.float32)
     ijk = np.asarray(grid.block_ijk)
     if blocks.shape[1:4] != (8, 8, 8) or blocks.ndim not in (4, 5) or blocks.shape[4:] not in ((), (3,)):
         raise ValueError(f"{where}: blocks shape {blocks.shape}; expected (b, 8, 8, 8) or (b, 8, 8, 8, 3)")
     if ijk.shape != (len(blocks), 3) or np.any(ijk % 8):
         raise ValueError(f"{where}: block_ijk shape {ijk.shape}; expected ({len(blocks)}, 3) multiples of 8")
-    if not np.isfinite(blocks).all():
+    if not _finite(blocks):
         raise ValueError(
             f"{where}: values contain NaN or inf; fix the upstream field (e.g. clamp the level set) before export"
         )
@@ -158,9 +162,16 @@ def _check_leaves(grid: LeafGrid, path: Path) -> np.ndarray:
             raise ValueError(f"{where}: a level set must be scalar; use grid_class='unknown' for vectors")
         if not grid.background > 0:
             raise ValueError(f"{where}: a level set needs background = narrow-band half width in metres (> 0)")
-        band = np.float32(grid.background)  # as _level_set_grid: outside the band is +band, then flood-filled
+        band = blocks.dtype.type(grid.background)  # as _level_set_grid: outside the band is +band, then flood-filled
         blocks = np.where(np.abs(blocks) < band, blocks, band)
     return blocks
+
+
+def _finite(a: np.ndarray) -> bool:
+    """No NaN or inf in `a` (float16: an all-ones exponent, tested on the bits ~10x faster)."""
+    if a.dtype == np.float16:
+        return not np.any((a.view(np.uint16) & 0x7C00) == 0x7C00)
+    return bool(np.isfinite(a).all())
 
 
 def _copy_leaves(out: Any, ijk: np.ndarray, blocks: np.ndarray, background, tolerance) -> None:

@@ -21,10 +21,10 @@ from mpmfx.geometry.colliders import collider_mesh, keyframes
 from mpmfx.io.frames import GroupSurface, ParticleFrame, SurfaceFrame
 from mpmfx.io.usd import ColliderSample, MeshSample, PointsSample, UsdShotWriter
 from mpmfx.io.usd_view import PreviewLook
-from mpmfx.io.vdb import LeafGrid, write_vdb
 from mpmfx.mpm.colliders import pose_matrix
 from mpmfx.render.camera import camera_inputs, frames_bounds, render_camera
 from mpmfx.render.looks import preview_surface
+from mpmfx.stages import grids
 from mpmfx.stages.base import Context
 from mpmfx.stages.colliders import animated_collider, collider_geometry
 from mpmfx.stages.names import surface_looks, usd_names
@@ -36,6 +36,7 @@ MESH = ("vertices", "faces", "normals", "velocities")  # what a surface frame gi
 CAMERA_SAMPLES = 12  # frames whose bounds the render camera frames (evenly spaced over those run)
 CODE = (
     "mpmfx.stages.export",
+    "mpmfx.stages.grids",
     "mpmfx.stages.names",
     "mpmfx.io",
     "mpmfx.surface.params",
@@ -75,27 +76,31 @@ def run(ctx: Context) -> dict:
 
 def frame(job: FrameJob, f: int) -> dict[str, float]:
     """Frame `f`'s .vdb files, then its USD layer (its existence marks the frame done): a task.
-    Returns where its time went, s: read (the upstream frames), vdb (the grids, built and
-    written), usd (the layer built in memory), write (the layer written and read back)."""
+    Returns where its time went, s: read (the upstream frames), vdb (waiting for the grids, which
+    child processes build and write from the leaves meanwhile: `mpmfx.stages.grids`), usd (the
+    layer built in memory), write (the layer written and read back)."""
     shot, entry = job.shot, job.entry
     surf, sim = job.upstream["surface"], job.upstream["simulate"]  # verified reads: a changed frame is redone
     t0 = time.perf_counter()
-    fields = None if shot.export.vdb else MESH  # without grids the leaves, most of the file, stay unread
-    groups = surf.read(surf.frame_path(f, SurfaceFrame.EXT), partial(SurfaceFrame.read, fields=fields)).groups
+    # the mesh only: the leaves, most of the file, are read by the grids' own processes
+    groups = surf.read(surf.frame_path(f, SurfaceFrame.EXT), partial(SurfaceFrame.read, fields=MESH)).groups
+    pending = grids.submit(job, f, list(groups)) if shot.export.vdb else {}
     particles = sim.read(sim.frame_path(f, ParticleFrame.EXT), ParticleFrame.read) if shot.export.points else None
     t1 = time.perf_counter()
-    volumes = _write_vdbs(shot, entry, f, groups) if shot.export.vdb else {}
-    split = {"read": t1 - t0, "vdb": time.perf_counter() - t1}
-    t2 = time.perf_counter()
     points = _points(shot, particles) if particles is not None else {}
     names = usd_names(shot)
-    seconds = {"usd": time.perf_counter() - t2}
+    meshes = {names.surfaces[g]: m for g, m in _meshes(groups).items()}
+    colliders = _colliders(shot, f)
+    t2 = time.perf_counter()
+    volumes = grids.results(pending)
+    split = {"read": t1 - t0, "vdb": time.perf_counter() - t2}
+    seconds = {"usd": t2 - t1}
     _writer(shot, entry).write_frame(
         f,
         points=points,
-        meshes={names.surfaces[g]: m for g, m in _meshes(groups).items()},
-        volumes={names.volumes[g]: v for g, v in volumes.items()},
-        colliders=_colliders(shot, f),
+        meshes=meshes,
+        volumes={names.volumes[g]: v for g, v in volumes.items() if v},
+        colliders=colliders,
         seconds=seconds,
     )
     return {**split, **seconds}
@@ -201,28 +206,6 @@ def _colliders(shot: Shot, frame: int) -> list:
             )
         )
     return out
-
-
-def _write_vdbs(shot: Shot, entry, frame: int, groups: dict) -> dict:
-    volumes = {}
-    for g, d in groups.items():
-        if d.block_ijk is None or len(d.block_ijk) == 0:  # (no leaves: a frame surfaced for no VDB)
-            continue
-        vs, band = float(d.voxel_size), float(d.background)
-        # straight from the stored leaves: a dense block over their bounding box grows with the
-        # cube of the resolution (tens of GB at 10M faces). Half floats on disk: 27 % smaller
-        # files (jelly_splash), ~5e-4 relative, invisible in a render
-        grids = [LeafGrid("surface", d.block_ijk, d.blocks, vs, "level_set", band, half=True)]
-        if d.vel_blocks is not None:  # 0 outside the stored leaves, inside ones too
-            grids.append(LeafGrid("vel", d.block_ijk, d.vel_blocks, vs, "unknown", 0.0, half=True))
-        if d.density_blocks is not None:  # 1 on the leaves wholly inside, 0 (inactive) outside the stored ones
-            grids.append(
-                LeafGrid("density", d.block_ijk, d.density_blocks, vs, "fog_volume", 0.0, True, d.inside_ijk, 1.0)
-            )
-        rel = f"vdb/{g}/{frame:04d}.vdb"
-        write_vdb(entry.root / rel, grids, metadata={"shot": shot.shot.name, "frame": frame, "units": "m", "group": g})
-        volumes[g] = {grid.name: rel for grid in grids}
-    return volumes
 
 
 def level_set(d: GroupSurface) -> SparseLevelSet:

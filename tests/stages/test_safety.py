@@ -166,6 +166,7 @@ def truncating_vdb(monkeypatch, after=lambda: None):
             after()
 
     monkeypatch.setattr(vdb_io, "import_pyopenvdb", lambda: Full())
+    monkeypatch.setenv("MPMFX_VDB_IN_PROCESS", "1")  # the grids made here, where the patch is
 
 
 def test_a_failing_vdb_writer_leaves_nothing_under_a_final_name(tmp_path, monkeypatch, capsys):
