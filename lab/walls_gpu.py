@@ -173,7 +173,7 @@ def main() -> None:
     t0 = time.perf_counter()
     if not a.dams:
         rows += rest_rows(rest_n, pool_n, a.device)
-    for n in dams:
+    for n in dams:  # each row said as it lands: a run cut short keeps what it measured
         free = dam_front(n, 0.0, a.layer, a.device)
         nodes, layer = dam_front(n, 0.3, 0.0, a.device), dam_front(n, 0.3, a.layer, a.device)
         rows.append(
@@ -184,6 +184,7 @@ def main() -> None:
                 f"{(free - layer) * 100:.1f} points",
             )
         )
+        print(*rows[-1], f"({time.perf_counter() - t0:.0f} s)", flush=True)
     print(f"\n{'case':<52} {'grid':<9} result   (device {a.device}, {time.perf_counter() - t0:.0f} s)")
     for case, grid, result in rows:
         print(f"{case:<52} {grid:<9} {result}")
