@@ -53,7 +53,7 @@ def main(argv=None) -> int:
 
     dx = 2.0 / args.grid
     over = [f"domain.grid_n={args.grid}", f"domain.origin=[-1.0, {-3 * dx:.6g}, -1.0]", *args.overrides]
-    over += [f"shot.frame_end={1 + args.simulate}"]
+    over += [f"shot.frame_end={1 + args.simulate}"] if args.simulate else []
     cache = Path(tempfile.mkdtemp(prefix="surface_stage_"))
     run = mpmfx.load_shot(
         SHOT_DIR / "hero_castle.toml", overrides=over, cache_root=cache, device=args.device, quiet=True

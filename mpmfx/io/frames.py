@@ -186,7 +186,7 @@ class SurfaceFrame:
                 f"{g}.{k}": (
                     np.float64(a)
                     if k in ("voxel_size", "background")
-                    else a.astype(np.float16)
+                    else a.astype(np.float16, copy=False)
                     if k in self._HALF
                     else a
                 )

@@ -59,6 +59,7 @@ def surface_params(shot: Shot, group: str):
         min_feature_particles=s.min_feature_particles,
         density=s.density,
         leaves=shot.export.vdb,  # the level set's leaves are for the VDB export, their one reader
+        half_attributes=True,  # as the frame file stores them (SurfaceFrame._HALF)
         anisotropic=s.anisotropic,
         close_voids=s.close_voids,
         sharp_edges=shot.sharp_edges_for(group),

@@ -158,14 +158,34 @@ def output_kinds(values, background: float, nact: int):
     return kind[:nact]
 
 
-def mesh_by_voxel(mesh: tuple | None, *, with_v: bool, pinned: bool) -> SurfaceMesh:
-    """The mesh on the host, its triangles with a -1 corner counted on the device."""
-    return _download_mesh(mesh, with_v=with_v, pinned=pinned, on_host=False)
+@wp.kernel
+def to_half(a: wp.array(dtype=wp.vec3), out: wp.array(dtype=wp.vec3h)):
+    t = wp.tid()
+    out[t] = wp.vec3h(a[t])
 
 
-def mesh_by_block(mesh: tuple | None, *, with_v: bool, pinned: bool) -> SurfaceMesh:
-    """mesh_by_voxel, the triangles with a -1 corner found on the host."""
-    return _download_mesh(mesh, with_v=with_v, pinned=pinned, on_host=True)
+def mesh_by_voxel(mesh: tuple | None, *, with_v: bool, pinned: bool, half: bool = False) -> SurfaceMesh:
+    """The mesh on the host, its triangles with a -1 corner counted on the device; half: normals
+    and velocities converted to float16 there (SurfaceParams.half_attributes)."""
+    if mesh is not None and half:
+        world, normals, velocities, faces = mesh
+        halves = [None if a is None else wp.empty(a.shape[0], dtype=wp.vec3h) for a in (normals, velocities if with_v else None)]
+        for a, h in zip((normals, velocities), halves):  # (velocities: zeros when not with_v, made on the host)
+            if h is not None:
+                launch_nonempty(wp, to_half, a.shape[0], [a, h])
+        mesh = (world, *halves, faces)
+    return _halves(_download_mesh(mesh, with_v=with_v, pinned=pinned, on_host=False), half)
+
+
+def mesh_by_block(mesh: tuple | None, *, with_v: bool, pinned: bool, half: bool = False) -> SurfaceMesh:
+    """mesh_by_voxel, the triangles with a -1 corner found on the host (and the halves made there)."""
+    return _halves(_download_mesh(mesh, with_v=with_v, pinned=pinned, on_host=True), half)
+
+
+def _halves(m: SurfaceMesh, half: bool) -> SurfaceMesh:
+    if half:  # (no copy of what the device converted)
+        m.normals, m.velocities = m.normals.astype(np.float16, copy=False), m.velocities.astype(np.float16, copy=False)
+    return m
 
 
 def _download_mesh(mesh: tuple | None, *, with_v: bool, pinned: bool, on_host: bool) -> SurfaceMesh:
@@ -182,8 +202,8 @@ def _download_mesh(mesh: tuple | None, *, with_v: bool, pinned: bool, on_host: b
     world, normals, velocities, faces, bad = to_host(
         wp, [world, normals, velocities if with_v else None, faces, bad], pinned=pinned
     )
-    if velocities is None:
-        velocities = np.zeros(world.shape, np.float32)  # untouched pages: zeros_like would write every page
+    if velocities is None:  # untouched pages: zeros_like would write every page
+        velocities = np.zeros(world.shape, normals.dtype)
     f = faces.reshape(-1, 3)
     if (f.size and f.min() < 0) if on_host else bad[0] > 0:
         drop = (f < 0).any(axis=1)

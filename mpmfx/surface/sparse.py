@@ -103,7 +103,7 @@ class DeviceSurface:
         pinned = PINNED_DOWNLOAD if pinned is None else pinned
         stats = dict(self.stats)
         t0 = time.perf_counter()
-        mesh = passes.download_mesh(self.mesh, with_v=self.vel is not None, pinned=pinned)
+        mesh = passes.download_mesh(self.mesh, with_v=self.vel is not None, pinned=pinned, half=params.half_attributes)
         t1 = time.perf_counter()
         sparse = passes.leaves(self, params, pinned=pinned) if params.leaves else self.no_leaves(params)
         t2 = time.perf_counter()
