@@ -151,11 +151,13 @@ def stream(shot, src: Path, cache: Path, n: int, args) -> None:
     job = FrameJob(shot, out, {"simulate": sim}, args.device)
     bar = types.SimpleNamespace(update=lambda: None)
     t0 = time.perf_counter()
-    _pipelined([(job, f) for f in frames], bar, write_threads=write_threads(args.device))
+    stats = _pipelined([(job, f) for f in frames], bar, write_threads=write_threads(args.device))
     wall = time.perf_counter() - t0
+    waits = {k: sum(st["seconds"][k] for st in stats) / len(stats) * 1e3 for k in stats[0]["seconds"]}
     print(
         f"\nthe stage's loop, {len(frames)} frames of {n:,} particles: {wall:.2f} s, "
-        f"{wall / len(frames) * 1e3:.0f} ms a frame, {n * len(frames) / wall / 1e6:.1f} M particles/s"
+        f"{wall / len(frames) * 1e3:.0f} ms a frame, {n * len(frames) / wall / 1e6:.1f} M particles/s; "
+        "a frame's mean ms: " + ", ".join(f"{k} {ms:.0f}" for k, ms in waits.items())
     )
 
 

@@ -74,7 +74,7 @@ def measure(shot: str | Path, *, overrides=(), cache: Path, device: str | None, 
         "stages_s": {s: round(results[s].seconds, 2) for s in STAGES},
         "simulate_split_s": man["simulate"].get("seconds_split", {}),
         "followed_s": {s: man[s].get("followed_s", {}) for s in ("surface", "export")},
-        "export_split_s": man["export"].get("seconds_split", {}),  # the frames exported after simulate
+        "split_s": {s: man[s].get("seconds_split", {}) for s in ("surface", "export")},  # frames made after simulate
         "faces": man["surface"].get("this_run", {}).get("faces", 0),
         "bytes_per_frame": {s: _frame_bytes(entries[s], frames) for s in ("simulate", "surface", "export")},
         "device_peak_bytes": wp.get_mempool_used_mem_high(dev) if dev.is_cuda and dev.is_mempool_enabled else None,
@@ -113,7 +113,7 @@ def table(r: dict) -> str:
             f"  {name:<8}  {r['stages_s'][name]:7.1f}  {ms(busy + r['stages_s'][name], r['frames']):>8}   "
             + ", ".join(f"{k} {v:.1f}" for k, v in part.items())
             + f"{'; ' if part else ''}after simulate {r['stages_s'][name]:.1f}"
-            + _parts(r.get("export_split_s") if name == "export" else None)
+            + _parts(r.get("split_s", {}).get(name))
         )
     lines.append(f"  total     {r['wall_s']:7.1f}            {r['wall_s'] / sim:.2f} x simulate" if sim else "")
     b = r["bytes_per_frame"]

@@ -10,6 +10,7 @@ leaves are kept only when export writes VDB (`export.vdb`), their one reader.
 from __future__ import annotations
 
 import contextlib
+import time
 from concurrent.futures import ThreadPoolExecutor
 from functools import partial
 
@@ -90,7 +91,14 @@ def finish(ctx: Context, results: list[dict]) -> dict:
     """In the client, after every frame's task (those made while simulate ran included): the
     manifest's extras."""
     done = results + ctx.followed
-    return {"this_run": {k: sum(r[k] for r in done) for k in ("vertices", "faces")}}
+    out = {"this_run": {k: sum(r[k] for r in done) for k in ("vertices", "faces")}}
+    split: dict[str, float] = {}
+    for r in results:  # the frames of this process's own loop (`_pipelined`)
+        for k, sec in r.get("seconds", {}).items():
+            split[k] = split.get(k, 0.0) + sec
+    if split:
+        out["seconds_split"] = {k: round(sec, 3) for k, sec in split.items()}
+    return out
 
 
 def frame(job: FrameJob, f: int) -> dict:
@@ -103,7 +111,9 @@ def frame(job: FrameJob, f: int) -> dict:
 def _pipelined(calls: list[tuple[FrameJob, int]], bar, *, write_threads: int) -> list[dict]:
     """The frames of `calls` surfaced here one after another, the next frame's particles read on
     a thread meanwhile and each frame's file written on `write_threads` threads
-    (`mpmfx.stages.writer.FrameWriter`: frames surfaced before an error are still written)."""
+    (`mpmfx.stages.writer.FrameWriter`: frames surfaced before an error are still written).
+    Each frame's stats hold "seconds": how long this loop waited for its read, surfaced it, and
+    waited for a writer to take it."""
     out = []
     with (
         ThreadPoolExecutor(max_workers=1, thread_name_prefix="mpmfx-read") as reader,
@@ -111,12 +121,16 @@ def _pipelined(calls: list[tuple[FrameJob, int]], bar, *, write_threads: int) ->
     ):
         ahead = reader.submit(read_particles, *calls[0])
         for i, (job, f) in enumerate(calls):
+            t0 = time.perf_counter()
             particles = ahead.result()
             if i + 1 < len(calls):
                 ahead = reader.submit(read_particles, *calls[i + 1])
+            t1 = time.perf_counter()
             surfaces, stats = make_surfaces(job, particles, f)
             del particles
+            t2 = time.perf_counter()
             writer.submit(surfaces.write, job.entry.frame_path(f, FRAME_EXT))
+            stats["seconds"] = {"read_wait": t1 - t0, "surface": t2 - t1, "writer_wait": time.perf_counter() - t2}
             out.append(stats)
             bar.update()
     return out
