@@ -42,7 +42,7 @@ LEVEL = 1  # zlib level, as the frame files were always written (fast; the level
 MAX_THREADS = 8
 _DOS_TIME, _DOS_DATE = 0, (0 << 9) | (1 << 5) | 1  # 1980-01-01 00:00
 _U32 = 0xFFFFFFFF  # a 32-bit field's "see the zip64 record"
-PIECES_TAG = 0x6D70  # extra field ("pm"): a deflated entry's pieces, their deflated lengths as uint32
+PIECES_TAG = 0x6D70  # extra field ("pm"): a deflated entry's piece size, then its pieces' deflated lengths (uint32)
 ZIP64_LIMIT = _U32  # sizes and offsets from this on go in zip64 records (tests lower it)
 
 
@@ -101,7 +101,7 @@ class _CRC:
     def result(self) -> int:
         crc = zlib.crc32(self._head)
         for piece in self._sums:
-            crc = _join(crc, piece.result())
+            crc = _join(crc, piece.result(), CHUNK)
         return zlib.crc32(self._rest, crc)
 
 
@@ -116,9 +116,9 @@ def _gf2_times(op: list[int], vec: int) -> int:
     return out
 
 
-def _join(crc_a: int, crc_b: int) -> int:
-    """crc32(a + b) from crc32(a) and crc32(b) of a whole CHUNK b (zlib's crc32_combine)."""
-    return _gf2_times(_append_zeros(CHUNK), crc_a) ^ crc_b
+def _join(crc_a: int, crc_b: int, nbytes: int) -> int:
+    """crc32(a + b) from crc32(a) and crc32(b) of an nbytes-long b (zlib's crc32_combine)."""
+    return _gf2_times(_append_zeros(nbytes), crc_a) ^ crc_b
 
 
 @functools.cache
@@ -215,7 +215,7 @@ def _central_header(
     fields = ([size, packed] if sizes64 else []) + ([offset] if offset64 else [])  # zip64 carries these, in this order
     extra = struct.pack(f"<HH{len(fields)}Q", 1, 8 * len(fields), *fields) if fields else b""
     if pieces:
-        extra += struct.pack(f"<HH{len(pieces)}I", PIECES_TAG, 4 * len(pieces), *pieces)
+        extra += struct.pack(f"<HH{len(pieces) + 1}I", PIECES_TAG, 4 * len(pieces) + 4, CHUNK, *pieces)
     version = 45 if fields else 20
     return (
         struct.pack(
@@ -279,7 +279,7 @@ def read_npz(path, names: Collection[str] | None = None, *, workers: int | None 
 
             # every piece of every entry queued before the first wait
             jobs = [
-                (i, _Pieces(run, fd, i, at, pieces) if (pieces := _pieces_of(i)) is not None else run(_inflated, fd, i, at))
+                (i, _Pieces(run, fd, i, at, *pieces) if (pieces := _pieces_of(i)) is not None else run(_inflated, fd, i, at))
                 for i, at in spans
             ]
             return {i.filename[:-4]: job.result() for i, job in jobs}  # in the file's order
@@ -318,17 +318,19 @@ def _array(buf, name: str) -> np.ndarray:
     return flat.reshape(shape[::-1]).T if fortran else flat.reshape(shape)
 
 
-def _pieces_of(info: zipfile.ZipInfo) -> list[int] | None:
-    """A stored entry: [] (read in CHUNK pieces); a deflated one: its pieces' deflated lengths
-    (PIECES_TAG), or None where the writer recorded none (one stream)."""
+def _pieces_of(info: zipfile.ZipInfo) -> tuple[int, list[int]] | None:
+    """(piece size, deflated lengths): a stored entry (CHUNK, []), read in pieces of this
+    reader's choosing; a deflated one as its writer recorded them (PIECES_TAG), or None where it
+    recorded none (one stream)."""
     if info.compress_type == zipfile.ZIP_STORED:
-        return []
+        return CHUNK, []
     extra, at = info.extra, 0
     while at + 4 <= len(extra):
         tag, n = struct.unpack_from("<HH", extra, at)
-        if tag == PIECES_TAG and n % 4 == 0:
-            lens = list(struct.unpack_from(f"<{n // 4}I", extra, at + 4))
-            return lens if sum(lens) == info.compress_size and len(lens) == -(-info.file_size // CHUNK) else None
+        if tag == PIECES_TAG and n % 4 == 0 and n >= 8:
+            size, *lens = struct.unpack_from(f"<{n // 4}I", extra, at + 4)
+            whole = size > 0 and sum(lens) == info.compress_size and len(lens) == -(-info.file_size // size)
+            return (size, lens) if whole else None
         at += 4 + n
     return None
 
@@ -337,49 +339,48 @@ class _Pieces:
     """An entry read into its array's memory a CHUNK piece at a time by run() (a stored piece
     read straight in, a deflated one inflated into place), each piece summed for the CRC-32
     while its bytes are still in the cache; result() checks the sizes and the CRC and gives the
-    array. packed: the deflated pieces' lengths, or [] for a stored entry."""
+    array. size: bytes a piece (the last may be shorter); packed: the deflated pieces' lengths,
+    or [] for a stored entry."""
 
-    def __init__(self, run, fd: int, info: zipfile.ZipInfo, at: int, packed: list[int]):
-        self._info = info
+    def __init__(self, run, fd: int, info: zipfile.ZipInfo, at: int, size: int, packed: list[int]):
+        self._info, self._size = info, size
         self._buf = np.empty(info.file_size, np.uint8)  # not zeroed: every byte is written over
         view = memoryview(self._buf)
-        starts = range(0, info.file_size, CHUNK)
+        starts = range(0, info.file_size, size)
         if packed:
             offsets = np.concatenate([[0], np.cumsum(packed)]).tolist()
             self._jobs = [
-                run(_inflate_sum, fd, view[i : i + CHUNK], at + offsets[k], packed[k]) for k, i in enumerate(starts)
+                run(_inflate_sum, fd, view[i : i + size], at + offsets[k], packed[k]) for k, i in enumerate(starts)
             ]
         else:
-            self._jobs = [run(_read_sum, fd, view[i : i + CHUNK], at + i) for i in starts]
+            self._jobs = [run(_read_sum, fd, view[i : i + size], at + i) for i in starts]
 
     def result(self) -> np.ndarray:
-        info, crc = self._info, 0
+        info, size, crc = self._info, self._size, 0
         for k, job in enumerate(self._jobs):
             got, piece_crc = job.result()
-            piece = self._buf[k * CHUNK : (k + 1) * CHUNK]
+            piece = self._buf[k * size : (k + 1) * size]
             if got != len(piece):
                 raise zipfile.BadZipFile(f"{info.filename}: {got} bytes where its piece {k} holds {len(piece)}")
-            # whole pieces joined; a last, shorter one continues the sum of those before it
-            crc = _join(crc, piece_crc) if got == CHUNK else zlib.crc32(piece, crc)
+            # whole pieces joined (piece_crc); a last, shorter one continues the sum before it
+            crc = _join(crc, piece_crc, size) if got == size else zlib.crc32(piece, crc)
         if crc != info.CRC:
             raise zipfile.BadZipFile(f"{info.filename}: CRC differs")
         return _array(self._buf, info.filename)
 
 
 def _read_sum(fd: int, piece: memoryview, at: int) -> tuple[int, int]:
-    """(bytes read into piece from offset `at`, their CRC-32 for a whole CHUNK, else 0: a short
-    piece is summed after the whole ones)."""
+    """(bytes read into piece from offset `at`, their CRC-32)."""
     got = os.preadv(fd, [piece], at) if hasattr(os, "preadv") else _pread_into(fd, piece, at)
-    return got, zlib.crc32(piece) if got == CHUNK else 0
+    return got, zlib.crc32(piece[:got])
 
 
 def _inflate_sum(fd: int, piece: memoryview, at: int, packed: int) -> tuple[int, int]:
     """_read_sum of a deflated piece: its `packed` bytes at `at` inflated into piece."""
     raw = zlib.decompressobj(-15).decompress(os.pread(fd, packed, at), len(piece) + 1)  # zlib releases the GIL
-    got = len(raw)
-    if got == len(piece):
+    if len(raw) == len(piece):
         piece[:] = raw
-    return got, zlib.crc32(piece) if got == CHUNK else 0
+    return len(raw), zlib.crc32(raw)
 
 
 def _pread_into(fd: int, buf: memoryview, at: int) -> int:
