@@ -6,8 +6,8 @@ solver's launches, the surfacing that follows it, the USD layers), and the group
 would wait for each other. A child process reads its group's leaves from the surface frame's
 file itself (the export read its mesh from that file, so its bytes were checked against their
 digest already), so only the job and a path cross; several groups, and the frame's USD layer,
-are made at once. A Dask worker (a daemonic process, which may not
-start children) spreads frames over processes already: there the grids are made in turn.
+are made at once. A Dask worker (a daemonic process, which may not start children) spreads
+frames over processes already: there the grids are made in turn.
 """
 
 from __future__ import annotations
