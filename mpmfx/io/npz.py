@@ -279,7 +279,12 @@ def read_npz(path, names: Collection[str] | None = None, *, workers: int | None 
 
             # every piece of every entry queued before the first wait
             jobs = [
-                (i, _Pieces(run, fd, i, at, *pieces) if (pieces := _pieces_of(i)) is not None else run(_inflated, fd, i, at))
+                (
+                    i,
+                    _Pieces(run, fd, i, at, *pieces)
+                    if (pieces := _pieces_of(i)) is not None
+                    else run(_inflated, fd, i, at),
+                )
                 for i, at in spans
             ]
             return {i.filename[:-4]: job.result() for i, job in jobs}  # in the file's order

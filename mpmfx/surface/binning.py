@@ -89,7 +89,9 @@ def sorted_copy(src: wp.array(dtype=wp.vec3), order: wp.array(dtype=wp.int32), d
 
 
 @wp.kernel
-def sorted_velocity(src: wp.array(dtype=wp.vec3), order: wp.array(dtype=wp.int32), dst: wp.array(dtype=wp.vec3), base: int):
+def sorted_velocity(
+    src: wp.array(dtype=wp.vec3), order: wp.array(dtype=wp.int32), dst: wp.array(dtype=wp.vec3), base: int
+):
     """dst[q] = src[order[q]], a non-finite velocity as 0 (one bad particle must not poison its
     neighbours' velocity; here it costs nothing, where a host pass over 10M costs 20-40 ms)."""
     q = wp.tid() + base

@@ -169,7 +169,10 @@ def mesh_by_voxel(mesh: tuple | None, *, with_v: bool, pinned: bool, half: bool 
     and velocities converted to float16 there (SurfaceParams.half_attributes)."""
     if mesh is not None and half:
         world, normals, velocities, faces = mesh
-        halves = [None if a is None else wp.empty(a.shape[0], dtype=wp.vec3h) for a in (normals, velocities if with_v else None)]
+        halves = [
+            None if a is None else wp.empty(a.shape[0], dtype=wp.vec3h)
+            for a in (normals, velocities if with_v else None)
+        ]
         for a, h in zip((normals, velocities), halves):  # (velocities: zeros when not with_v, made on the host)
             if h is not None:
                 launch_nonempty(wp, to_half, a.shape[0], [a, h])

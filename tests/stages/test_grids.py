@@ -9,9 +9,9 @@ import pytest
 from mpmfx.cache import Entry
 from mpmfx.io.frames import GroupSurface, SurfaceFrame
 from mpmfx.io.vdb import read_vdb
+from mpmfx.shotfile import load_shot_config
 from mpmfx.stages import grids
 from mpmfx.stages.parallel import FrameJob
-from mpmfx.shotfile import load_shot_config
 from tests.conftest import write_tiny_shot
 
 
@@ -57,4 +57,6 @@ def test_a_child_that_dies_takes_no_later_frame_with_it(tmp_path, monkeypatch):
     died = grids._children().submit(os._exit, 1)  # as a child killed, or out of memory
     with pytest.raises(Exception, match="terminated abruptly"):
         grids.results({"all": died})
-    assert grids.results(grids.submit(j, 1, ["all"])) == {"all": {"surface": "vdb/all/0001.vdb", "vel": "vdb/all/0001.vdb"}}
+    assert grids.results(grids.submit(j, 1, ["all"])) == {
+        "all": {"surface": "vdb/all/0001.vdb", "vel": "vdb/all/0001.vdb"}
+    }
