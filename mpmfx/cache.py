@@ -308,7 +308,8 @@ class Entry:
         known = [rel for rel, d in want.items() if d is not None]
         bad = [rel for rel in rels if not (self.root / rel).is_file()]
         known = [rel for rel in known if rel not in bad]
-        bad += [rel for rel, d in zip(known, sums.digests([self.root / r for r in known])) if d != want[rel]]
+        found = sums.digests([self.root / r for r in known], like=[want[r] for r in known])
+        bad += [rel for rel, d in zip(known, found) if d != want[rel]]
         return sorted(bad), unverified
 
     def verified(self, path: str | Path) -> Path:
@@ -321,7 +322,7 @@ class Entry:
             raise DamagedError(str(self.root), rel, "missing (deleted since it was written)")
         if (rec := sums.written(path)) and rec[0] != (size := path.stat().st_size):  # sizes first: no read
             raise DamagedError(str(self.root), rel, f"{size} bytes, {rec[0]} when written")
-        if (want := self.expected(rel)) is not None and sums.digest(path) != want:
+        if (want := self.expected(rel)) is not None and sums.digest(path, like=want) != want:
             raise DamagedError(str(self.root), rel, "its bytes differ from those written (checksum)")
         return path
 

@@ -4,7 +4,7 @@ import os
 
 import pytest
 
-from mpmfx.cache import Cache, atomic_path, stage_key
+from mpmfx.cache import Cache, Entry, atomic_path, stage_key
 
 
 def test_key_is_canonical_and_sensitive():
@@ -132,14 +132,14 @@ def test_a_manifest_of_the_wrong_shape_makes_the_entry_partial_not_a_crash(tmp_p
     assert e.done_frames("npz") == [1]  # the complete frame stays: a run resumes, then rewrites the manifest
 
 
-def test_a_digest_is_b2sum_for_one_piece_and_the_same_on_any_number_of_threads(tmp_path, monkeypatch):
+def test_a_digest_is_sha256sum_for_one_piece_and_the_same_on_any_number_of_threads(tmp_path, monkeypatch):
     import hashlib
 
     from mpmfx import checksum
 
     path = tmp_path / "f.bin"
     path.write_bytes(os.urandom(10_000))
-    assert checksum.digest(path) == hashlib.blake2b(path.read_bytes(), digest_size=16).hexdigest()  # b2sum -l 128
+    assert checksum.digest(path) == hashlib.sha256(path.read_bytes()).hexdigest()  # sha256sum
     monkeypatch.setattr(checksum, "PIECE", 1000)  # ten pieces
     one = checksum.digest(path)
     monkeypatch.setattr(checksum, "MAX_THREADS", 1)
@@ -173,3 +173,30 @@ def test_a_written_file_is_verified_against_what_was_written(tmp_path):
     assert e.mark_damaged(["frames/0001.npz"]) and not e.complete([1]) and e.damaged() == ["frames/0001.npz"]
     checksum.sidecar(e.frame_path(1, "npz")).unlink()  # the manifest's copy still knows it
     assert e.verify()[0] == ["frames/0001.npz"]
+
+
+def test_an_older_entrys_blake2b_digests_still_verify_and_still_catch_a_change(tmp_path):
+    """Entries written before the digest was SHA-256 recorded blake2b-128 (32 hex digits) in
+    their sidecars and manifests: they are checked with blake2b, not redone, and a changed byte
+    is still found."""
+    import hashlib
+
+    from mpmfx import checksum
+
+    e = Entry(tmp_path / "e", "surface", "k", {})
+    path = e.frame_path(1, "npz")
+    path.parent.mkdir(parents=True)
+    path.write_bytes(os.urandom(3 * checksum.PIECE + 5))
+    pieces = [
+        hashlib.blake2b(path.read_bytes()[i : i + checksum.PIECE], digest_size=16).digest()
+        for i in range(0, path.stat().st_size, checksum.PIECE)
+    ]
+    old = hashlib.blake2b(b"".join(pieces), digest_size=16).hexdigest()
+    checksum.sidecar(path).write_text(f"{path.stat().st_size} {old}")
+    assert e.verified(path) == path and e.verify(["frames/0001.npz"]) == ([], [])
+    data = bytearray(path.read_bytes())
+    data[checksum.PIECE + 7] ^= 1
+    path.write_bytes(bytes(data))
+    assert e.verify(["frames/0001.npz"])[0] == ["frames/0001.npz"]
+    with pytest.raises(checksum.DamagedError, match="differ"):
+        e.verified(path)
