@@ -28,9 +28,8 @@ ALGORITHM = "sha256, 4 MiB pieces"  # named in every manifest that records diges
 LEGACY_HEX = 32  # hex digits of a blake2b-128 digest (what entries recorded before SHA-256)
 PIECE = 4 << 20  # bytes hashed as one piece
 MAX_THREADS = 8
-SUFFIX = (
-    ".b2"  # sidecar: .<name>.b2 beside the file (named for the digest it first held; kept, so older entries' are found)
-)
+# sidecar: .<name>.b2 beside the file (named for the digest it first held; kept: older entries' are found)
+SUFFIX = ".b2"
 
 
 class DamagedError(Exception):
