@@ -26,7 +26,9 @@ import functools
 import io
 import math
 import os
+import re
 import struct
+import threading
 import zipfile
 import zlib
 from collections.abc import Collection
@@ -302,15 +304,32 @@ def _data_offset(fd: int, info: zipfile.ZipInfo) -> int:
     return info.header_offset + 30 + name_len + extra_len
 
 
+# the header np.save writes for a plain dtype: read without numpy's parser, which evaluates it as
+# Python (ast), and CPython 3.11's compiler fails at random ("AST constructor recursion depth
+# mismatch") when threads compile at once: the frame readers' threads and Warp's, parsing kernels
+_HEADER = re.compile(r"\{'descr': '([^']+)', 'fortran_order': (True|False), 'shape': \(([0-9, ]*)\), \}\s*")
+_PARSE = threading.Lock()  # numpy's parser, for any other header, one thread at a time
+
+
 def _npy(buf, name: str) -> tuple[np.dtype, tuple, bool, int]:
     """(dtype, shape, fortran order, header length) of the .npy bytes in `buf`."""
     head = io.BytesIO(bytes(buf[: min(len(buf), 1 << 16)]))
     version = np.lib.format.read_magic(head)
-    read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
-    shape, fortran, dtype = read(head)
+    after_magic = head.tell()
+    size = struct.unpack("<H" if version == (1, 0) else "<I", head.read(2 if version == (1, 0) else 4))[0]
+    start = head.tell()
+    text = head.read(size).decode("latin1")
+    if m := _HEADER.fullmatch(text):
+        dtype = np.dtype(m.group(1))
+        shape, fortran = tuple(int(d) for d in m.group(3).split(",") if d.strip()), m.group(2) == "True"
+    else:
+        head.seek(after_magic)
+        read = np.lib.format.read_array_header_1_0 if version == (1, 0) else np.lib.format.read_array_header_2_0
+        with _PARSE:
+            shape, fortran, dtype = read(head)
     if dtype.hasobject:
         raise ValueError(f"{name}: npz entries hold plain arrays, not Python objects")
-    return dtype, shape, fortran, head.tell()
+    return dtype, shape, fortran, start + size
 
 
 def _array(buf, name: str) -> np.ndarray:
