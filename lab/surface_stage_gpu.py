@@ -1,4 +1,4 @@
-"""The surface stage's throughput on one frame, from the frame file to the mesh on disk.
+"""The surface stage's throughput, from the frame file to the mesh on disk.
 
     python lab/surface_stage_gpu.py [--grid 400] [--device cuda] [--reps 3] [--stream 8] [--profile]
                                     [--simulate 12]
@@ -9,7 +9,7 @@ particles written as a simulate frame file (`ParticleFrame`, as simulate writes 
 surfaced `--reps` times as the surface stage does it, in turn (no solver beside it):
 reading the file, the surfacer (its own stats: the device's part), building the frame record,
 and writing its file (deflate, checksums, disk). Prints one table, each part in ms and the
-whole in M particles/s, with the surfacer's own split (upload, device passes, download).
+whole in M particles/s, with the surfacer's own split (its passes on the device, the download).
 `--stream K` then runs the stage's own loop (`mpmfx.stages.surface`: the next frame read ahead
 and frames written behind on threads) over K copies of the frame as cache files with their
 digests, and prints its throughput. `--profile` runs one more frame in turn under cProfile and
