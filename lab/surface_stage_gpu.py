@@ -45,8 +45,14 @@ def main(argv=None) -> int:
     ap.add_argument("--stream", type=int, default=0, help="frames through the stage's own loop")
     ap.add_argument("--profile", action="store_true", help="one frame in turn under cProfile")
     ap.add_argument("--simulate", type=int, default=0, help="surface the castle after this many frames")
+    ap.add_argument(
+        "--variants",
+        action="store_true",
+        help="with --stream: also the loop with 8 writers, with nothing deflated, and with no writes",
+    )
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="more shot overrides")
     args = ap.parse_args(argv)
+    args.label, args.write_threads = "", 0
     import mpmfx.stages.surface as stage
     from mpmfx.stages.surface import make_surfaces, write_threads
     from mpmfx.stages.writer import FrameWriter
@@ -119,6 +125,8 @@ def main(argv=None) -> int:
         print(f"| {i} | " + " | ".join(cells) + " |")
     if args.stream:
         stream(run.shot, src, cache, n, args)
+        if args.variants:
+            variants(run.shot, src, cache, n, args)
     if args.profile:
         prof = cProfile.Profile()
         prof.enable()
@@ -141,8 +149,8 @@ def stream(shot, src: Path, cache: Path, n: int, args) -> None:
 
     sim = Entry(cache / "sim", "simulate", "lab", {})
     out = Entry(cache / "surf", "surface", "lab", {})
-    sim.frames_dir.mkdir(parents=True)
-    out.frames_dir.mkdir(parents=True)
+    sim.frames_dir.mkdir(parents=True, exist_ok=True)
+    out.frames_dir.mkdir(parents=True, exist_ok=True)
     frames = list(range(1, args.stream + 1))
     for f in frames:  # copies with their digests, as simulate leaves them (in the page cache)
         dst = sim.frame_path(f, ParticleFrame.EXT)
@@ -150,15 +158,63 @@ def stream(shot, src: Path, cache: Path, n: int, args) -> None:
         checksum.record(dst)
     job = FrameJob(shot, out, {"simulate": sim}, args.device)
     bar = types.SimpleNamespace(update=lambda: None)
-    t0 = time.perf_counter()
-    stats = _pipelined([(job, f) for f in frames], bar, write_threads=write_threads(args.device))
-    wall = time.perf_counter() - t0
+    threads = args.write_threads or write_threads(args.device)
+    for f in frames:  # a variant's run writes into the same entry
+        out.frame_path(f, "npz").unlink(missing_ok=True)
+    cpu0, t0 = os.times(), time.perf_counter()
+    stats = _pipelined([(job, f) for f in frames], bar, write_threads=threads)
+    wall, cpu1 = time.perf_counter() - t0, os.times()
+    cpu = (cpu1.user - cpu0.user + cpu1.system - cpu0.system) / len(frames)
     waits = {k: sum(st["seconds"][k] for st in stats) / len(stats) * 1e3 for k in stats[0]["seconds"]}
     print(
-        f"\nthe stage's loop, {len(frames)} frames of {n:,} particles: {wall:.2f} s, "
-        f"{wall / len(frames) * 1e3:.0f} ms a frame, {n * len(frames) / wall / 1e6:.1f} M particles/s; "
-        "a frame's mean ms: " + ", ".join(f"{k} {ms:.0f}" for k, ms in waits.items())
+        f"\nthe stage's loop{args.label}, {len(frames)} frames of {n:,} particles, {threads} writers: {wall:.2f} s, "
+        f"{wall / len(frames) * 1e3:.0f} ms a frame, {n * len(frames) / wall / 1e6:.1f} M particles/s, "
+        f"{cpu:.2f} host CPU-s a frame; a frame's mean ms: " + ", ".join(f"{k} {ms:.0f}" for k, ms in waits.items()),
+        flush=True,
     )
+
+
+def variants(shot, src: Path, cache: Path, n: int, args) -> None:
+    """The loop again with one thing changed each time: which part of the host's work bounds it."""
+    import mpmfx.stages.surface as stage
+    from mpmfx.io import npz
+    from mpmfx.io.frames import SurfaceFrame
+    from mpmfx.surface.pinned import host_buffer
+
+    for name, alloc in (("pageable", None), ("page-locked", lambda nbytes: host_buffer(wp, nbytes))):
+        p = ParticleFrame.read(src, fields=stage.SURFACED, alloc=alloc)
+        wp.synchronize()
+        t0 = time.perf_counter()
+        for a in (p.x, p.v):
+            wp.array(a, dtype=wp.vec3, device=args.device)
+        wp.synchronize()
+        print(f"\nupload of x and v from {name} memory: {(time.perf_counter() - t0) * 1e3:.1f} ms")
+
+    def again(label, **changes):
+        stream(shot, src, cache, n, argparse.Namespace(**{**vars(args), "label": f" ({label})", **changes}))
+
+    stage.PINNED_READS = False
+    again("pageable reads")
+    stage.PINNED_READS = True
+    isal_deflate = npz._deflate
+    npz._deflate = _zlib_deflate
+    again("zlib's deflate")
+    npz._deflate = isal_deflate
+    deflate, write = SurfaceFrame._DEFLATE, SurfaceFrame.write
+    SurfaceFrame._DEFLATE = ()
+    again("stored, no deflate")
+    SurfaceFrame._DEFLATE = deflate
+    SurfaceFrame.write = lambda self, path: None
+    again("no writes")
+    SurfaceFrame.write = write
+
+
+def _zlib_deflate(piece, last: bool) -> bytes:
+    """mpmfx.io.npz's deflate of a piece with zlib's level 1, as the frame files were written before."""
+    import zlib
+
+    c = zlib.compressobj(1, zlib.DEFLATED, -15)
+    return c.compress(piece) + c.flush(zlib.Z_FINISH if last else zlib.Z_FULL_FLUSH)
 
 
 if __name__ == "__main__":

@@ -47,10 +47,10 @@ def write_arrays(path: str | Path, arrays: dict[str, np.ndarray], *, compress: b
     return path
 
 
-def read_arrays(path: str | Path, names: Collection[str] | None = None) -> dict[str, np.ndarray]:
+def read_arrays(path: str | Path, names: Collection[str] | None = None, alloc=None) -> dict[str, np.ndarray]:
     """The arrays of a frame file (those in `names`, None: all), big ones inflated on several
-    threads at once (mpmfx.io.npz)."""
-    data = read_npz(path, None if names is None else {"_format", *names})
+    threads at once (mpmfx.io.npz; alloc: read_npz's, where the arrays' bytes go)."""
+    data = read_npz(path, None if names is None else {"_format", *names}, alloc=alloc)
     out = {k: a for k, a in data.items() if k != "_format"}
     fmt = int(data["_format"]) if "_format" in data else -1
     if fmt not in READS:
@@ -122,10 +122,10 @@ class ParticleFrame:
         return write_arrays(path, arrays, compress=[k for k in self._DEFLATE if getattr(self, k) is not None])
 
     @classmethod
-    def read(cls, path: str | Path, fields: Collection[str] | None = None) -> ParticleFrame:
+    def read(cls, path: str | Path, fields: Collection[str] | None = None, alloc=None) -> ParticleFrame:
         """fields: the arrays to read (None: all); the others are None (the surfacer needs x, v
-        and body, not the materials' state)."""
-        arrays = read_arrays(path, None if fields is None else {*fields, "x"})  # (x: the count)
+        and body, not the materials' state). alloc: where the arrays' bytes go (read_arrays)."""
+        arrays = read_arrays(path, None if fields is None else {*fields, "x"}, alloc)  # (x: the count)
         if "id" not in arrays and (fields is None or "id" in fields):
             arrays["id"] = np.arange(len(arrays["x"]), dtype=np.int32)
         unread = dict.fromkeys(f.name for f in dataclasses.fields(cls))

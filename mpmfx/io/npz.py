@@ -1,18 +1,19 @@
 """The .npz writer and reader of the frame files: big entries deflated, and inflated, on several
 threads at once.
 
-zipfile deflates one entry after another on one core, and a GPU shot's surface frame (~330 MB
-of arrays at 3.4M particles) then takes longer to write than the GPU takes to simulate and
-surface it. Here each entry's .npy bytes are cut into CHUNK pieces that are deflated independently on a
-thread pool (zlib releases the GIL). Every piece but the last ends on a full flush, so the pieces
-join into one raw deflate stream, as pigz's do. The zip is then written around them.
+zipfile deflates one entry after another on one core with zlib, and a GPU shot's surface frame
+then takes longer to write than the GPU takes to surface it. Here the deflate is Intel's ISA-L
+(python-isal): at level 1 it shrinks a surface frame's vertices, faces and level set as much as
+zlib's level 1 does, 4-9x faster (docs/benchmarks.md), and inflates ~1.5-2x faster. Each entry's
+.npy bytes are cut into CHUNK pieces that are deflated independently on the process's shared
+deflating threads (ISA-L releases the GIL). Every piece but the last ends on a full flush, so the
+pieces join into one raw deflate stream, as pigz's do. The zip is then written around them.
 
 The central directory records each deflated entry's pieces (their deflated lengths, in an
 extra field of its own, PIECES_TAG, that other zip readers skip), so `read_npz` inflates an
 entry's pieces on threads at once too, and reads stored entries straight into their arrays,
-CHUNK pieces on threads at once: one core inflates ~300 MB/s, and a 10M-face surface frame
-holds 180 MB of deflated vertices and faces. A big entry's CRC-32 is likewise summed a piece
-a thread and the pieces' sums joined (zlib's crc32_combine). An entry written without the
+CHUNK pieces on threads at once. A big entry's CRC-32 is likewise summed a piece a thread and
+the pieces' sums joined (crc32_combine). An entry written without the
 table (an older file) is inflated as one stream on one thread.
 
 The files are ordinary zips (np.load, zipfile and unzip read them), with zip64 records only where
@@ -22,7 +23,6 @@ give the same bytes whatever the number of threads.
 
 from __future__ import annotations
 
-import functools
 import io
 import math
 import os
@@ -30,17 +30,17 @@ import re
 import struct
 import threading
 import zipfile
-import zlib
-from collections.abc import Collection
+from collections.abc import Callable, Collection
 from concurrent.futures import ThreadPoolExecutor
 from typing import BinaryIO
 
 import numpy as np
+from isal import isal_zlib
 
 from mpmfx.threads import THREADS_ENV, cpu_threads, usable_cores
 
 CHUNK = 4 << 20  # bytes of .npy data deflated as one piece
-LEVEL = 1  # zlib level, as the frame files were always written (fast; the level set still shrinks ~2.5x)
+LEVEL = 1  # ISA-L's level (0-3): 1 shrinks as much as zlib's 1, at about the speed of its 0
 MAX_THREADS = 8
 _DOS_TIME, _DOS_DATE = 0, (0 << 9) | (1 << 5) | 1  # 1980-01-01 00:00
 _U32 = 0xFFFFFFFF  # a 32-bit field's "see the zip64 record"
@@ -55,6 +55,21 @@ def threads() -> int:
     writing at once do not each start threads for every core."""
     cores = min(usable_cores(), cpu_threads()) if THREADS_ENV in os.environ else usable_cores()
     return max(1, min(MAX_THREADS, cores // 2))
+
+
+_POOLS: dict[tuple[int, int], ThreadPoolExecutor] = {}  # (pid, threads): the deflating threads
+_POOLS_LOCK = threading.Lock()
+
+
+def _write_pool(workers: int) -> ThreadPoolExecutor:
+    """The process's deflating threads, shared by every write_npz at once: a stage writing four
+    frames behind a GPU runs `workers` deflating threads, not four times that, and starts none
+    a frame. Made again in a forked child (a pool's threads do not fork)."""
+    key = (os.getpid(), workers)
+    with _POOLS_LOCK:
+        if key not in _POOLS:
+            _POOLS[key] = ThreadPoolExecutor(workers, thread_name_prefix="mpmfx-deflate")
+        return _POOLS[key]
 
 
 def read_threads() -> int:
@@ -87,8 +102,8 @@ def _pieces(header: bytes, data: memoryview) -> list:
 
 
 def _deflate(piece, last: bool) -> bytes:
-    c = zlib.compressobj(LEVEL, zlib.DEFLATED, -15)
-    return c.compress(piece) + c.flush(zlib.Z_FINISH if last else zlib.Z_FULL_FLUSH)
+    c = isal_zlib.compressobj(LEVEL, isal_zlib.DEFLATED, -15)
+    return c.compress(piece) + c.flush(isal_zlib.Z_FINISH if last else isal_zlib.Z_FULL_FLUSH)
 
 
 class _CRC:
@@ -98,57 +113,35 @@ class _CRC:
     def __init__(self, run, head: bytes, data):
         whole = len(data) // CHUNK * CHUNK
         self._head, self._rest = head, data[whole:]
-        self._sums = [run(zlib.crc32, data[i : i + CHUNK]) for i in range(0, whole, CHUNK)]
+        self._sums = [run(isal_zlib.crc32, data[i : i + CHUNK]) for i in range(0, whole, CHUNK)]
+
+    def pieces(self) -> list:
+        return self._sums
 
     def result(self) -> int:
-        crc = zlib.crc32(self._head)
+        crc = isal_zlib.crc32(self._head)
         for piece in self._sums:
             crc = _join(crc, piece.result(), CHUNK)
-        return zlib.crc32(self._rest, crc)
-
-
-def _gf2_times(op: list[int], vec: int) -> int:
-    """The 32x32 GF(2) matrix `op` (its columns as ints) times the bit vector vec."""
-    out, i = 0, 0
-    while vec:
-        if vec & 1:
-            out ^= op[i]
-        vec >>= 1
-        i += 1
-    return out
+        return isal_zlib.crc32(self._rest, crc)
 
 
 def _join(crc_a: int, crc_b: int, nbytes: int) -> int:
-    """crc32(a + b) from crc32(a) and crc32(b) of an nbytes-long b (zlib's crc32_combine)."""
-    return _gf2_times(_append_zeros(nbytes), crc_a) ^ crc_b
-
-
-@functools.cache
-def _append_zeros(nbytes: int) -> list[int]:
-    """The operator that takes crc32(a) to crc32(a + nbytes zero bytes) before the final xor."""
-    op = [0xEDB88320] + [1 << n for n in range(31)]  # one zero bit (the reflected polynomial)
-    out = None
-    bits = 8 * nbytes
-    while bits:
-        if bits & 1:
-            out = op if out is None else [_gf2_times(op, c) for c in out]
-        bits >>= 1
-        op = [_gf2_times(op, c) for c in op] if bits else op
-    return out
+    """crc32(a + b) from crc32(a) and crc32(b) of an nbytes-long b."""
+    return isal_zlib.crc32_combine(crc_a, crc_b, nbytes)
 
 
 def write_npz(f: BinaryIO, entries: list[tuple[str, np.ndarray, bool]], *, workers: int | None = None) -> None:
     """Write entries (name without .npy, array, deflate it) as a zip to the open binary file f.
-    workers: deflating threads (None: threads())."""
+    workers: deflating threads (None: threads()), a pool the process's writes share (_write_pool)."""
     workers = threads() if workers is None else workers
     parts = [(name, *npy_parts(value), deflate) for name, value, deflate in entries]
-    pool = ThreadPoolExecutor(max_workers=workers, thread_name_prefix="mpmfx-deflate") if workers > 1 else None
+    pool = _write_pool(workers) if workers > 1 else None
+    jobs = []  # per entry: (crc, [deflated piece futures] or None)
+
+    def run(fn, *args):
+        return pool.submit(fn, *args) if pool else _Done(fn(*args))
+
     try:
-
-        def run(fn, *args):
-            return pool.submit(fn, *args) if pool else _Done(fn(*args))
-
-        jobs = []  # per entry: (crc, [deflated piece futures] or None)
         for _name, header, data, deflate in parts:
             pieces = _pieces(header, data) if deflate else None
             jobs.append(
@@ -170,9 +163,10 @@ def write_npz(f: BinaryIO, entries: list[tuple[str, np.ndarray, bool]], *, worke
             central.append(_central_header(name, crc.result(), packed, size, deflate, offset, pieces))
             offset += len(local) + packed
         _end(f, central, offset)
-    finally:
-        if pool:
-            pool.shutdown(wait=True)
+    finally:  # an error leaves no piece of this file still running on the shared threads
+        for crc, deflated in jobs:
+            for job in [*crc.pieces(), *(deflated or [])]:
+                job.cancel() or job.exception()
 
 
 class _Done:
@@ -183,6 +177,12 @@ class _Done:
 
     def result(self):
         return self._value
+
+    def cancel(self) -> bool:
+        return False
+
+    def exception(self):
+        return None
 
 
 def _local_header(name: str, crc: int, packed: int, size: int, deflate: bool) -> bytes:
@@ -258,10 +258,14 @@ def _end(f: BinaryIO, central: list[bytes], start: int) -> None:
         f.write(struct.pack("<IHHHHIIH", 0x06054B50, 0, 0, n, n, size, start, 0))
 
 
-def read_npz(path, names: Collection[str] | None = None, *, workers: int | None = None) -> dict[str, np.ndarray]:
+def read_npz(
+    path, names: Collection[str] | None = None, *, workers: int | None = None, alloc: Callable | None = None
+) -> dict[str, np.ndarray]:
     """{name (without .npy): array} of the zip at `path`: the entries in `names` (None: all),
     deflated ones inflated on `workers` threads (None: read_threads()) at once. The arrays are
-    writable, as np.load's."""
+    writable, as np.load's. alloc(nbytes): a writable uint8 array of nbytes for an entry's bytes
+    (the array is a view of it past its .npy header), such as page-locked memory a GPU copies
+    from at full speed; None: numpy's. (An older file's one-stream entry ignores it.)"""
     workers = read_threads() if workers is None else workers
     with open(path, "rb") as f, zipfile.ZipFile(f) as zf:
         infos = [i for i in zf.infolist() if i.filename.endswith(".npy")]
@@ -283,7 +287,7 @@ def read_npz(path, names: Collection[str] | None = None, *, workers: int | None 
             jobs = [
                 (
                     i,
-                    _Pieces(run, fd, i, at, *pieces)
+                    _Pieces(run, fd, i, at, *pieces, alloc=alloc)
                     if (pieces := _pieces_of(i)) is not None
                     else run(_inflated, fd, i, at),
                 )
@@ -366,9 +370,10 @@ class _Pieces:
     array. size: bytes a piece (the last may be shorter); packed: the deflated pieces' lengths,
     or [] for a stored entry."""
 
-    def __init__(self, run, fd: int, info: zipfile.ZipInfo, at: int, size: int, packed: list[int]):
+    def __init__(self, run, fd: int, info: zipfile.ZipInfo, at: int, size: int, packed: list[int], alloc=None):
         self._info, self._size = info, size
-        self._buf = np.empty(info.file_size, np.uint8)  # not zeroed: every byte is written over
+        # not zeroed: every byte is written over
+        self._buf = np.empty(info.file_size, np.uint8) if alloc is None else alloc(info.file_size)[: info.file_size]
         view = memoryview(self._buf)
         starts = range(0, info.file_size, size)
         if packed:
@@ -387,7 +392,7 @@ class _Pieces:
             if got != len(piece):
                 raise zipfile.BadZipFile(f"{info.filename}: {got} bytes where its piece {k} holds {len(piece)}")
             # whole pieces joined (piece_crc); a last, shorter one continues the sum before it
-            crc = _join(crc, piece_crc, size) if got == size else zlib.crc32(piece, crc)
+            crc = _join(crc, piece_crc, size) if got == size else isal_zlib.crc32(piece, crc)
         if crc != info.CRC:
             raise zipfile.BadZipFile(f"{info.filename}: CRC differs")
         return _array(self._buf, info.filename)
@@ -396,15 +401,18 @@ class _Pieces:
 def _read_sum(fd: int, piece: memoryview, at: int) -> tuple[int, int]:
     """(bytes read into piece from offset `at`, their CRC-32)."""
     got = os.preadv(fd, [piece], at) if hasattr(os, "preadv") else _pread_into(fd, piece, at)
-    return got, zlib.crc32(piece[:got])
+    return got, isal_zlib.crc32(piece[:got])
 
 
 def _inflate_sum(fd: int, piece: memoryview, at: int, packed: int) -> tuple[int, int]:
     """_read_sum of a deflated piece: its `packed` bytes at `at` inflated into piece."""
-    raw = zlib.decompressobj(-15).decompress(os.pread(fd, packed, at), len(piece) + 1)  # zlib releases the GIL
+    try:  # (ISA-L releases the GIL)
+        raw = isal_zlib.decompressobj(-15).decompress(os.pread(fd, packed, at), len(piece) + 1)
+    except isal_zlib.error as exc:
+        raise zipfile.BadZipFile(f"a deflated piece does not inflate ({exc})") from None
     if len(raw) == len(piece):
         piece[:] = raw
-    return len(raw), zlib.crc32(raw)
+    return len(raw), isal_zlib.crc32(raw)
 
 
 def _pread_into(fd: int, buf: memoryview, at: int) -> int:
@@ -414,8 +422,10 @@ def _pread_into(fd: int, buf: memoryview, at: int) -> int:
 
 
 def _inflated(fd: int, info: zipfile.ZipInfo, at: int) -> np.ndarray:
-    d = zlib.decompressobj(-15)
-    raw = bytearray(d.decompress(os.pread(fd, info.compress_size, at)))  # zlib releases the GIL
-    if len(raw) != info.file_size or zlib.crc32(raw) != info.CRC:
+    try:
+        raw = bytearray(isal_zlib.decompressobj(-15).decompress(os.pread(fd, info.compress_size, at)))
+    except isal_zlib.error as exc:
+        raise zipfile.BadZipFile(f"{info.filename}: does not inflate ({exc})") from None
+    if len(raw) != info.file_size or isal_zlib.crc32(raw) != info.CRC:
         raise zipfile.BadZipFile(f"{info.filename}: inflated to {len(raw)} bytes or CRC differs")
     return _array(raw, info.filename)

@@ -86,6 +86,15 @@ PINNED = PinnedPool(limit=pinned_limit())
 velocities ~300 MB)."""
 
 
+def host_buffer(wp, nbytes: int) -> np.ndarray:
+    """A uint8 array of nbytes in a page-locked buffer of the PINNED pool (numpy's memory past its
+    limit), for host data a GPU call will upload: from page-locked memory the copy is one DMA,
+    from pageable memory it goes through the driver's staging (mpmfx.io.npz.read_npz's alloc).
+    The buffer goes back to the pool when the array and its views are gone."""
+    buf = PINNED.take(wp, nbytes) if nbytes else None
+    return np.empty(nbytes, np.uint8) if buf is None else PINNED.lend(wp, buf, (nbytes,), np.uint8)
+
+
 def to_host(wp, arrays: list, *, pinned: bool) -> list:
     """numpy copies of device arrays (None stays None; arrays already on the CPU are returned as
     numpy views), every copy queued before one wait. pinned (CUDA only): into page-locked buffers
