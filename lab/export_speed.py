@@ -3,7 +3,7 @@ frame of about --faces triangles, with and without the VDB grids, and where its 
 (`seconds_split`: reading the surface frame, building the USD layer, building and writing the
 VDB grids, writing the USD layer). One table; rows as JSON under --out.
 
-    python lab/export_speed.py [--device cpu|cuda:0] [--faces 10000000] [--repeat 2]
+    python lab/export_speed.py [--device cpu|cuda:0] [--faces 10000000] [--repeat 2] [--parallel 4]
 
 The frame is built on the host: per surface group of jelly_splash a sphere, meshed as a latitude /
 longitude grid (vertices, normals, velocities of a spin), and its level set as 8^3 leaves in the
@@ -11,6 +11,8 @@ narrow band with the leaves wholly inside listed, as the surface stage stores th
 the one at which marching cubes gives about that many triangles, so the leaves are as many as a
 surfaced frame's. Export runs on the host's cores whatever the device: --device only names the
 machine in the table (run it on the GPU machine to time that machine's CPU).
+`--parallel W` then exports 2W copies of the frame (without VDB) on W processes at once, as the
+stage's Dask workers take frames on a many-core host, and prints the seconds a frame.
 """
 
 import argparse
@@ -101,6 +103,34 @@ def time_export(shot, root: Path, surf: Entry, vdb: bool, repeat: int) -> list[d
     return out
 
 
+def _warm(_) -> None:
+    """A process's imports (USD's included), before the timed frames."""
+    import pxr.Usd  # noqa: F401
+
+
+def throughput(shot, root: Path, mesh: Entry, workers: int) -> float:
+    """Seconds a frame of export.frame over 2 * workers copies of `mesh`'s frame on `workers`
+    processes at once (VDB off)."""
+    import multiprocessing
+    import shutil
+    from concurrent.futures import ProcessPoolExecutor
+
+    from mpmfx import checksum
+
+    shot = shot.model_copy(update={"export": shot.export.model_copy(update={"vdb": False, "points": False})})
+    frames = list(range(FRAME, FRAME + 2 * workers))
+    for f in frames[1:]:
+        dst = mesh.frame_path(f, SurfaceFrame.EXT)
+        shutil.copyfile(mesh.frame_path(FRAME, SurfaceFrame.EXT), dst)
+        checksum.record(dst)
+    job = FrameJob(shot, Entry(root / "export-parallel", "export", "parallel", {}), {"surface": mesh, "simulate": mesh})
+    with ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("forkserver")) as pool:
+        list(pool.map(_warm, range(workers)))
+        t0 = time.perf_counter()
+        list(pool.map(export.frame, [job] * len(frames), frames))
+        return (time.perf_counter() - t0) / len(frames)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--device", default="cpu", help="names the machine in the table (export runs on its CPU)")
@@ -108,6 +138,7 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=2, help="runs of each; the table shows the fastest")
     ap.add_argument("--density", action="store_true", help="fog density leaves too (surface.density)")
     ap.add_argument("--no-vdb-run", action="store_true", help="only the run without VDB grids")
+    ap.add_argument("--parallel", type=int, default=0, help="then 2W frames on W processes (VDB off)")
     args = ap.parse_args()
     shot = load_shot_config(SHOT)
     with tempfile.TemporaryDirectory(prefix="mpmfx-export-speed-") as tmp:
@@ -143,6 +174,10 @@ def main() -> None:
                 rows.append(
                     {"row": f"export.frame, {part}", "vdb": tag, "s": round(s, 3), "faces": nfaces, "device": dev}
                 )
+        if args.parallel:
+            s = throughput(shot, root, mesh, args.parallel)
+            row = f"{2 * args.parallel} frames on {args.parallel} processes, a frame"
+            rows.append({"row": row, "vdb": "VDB off", "s": round(s, 3), "faces": nfaces, "device": dev})
     print(f"export of one frame, {nfaces:,} faces; {dev}")
     print_table(rows, ["row", "vdb", "s"])
     Path(OUT).mkdir(parents=True, exist_ok=True)

@@ -207,6 +207,7 @@ def variants(shot, src: Path, cache: Path, n: int, args) -> None:
     SurfaceFrame.write = lambda self, path: None
     again("no writes")
     SurfaceFrame.write = write
+    again("page-locked reads, once more: after the pool's buffers are made")
 
 
 def _zlib_deflate(piece, last: bool) -> bytes:
