@@ -123,3 +123,79 @@ def test_plain_headers_are_read_without_pythons_compiler(tmp_path, monkeypatch):
     monkeypatch.undo()
     mixed = {"rec": np.zeros(3, dtype=[("a", "<f4"), ("b", "<i8")])}
     assert read_arrays(write_arrays(tmp_path / "r.npz", mixed))["rec"].dtype == mixed["rec"].dtype
+
+
+def _zlib_deflate(piece, last: bool) -> bytes:
+    c = zlib.compressobj(1, zlib.DEFLATED, -15)
+    return c.compress(piece) + c.flush(zlib.Z_FINISH if last else zlib.Z_FULL_FLUSH)
+
+
+def test_files_deflated_by_zlib_still_read(tmp_path, monkeypatch):
+    """Caches written before the frame files were deflated with ISA-L hold zlib's streams: they
+    read as they did, pieces and all."""
+    monkeypatch.setattr(npz, "CHUNK", 64 << 10)
+    monkeypatch.setattr(npz, "_deflate", _zlib_deflate)
+    old = write_arrays(tmp_path / "zlib.npz", arrays(), compress=["x", "blocks"])
+    monkeypatch.undo()
+    monkeypatch.setattr(npz, "CHUNK", 64 << 10)
+    check(old, arrays())
+    new = write_arrays(tmp_path / "isal.npz", arrays(), compress=["x", "blocks"])
+    assert new.read_bytes() != old.read_bytes()  # the other deflate: the same arrays, other streams
+    check(new, arrays())
+
+
+def test_writes_at_once_share_one_set_of_deflating_threads(tmp_path, monkeypatch):
+    """Four frames written at once (the GPU surface stage's writers) give the bytes a lone write
+    gives, on the process's one pool of deflating threads, not a pool each."""
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    monkeypatch.setattr(npz, "CHUNK", 64 << 10)
+    monkeypatch.setattr(npz, "threads", lambda: 3)
+    alone = write_arrays(tmp_path / "alone.npz", arrays(), compress=["x", "blocks"]).read_bytes()
+    before = threading.active_count()
+    with ThreadPoolExecutor(4) as writers:
+        paths = list(
+            writers.map(lambda k: write_arrays(tmp_path / f"w{k}.npz", arrays(), compress=["x", "blocks"]), range(4))
+        )
+        assert threading.active_count() <= before + 4  # the writers; the deflating threads were already there
+    assert all(p.read_bytes() == alone for p in paths)
+
+
+def test_a_failed_write_leaves_no_piece_running(tmp_path, monkeypatch):
+    """A write that fails midway (a full disk) cancels or finishes its pieces on the shared
+    threads before it raises, and the next write is whole."""
+    monkeypatch.setattr(npz, "CHUNK", 16 << 10)
+    pool = npz._write_pool(2)
+
+    class Full:
+        def __init__(self):
+            self.n = 0
+
+        def write(self, b):
+            self.n += len(b)
+            if self.n > 50_000:
+                raise OSError(28, "No space left on device")
+
+    entries = [(k, np.asarray(v), k in ("x", "blocks")) for k, v in arrays().items()]
+    with pytest.raises(OSError, match="No space"):
+        npz.write_npz(Full(), entries, workers=2)
+    assert pool._work_queue.empty()
+    check(write_arrays(tmp_path / "after.npz", arrays(), compress=["x", "blocks"]), arrays())
+
+
+def test_arrays_are_read_into_the_memory_alloc_gives(tmp_path, monkeypatch):
+    """read_npz's alloc (the GPU surface stage's page-locked buffers): every entry read in pieces
+    lands in the caller's memory, stored and deflated alike, with the same values."""
+    monkeypatch.setattr(npz, "CHUNK", 64 << 10)
+    path = write_arrays(tmp_path / "a.npz", arrays(), compress=["x", "blocks"])
+    given = []
+
+    def alloc(nbytes):
+        given.append(np.empty(nbytes + 100, np.uint8))  # larger than asked, as a pool's buffer
+        return given[-1]
+
+    got = read_arrays(path, alloc=alloc)
+    assert all(np.array_equal(got[k], np.asarray(v)) for k, v in arrays().items())
+    for k in ("x", "blocks", "fortran"):
+        assert any(np.shares_memory(got[k], g) for g in given), k
