@@ -78,14 +78,15 @@ def run(ctx: Context) -> dict:
     # On a GPU a frame takes ~0.3 s here, less than a worker takes to start and load its kernels
     # (docs/scale-out.md): the default stays serial there; on the CPU, frames go to all cores.
     # Serial frames are read ahead and written behind on threads: at 10M particles on an H200
-    # reading a frame takes ~60 ms, surfacing it ~120 ms, deflating and writing it ~300 ms.
+    # reading a frame takes ~50 ms, surfacing it 90-140 ms, deflating and writing it 80-100 ms.
     on_gpu = wp.get_device(ctx.device).is_cuda
     serial = partial(_pipelined, write_threads=write_threads(ctx.device))
     return finish(ctx, ctx.map_frames(frame, todo(ctx), desc="surface", auto=not on_gpu, serial=serial))
 
 
 def write_threads(device: str | None) -> int:
-    """Threads writing frames behind the surfacing: on a GPU the host's deflate is the slow part."""
+    """Threads writing frames behind the surfacing: on a GPU a frame's deflate and write take about
+    as long as its surfacing, and several frames are written at once."""
     return GPU_WRITE_THREADS if wp.get_device(device).is_cuda else 1
 
 
