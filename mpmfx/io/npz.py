@@ -13,8 +13,8 @@ The central directory records each deflated entry's pieces (their deflated lengt
 extra field of its own, PIECES_TAG, that other zip readers skip), so `read_npz` inflates an
 entry's pieces on threads at once too, and reads stored entries straight into their arrays,
 CHUNK pieces on threads at once. A big entry's CRC-32 is likewise summed a piece a thread and
-the pieces' sums joined (crc32_combine). An entry written without the
-table (an older file) is inflated as one stream on one thread.
+the pieces' sums joined (crc32_combine). An entry written without the table (an older file) is
+inflated as one stream on one thread.
 
 The files are ordinary zips (np.load, zipfile and unzip read them), with zip64 records only where
 a size or an offset needs them. Each entry carries the fixed date 1980-01-01, so the same arrays

@@ -1,4 +1,5 @@
-"""Page-locked host buffers for the surfacer's downloads from a GPU, and the copy to the host."""
+"""Page-locked host buffers for the surfacer's downloads from a GPU (and the surface stage's
+reads of the particles it uploads), and the copy to the host."""
 
 from __future__ import annotations
 
@@ -71,8 +72,9 @@ class PinnedPool:
 
 
 def pinned_limit() -> int:
-    """Bytes the downloads may hold page-locked: an eighth of the host's memory, at most 4 GiB
-    (a 10M torus at "fine" lends 174 MB a frame, and the stage's 4 writers may hold 4 frames)."""
+    """Bytes the pool may hold page-locked: an eighth of the host's memory, at most 4 GiB (a 10M
+    torus at "fine" lends 174 MB a frame, and the stage's 4 writers may hold 4 frames; at 10M
+    particles the surface stage reads 283 MB a frame into it, a frame ahead)."""
     try:
         ram = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
     except (ValueError, OSError, AttributeError):
@@ -82,8 +84,8 @@ def pinned_limit() -> int:
 
 PINNED = PinnedPool(limit=pinned_limit())
 
-"""The downloads' page-locked buffers (a 10M-particle frame's mesh and leaves are ~120 MB, with
-velocities ~300 MB)."""
+"""The downloads' and reads' page-locked buffers (a 10M-particle frame's mesh and leaves are
+~120 MB, with velocities ~300 MB)."""
 
 
 def host_buffer(wp, nbytes: int) -> np.ndarray:
