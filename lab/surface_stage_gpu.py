@@ -12,7 +12,8 @@ and writing its file (deflate, checksums, disk). Prints one table, each part in 
 whole in M particles/s, with the surfacer's own split (its passes on the device, the download).
 `--stream K` then runs the stage's own loop (`mpmfx.stages.surface`: the next frame read ahead
 and frames written behind on threads) over K copies of the frame as cache files with their
-digests, and prints its throughput. `--profile` runs one more frame in turn under cProfile and
+digests, and prints its throughput; `--variants` runs that loop again with one thing changed each
+time (pageable reads, zlib's deflate, nothing deflated, nothing written). `--profile` runs one more frame in turn under cProfile and
 prints where the host's time goes. The castle at rest has less surface than the collapsing pile
 a shot frame holds (fewer vertices a particle).
 """
@@ -48,11 +49,11 @@ def main(argv=None) -> int:
     ap.add_argument(
         "--variants",
         action="store_true",
-        help="with --stream: also the loop with 8 writers, with nothing deflated, and with no writes",
+        help="with --stream: the loop again with pageable reads, zlib's deflate, nothing deflated, nothing written",
     )
     ap.add_argument("--set", dest="overrides", action="append", default=[], help="more shot overrides")
     args = ap.parse_args(argv)
-    args.label, args.write_threads = "", 0
+    args.label = ""
     import mpmfx.stages.surface as stage
     from mpmfx.stages.surface import make_surfaces, write_threads
     from mpmfx.stages.writer import FrameWriter
@@ -158,7 +159,7 @@ def stream(shot, src: Path, cache: Path, n: int, args) -> None:
         checksum.record(dst)
     job = FrameJob(shot, out, {"simulate": sim}, args.device)
     bar = types.SimpleNamespace(update=lambda: None)
-    threads = args.write_threads or write_threads(args.device)
+    threads = write_threads(args.device)
     for f in frames:  # a variant's run writes into the same entry
         out.frame_path(f, "npz").unlink(missing_ok=True)
     cpu0, t0 = os.times(), time.perf_counter()
