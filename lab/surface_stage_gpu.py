@@ -1,21 +1,21 @@
 """The surface stage's throughput, from the frame file to the mesh on disk.
 
-    python lab/surface_stage_gpu.py [--grid 400] [--device cuda] [--reps 3] [--stream 8] [--profile]
-                                    [--simulate 12]
+    python lab/surface_stage_gpu.py [--grid 400] [--device cuda] [--reps 3] [--stream 8] [--variants]
+                                    [--profile] [--simulate 12]
 
 hero_castle is voxelised at `--grid` (400: 10.1M particles) through the stage runner, its
 particles written as a simulate frame file (`ParticleFrame`, as simulate writes it; with
 `--simulate K`, simulated K frames and the last one taken: a collapsing pile), and that frame
-surfaced `--reps` times as the surface stage does it, in turn (no solver beside it):
-reading the file, the surfacer (its own stats: the device's part), building the frame record,
-and writing its file (deflate, checksums, disk). Prints one table, each part in ms and the
-whole in M particles/s, with the surfacer's own split (its passes on the device, the download).
-`--stream K` then runs the stage's own loop (`mpmfx.stages.surface`: the next frame read ahead
-and frames written behind on threads) over K copies of the frame as cache files with their
-digests, and prints its throughput; `--variants` runs that loop again with one thing changed each
-time (pageable reads, zlib's deflate, nothing deflated, nothing written). `--profile` runs one more frame in turn under cProfile and
-prints where the host's time goes. The castle at rest has less surface than the collapsing pile
-a shot frame holds (fewer vertices a particle).
+surfaced `--reps` times as the surface stage does it, in turn (no solver beside it): reading the
+file, the surfacer (its own stats: the device's part), building the frame record, and writing its
+file (deflate, checksums, disk). Prints one table, each part in ms and the whole in M particles/s,
+with the surfacer's own split (its passes on the device, the download). `--stream K` then runs the
+stage's own loop (`mpmfx.stages.surface`: the next frame read ahead and frames written behind on
+threads) over K copies of the frame as cache files with their digests, and prints its throughput;
+`--variants` runs that loop again with one thing changed each time (pageable reads, zlib's
+deflate, nothing deflated, nothing written). `--profile` runs one more frame in turn under
+cProfile and prints where the host's time goes. The castle at rest has less surface than the
+collapsing pile a shot frame holds (fewer vertices a particle).
 """
 
 from __future__ import annotations
