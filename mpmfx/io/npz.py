@@ -18,7 +18,10 @@ inflated as one stream on one thread.
 
 The files are ordinary zips (np.load, zipfile and unzip read them), with zip64 records only where
 a size or an offset needs them. Each entry carries the fixed date 1980-01-01, so the same arrays
-give the same bytes whatever the number of threads.
+give the same bytes whatever the number of threads, with one ISA-L version (pinned) on one kind of
+CPU: ISA-L picks its code by the CPU's instructions at run time. Nothing compares a file's bytes
+across machines: cache keys hash settings and code, and a file's digest is recorded where it is
+written.
 """
 
 from __future__ import annotations
