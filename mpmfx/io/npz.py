@@ -4,7 +4,7 @@ threads at once.
 zipfile deflates one entry after another on one core with zlib, and a GPU shot's surface frame
 then takes longer to write than the GPU takes to surface it. Here the deflate is Intel's ISA-L
 (python-isal): at level 1 it shrinks a surface frame's vertices, faces and level set as much as
-zlib's level 1 does, 4-9x faster (docs/benchmarks.md), and inflates ~1.5-2x faster. Each entry's
+zlib's level 1 does, 3-8x faster (docs/benchmarks.md), and inflates ~1.5-2x faster. Each entry's
 .npy bytes are cut into CHUNK pieces that are deflated independently on the process's shared
 deflating threads (ISA-L releases the GIL). Every piece but the last ends on a full flush, so the
 pieces join into one raw deflate stream, as pigz's do. The zip is then written around them.
