@@ -113,8 +113,7 @@ def to_host(wp, arrays: list, *, pinned: bool) -> list:
         scalar = wp.dtype_to_numpy(getattr(a.dtype, "_wp_scalar_type_", a.dtype))
         shape = tuple(a.shape) + tuple(getattr(a.dtype, "_shape_", ()))
         nbytes = int(np.prod(shape)) * np.dtype(scalar).itemsize
-        buf = PINNED.take(wp, nbytes) if pinned and nbytes else None
-        host = PINNED.lend(wp, buf, shape, scalar) if buf is not None else np.empty(shape, dtype=scalar)
+        host = host_buffer(wp, nbytes).view(scalar).reshape(shape) if pinned else np.empty(shape, dtype=scalar)
         wp.copy(wp.array(host, dtype=a.dtype, device="cpu", copy=False), a)
         out.append(host)
     wp.synchronize()

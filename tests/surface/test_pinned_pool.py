@@ -68,3 +68,23 @@ def test_a_free_buffer_serves_a_smaller_array_before_a_new_one_is_pinned():
     held = pool._held
     assert pool.take(wp, 1 << 20).ptr == big.ptr
     assert pool._held == held  # nothing new pinned
+
+
+def test_host_buffer_lends_from_the_pool_and_takes_it_back(monkeypatch):
+    """host_buffer (the surface stage's reads, the downloads' copies) hands out the pool's memory
+    and gets it back when the array made of it is gone; past the limit, numpy's memory."""
+    from mpmfx.surface import pinned
+
+    pool = HostPool(limit=8 << 20)
+    monkeypatch.setattr(pinned, "PINNED", pool)
+    first = pinned.host_buffer(wp, 4 << 20)
+    x = first[128:].view(np.float32)  # as read_npz's arrays: a view past the .npy header
+    x[:] = 1.0
+    del first
+    gc.collect()
+    assert pool.take(wp, 1 << 20) is not None and pool._held > 4 << 20  # still lent (x): a second buffer
+    assert pinned.host_buffer(wp, 8 << 20).size == 8 << 20  # past the limit: numpy's
+    ptr = x.__array_interface__["data"][0] - 128
+    del x
+    gc.collect()
+    assert pool.take(wp, 4 << 20).ptr == ptr  # back once the view is gone
