@@ -382,7 +382,8 @@ class _Pieces:
         if packed:
             offsets = np.concatenate([[0], np.cumsum(packed)]).tolist()
             self._jobs = [
-                run(_inflate_sum, fd, view[i : i + size], at + offsets[k], packed[k]) for k, i in enumerate(starts)
+                run(_inflate_sum, fd, view[i : i + size], at + offsets[k], packed[k], info.filename)
+                for k, i in enumerate(starts)
             ]
         else:
             self._jobs = [run(_read_sum, fd, view[i : i + size], at + i) for i in starts]
@@ -407,12 +408,12 @@ def _read_sum(fd: int, piece: memoryview, at: int) -> tuple[int, int]:
     return got, isal_zlib.crc32(piece[:got])
 
 
-def _inflate_sum(fd: int, piece: memoryview, at: int, packed: int) -> tuple[int, int]:
-    """_read_sum of a deflated piece: its `packed` bytes at `at` inflated into piece."""
+def _inflate_sum(fd: int, piece: memoryview, at: int, packed: int, name: str) -> tuple[int, int]:
+    """_read_sum of entry `name`'s deflated piece: its `packed` bytes at `at` inflated into piece."""
     try:  # (ISA-L releases the GIL)
         raw = isal_zlib.decompressobj(-15).decompress(os.pread(fd, packed, at), len(piece) + 1)
     except isal_zlib.error as exc:
-        raise zipfile.BadZipFile(f"a deflated piece does not inflate ({exc})") from None
+        raise zipfile.BadZipFile(f"{name}: a deflated piece does not inflate ({exc})") from None
     if len(raw) == len(piece):
         piece[:] = raw
     return len(raw), isal_zlib.crc32(raw)
